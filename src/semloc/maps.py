@@ -1,0 +1,299 @@
+"""Object-level maps: `SemanticObject` (one object) and `ObjectMap` (a frame's set of objects).
+
+An `ObjectMap` is an immutable sequence of objects plus frame metadata (`up`, `name`) and the
+unknown top-level keys of the file it came from.  Column views (`ids`, `labels`, `positions`,
+`sizes`, `rotations`, `seen`) are numpy arrays computed once.  Construction validates every
+object and raises `MapError` naming the object and the problem, so API users get the same
+guarantees as file readers.  This module does no I/O.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Iterator, Sequence
+from dataclasses import dataclass, field, replace
+from functools import cached_property
+from typing import Any
+
+import numpy as np
+
+
+class MapError(ValueError):
+    """A map (file or in-memory) is invalid; the message names the source, object and problem."""
+
+
+def _as_vector(value: Any, length: int, what: str) -> np.ndarray:
+    try:
+        array = np.asarray(value, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise MapError(f"{what} must be numbers, got {value!r:.60}") from exc
+    if array.shape != (length,):
+        raise MapError(f"{what} must have shape ({length},), got {array.shape}")
+    if not np.all(np.isfinite(array)):
+        raise MapError(f"{what} has non-finite values")
+    return array
+
+
+def _as_points(value: Any, what: str = "points") -> np.ndarray:
+    try:
+        array = np.asarray(value, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise MapError(f"{what} must be an N x 3 array of numbers") from exc
+    if array.size == 0:
+        return np.zeros((0, 3))
+    if array.ndim != 2 or array.shape[1] != 3:
+        raise MapError(f"{what} must have shape (N, 3), got {array.shape}")
+    if not np.all(np.isfinite(array)):
+        raise MapError(f"{what} has non-finite values")
+    return array
+
+
+def _as_rotation(value: Any) -> np.ndarray:
+    try:
+        array = np.asarray(value, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise MapError("rotation must be a 3 x 3 array of numbers") from exc
+    if array.shape != (3, 3):
+        raise MapError(f"rotation must have shape (3, 3), got {array.shape}")
+    if not np.all(np.isfinite(array)):
+        raise MapError("rotation has non-finite values")
+    if not np.allclose(array @ array.T, np.eye(3), atol=1e-3) or np.linalg.det(array) < 0:
+        raise MapError("rotation is not a proper rotation matrix")
+    return array
+
+
+@dataclass(frozen=True, eq=False)
+class SemanticObject:
+    """One object: id, semantic label and centre, with optional box, points and descriptor.
+
+    `seen` is the keyframe index of the first detection (drives incremental replay);
+    `extra` keeps unknown keys of the file so that they survive a round trip.
+    """
+
+    id: str
+    label: str
+    position: np.ndarray
+    size: np.ndarray | None = None
+    rotation: np.ndarray | None = None
+    points: np.ndarray | None = None
+    descriptor: np.ndarray | None = None
+    seen: int = 0
+    score: float | None = None
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        set_ = object.__setattr__
+        if isinstance(self.id, (int, np.integer)) and not isinstance(self.id, bool):
+            set_(self, "id", str(self.id))
+        if not isinstance(self.id, str) or not self.id:
+            raise MapError(f"object id must be a non-empty string, got {self.id!r}")
+        try:
+            self._validate()
+        except MapError as exc:
+            raise MapError(f"object '{self.id}': {exc}") from None
+
+    def _validate(self) -> None:
+        set_ = object.__setattr__
+        if not isinstance(self.label, str) or not self.label.strip():
+            raise MapError(f"label must be a non-empty string, got {self.label!r}")
+        set_(self, "position", _as_vector(self.position, 3, "position"))
+        if self.size is not None:
+            size = _as_vector(self.size, 3, "size")
+            if np.any(size < 0):
+                raise MapError("size has negative entries")
+            set_(self, "size", size)
+        if self.rotation is not None:
+            set_(self, "rotation", _as_rotation(self.rotation))
+        if self.points is not None:
+            set_(self, "points", _as_points(self.points))
+        if self.descriptor is not None:
+            try:
+                descriptor = np.asarray(self.descriptor, dtype=float).ravel()
+            except (TypeError, ValueError) as exc:
+                raise MapError("descriptor must be a vector of numbers") from exc
+            if descriptor.size == 0 or not np.all(np.isfinite(descriptor)):
+                raise MapError("descriptor must be a non-empty vector of finite numbers")
+            set_(self, "descriptor", descriptor)
+        if isinstance(self.seen, bool) or not isinstance(self.seen, (int, np.integer)):
+            raise MapError(f"seen must be an integer, got {self.seen!r}")
+        set_(self, "seen", int(self.seen))
+        if self.score is not None:
+            if isinstance(self.score, bool) or not isinstance(self.score, (int, float)):
+                raise MapError(f"score must be a number, got {self.score!r}")
+            if not np.isfinite(self.score):
+                raise MapError("score is not finite")
+            set_(self, "score", float(self.score))
+
+    def replace(self, **changes: Any) -> SemanticObject:
+        """A copy with some fields changed (validated again)."""
+        return replace(self, **changes)
+
+    def transformed(self, T: np.ndarray) -> SemanticObject:
+        """This object expressed in another frame: `p_new = R @ p + t` for T = [R t; 0 1]."""
+        R, t = T[:3, :3], T[:3, 3]
+        return self.replace(
+            position=R @ self.position + t,
+            rotation=None if self.rotation is None else R @ self.rotation,
+            points=None if self.points is None else self.points @ R.T + t,
+        )
+
+
+class ObjectMap(Sequence[SemanticObject]):
+    """An immutable, validated collection of objects in one frame.
+
+    Build it from `SemanticObject`s (`ObjectMap(objects, up=..., name=...)`) or from arrays
+    (`ObjectMap.from_arrays`).  Ids must be unique.
+    """
+
+    def __init__(
+        self,
+        objects: Iterable[SemanticObject],
+        up: Any = None,
+        name: str = "",
+        extra: dict[str, Any] | None = None,
+    ) -> None:
+        self._objects: tuple[SemanticObject, ...] = tuple(objects)
+        for obj in self._objects:
+            if not isinstance(obj, SemanticObject):
+                raise MapError(f"map entries must be SemanticObject, got {type(obj).__name__}")
+        self.up: np.ndarray | None = None if up is None else _unit_up(up)
+        self.name = str(name)
+        self.extra: dict[str, Any] = dict(extra or {})
+        self._index: dict[str, int] = {}
+        for i, obj in enumerate(self._objects):
+            if obj.id in self._index:
+                raise MapError(f"object '{obj.id}': duplicate id")
+            self._index[obj.id] = i
+
+    @classmethod
+    def from_arrays(
+        cls,
+        ids: Sequence[Any],
+        labels: Sequence[str],
+        positions: Any,
+        *,
+        points: Sequence[Any] | None = None,
+        descriptors: Sequence[Any] | None = None,
+        sizes: Any = None,
+        rotations: Any = None,
+        seen: Sequence[int] | None = None,
+        up: Any = None,
+        name: str = "",
+    ) -> ObjectMap:
+        """Build a map from parallel arrays (one row per object); optional columns may be None."""
+        positions = np.asarray(positions, dtype=float)
+        n = len(ids)
+        if len(labels) != n or positions.shape != (n, 3):
+            raise MapError(
+                f"ids ({n}), labels ({len(labels)}) and positions {positions.shape} do not match"
+            )
+        for column, what in ((points, "points"), (descriptors, "descriptors"), (seen, "seen")):
+            if column is not None and len(column) != n:
+                raise MapError(f"{what} has {len(column)} entries for {n} objects")
+        objects = [
+            SemanticObject(
+                id=ids[i],
+                label=labels[i],
+                position=positions[i],
+                size=None if sizes is None else sizes[i],
+                rotation=None if rotations is None else rotations[i],
+                points=None if points is None else points[i],
+                descriptor=None if descriptors is None else descriptors[i],
+                seen=0 if seen is None else int(seen[i]),
+            )
+            for i in range(n)
+        ]
+        return cls(objects, up=up, name=name)
+
+    # Sequence protocol -------------------------------------------------------------------
+    def __len__(self) -> int:
+        return len(self._objects)
+
+    def __getitem__(self, item):  # type: ignore[override]
+        if isinstance(item, slice):
+            return self.with_objects(self._objects[item])
+        return self._objects[item]
+
+    def __iter__(self) -> Iterator[SemanticObject]:
+        return iter(self._objects)
+
+    def __repr__(self) -> str:
+        return f"ObjectMap(name={self.name!r}, objects={len(self)}, up={self.up})"
+
+    # Lookup --------------------------------------------------------------------------------
+    def index_of(self, object_id: str) -> int:
+        return self._index[str(object_id)]
+
+    def get(self, object_id: str) -> SemanticObject:
+        return self._objects[self.index_of(object_id)]
+
+    def __contains__(self, object_id: object) -> bool:
+        return str(object_id) in self._index
+
+    # Column views --------------------------------------------------------------------------
+    @cached_property
+    def ids(self) -> np.ndarray:
+        return np.array([o.id for o in self._objects], dtype=object)
+
+    @cached_property
+    def labels(self) -> np.ndarray:
+        return np.array([o.label for o in self._objects], dtype=object)
+
+    @cached_property
+    def positions(self) -> np.ndarray:
+        if not self._objects:
+            return np.zeros((0, 3))
+        return np.stack([o.position for o in self._objects])
+
+    @cached_property
+    def sizes(self) -> np.ndarray:
+        """(N, 3); NaN rows where an object has no box."""
+        return np.array(
+            [o.size if o.size is not None else [np.nan] * 3 for o in self._objects]
+        ).reshape(-1, 3)
+
+    @cached_property
+    def rotations(self) -> np.ndarray:
+        """(N, 3, 3); identity where an object has no box rotation."""
+        return np.array(
+            [o.rotation if o.rotation is not None else np.eye(3) for o in self._objects]
+        ).reshape(-1, 3, 3)
+
+    @cached_property
+    def seen(self) -> np.ndarray:
+        return np.array([o.seen for o in self._objects], dtype=int)
+
+    @property
+    def points(self) -> list[np.ndarray | None]:
+        return [o.points for o in self._objects]
+
+    @property
+    def descriptors(self) -> list[np.ndarray | None]:
+        return [o.descriptor for o in self._objects]
+
+    @property
+    def has_points(self) -> bool:
+        return any(o.points is not None and len(o.points) for o in self._objects)
+
+    # Derived maps ----------------------------------------------------------------------------
+    def with_objects(self, objects: Iterable[SemanticObject]) -> ObjectMap:
+        """A map with the same frame metadata and other objects."""
+        return ObjectMap(objects, up=self.up, name=self.name, extra=self.extra)
+
+    def subset(self, ids: Iterable[str]) -> ObjectMap:
+        return self.with_objects(self.get(i) for i in ids)
+
+    def transformed(self, T: np.ndarray) -> ObjectMap:
+        """The same objects expressed in another frame (`p_new = R p + t`); `up` rotates too."""
+        T = np.asarray(T, dtype=float)
+        up = None if self.up is None else T[:3, :3] @ self.up
+        return ObjectMap(
+            (o.transformed(T) for o in self._objects), up=up, name=self.name, extra=self.extra
+        )
+
+
+def _unit_up(up: Any) -> np.ndarray:
+    vector = _as_vector(up, 3, "up")
+    norm = np.linalg.norm(vector)
+    if norm < 1e-9:
+        raise MapError("up must be a non-zero vector")
+    return vector / norm
