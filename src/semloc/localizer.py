@@ -87,6 +87,9 @@ class LocalizerConfig(BaseModel):
     pose: PoseConfig = Field(default_factory=PoseConfig)
     decision: DecisionConfig = Field(default_factory=DecisionConfig)
     top_k: int = Field(10, ge=1, description="How many distinct hypotheses are reported.")
+    screened_sets: int = Field(
+        60, ge=1, description="Association sets screened by closed-form pose for hypotheses."
+    )
     rank_by: Literal["residual", "score", "fitness"] = Field(
         "residual",
         description="Order of the reported hypotheses: 'residual' (most pairs, then smallest "
@@ -289,7 +292,7 @@ class Localizer:
         cfg = self.config
         by_size = cfg.rank_by == "residual"
         screened = []
-        for aset in self._clustering.top(cfg.top_k * 20, min_size=2, largest_first=by_size):
+        for aset in self._clustering.top(cfg.screened_sets, min_size=2, largest_first=by_size):
             pose, residual = self._closed_form(aset)
             screened.append((aset, pose, residual))
         if by_size:
