@@ -28,6 +28,9 @@ Where the paper is silent (see also DESIGN.md)
       iteration (or at this update) are tried; iterations run until no new set appears.
       Within an iteration all merges use the scores from its start, so the result does not
       depend on the order of objects.
+    * K is capped by `max_sets` (default 2000, None for the paper's 10·n): the merge search
+      costs about K² per iteration, so a 1000-object map would otherwise spend seconds per
+      update once 15+ local objects are in.
     * Top-K pruning happens after every iteration (bounding work and memory), with ties broken
       by size and then by an order-independent hash of the set's (global id, local id) pairs.
     * A set's age is reset when it merges (as either parent), when it is created, and when a
@@ -71,6 +74,11 @@ class ClusteringConfig(BaseModel):
     )
     sets_per_object: int = Field(
         10, ge=1, description="Keep the top K = sets_per_object * n_global sets (paper: 10)."
+    )
+    max_sets: int | None = Field(
+        2000,
+        ge=1,
+        description="Upper bound on K (work grows with K²); None keeps the paper's 10·n.",
     )
     expiry_updates: int = Field(
         2, ge=0, description="Drop sets that have not merged for more than this many updates."
@@ -153,6 +161,8 @@ class HierarchicalClustering:
         self._global_positions = np.asarray(global_positions, dtype=float)
         self._global_ids = list(global_ids)
         self.capacity = self.config.sets_per_object * max(len(self._global_ids), 1)
+        if self.config.max_sets is not None:
+            self.capacity = min(self.capacity, self.config.max_sets)
         self.step = 0
         # candidates
         self._cand_g = np.zeros(0, dtype=np.int64)
@@ -164,6 +174,7 @@ class HierarchicalClustering:
         self._local_positions = np.zeros((0, 3))
         self._local_ids: list[str] = []
         self._h = np.zeros((0, 0))
+        self._compat = np.zeros((0, 0), dtype=bool)
         self._compat_bits = np.zeros((0, 1), dtype=np.uint64)
         # sets
         self._words = 1
@@ -221,7 +232,7 @@ class HierarchicalClustering:
         self._local_positions = np.asarray(local_positions, dtype=float).reshape(-1, 3)
         self._local_ids = list(local_ids)
         stale = self._register_candidates(detections)
-        self._refresh_compatibility()
+        self._refresh_compatibility(set(detections), stale)
         fresh_rows = self._revalidate(stale, moved)
         fresh_rows += self._add_singletons(detections)
         self._cluster(np.unique(np.array(fresh_rows, dtype=np.int64)))
@@ -262,26 +273,25 @@ class HierarchicalClustering:
         self._cand_alive[list(stale)] = False
         return stale
 
-    def _refresh_compatibility(self) -> None:
-        """Recompute h and the packed compatibility rows for all candidates."""
-        cfg = self.config
-        g, l = self._cand_g, self._cand_l
-        d_global = np.linalg.norm(
-            self._global_positions[g][:, None] - self._global_positions[g][None], axis=2
-        )
-        d_local = np.linalg.norm(
-            self._local_positions[l][:, None] - self._local_positions[l][None], axis=2
-        )
-        one_to_one = (g[:, None] != g[None]) & (l[:, None] != l[None])
-        h = np.where(one_to_one, merge_metric(d_global, d_local, 0.0, cfg.min_distance), 0.0)
-        gate = h
-        if cfg.distance_tolerance > 0:
-            gate = merge_metric(d_global, d_local, cfg.distance_tolerance, cfg.min_distance)
-        alive = self._cand_alive
-        compat = (gate > cfg.gamma) & one_to_one & alive[:, None] & alive[None]
+    def _refresh_compatibility(self, detected: set[int], stale: set[int]) -> None:
+        """Update h and compatibility for the candidates of detected objects and stale ones."""
+        n, known = len(self._cand_g), len(self._h)
+        rows = np.union1d(
+            np.arange(known, n),
+            np.flatnonzero(
+                np.isin(self._cand_l, list(detected)) | np.isin(np.arange(n), list(stale))
+            ),
+        ).astype(np.int64)
+        h = np.zeros((n, n))
+        h[:known, :known] = self._h
+        compat = np.zeros((n, n), dtype=bool)
+        compat[:known, :known] = self._compat
+        if len(rows):
+            h_rows, compat_rows = self._pair_rows(rows)
+            h[rows], h[:, rows] = h_rows, h_rows.T
+            compat[rows], compat[:, rows] = compat_rows, compat_rows.T
         np.fill_diagonal(compat, True)
-        self._h = h
-        n = len(g)
+        self._h, self._compat = h, compat
         words = max(1, -(-n // 64))
         self._compat_bits = np.vstack(
             [_pack_rows(compat, words), np.full((1, words), ~np.uint64(0))]
@@ -293,6 +303,25 @@ class HierarchicalClustering:
             self._words = words
         self._common = self._common_of(self._members)
         self._row_of = {self._bits[r].tobytes(): r for r in range(len(self._bits))}
+
+    def _pair_rows(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """h and compatibility of the candidates `rows` against all candidates."""
+        cfg = self.config
+        g, l = self._cand_g, self._cand_l
+        d_global = np.linalg.norm(
+            self._global_positions[g[rows]][:, None] - self._global_positions[g][None], axis=2
+        )
+        d_local = np.linalg.norm(
+            self._local_positions[l[rows]][:, None] - self._local_positions[l][None], axis=2
+        )
+        one_to_one = (g[rows][:, None] != g[None]) & (l[rows][:, None] != l[None])
+        h = np.where(one_to_one, merge_metric(d_global, d_local, 0.0, cfg.min_distance), 0.0)
+        gate = h
+        if cfg.distance_tolerance > 0:
+            gate = merge_metric(d_global, d_local, cfg.distance_tolerance, cfg.min_distance)
+        alive = self._cand_alive
+        compat = (gate > cfg.gamma) & one_to_one & alive[rows][:, None] & alive[None]
+        return h, compat
 
     def _common_of(self, members: np.ndarray) -> np.ndarray:
         padded = np.where(members >= 0, members, len(self._compat_bits) - 1)
@@ -344,6 +373,7 @@ class HierarchicalClustering:
             unions, scores = self._best_merges(parents_a, parents_b)
             frontier = self._insert(unions, scores)
             frontier = self._prune(frontier)
+        self._prune(np.zeros(0, dtype=np.int64))  # a round ends with at most K sets
 
     def _find_merges(self, frontier: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """All (a, b) rows with a in the frontier whose union passes the merge criterion."""
@@ -351,6 +381,8 @@ class HierarchicalClustering:
         in_frontier = np.zeros(n_pool, dtype=bool)
         in_frontier[frontier] = True
         chunk = max(1, _CHUNK_ELEMENTS // max(n_pool, 1))
+        size = (self._members >= 0).sum(axis=1)
+        floor = self._survival_floor()
         folded_bits = np.bitwise_or.reduce(self._bits, axis=1)
         folded_common = np.bitwise_or.reduce(self._common, axis=1)
         found_a, found_b = [], []
@@ -358,18 +390,35 @@ class HierarchicalClustering:
             rows = frontier[start : start + chunk]
             # a pair of two frontier sets is tried once, from its lower row
             ok = ~in_frontier[None, :] | (np.arange(n_pool)[None, :] > rows[:, None])
+            if floor > -np.inf:  # merges that cannot reach the top K would be pruned at once
+                bound = self._score[rows][:, None] + self._score[None, :]
+                ok &= bound + np.outer(size[rows], size) >= floor
             # b ⊆ M(a) (the union is a clique); folding the words with OR keeps ⊆, so a
             # one-word test screens the pairs before the exact test on every word
             ok &= (folded_bits[None, :] & ~folded_common[rows][:, None]) == 0
             ia, ib = np.nonzero(ok)
             exact = np.all((self._bits[ib] & ~self._common[rows[ia]]) == 0, axis=1)
-            ia, ib = ia[exact], ib[exact]
-            a, b = self._bits[rows[ia]], self._bits[ib]
-            # neither contains the other: both bring new pairs
-            adds = np.any((b & ~a) != 0, axis=1) & np.any((a & ~b) != 0, axis=1)
-            found_a.append(rows[ia[adds]])
-            found_b.append(ib[adds])
+            ia, ib = rows[ia[exact]], ib[exact]
+            a, b = self._bits[ia], self._bits[ib]
+            a_adds, b_adds = _popcount(a & ~b), _popcount(b & ~a)
+            keep = (a_adds > 0) & (b_adds > 0)  # neither contains the other
+            if floor > -np.inf:
+                keep &= self._score[ia] + self._score[ib] + a_adds * b_adds >= floor
+            found_a.append(ia[keep])
+            found_b.append(ib[keep])
         return np.concatenate(found_a), np.concatenate(found_b)
+
+    def _survival_floor(self) -> float:
+        """The K-th best score in the pool (-inf while the pool is not full), less a hair.
+
+        A merge scores at most v_A + v_B + |A|·|B| (h ≤ 1).  One that cannot reach the K-th
+        best score is pruned at the end of the iteration, and so are both of its parents
+        (their scores are lower still), so such merges are skipped without changing the result.
+        """
+        if len(self._score) < self.capacity:
+            return -np.inf
+        kth = np.partition(self._score, len(self._score) - self.capacity)
+        return float(kth[len(self._score) - self.capacity]) - 1e-9
 
     def _best_merges(self, rows_a: np.ndarray, rows_b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Distinct unions of the merges and, for each, the largest merge score.
