@@ -38,6 +38,8 @@ _CENTRE_INLIER = 0.5  # m: centre-based fitness threshold (no points)
 _SEARCH_POINTS = 512  # local points used to score search candidates
 _SEARCH_CANDIDATES = 3  # best local maxima refined after the coarse search
 _SO3_DIRECTIONS = 48  # Fibonacci directions of the 1-pair 6-DoF search (x yaw steps)
+_NORMAL_NEIGHBOURS = 10  # neighbours for normal estimation
+_SIGN_DIRECTION = np.array([1.0, 2.0, 3.0]) / np.sqrt(14.0)  # half-space for signed normals
 
 Solver = Callable[[np.ndarray, np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
 
@@ -57,6 +59,12 @@ class PoseConfig(BaseModel):
     )
     icp_kernel: float = Field(
         0.1, gt=0, description="Tukey kernel scale (m); ICP anneals from 4x this value down to it."
+    )
+    icp_normal_angle: float = Field(
+        45.0,
+        gt=0,
+        le=90,
+        description="Max angle (deg) between unoriented normals of ICP correspondences; 90 = off.",
     )
     fitness_radius: float = Field(
         0.1, gt=0, description="A local point is an inlier if a global point is within this (m)."
@@ -187,7 +195,7 @@ def _spread(xyz: np.ndarray, w: np.ndarray, horizontal: bool) -> float:
     if horizontal:
         return float(np.linalg.norm(d[:, :2]))
     s = np.linalg.svd(d, compute_uv=False)
-    return float(np.hypot(s[1], s[2]))
+    return float(np.linalg.norm(s[1:]))
 
 
 def _degenerate(src, dst, w, yaw_only: bool, tol: float) -> bool:
@@ -291,26 +299,80 @@ def _centre_fitness(T, src, dst) -> tuple[float, float]:
 # --------------------------------------------------------------------------- robust ICP
 
 
+def _normals(points: np.ndarray, k: int = _NORMAL_NEIGHBOURS) -> np.ndarray:
+    """Unoriented unit normals from the covariance of the k nearest neighbours."""
+    k = min(k, len(points))
+    _, idx = cKDTree(points).query(points, k=k)
+    nb = points[idx.reshape(len(points), k)]
+    nb = nb - nb.mean(axis=1, keepdims=True)
+    _, vectors = np.linalg.eigh(np.einsum("nki,nkj->nij", nb, nb))
+    return vectors[:, :, 0]
+
+
+def _signed(normals: np.ndarray) -> np.ndarray:
+    """Flip unoriented normals into one half-space so that similar normals get similar vectors."""
+    return normals * np.where(normals @ _SIGN_DIRECTION < 0, -1.0, 1.0)[:, None]
+
+
+class _Matcher:
+    """Nearest global point within the kernel, with a compatible normal when normals are used.
+
+    With normals, the search runs in 6-D on (point, kernel * signed normal), so that a point on
+    another face is not preferred just for being a little closer; the 3-D distance and the
+    normal angle are then checked.
+    """
+
+    def __init__(self, dst: np.ndarray, tree: cKDTree, src: np.ndarray, cfg: PoseConfig):
+        self.dst, self.tree, self.kernel = dst, tree, 0.0
+        self.use_normals = cfg.icp_normal_angle < 90 and min(len(src), len(dst)) >= 3
+        self.cos_max = np.cos(np.radians(cfg.icp_normal_angle))
+        if self.use_normals:
+            self.src_n, self.dst_n = _normals(src), _signed(_normals(dst))
+
+    def __call__(self, moved: np.ndarray, R: np.ndarray, kernel: float):
+        if not self.use_normals:
+            d, idx = self.tree.query(moved, distance_upper_bound=kernel)
+            ok = np.isfinite(d)
+            return d[ok], idx[ok], ok
+        if kernel != self.kernel:  # the 6-D tree depends on the kernel
+            self.kernel, self.tree6 = kernel, cKDTree(np.hstack([self.dst, kernel * self.dst_n]))
+        normals = _signed(self.src_n @ R.T)
+        bound = kernel * np.sqrt(1 + 2 * (1 - self.cos_max))  # 3-D and normal chord both in range
+        _, idx = self.tree6.query(np.hstack([moved, kernel * normals]), distance_upper_bound=bound)
+        found = idx < len(self.dst)
+        idx = np.where(found, idx, 0)
+        d = np.linalg.norm(self.dst[idx] - moved, axis=1)
+        cos = np.abs(np.einsum("ni,ni->n", normals, self.dst_n[idx]))
+        ok = found & (d < kernel) & (cos >= self.cos_max)
+        return d[ok], idx[ok], ok
+
+
 def _icp(T: np.ndarray, src, dst, tree: cKDTree, cfg: PoseConfig, solve: Solver) -> np.ndarray:
-    """IRLS point-to-point ICP with Tukey weights; the kernel anneals from 4x to icp_kernel."""
-    for i in range(cfg.icp_iterations):
-        kernel = cfg.icp_kernel * max(1.0, 4.0 * 0.8**i)
+    """IRLS point-to-point ICP with Tukey weights (correspondences beyond the kernel ignored).
+
+    Correspondences must have compatible (unoriented) normals, within `icp_normal_angle`: this
+    keeps a partial view from settling inside the full object.  Graduated: the kernel starts at
+    4x `icp_kernel` and halves whenever an iteration moves the points by less than 1 % of it on
+    average, so offsets beyond `icp_kernel` (centres biased by partial views) are still pulled
+    in; stops once that happens at `icp_kernel`.
+    """
+    match = _Matcher(dst, tree, src, cfg)
+    kernel = 4.0 * cfg.icp_kernel
+    for _ in range(cfg.icp_iterations):
         moved = _apply(T, src)
-        d, idx = tree.query(moved, distance_upper_bound=kernel)
-        ok = np.isfinite(d)
-        if ok.sum() < 3:
+        d, idx, ok = match(moved, T[:3, :3], kernel)
+        if len(d) < 3:
             break
-        w = (1.0 - (d[ok] / kernel) ** 2) ** 2
-        try:
-            if _degenerate(moved[ok], dst[idx[ok]], w, solve is _yaw, _TOL):
-                break
-        except np.linalg.LinAlgError:
+        w = (1.0 - (d / kernel) ** 2) ** 2
+        p, q = moved[ok], dst[idx]
+        if _degenerate(p, q, w, solve is _yaw, _TOL):
             break
-        R, t = solve(moved[ok], dst[idx[ok]], w)
+        R, t = solve(p, q, w)
         T = _transform(R, t) @ T
-        small = np.linalg.norm(t) < 1e-7 and np.trace(R) > 3 - 1e-12
-        if small and kernel == cfg.icp_kernel:
-            break
+        if np.mean(np.linalg.norm(p @ (R - np.eye(3)).T + t, axis=1)) < 0.01 * kernel:
+            if kernel <= cfg.icp_kernel:
+                break
+            kernel = max(cfg.icp_kernel, 0.5 * kernel)
     return T
 
 
