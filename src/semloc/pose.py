@@ -12,8 +12,9 @@ This module owns the last stage of the pipeline (paper, "Camera pose recovery"):
    This is the low-dimensional stand-in for the paper's Go-ICP.
 3. **Robust ICP** on the concatenated per-object point sets (local object points vs. the points
    of their matched global objects): one numpy IRLS implementation for both modes
-   (scipy cKDTree nearest neighbours, Tukey biweight with a kernel annealed from 4x to
-   `icp_kernel`, weighted Kabsch in 6-DoF, weighted yaw + translation in 4-DoF).  A refinement
+   (scipy cKDTree nearest neighbours, Tukey biweight with a kernel annealed from
+   `icp_kernel_start` to `icp_kernel`, correspondences restricted to compatible normals,
+   weighted Kabsch in 6-DoF, weighted yaw + translation in 4-DoF).  A refinement
    is kept only if it does not lower fitness.
 
 4-DoF problems are solved in "canonical" frames: each side is rotated so that its `up` is +z,
@@ -39,6 +40,7 @@ _SEARCH_POINTS = 512  # local points used to score search candidates
 _SEARCH_CANDIDATES = 3  # best local maxima refined after the coarse search
 _SO3_DIRECTIONS = 48  # Fibonacci directions of the 1-pair 6-DoF search (x yaw steps)
 _NORMAL_NEIGHBOURS = 10  # neighbours for normal estimation
+_COARSE_POINTS = 1000  # local points used by ICP while the kernel is above icp_kernel
 _SIGN_DIRECTION = np.array([1.0, 2.0, 3.0]) / np.sqrt(14.0)  # half-space for signed normals
 
 Solver = Callable[[np.ndarray, np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
@@ -58,7 +60,13 @@ class PoseConfig(BaseModel):
         4000, ge=3, description="Points per side after downsampling (seeded random subsample)."
     )
     icp_kernel: float = Field(
-        0.1, gt=0, description="Tukey kernel scale (m); ICP anneals from 4x this value down to it."
+        0.1, gt=0, description="Final Tukey kernel scale (m): residuals beyond it get no weight."
+    )
+    icp_kernel_start: float = Field(
+        0.6,
+        gt=0,
+        description="Initial Tukey kernel scale (m), halved on convergence down to icp_kernel; "
+        "about twice the largest centre bias (partial views) that ICP should still correct.",
     )
     icp_normal_angle: float = Field(
         45.0,
@@ -323,22 +331,23 @@ class _Matcher:
     """
 
     def __init__(self, dst: np.ndarray, tree: cKDTree, src: np.ndarray, cfg: PoseConfig):
-        self.dst, self.tree, self.kernel = dst, tree, 0.0
+        self.dst, self.tree, self.trees6 = dst, tree, {}
         self.use_normals = cfg.icp_normal_angle < 90 and min(len(src), len(dst)) >= 3
         self.cos_max = np.cos(np.radians(cfg.icp_normal_angle))
         if self.use_normals:
             self.src_n, self.dst_n = _normals(src), _signed(_normals(dst))
 
-    def __call__(self, moved: np.ndarray, R: np.ndarray, kernel: float):
+    def __call__(self, moved: np.ndarray, rows, R: np.ndarray, kernel: float):
         if not self.use_normals:
             d, idx = self.tree.query(moved, distance_upper_bound=kernel)
             ok = np.isfinite(d)
             return d[ok], idx[ok], ok
-        if kernel != self.kernel:  # the 6-D tree depends on the kernel
-            self.kernel, self.tree6 = kernel, cKDTree(np.hstack([self.dst, kernel * self.dst_n]))
-        normals = _signed(self.src_n @ R.T)
+        if kernel not in self.trees6:  # the 6-D tree depends on the kernel
+            self.trees6[kernel] = cKDTree(np.hstack([self.dst, kernel * self.dst_n]))
+        normals = _signed(self.src_n[rows] @ R.T)
         bound = kernel * np.sqrt(1 + 2 * (1 - self.cos_max))  # 3-D and normal chord both in range
-        _, idx = self.tree6.query(np.hstack([moved, kernel * normals]), distance_upper_bound=bound)
+        query = np.hstack([moved, kernel * normals])
+        _, idx = self.trees6[kernel].query(query, distance_upper_bound=bound)
         found = idx < len(self.dst)
         idx = np.where(found, idx, 0)
         d = np.linalg.norm(self.dst[idx] - moved, axis=1)
@@ -347,20 +356,22 @@ class _Matcher:
         return d[ok], idx[ok], ok
 
 
-def _icp(T: np.ndarray, src, dst, tree: cKDTree, cfg: PoseConfig, solve: Solver) -> np.ndarray:
+def _icp(T: np.ndarray, src, dst, match: _Matcher, cfg: PoseConfig, solve: Solver) -> np.ndarray:
     """IRLS point-to-point ICP with Tukey weights (correspondences beyond the kernel ignored).
 
     Correspondences must have compatible (unoriented) normals, within `icp_normal_angle`: this
     keeps a partial view from settling inside the full object.  Graduated: the kernel starts at
-    4x `icp_kernel` and halves whenever an iteration moves the points by less than 1 % of it on
-    average, so offsets beyond `icp_kernel` (centres biased by partial views) are still pulled
-    in; stops once that happens at `icp_kernel`.
+    `icp_kernel_start` and halves whenever an iteration moves the points by less than 1 % of it
+    on average, so offsets beyond `icp_kernel` (centres biased by partial views) are still
+    pulled in; stops once that happens at `icp_kernel`.  Coarse levels use a subsample of
+    about `_COARSE_POINTS` local points.
     """
-    match = _Matcher(dst, tree, src, cfg)
-    kernel = 4.0 * cfg.icp_kernel
+    kernel = max(cfg.icp_kernel_start, cfg.icp_kernel)
+    coarse = np.arange(0, len(src), max(1, len(src) // _COARSE_POINTS))
     for _ in range(cfg.icp_iterations):
-        moved = _apply(T, src)
-        d, idx, ok = match(moved, T[:3, :3], kernel)
+        rows = coarse if kernel > cfg.icp_kernel else slice(None)
+        moved = _apply(T, src[rows])
+        d, idx, ok = match(moved, rows, T[:3, :3], kernel)
         if len(d) < 3:
             break
         w = (1.0 - (d / kernel) ** 2) ** 2
@@ -512,11 +523,12 @@ def estimate_pose(
 def _best_refined(candidates, method, clouds, tree, cfg: PoseConfig, solve: Solver):
     """Best candidate by (fitness, -rmse), each refined by ICP when that does not lower fitness."""
     src, dst = clouds
+    match = _Matcher(dst, tree, src, cfg) if cfg.refine else None
     best = None
     for T0 in candidates:
         result = (*_point_fitness(T0, src, tree, cfg.fitness_radius), T0, method)
         if cfg.refine and cfg.icp_iterations > 0:
-            T1 = _icp(T0, src, dst, tree, cfg, solve)
+            T1 = _icp(T0, src, dst, match, cfg, solve)
             refined = (*_point_fitness(T1, src, tree, cfg.fitness_radius), T1, method + "+icp")
             if refined[0] >= result[0]:
                 result = refined
