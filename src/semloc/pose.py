@@ -38,6 +38,7 @@ _TOL = 1e-9  # spread (m) below which positions are mathematically degenerate
 _CENTRE_INLIER = 0.5  # m: centre-based fitness threshold (no points)
 _SEARCH_POINTS = 512  # local points used to score search candidates
 _SEARCH_CANDIDATES = 3  # best local maxima refined after the coarse search
+_CANDIDATE_SHARE = 0.5  # ... if their score is at least this share of the best score
 _SO3_DIRECTIONS = 48  # Fibonacci directions of the 1-pair 6-DoF search (x yaw steps)
 _NORMAL_NEIGHBOURS = 10  # neighbours for normal estimation
 _COARSE_POINTS = 1000  # local points used by ICP while the kernel is above icp_kernel
@@ -156,20 +157,29 @@ def _transform(R: np.ndarray, t: np.ndarray) -> np.ndarray:
 
 
 def _rot_to_z(up: np.ndarray) -> np.ndarray:
-    """Smallest rotation taking the unit vector `up` onto +z."""
-    c = up[2]
+    """Smallest rotation taking the unit vector `up` onto +z (Rodrigues, axis up x z)."""
+    x, y, c = float(up[0]), float(up[1]), float(up[2])
     if c < -1 + 1e-12:
         return np.diag([1.0, -1.0, -1.0])
-    v = np.cross(up, [0.0, 0.0, 1.0])
-    K = np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
-    return np.eye(3) + K + K @ K / (1 + c)
+    k = 1.0 / (1.0 + c)
+    return np.array(
+        [
+            [1 - k * x * x, -k * x * y, -x],
+            [-k * x * y, 1 - k * y * y, -y],
+            [x, y, 1 - k * (x * x + y * y)],
+        ]
+    )
 
 
 def _rot_z(theta: np.ndarray | float) -> np.ndarray:
-    """Rotation(s) about +z; shape (3,3) or (K,3,3)."""
+    """Rotation(s) about +z; shape (3,3) for a scalar angle or (K,3,3)."""
+    if np.ndim(theta) == 0:
+        c, s = np.cos(theta), np.sin(theta)
+        return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
     c, s = np.cos(theta), np.sin(theta)
-    z, o = np.zeros_like(c), np.ones_like(c)
-    return np.moveaxis(np.array([[c, -s, z], [s, c, z], [z, z, o]]), (0, 1), (-2, -1))
+    R = np.zeros((len(c), 3, 3))
+    R[:, 0, 0], R[:, 0, 1], R[:, 1, 0], R[:, 1, 1], R[:, 2, 2] = c, -s, s, c, 1.0
+    return R
 
 
 def _centroids(src, dst, w):
@@ -198,12 +208,12 @@ def _yaw(src: np.ndarray, dst: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, n
 
 def _spread(xyz: np.ndarray, w: np.ndarray, horizontal: bool) -> float:
     """Horizontal RMS spread (z-up frame) or RMS distance off the best-fit line (6-DoF)."""
-    c = w @ xyz / w.sum()
-    d = (xyz - c) * np.sqrt(w / w.sum())[:, None]
+    w = w / w.sum()
+    d = xyz - w @ xyz
+    cov = d.T @ (d * w[:, None])
     if horizontal:
-        return float(np.linalg.norm(d[:, :2]))
-    s = np.linalg.svd(d, compute_uv=False)
-    return float(np.linalg.norm(s[1:]))
+        return float(np.sqrt(max(cov[0, 0] + cov[1, 1], 0.0)))
+    return float(np.sqrt(max(np.sum(np.linalg.eigvalsh(cov)[:2]), 0.0)))
 
 
 def _degenerate(src, dst, w, yaw_only: bool, tol: float) -> bool:
@@ -406,6 +416,7 @@ def _sweep(axis_rot: Callable[[np.ndarray], np.ndarray], pivots, src, tree, cfg)
     peaks = np.flatnonzero((s >= np.roll(s, 1)) & (s >= np.roll(s, -1)) & (s > 0))
     if len(peaks) == 0:
         peaks = np.array([int(np.argmax(s))])
+    peaks = peaks[s[peaks] >= _CANDIDATE_SHARE * s.max()]
     peaks = peaks[np.argsort(-s[peaks])][:_SEARCH_CANDIDATES]
     fine = np.linspace(-step, step, 21)
     best = []
@@ -432,6 +443,8 @@ def _so3_search(pivots, src, tree, cfg) -> list:
     s = _scores(rotations, *pivots, src, tree, cfg.fitness_radius)
     chosen: list[np.ndarray] = []
     for k in np.argsort(-s):
+        if s[k] < _CANDIDATE_SHARE * s.max():
+            break
         far = all(np.trace(R.T @ rotations[k]) < 1 + 2 * np.cos(np.radians(30)) for R in chosen)
         if far:
             chosen.append(rotations[k])
