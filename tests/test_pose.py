@@ -278,6 +278,64 @@ def test_search_6dof_one_pair_coarse_so3() -> None:
     assert trans_err(est.T, T_true) < 0.05
 
 
+def test_search_without_refinement_is_within_the_fine_grid() -> None:
+    rng = np.random.default_rng(11)
+    T_true = make_T(rot_z(-1.234), [0.4, 0.1, -0.2])
+    local_pts = l_shape(rng, 2000)
+    glob_pts = apply(T_true, local_pts)
+    cfg = PoseConfig(refine=False)
+    est = estimate_pose(
+        local_pts.mean(0)[None],
+        apply(T_true, local_pts.mean(0)[None]),
+        [local_pts],
+        [glob_pts],
+        Z,
+        Z,
+        cfg,
+    )
+    assert est.method == "search-4dof"
+    assert rot_err_deg(est.T, T_true) < 1.0  # coarse 5 deg grid refined to 0.5 deg
+    assert trans_err(est.T, T_true) < 0.02
+    assert np.allclose(est.T[:3, :3] @ Z, Z)
+
+
+def test_close_centres_use_the_search_when_points_exist() -> None:
+    """Two pairs 4 cm apart horizontally: the closed-form yaw would be noise; search instead."""
+    rng = np.random.default_rng(12)
+    T_true = make_T(rot_z(2.2), [1.0, 1.0, 0.0])
+    objs = [l_shape(rng, 1500), l_shape(rng, 1500)[:, [1, 0, 2]] + [0.04, 0.0, 1.0]]
+    centres_l = np.array([p.mean(0) for p in objs])
+    centres_g = apply(T_true, centres_l) + rng.normal(0, 0.02, (2, 3))
+    glob = [apply(T_true, p) for p in objs]
+    est = estimate_pose(centres_l, centres_g, objs, glob, Z, Z)
+    assert est.method.startswith("search-4dof")
+    assert rot_err_deg(est.T, T_true) < 3.0
+    assert estimate_pose(centres_l, centres_g, None, None, Z, Z).method == "closed-form-4dof"
+
+
+def test_6dof_pairs_with_coincident_global_centres_stay_finite() -> None:
+    rng = np.random.default_rng(13)
+    local_pts = [box_surface(rng, [0.5, 0.3, 0.2], 300), box_surface(rng, [0.3, 0.3, 0.3], 300) + 1]
+    centres_l = np.array([p.mean(0) for p in local_pts])
+    centres_g = np.zeros((2, 3))  # inconsistent data: both global centres coincide
+    glob_pts = [box_surface(rng, [0.5, 0.3, 0.2], 300)] * 2
+    est = estimate_pose(centres_l, centres_g, local_pts, glob_pts, config=PoseConfig(refine=False))
+    assert est.method == "search-6dof"
+    assert np.all(np.isfinite(est.T)) and 0.0 <= est.fitness <= 1.0
+
+
+def test_downsample_voxel_means_and_huge_ranges() -> None:
+    from semloc.pose import _downsample
+
+    pts = np.array([[0.01, 0.01, 0.01], [0.03, 0.03, 0.03], [1.0, 1.0, 1.0]])
+    out = _downsample(pts, 0.05, 100, np.random.default_rng(0))
+    assert np.allclose(out, [[0.02, 0.02, 0.02], [1.0, 1.0, 1.0]])
+    far = np.vstack([pts, [[1e9, -1e9, 1e9]]])  # voxel keys no longer fit one int64
+    out = _downsample(far, 1e-6, 100, np.random.default_rng(0))
+    assert len(out) == 4 and np.allclose(np.sort(out[:, 0]), np.sort(far[:, 0]))
+    assert len(_downsample(far, 0.0, 2, np.random.default_rng(0))) == 2
+
+
 @pytest.mark.parametrize(
     ("local", "up"),
     [([[1.0, 2, 3]], Z), ([[1.0, 2, 3]], None), ([[0.0, 0, 0], [1, 0, 0]], None)],

@@ -259,8 +259,12 @@ def _downsample(points: np.ndarray, voxel: float, max_points: int, rng) -> np.nd
         keys = np.floor(points / voxel).astype(np.int64)
         keys -= keys.min(axis=0)
         dims = keys.max(axis=0) + 1
-        flat = (keys[:, 0] * dims[1] + keys[:, 1]) * dims[2] + keys[:, 2]
-        _, inverse, counts = np.unique(flat, return_inverse=True, return_counts=True)
+        if np.prod(dims.astype(float)) < 2.0**62:  # one integer key per voxel
+            flat = (keys[:, 0] * dims[1] + keys[:, 1]) * dims[2] + keys[:, 2]
+            _, inverse, counts = np.unique(flat, return_inverse=True, return_counts=True)
+        else:
+            _, inverse, counts = np.unique(keys, axis=0, return_inverse=True, return_counts=True)
+        inverse = inverse.reshape(-1)
         sums = np.zeros((len(counts), 3))
         np.add.at(sums, inverse, points)
         points = sums / counts[:, None]
@@ -469,11 +473,10 @@ def _search(src_c, dst_c, clouds, tree, yaw_only: bool, cfg: PoseConfig) -> list
         rotations = _sweep(_rot_z, pivots, sample, tree, cfg)
     else:
         _, s, Vt = np.linalg.svd(src_c - pivots[0])
-        if len(src_c) < 2 or s[0] <= cfg.min_spread:
-            rotations = _so3_search(pivots, sample, tree, cfg)
+        axis_g = ((src_c - pivots[0]) @ Vt[0]) @ (dst_c - pivots[1])  # matching global direction
+        if s[0] <= cfg.min_spread or np.linalg.norm(axis_g) <= cfg.min_spread * s[0]:
+            rotations = _so3_search(pivots, sample[::2], tree, cfg)
         else:
-            proj = (src_c - pivots[0]) @ Vt[0]
-            axis_g = proj @ (dst_c - pivots[1])
             axis_g /= np.linalg.norm(axis_g)
             rotations = _sweep(_axis_rotations(Vt[0], axis_g), pivots, sample, tree, cfg)
     return [_transform(R, pivots[1] - R @ pivots[0]) for R in rotations]
