@@ -6,7 +6,8 @@ This module owns the last stage of the pipeline (paper, "Camera pose recovery"):
    centres, 6-DoF (Kabsch/Umeyama without scale) or 4-DoF (yaw about gravity-up + translation)
    when both frames know their `up` direction.
 2. **Global search** when the centres alone do not determine the pose (1 pair, 2 pairs on the
-   up axis in 4-DoF, 1-2 pairs or collinear centres in 6-DoF): the free rotation is sampled
+   up axis in 4-DoF, 1-2 pairs or collinear centres in 6-DoF; with points, also centres spread
+   less than `min_spread`, whose closed-form rotation would be noise): the free rotation is sampled
    (a 1-D sweep about the axis through the matched centres, or a coarse grid over SO(3) for a
    single 6-DoF pair) and scored by point-set fitness; the best few candidates are refined.
    This is the low-dimensional stand-in for the paper's Go-ICP.
@@ -14,8 +15,8 @@ This module owns the last stage of the pipeline (paper, "Camera pose recovery"):
    of their matched global objects): one numpy IRLS implementation for both modes
    (scipy cKDTree nearest neighbours, Tukey biweight with a kernel annealed from
    `icp_kernel_start` to `icp_kernel`, correspondences restricted to compatible normals,
-   weighted Kabsch in 6-DoF, weighted yaw + translation in 4-DoF).  A refinement
-   is kept only if it does not lower fitness.
+   weighted Kabsch in 6-DoF, weighted yaw + translation in 4-DoF; Open3D is not used).  A
+   refinement is kept only if it does not lower fitness.
 
 4-DoF problems are solved in "canonical" frames: each side is rotated so that its `up` is +z,
 yaw + translation are solved there, and the result is rotated back, so `R @ up_local ==
