@@ -8,6 +8,7 @@ spanning `[-size/2, size/2]` there (the native map format's `position`, `size`, 
 from __future__ import annotations
 
 import numpy as np
+from scipy.spatial import ConvexHull, QhullError
 
 
 def voxel_downsample(points: np.ndarray, voxel: float) -> np.ndarray:
@@ -35,24 +36,39 @@ def up_basis(up: np.ndarray | None) -> np.ndarray:
 def upright_box(
     points: np.ndarray, up: np.ndarray | None = None
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Gravity-aligned oriented box of a point set: yaw from the principal axis of the points
-    projected on the ground plane, height along `up`.  Returns (centre, size, rotation)."""
+    """Gravity-aligned oriented box of a point set: the minimum-area rectangle of the points
+    projected on the ground plane (its long side is the box's first axis), height along `up`.
+    Returns (centre, size, rotation)."""
     points = np.asarray(points, dtype=float).reshape(-1, 3)
     basis = up_basis(up)
-    local = points @ basis
-    xy = local[:, :2] - local[:, :2].mean(axis=0)
-    if len(points) >= 3:
-        eigenvalues, eigenvectors = np.linalg.eigh(xy.T @ xy)
-        major = eigenvectors[:, np.argmax(eigenvalues)]
-    else:
-        major = np.array([1.0, 0.0])
-    if major[0] < 0 or (major[0] == 0 and major[1] < 0):
-        major = -major
+    major = _footprint_axis((points @ basis)[:, :2])
     yaw = np.array([[major[0], -major[1], 0.0], [major[1], major[0], 0.0], [0.0, 0.0, 1.0]])
     rotation = basis @ yaw
     in_box = points @ rotation
     low, high = in_box.min(axis=0), in_box.max(axis=0)
     return rotation @ ((low + high) / 2), high - low, rotation
+
+
+def _footprint_axis(xy: np.ndarray) -> np.ndarray:
+    """Unit direction of the long side of the minimum-area rectangle around 2-D points."""
+    candidates = [np.array([1.0, 0.0])]
+    try:
+        hull = xy[ConvexHull(xy).vertices]
+        edges = np.roll(hull, -1, axis=0) - hull
+        lengths = np.linalg.norm(edges, axis=1)
+        candidates += list(edges[lengths > 1e-12] / lengths[lengths > 1e-12, None])
+    except (QhullError, ValueError):
+        hull = xy
+    best, best_area = candidates[0], np.inf
+    for axis in candidates:
+        normal = np.array([-axis[1], axis[0]])
+        extent_a, extent_n = np.ptp(hull @ axis), np.ptp(hull @ normal)
+        if extent_a * extent_n < best_area - 1e-12:
+            best_area = extent_a * extent_n
+            best = axis if extent_a >= extent_n else normal
+    if best[0] < -1e-12 or (abs(best[0]) <= 1e-12 and best[1] < 0):
+        best = -best
+    return best
 
 
 def box_corners(centre: np.ndarray, size: np.ndarray, rotation: np.ndarray) -> np.ndarray:
