@@ -248,8 +248,8 @@ def crop(
     transform: Annotated[
         str,
         typer.Option(
-            help="'random' (random yaw about up and shift), 'none', or a JSON file with a 4x4 "
-            'T_global_local (a list of 4 rows, or {"T_global_local": ...}).'
+            help="'random' (a frame at the viewpoint, random yaw about up), 'none', or a JSON "
+            'file with a 4x4 T_global_local (a list of 4 rows, or {"T_global_local": ...}).'
         ),
     ] = "random",
     seed: Annotated[int, typer.Option(help="Seed of the random transform.")] = 0,

@@ -4,8 +4,9 @@
 points on the side of each object that faces the viewpoint (half-space test about the object
 centre), renames the objects (`l0`, `l1`, ... in order of distance, which is also their `seen`
 order) and expresses everything in a new frame: `p_local = inv(T_global_local) @ p_global`.
-The returned `CropTruth` holds `T_global_local` and the id pairs; `crop_truth_to_dict` is the
-JSON written beside the local map (`LOCAL.gt.json`).
+With a random transform the local frame sits at the viewpoint with a random heading, as a
+robot's own frame would.  The returned `CropTruth` holds `T_global_local` and the id pairs;
+`crop_truth_to_dict` is the JSON written beside the local map (`LOCAL.gt.json`).
 """
 
 from __future__ import annotations
@@ -52,8 +53,9 @@ def crop_with_truth(
 ) -> tuple[ObjectMap, CropTruth]:
     """Crop `objmap` around `center` (objects whose centre is within `radius`).
 
-    `transform`: "random" (a random rotation, about `up` when the map has one, and a shift of
-    up to 5 m, drawn with `seed`), a 4x4 `T_global_local`, or None (identity).  Objects with
+    `transform`: "random" (the local frame sits at `center` with a random heading: a yaw
+    about `up` when the map has one, drawn with `seed`), a 4x4 `T_global_local`, or None
+    (identity: the local frame is the global one).  Objects with
     points keep those facing the viewpoint; an object left with fewer than `min_points` of
     them keeps its nearest `min_points` points.
     """
@@ -62,7 +64,7 @@ def crop_with_truth(
         raise MapError(f"center must be 3 finite numbers, got {center.tolist()}")
     if not np.isfinite(radius) or radius <= 0:
         raise MapError(f"radius must be a positive number, got {radius}")
-    T = pose_for(transform, objmap.up, seed)
+    T = pose_for(transform, objmap.up, seed, origin=center)
     distances = np.linalg.norm(objmap.positions - center, axis=1) if len(objmap) else []
     order = [i for i in np.argsort(distances, kind="stable") if distances[i] <= radius]
     local_from_global = np.linalg.inv(T)
@@ -96,15 +98,18 @@ def visible_points(obj: SemanticObject, viewpoint: np.ndarray, min_points: int =
 
 
 def pose_for(
-    transform: str | np.ndarray | None, up: np.ndarray | None, seed: int | None
+    transform: str | np.ndarray | None,
+    up: np.ndarray | None,
+    seed: int | None,
+    origin: np.ndarray | None = None,
 ) -> np.ndarray:
-    """A 4x4 pose from the `transform` argument of `crop_map`."""
+    """A 4x4 pose from the `transform` argument of `crop_map` (random: see `random_pose`)."""
     if transform is None:
         return np.eye(4)
     if isinstance(transform, str):
         if transform != "random":
             raise MapError(f"transform must be 'random', a 4x4 matrix or None, got {transform!r}")
-        return random_pose(np.random.default_rng(seed), up)
+        return random_pose(np.random.default_rng(seed), up, origin)
     T = np.asarray(transform, dtype=float)
     if T.shape != (4, 4) or not np.all(np.isfinite(T)):
         raise MapError("transform must be a 4x4 matrix of finite numbers")
@@ -116,8 +121,11 @@ def pose_for(
     return T
 
 
-def random_pose(rng: np.random.Generator, up: np.ndarray | None, shift: float = 5.0):
-    """A random rigid pose: yaw about `up` (any rotation when `up` is None), shift <= `shift`."""
+def random_pose(
+    rng: np.random.Generator, up: np.ndarray | None, origin: np.ndarray | None = None
+) -> np.ndarray:
+    """A random frame at `origin` (the viewpoint: so the pose's translation error is the
+    robot's position error): random yaw about `up`, or any rotation when `up` is None."""
     T = np.eye(4)
     if up is None:
         T[:3, :3] = quaternion_matrix(*rng.normal(size=4))
@@ -127,7 +135,7 @@ def random_pose(rng: np.random.Generator, up: np.ndarray | None, shift: float = 
         c, s = np.cos(angle), np.sin(angle)
         yaw = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
         T[:3, :3] = basis @ yaw @ basis.T
-    T[:3, 3] = rng.uniform(-shift, shift, size=3)
+    T[:3, 3] = np.zeros(3) if origin is None else origin
     return T
 
 
