@@ -253,6 +253,9 @@ def crop(
         ),
     ] = "random",
     seed: Annotated[int, typer.Option(help="Seed of the random transform.")] = 0,
+    recentre: Annotated[
+        bool, typer.Option(help="Re-fit each object's centre and box to its visible points.")
+    ] = False,
 ) -> None:
     """Cut a local observation out of MAP (visible-side points, new frame, ground truth)."""
     from semloc.crop import crop_truth_to_dict, crop_with_truth
@@ -266,7 +269,7 @@ def crop(
         pose = None
     else:
         pose = _read_pose(Path(transform))
-    local, truth = crop_with_truth(objmap, center, radius, pose, seed)
+    local, truth = crop_with_truth(objmap, center, radius, pose, seed, recentre=recentre)
     if len(local) == 0:
         fail(f"no object of {map_file} has its centre within {radius} m of {list(center)}")
     save_map(local, output)

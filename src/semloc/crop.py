@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from semloc.io.geometry import quaternion_matrix, up_basis
+from semloc.io.geometry import quaternion_matrix, up_basis, upright_box
 from semloc.maps import MapError, ObjectMap, SemanticObject
 
 
@@ -37,9 +37,10 @@ def crop_map(
     transform: str | np.ndarray | None = "random",
     seed: int | None = 0,
     min_points: int = 3,
+    recentre: bool = False,
 ) -> tuple[ObjectMap, np.ndarray]:
     """The local map seen from `center` and its pose `T_global_local` (see `crop_with_truth`)."""
-    local, truth = crop_with_truth(objmap, center, radius, transform, seed, min_points)
+    local, truth = crop_with_truth(objmap, center, radius, transform, seed, min_points, recentre)
     return local, truth.T_global_local
 
 
@@ -50,6 +51,7 @@ def crop_with_truth(
     transform: str | np.ndarray | None = "random",
     seed: int | None = 0,
     min_points: int = 3,
+    recentre: bool = False,
 ) -> tuple[ObjectMap, CropTruth]:
     """Crop `objmap` around `center` (objects whose centre is within `radius`).
 
@@ -57,7 +59,8 @@ def crop_with_truth(
     about `up` when the map has one, drawn with `seed`), a 4x4 `T_global_local`, or None
     (identity: the local frame is the global one).  Objects with
     points keep those facing the viewpoint; an object left with fewer than `min_points` of
-    them keeps its nearest `min_points` points.
+    them keeps its nearest `min_points` points.  With `recentre`, such an object's position
+    and box are those of its visible points (as a detector seeing one side would report).
     """
     center = np.asarray(center, dtype=float)
     if center.shape != (3,) or not np.all(np.isfinite(center)):
@@ -71,9 +74,11 @@ def crop_with_truth(
     objects, pairs = [], []
     for rank, index in enumerate(order):
         obj = objmap[int(index)]
-        seen_obj = obj.replace(
-            id=f"l{rank}", seen=rank, points=visible_points(obj, center, min_points)
-        )
+        points = visible_points(obj, center, min_points)
+        seen_obj = obj.replace(id=f"l{rank}", seen=rank, points=points)
+        if recentre and points is not None and len(points):
+            position, size, rotation = upright_box(points, objmap.up)
+            seen_obj = seen_obj.replace(position=position, size=size, rotation=rotation)
         objects.append(seen_obj.transformed(local_from_global))
         pairs.append((obj.id, f"l{rank}"))
     up = None if objmap.up is None else local_from_global[:3, :3] @ objmap.up
