@@ -35,10 +35,10 @@ from semloc.io.replica import load_replica
 from semloc.io.rscan import load_rscan
 from semloc.io.scan2cad import load_scan2cad
 from semloc.io.scannet import load_scannet
-from semloc.localizer import localize, pose_difference
+from semloc.localizer import localize
 from semloc.maps import ObjectMap
+from semloc.metrics import is_success, pose_error
 
-ROTATION_DEG, TRANSLATION_M = 15.0, 0.5
 BINS = ((1, 2), (3, 4), (5, 6), (7, 9), (10, 10**6))
 RADII = (1.0, 1.5, 2.0, 3.0)
 
@@ -64,10 +64,10 @@ def run_trial(check: str, global_map: ObjectMap, local_map: ObjectMap, truth: np
     start = time.perf_counter()
     result = localize(global_map, local_map)
     ms = (time.perf_counter() - start) * 1e3
-    right = [_is_right(h.pose, truth) for h in result.hypotheses[:10]]
+    right = [is_success(h.pose, truth) for h in result.hypotheses[:10]]
     errors = (np.inf, np.inf)
     if result.hypotheses and result.hypotheses[0].pose is not None:
-        errors = pose_difference(result.hypotheses[0].pose, truth)
+        errors = pose_error(result.hypotheses[0].pose, truth)
     return Trial(
         check=check,
         n_objects=len(local_map),
@@ -80,13 +80,6 @@ def run_trial(check: str, global_map: ObjectMap, local_map: ObjectMap, truth: np
         translation_m=errors[1],
         ms=ms,
     )
-
-
-def _is_right(pose: np.ndarray | None, truth: np.ndarray) -> bool:
-    if pose is None:
-        return False
-    rotation, translation = pose_difference(pose, truth)
-    return rotation < ROTATION_DEG and translation < TRANSLATION_M
 
 
 def crop_trials(
