@@ -103,6 +103,16 @@ def test_scannet_bad_aggregation(tmp_path, edit, message):
     assert "aggregation.json" in str(info.value)
 
 
+def test_scannet_label_mesh_with_other_vertex_count(tmp_path):
+    from semloc.io.ply import read_ply, write_ply
+
+    write_scannet(tmp_path)
+    path = tmp_path / "scene0001_00_vh_clean_2.labels.ply"
+    write_ply(path, read_ply(path).vertices[:-1])
+    with pytest.raises(MapError, match=r"labels\.ply: \d+ vertices but the mesh has \d+"):
+        load_scannet(tmp_path, labels="nyu40")
+
+
 def test_scannet_refuses_label_mesh_that_is_not_nyu40(tmp_path):
     from semloc.io.ply import read_ply, write_ply
 
@@ -170,6 +180,7 @@ def test_scan2cad_scan_map_from_labelled_mesh(tmp_path):
         (lambda e: e.pop("aligned_models"), "missing key 'aligned_models'"),
         (lambda e: e["aligned_models"][1].pop("trs"), r"aligned_models\[1\]: missing key 'trs'"),
         (lambda e: e["trs"].update(rotation=[0, 0, 0, 0]), "trs: quaternion has zero"),
+        (lambda e: e.update(n_aligned_models=5), "n_aligned_models is 5 but 3 models"),
         (lambda e: e["aligned_models"][0].update(id_cad="gone"), "gone/model_normalized.obj: CAD"),
     ],
 )
@@ -180,6 +191,16 @@ def test_scan2cad_bad_annotation(tmp_path, edit, message):
     path.write_text(json.dumps(document))
     with pytest.raises(MapError, match=message):
         load_scan2cad(path)
+
+
+def test_scan2cad_scan_dir_elsewhere_and_missing(tmp_path):
+    path = write_scan2cad(tmp_path)
+    elsewhere = tmp_path / "scans"
+    elsewhere.mkdir()
+    mesh = path.parent / "scene0002_00_vh_clean_2.labels.ply"
+    mesh.rename(elsewhere / mesh.name)
+    assert load_scan2cad(path).scan is None
+    assert len(load_scan2cad(path, scan_dir=elsewhere).scan) == 4
 
 
 def test_scan2cad_bad_obj(tmp_path):

@@ -43,6 +43,15 @@ def test_crop_check_and_table():
     assert "| room crops | all | 4 |" in text and "| room itself | 15 | 1 | 100% |" in text
 
 
+def test_real_data_dir_resolution(monkeypatch, tmp_path):
+    from semloc.io.datasets import real_data_dir
+
+    monkeypatch.setenv("SEMLOC_DATA", str(tmp_path))
+    assert real_data_dir() == tmp_path
+    monkeypatch.setenv("SEMLOC_DATA", str(tmp_path / "absent"))
+    assert real_data_dir() is None
+
+
 def test_script_without_data_exits_2(monkeypatch, tmp_path, capsys):
     monkeypatch.setenv("SEMLOC_DATA", str(tmp_path / "absent"))
     assert _script().main([]) == 2

@@ -199,6 +199,10 @@ def convert(
     shapenet: Annotated[
         Path | None, typer.Option(help="scan2cad: ShapeNet root (default: ./shapenet nearby).")
     ] = None,
+    scan_dir: Annotated[
+        Path | None,
+        typer.Option(help="scan2cad: folder of the scan's labelled mesh (default: INPUT's)."),
+    ] = None,
     scene: Annotated[
         str | None, typer.Option(help="scan2cad: which scan of a multi-scan annotation file.")
     ] = None,
@@ -218,6 +222,7 @@ def convert(
         keep_unlabeled=keep_unlabeled,
         voxel=voxel,
         shapenet=shapenet,
+        scan_dir=scan_dir,
         scene=scene,
         seed=seed,
     )

@@ -14,10 +14,18 @@ PROJECT_ROOT = Path(__file__).resolve().parents[3]
 
 
 def real_data_dir() -> Path | None:
-    """The folder of real samples, or None when it does not exist."""
+    """The folder of real samples, or None when it does not exist.
+
+    `$SEMLOC_DATA` when set; else `../shared/data/real` beside the project (the source tree
+    this module lives in, or the current folder for an installed package)."""
     configured = os.environ.get("SEMLOC_DATA")
-    folder = Path(configured) if configured else PROJECT_ROOT.parent / "shared" / "data" / "real"
-    return folder if folder.is_dir() else None
+    if configured:
+        return Path(configured) if Path(configured).is_dir() else None
+    for root in (PROJECT_ROOT, Path.cwd()):
+        folder = root.parent / "shared" / "data" / "real"
+        if folder.is_dir():
+            return folder
+    return None
 
 
 def real_sample(*parts: str) -> Path | None:

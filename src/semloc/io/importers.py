@@ -31,6 +31,7 @@ def convert(
     keep_unlabeled: bool = False,
     voxel: float = 0.05,
     shapenet: str | os.PathLike[str] | None = None,
+    scan_dir: str | os.PathLike[str] | None = None,
     scene: str | None = None,
     seed: int = 0,
 ) -> tuple[ObjectMap, ObjectMap | None]:
@@ -41,6 +42,7 @@ def convert(
         kind,
         label_map=label_map,
         shapenet=shapenet,
+        scan_dir=scan_dir,
         scene=scene,
         keep_unlabeled=keep_unlabeled or None,
     )
@@ -61,6 +63,7 @@ def convert(
         maps = load_scan2cad(
             source,
             shapenet=shapenet,
+            scan_dir=scan_dir,
             scene=scene,
             labels=labels or "nyu40",
             include_structure=include_structure,
@@ -88,6 +91,7 @@ def convert(
 _APPLIES = {
     "label_map": {"scannet"},
     "shapenet": {"scan2cad"},
+    "scan_dir": {"scan2cad"},
     "scene": {"scan2cad"},
     "keep_unlabeled": {"replica", "3rscan"},
 }

@@ -145,6 +145,12 @@ def _select_scan(path: Path, scene: str | None) -> dict[str, Any]:
             raise MapError(f"{path}: missing key '{key}'")
     if not isinstance(entry["aligned_models"], list):
         raise MapError(f"{path}: 'aligned_models' must be a list")
+    declared = entry.get("n_aligned_models", len(entry["aligned_models"]))
+    if declared != len(entry["aligned_models"]):
+        raise MapError(
+            f"{path}: n_aligned_models is {declared} but {len(entry['aligned_models'])} "
+            "models are listed"
+        )
     return entry
 
 
