@@ -57,10 +57,10 @@ def crop_with_truth(
 
     `transform`: "random" (the local frame sits at `center` with a random heading: a yaw
     about `up` when the map has one, drawn with `seed`), a 4x4 `T_global_local`, or None
-    (identity: the local frame is the global one).  Objects with
-    points keep those facing the viewpoint; an object left with fewer than `min_points` of
-    them keeps its nearest `min_points` points.  With `recentre`, such an object's position
-    and box are those of its visible points (as a detector seeing one side would report).
+    (identity: the local frame is the global one).  Objects with points keep those facing
+    the viewpoint; one left with fewer than `min_points` of them keeps its `min_points`
+    points nearest to the viewpoint.  With `recentre`, an object's position and box are
+    re-fitted to its visible points (as a detector seeing one side would report them).
     """
     center = np.asarray(center, dtype=float)
     if center.shape != (3,) or not np.all(np.isfinite(center)):
@@ -87,7 +87,9 @@ def crop_with_truth(
     return local, CropTruth(T, pairs, center, float(radius))
 
 
-def visible_points(obj: SemanticObject, viewpoint: np.ndarray, min_points: int = 3):
+def visible_points(
+    obj: SemanticObject, viewpoint: np.ndarray, min_points: int = 3
+) -> np.ndarray | None:
     """The points of `obj` on its side facing `viewpoint` (None when it has no points)."""
     if obj.points is None or len(obj.points) == 0:
         return obj.points
