@@ -152,6 +152,156 @@ def print_result(result: Result, out: Console) -> None:
     out.print(f"{steps} update(s), {total:.1f} ms in all")
 
 
+# Importers and crops (issue 6): `semloc convert`, `semloc crop`. ----------------------------
+
+
+class ConvertKind(StrEnum):
+    scannet = "scannet"
+    scan2cad = "scan2cad"
+    replica = "replica"
+    rscan = "3rscan"
+
+
+@app.command()
+def convert(
+    kind: Annotated[ConvertKind, typer.Argument(help="Dataset format of INPUT.")],
+    source: Annotated[
+        Path,
+        typer.Argument(
+            metavar="INPUT",
+            help="scannet: scene folder or .aggregation.json; scan2cad: annotation JSON or its "
+            "folder; replica: info_semantic.json or its folder; 3rscan: data.npy or its folder.",
+        ),
+    ],
+    output: Annotated[Path, typer.Option("--output", "-o", help="Map file to write (JSON).")],
+    labels: Annotated[
+        str | None,
+        typer.Option(
+            help="Label vocabulary: scannet raw|nyu40 (default raw); 3rscan nyu40|rio27|eigen13 "
+            "(default nyu40); scan2cad nyu40|shapenet (default nyu40)."
+        ),
+    ] = None,
+    label_map: Annotated[
+        Path | None,
+        typer.Option(
+            help="scannet: JSON {raw: label} or scannetv2-labels.combined.tsv mapping raw labels."
+        ),
+    ] = None,
+    include_structure: Annotated[
+        bool, typer.Option(help="Keep walls, floors and ceilings (left out by default).")
+    ] = False,
+    keep_unlabeled: Annotated[
+        bool, typer.Option(help="replica, 3rscan: keep unannotated/placeholder objects.")
+    ] = False,
+    voxel: Annotated[
+        float, typer.Option(help="Voxel edge (m) for downsampling object points; 0 keeps all.")
+    ] = 0.05,
+    shapenet: Annotated[
+        Path | None, typer.Option(help="scan2cad: ShapeNet root (default: ./shapenet nearby).")
+    ] = None,
+    scan_dir: Annotated[
+        Path | None,
+        typer.Option(help="scan2cad: folder of the scan's labelled mesh (default: INPUT's)."),
+    ] = None,
+    scene: Annotated[
+        str | None, typer.Option(help="scan2cad: which scan of a multi-scan annotation file.")
+    ] = None,
+    scan_output: Annotated[
+        Path | None,
+        typer.Option(help="scan2cad: where to write the scan-derived map (default OUT.scan.json)."),
+    ] = None,
+    seed: Annotated[int, typer.Option(help="Seed for sampled surface points.")] = 0,
+) -> None:
+    """Convert a dataset scene into a semloc map (ScanNet, Scan2CAD, Replica, 3RScan)."""
+    from semloc.io import importers, save_map
+
+    options = dict(
+        labels=labels,
+        label_map=label_map,
+        include_structure=include_structure,
+        keep_unlabeled=keep_unlabeled,
+        voxel=voxel,
+        shapenet=shapenet,
+        scan_dir=scan_dir,
+        scene=scene,
+        seed=seed,
+    )
+    try:
+        maps = importers.convert(kind.value, source, **options)
+    except ValueError as exc:
+        if isinstance(exc, MapError):
+            raise
+        fail(str(exc))
+    save_map(maps[0], output)
+    console.print(f"wrote {output}: {len(maps[0])} objects")
+    if len(maps) > 1 and maps[1] is not None:
+        second = scan_output or output.with_name(output.name.removesuffix(".json") + ".scan.json")
+        save_map(maps[1], second)
+        console.print(f"wrote {second}: {len(maps[1])} objects (scan-derived)")
+
+
+@app.command()
+def crop(
+    map_file: Annotated[Path, typer.Argument(metavar="MAP", help="Map to cut from (semloc JSON).")],
+    center: Annotated[
+        tuple[float, float, float], typer.Option(help="Viewpoint X Y Z in the map frame (m).")
+    ],
+    radius: Annotated[float, typer.Option(help="Objects whose centre is within this (m).")],
+    output: Annotated[
+        Path, typer.Option("--output", "-o", help="Local map to write; truth goes to .gt.json.")
+    ],
+    transform: Annotated[
+        str,
+        typer.Option(
+            help="'random' (a frame at the viewpoint, random yaw about up), 'none', or a JSON "
+            'file with a 4x4 T_global_local (a list of 4 rows, or {"T_global_local": ...}).'
+        ),
+    ] = "random",
+    seed: Annotated[int, typer.Option(help="Seed of the random transform.")] = 0,
+    recentre: Annotated[
+        bool, typer.Option(help="Re-fit each object's centre and box to its visible points.")
+    ] = False,
+) -> None:
+    """Cut a local observation out of MAP (visible-side points, new frame, ground truth)."""
+    from semloc.crop import crop_truth_to_dict, crop_with_truth
+    from semloc.io import save_map
+
+    objmap = load_map(map_file)
+    pose: str | np.ndarray | None
+    if transform == "random":
+        pose = "random"
+    elif transform == "none":
+        pose = None
+    else:
+        pose = _read_pose(Path(transform))
+    local, truth = crop_with_truth(objmap, center, radius, pose, seed, recentre=recentre)
+    if len(local) == 0:
+        fail(f"no object of {map_file} has its centre within {radius} m of {list(center)}")
+    save_map(local, output)
+    truth_path = output.with_name(output.name.removesuffix(".json") + ".gt.json")
+    document = crop_truth_to_dict(truth, objmap.name)
+    write_atomic(truth_path, json.dumps(document, indent=1) + "\n")
+    console.print(f"wrote {output}: {len(local)} objects; ground truth in {truth_path}")
+
+
+def _read_pose(path: Path) -> np.ndarray:
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        fail(f"{path}: file not found (--transform takes 'random', 'none' or a JSON file)")
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        fail(f"{path}: not valid JSON ({exc})")
+    if isinstance(data, dict):
+        data = data.get("T_global_local")
+    try:
+        pose = np.asarray(data, dtype=float)
+    except (TypeError, ValueError):
+        pose = np.zeros(0)
+    if pose.shape != (4, 4):
+        fail(f"{path}: expected a 4x4 matrix (4 rows of 4 numbers)")
+    return pose
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the `semloc` script: runs the app and maps errors to exit status 2."""
     try:
