@@ -79,9 +79,7 @@ def map_from_dict(document: Any, base_dir: Path | None = None) -> ObjectMap:
     return ObjectMap(objects, up=document.get("up"), name=name, extra=extra)
 
 
-def _object_from_dict(
-    raw: Any, index: int, external: dict[str, np.ndarray]
-) -> SemanticObject:
+def _object_from_dict(raw: Any, index: int, external: dict[str, np.ndarray]) -> SemanticObject:
     if not isinstance(raw, dict):
         raise MapError(f"object #{index}: must be a JSON object")
     object_id = raw.get("id")
@@ -155,9 +153,7 @@ def _list(array: np.ndarray) -> list:
     return np.round(np.asarray(array, dtype=float), 6).tolist()
 
 
-def save_map(
-    objmap: ObjectMap, path: str | os.PathLike[str], points: str = "auto"
-) -> Path:
+def save_map(objmap: ObjectMap, path: str | os.PathLike[str], points: str = "auto") -> Path:
     """Write `objmap` to `path` atomically.
 
     `points`: "inline" (in the JSON), "file" (a `<stem>.points.npz` beside it) or "auto"
@@ -197,4 +193,3 @@ def write_atomic(path: str | os.PathLike[str], data: bytes | str) -> None:
         if os.path.exists(tmp):
             os.unlink(tmp)
         raise
-
