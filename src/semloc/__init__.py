@@ -1,7 +1,27 @@
-"""semloc: object-level relocalization by hierarchical clustering of object association sets."""
+"""semloc: object-level relocalization by hierarchical clustering of object association sets.
+
+    import semloc
+    g = semloc.load_map("global.json")
+    l = semloc.load_map("local.json")
+    r = semloc.localize(g, l)        # r.status, r.pose (4x4 T_global_local), r.hypotheses
+"""
 
 from semloc.io import load_map, save_map
+from semloc.localizer import Hypothesis, Localizer, LocalizerConfig, Result, Step, localize
 from semloc.maps import MapError, ObjectMap, SemanticObject
 
 __version__ = "0.1.0"
-__all__ = ["MapError", "ObjectMap", "SemanticObject", "load_map", "save_map", "__version__"]
+__all__ = [
+    "Hypothesis",
+    "Localizer",
+    "LocalizerConfig",
+    "MapError",
+    "ObjectMap",
+    "Result",
+    "SemanticObject",
+    "Step",
+    "__version__",
+    "load_map",
+    "localize",
+    "save_map",
+]

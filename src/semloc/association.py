@@ -1,0 +1,83 @@
+"""Candidate (singleton) associations between local and global objects (paper Sec. III-B, init).
+
+A local object may be associated with a global object when their labels agree (compared after
+an optional label map of synonyms, case- and space-insensitive) and, when both carry shape
+descriptors of the same length, the descriptor distance is below `delta`.  Every candidate
+becomes a singleton association set with score 0.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field
+
+from semloc.maps import ObjectMap, SemanticObject
+
+
+class AssociationConfig(BaseModel):
+    """Which (global, local) object pairs may be associated at all."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    delta: float = Field(
+        0.5, gt=0, description="Descriptor distance bound for a candidate pair (paper: 0.5)."
+    )
+    label_map: dict[str, str] = Field(
+        default_factory=dict,
+        description="Synonyms mapped onto one label before comparing, e.g. {'sofa': 'couch'}.",
+    )
+    use_descriptors: bool = Field(
+        True, description="Gate candidates by descriptor distance when both objects have one."
+    )
+
+
+def canonical_label(label: str, label_map: dict[str, str]) -> str:
+    """The label used for comparison: trimmed, lower case, mapped through `label_map`."""
+    key = label.strip().lower()
+    mapped = label_map.get(label, label_map.get(key, key))
+    return mapped.strip().lower()
+
+
+class CandidateIndex:
+    """Global objects grouped by label, ready to answer "which global objects may this be?"."""
+
+    def __init__(self, global_map: ObjectMap, config: AssociationConfig) -> None:
+        self.config = config
+        self._label_map = {k.strip().lower(): v for k, v in config.label_map.items()}
+        self._by_label: dict[str, np.ndarray] = {}
+        labels = [canonical_label(label, self._label_map) for label in global_map.labels]
+        for label in sorted(set(labels)):
+            self._by_label[label] = np.flatnonzero(np.array(labels, dtype=object) == label)
+        self._descriptors = global_map.descriptors
+
+    @property
+    def labels(self) -> set[str]:
+        return set(self._by_label)
+
+    def candidates(self, obj: SemanticObject) -> np.ndarray:
+        """Indices of the global objects that `obj` may be associated with (sorted)."""
+        label = canonical_label(obj.label, self._label_map)
+        indices = self._by_label.get(label, np.zeros(0, dtype=int))
+        if not self.config.use_descriptors or obj.descriptor is None or len(indices) == 0:
+            return indices
+        return np.array(
+            [i for i in indices if self._descriptor_ok(self._descriptors[i], obj.descriptor)],
+            dtype=int,
+        )
+
+    def _descriptor_ok(self, global_descriptor: np.ndarray | None, local: np.ndarray) -> bool:
+        if global_descriptor is None or global_descriptor.shape != local.shape:
+            return True
+        return float(np.linalg.norm(global_descriptor - local)) < self.config.delta
+
+
+def candidate_pairs(
+    global_map: ObjectMap,
+    local_objects: Sequence[SemanticObject],
+    config: AssociationConfig | None = None,
+) -> list[tuple[int, int]]:
+    """All singleton candidates as (global index, index into `local_objects`) pairs."""
+    index = CandidateIndex(global_map, config or AssociationConfig())
+    return [(int(g), j) for j, obj in enumerate(local_objects) for g in index.candidates(obj)]

@@ -1,0 +1,490 @@
+"""Association sets and their incremental hierarchical clustering (the paper's Sec. III-B).
+
+Vocabulary
+    candidate        a pair (global object, local object) allowed by `association.py`.
+    association set  a set of candidates, one-to-one, with a score v; singletons score 0.
+    h(a, b)          distance-ratio merge metric of two candidates a=(α_i, β_i), b=(α_j, β_j):
+                     min(d^B/d^A, d^A/d^B) of the global and local object distances.
+
+The paper's rules, as implemented
+    * Two sets D1, D2 merge when every *new* cross pair (a ∈ D1∖D2, b ∈ D2∖D1) has h > γ; a
+      set containing the other is not merged.  A cross pair sharing a global or a local object
+      with different partners has h = 0 (the union must stay one-to-one).
+    * The merged set scores v1 + v2 + Σ h over the new cross pairs; the originals are kept.
+    * Duplicates keep the larger score.  Only the top K = sets_per_object · n_global sets are
+      kept.  Sets that have not merged for more than `expiry_updates` updates are dropped.
+    * Each update adds the singletons of new or re-detected local objects, then clusters again.
+
+Formulation (equivalent to the literal pairwise test, see tests/test_clustering.py)
+    A boolean compatibility matrix C over candidates holds h(a, b) > γ for one-to-one pairs
+    (C[a, a] = True).  Every set is a clique of C (singletons trivially; a merge only joins
+    sets whose new cross pairs are all compatible), so D1 ∪ D2 passes the literal test exactly
+    when D2 ⊆ M(D1) = ⋂_{a ∈ D1} C[a].  Sets are bitsets over candidates (rows of uint64
+    words), M(D) is kept per set, and the test is a vectorised `D2 & ~M(D1) == 0`.
+
+Where the paper is silent (see also DESIGN.md)
+    * "Marking merged sets": every pair of sets is tried once.  A clustering round works on a
+      frontier: in each iteration only pairs with at least one set created in the previous
+      iteration (or at this update) are tried; iterations run until no new set appears.
+      Within an iteration all merges use the scores from its start, so the result does not
+      depend on the order of objects.
+    * Top-K pruning happens after every iteration (bounding work and memory), with ties broken
+      by size and then by an order-independent hash of the set's (global id, local id) pairs.
+    * A set's age is reset when it merges (as either parent), when it is created, and when a
+      re-detection re-adds it as a singleton.  Expiry spares the `protect_top` best sets, so
+      an answer is not forgotten while new detections bring nothing consistent.
+    * `distance_tolerance` (ε, metres, default 0 = the paper) softens the ratio for centres
+      biased by partial views: h = 1 − max(0, |d^A − d^B| − ε) / max(d^A, d^B).  Distances
+      both below `min_distance` count as h = 1.
+    * When a re-detection moves a local object, the compatibility of its candidates is
+      recomputed; sets that are no longer cliques are dropped and the others keep their score.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field
+
+_CHUNK_ELEMENTS = 1 << 22  # bound on the (frontier x pool x words) intermediate arrays
+
+
+class ClusteringConfig(BaseModel):
+    """Parameters of the hierarchical clustering of association sets."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    gamma: float = Field(0.8, gt=0, lt=1, description="Merge threshold on the distance ratio h.")
+    distance_tolerance: float = Field(
+        0.0, ge=0, description="Absolute slack ε (m) on distance differences; 0 is the paper."
+    )
+    min_distance: float = Field(
+        0.05, ge=0, description="Distances below this (m) on both sides count as equal."
+    )
+    sets_per_object: int = Field(
+        10, ge=1, description="Keep the top K = sets_per_object * n_global sets (paper: 10)."
+    )
+    expiry_updates: int = Field(
+        2, ge=0, description="Drop sets that have not merged for more than this many updates."
+    )
+    protect_top: int = Field(10, ge=0, description="The best sets are never expired.")
+
+
+def merge_metric(
+    d_global: np.ndarray,
+    d_local: np.ndarray,
+    tolerance: float = 0.0,
+    min_distance: float = 0.05,
+) -> np.ndarray:
+    """h for arrays of global and local distances (broadcasting); 1 is perfect agreement."""
+    d_global, d_local = np.broadcast_arrays(np.asarray(d_global), np.asarray(d_local))
+    d_max = np.maximum(d_global, d_local)
+    excess = np.maximum(np.abs(d_global - d_local) - tolerance, 0.0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        h = 1.0 - excess / d_max
+    return np.where(d_max < min_distance, 1.0, np.where(d_max > 0, h, 1.0))
+
+
+@dataclass(frozen=True)
+class AssociationSet:
+    """One association set: (global index, local index) pairs, score and bookkeeping."""
+
+    pairs: tuple[tuple[int, int], ...]
+    score: float
+    last_merge: int
+
+    def __len__(self) -> int:
+        return len(self.pairs)
+
+
+def _pack_rows(matrix: np.ndarray, words: int) -> np.ndarray:
+    """Pack a boolean matrix (rows x columns) into rows of `words` little-endian uint64."""
+    rows = matrix.shape[0]
+    padded = np.zeros((rows, words * 64), dtype=bool)
+    padded[:, : matrix.shape[1]] = matrix
+    return np.packbits(padded, axis=1, bitorder="little").view(np.uint64).reshape(rows, words)
+
+
+def _unpack_rows(bits: np.ndarray, columns: int) -> np.ndarray:
+    flat = np.unpackbits(bits.view(np.uint8), axis=1, bitorder="little")
+    return flat[:, :columns].astype(bool)
+
+
+def _members(bits: np.ndarray, columns: int) -> np.ndarray:
+    """Member candidate indices per row, padded with -1 (rows x max size)."""
+    mask = _unpack_rows(bits, columns)
+    sizes = mask.sum(axis=1)
+    width = max(int(sizes.max(initial=0)), 1)
+    out = np.full((len(bits), width), -1, dtype=np.int64)
+    rows, cols = np.nonzero(mask)
+    slot = np.arange(len(rows)) - np.repeat(np.cumsum(sizes) - sizes, sizes)
+    out[rows, slot] = cols
+    return out
+
+
+def _pair_hash(global_id: str, local_id: str) -> np.uint64:
+    digest = hashlib.blake2b(f"{global_id}\x00{local_id}".encode(), digest_size=8).digest()
+    return np.frombuffer(digest, dtype=np.uint64)[0]
+
+
+class HierarchicalClustering:
+    """The pool of association sets over a growing local map, grown incrementally.
+
+    `global_positions` and `global_ids` describe the global map; `update()` receives the
+    positions of all local objects so far and the candidate global indices of the local
+    objects that are new or re-detected at this update.
+    """
+
+    def __init__(
+        self,
+        global_positions: np.ndarray,
+        global_ids: list[str],
+        config: ClusteringConfig | None = None,
+    ) -> None:
+        self.config = config or ClusteringConfig()
+        self._global_positions = np.asarray(global_positions, dtype=float)
+        self._global_ids = list(global_ids)
+        self.capacity = self.config.sets_per_object * max(len(self._global_ids), 1)
+        self.step = 0
+        # candidates
+        self._cand_g = np.zeros(0, dtype=np.int64)
+        self._cand_l = np.zeros(0, dtype=np.int64)
+        self._cand_hash = np.zeros(0, dtype=np.uint64)
+        self._cand_alive = np.zeros(0, dtype=bool)
+        self._cand_index: dict[tuple[int, int], int] = {}
+        self._cands_of_local: dict[int, dict[int, int]] = {}
+        self._local_positions = np.zeros((0, 3))
+        self._local_ids: list[str] = []
+        self._h = np.zeros((0, 0))
+        self._compat_bits = np.zeros((0, 1), dtype=np.uint64)
+        # sets
+        self._words = 1
+        self._bits = np.zeros((0, 1), dtype=np.uint64)
+        self._common = np.zeros((0, 1), dtype=np.uint64)
+        self._members = np.full((0, 1), -1, dtype=np.int64)
+        self._score = np.zeros(0)
+        self._last_merge = np.zeros(0, dtype=np.int64)
+        self._row_of: dict[bytes, int] = {}
+
+    # ------------------------------------------------------------------------------------
+    # Public view
+    @property
+    def n_sets(self) -> int:
+        return len(self._score)
+
+    @property
+    def n_candidates(self) -> int:
+        return int(self._cand_alive.sum())
+
+    def sets(self) -> list[AssociationSet]:
+        """All sets, best first (score, then size, then an order-independent tie-break)."""
+        return [self._set(row) for row in self._ranking()]
+
+    def top(self, k: int, min_size: int = 1) -> list[AssociationSet]:
+        """The k best sets with at least `min_size` pairs."""
+        out: list[AssociationSet] = []
+        for row in self._ranking():
+            if len(out) == k:
+                break
+            if (self._members[row] >= 0).sum() >= min_size:
+                out.append(self._set(row))
+        return out
+
+    def _set(self, row: int) -> AssociationSet:
+        members = self._members[row][self._members[row] >= 0]
+        pairs = tuple(
+            sorted((int(self._cand_g[c]), int(self._cand_l[c])) for c in members)
+        )
+        return AssociationSet(pairs, float(self._score[row]), int(self._last_merge[row]))
+
+    # ------------------------------------------------------------------------------------
+    # Update
+    def update(
+        self,
+        local_positions: np.ndarray,
+        local_ids: list[str],
+        detections: dict[int, np.ndarray],
+    ) -> None:
+        """One incremental update: new/re-detected local objects, then a clustering round.
+
+        `local_positions` (L, 3) and `local_ids` cover all local objects so far (index = local
+        index); `detections` maps the local index of each new or re-detected object to the
+        global indices it may be associated with.
+        """
+        self.step += 1
+        moved = self._moved_locals(np.asarray(local_positions, dtype=float), detections)
+        self._local_positions = np.asarray(local_positions, dtype=float).reshape(-1, 3)
+        self._local_ids = list(local_ids)
+        stale = self._register_candidates(detections)
+        self._refresh_compatibility()
+        fresh_rows = self._revalidate(stale, moved)
+        fresh_rows += self._add_singletons(detections)
+        self._cluster(np.unique(np.array(fresh_rows, dtype=np.int64)))
+        self._expire()
+
+    def _moved_locals(self, positions: np.ndarray, detections: dict[int, np.ndarray]) -> set[int]:
+        known = len(self._local_positions)
+        return {
+            local
+            for local in detections
+            if local < known
+            and np.linalg.norm(positions[local] - self._local_positions[local]) > 1e-6
+        }
+
+    def _register_candidates(self, detections: dict[int, np.ndarray]) -> set[int]:
+        """Add new candidate pairs; return candidates that a re-detection no longer allows."""
+        stale: set[int] = set()
+        new_g, new_l = [], []
+        for local, globals_ in detections.items():
+            allowed = {int(g) for g in globals_}
+            known = self._cands_of_local.setdefault(local, {})
+            stale.update(c for g, c in known.items() if g not in allowed)
+            for g in sorted(allowed):
+                if g in known:
+                    self._cand_alive[known[g]] = True
+                else:
+                    known[g] = self._cand_index[(g, local)] = len(self._cand_g) + len(new_g)
+                    new_g.append(g)
+                    new_l.append(local)
+        if new_g:
+            hashes = [
+                _pair_hash(self._global_ids[g], self._local_ids[l]) for g, l in zip(new_g, new_l)
+            ]
+            self._cand_g = np.concatenate([self._cand_g, new_g]).astype(np.int64)
+            self._cand_l = np.concatenate([self._cand_l, new_l]).astype(np.int64)
+            self._cand_hash = np.concatenate([self._cand_hash, np.array(hashes, np.uint64)])
+            self._cand_alive = np.concatenate([self._cand_alive, np.ones(len(new_g), bool)])
+        self._cand_alive[list(stale)] = False
+        return stale
+
+    def _refresh_compatibility(self) -> None:
+        """Recompute h and the packed compatibility rows for all candidates."""
+        cfg = self.config
+        g, l = self._cand_g, self._cand_l
+        d_global = np.linalg.norm(
+            self._global_positions[g][:, None] - self._global_positions[g][None], axis=2
+        )
+        d_local = np.linalg.norm(
+            self._local_positions[l][:, None] - self._local_positions[l][None], axis=2
+        )
+        h = merge_metric(d_global, d_local, cfg.distance_tolerance, cfg.min_distance)
+        one_to_one = (g[:, None] != g[None]) & (l[:, None] != l[None])
+        h = np.where(one_to_one, h, 0.0)
+        alive = self._cand_alive
+        compat = (h > cfg.gamma) & alive[:, None] & alive[None]
+        np.fill_diagonal(compat, True)
+        self._h = h
+        n = len(g)
+        words = max(1, -(-n // 64))
+        self._compat_bits = np.vstack(
+            [_pack_rows(compat, words), np.full((1, words), ~np.uint64(0))]
+        )  # the last row (all ones) serves as padding for member lists
+        if words != self._words:
+            self._bits = np.hstack(
+                [self._bits, np.zeros((len(self._bits), words - self._words), np.uint64)]
+            )
+            self._words = words
+        self._common = self._common_of(self._members)
+        self._row_of = {self._bits[r].tobytes(): r for r in range(len(self._bits))}
+
+    def _common_of(self, members: np.ndarray) -> np.ndarray:
+        padded = np.where(members >= 0, members, len(self._compat_bits) - 1)
+        return np.bitwise_and.reduce(self._compat_bits[padded], axis=1)
+
+    def _revalidate(self, stale: set[int], moved: set[int]) -> list[int]:
+        """Drop sets with stale candidates or broken cliques; sets with moved objects are fresh."""
+        if not len(self._score):
+            return []
+        members = self._members
+        valid = members >= 0
+        has_stale = np.isin(members, list(stale)) & valid
+        is_clique = np.all((self._bits & ~self._common) == 0, axis=1)
+        keep = ~has_stale.any(axis=1) & is_clique
+        touched = np.isin(self._cand_l[np.where(valid, members, 0)], list(moved)) & valid
+        self._keep_rows(keep)
+        return list(np.flatnonzero(touched.any(axis=1)[keep]))
+
+    def _add_singletons(self, detections: dict[int, np.ndarray]) -> list[int]:
+        rows: list[int] = []
+        for local, globals_ in detections.items():
+            for g in sorted({int(x) for x in globals_}):
+                c = self._cand_index[(g, local)]
+                bits = np.zeros((1, self._words), np.uint64)
+                bits[0, c // 64] = np.uint64(1) << np.uint64(c % 64)
+                row = self._row_of.get(bits[0].tobytes())
+                if row is None:
+                    row = self._append(bits, np.array([[c]]), np.zeros(1))[0]
+                self._last_merge[row] = self.step
+                rows.append(row)
+        return rows
+
+    # ------------------------------------------------------------------------------------
+    # Clustering round
+    def _cluster(self, frontier: np.ndarray) -> None:
+        while len(frontier):
+            parents_a, parents_b = self._find_merges(frontier)
+            if not len(parents_a):
+                break
+            self._last_merge[parents_a] = self.step
+            self._last_merge[parents_b] = self.step
+            bits = self._bits[parents_a] | self._bits[parents_b]
+            scores = (
+                self._score[parents_a]
+                + self._score[parents_b]
+                + self._cross_sum(parents_a, parents_b)
+            )
+            frontier = self._insert(bits, scores)
+            frontier = self._prune(frontier)
+
+    def _find_merges(self, frontier: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """All (a, b) rows with a in the frontier whose union passes the merge criterion."""
+        n_pool = len(self._bits)
+        in_frontier = np.zeros(n_pool, dtype=bool)
+        in_frontier[frontier] = True
+        chunk = max(1, _CHUNK_ELEMENTS // max(n_pool, 1))
+        found_a, found_b = [], []
+        for start in range(0, len(frontier), chunk):
+            rows = frontier[start : start + chunk]
+            # a pair of two frontier sets is tried once, from its lower row
+            ok = ~in_frontier[None, :] | (np.arange(n_pool)[None, :] > rows[:, None])
+            for w in range(self._words):  # b ⊆ M(a): the union is a clique
+                ok &= (self._bits[None, :, w] & ~self._common[rows, w][:, None]) == 0
+            ia, ib = np.nonzero(ok)
+            a, b = self._bits[rows[ia]], self._bits[ib]
+            # neither contains the other: both bring new pairs
+            adds = np.any((b & ~a) != 0, axis=1) & np.any((a & ~b) != 0, axis=1)
+            found_a.append(rows[ia[adds]])
+            found_b.append(ib[adds])
+        return np.concatenate(found_a), np.concatenate(found_b)
+
+    def _cross_sum(self, rows_a: np.ndarray, rows_b: np.ndarray) -> np.ndarray:
+        """Σ h over the new cross pairs (a ∈ A∖B, b ∈ B∖A) for each merge (A, B).
+
+        Each merge is oriented so that its smaller set is indexed by a short member list;
+        merges are grouped by that size, keeping the gathers at (merges x large x small).
+        """
+        size = (self._members >= 0).sum(axis=1)
+        swap = size[rows_a] < size[rows_b]
+        large = np.where(swap, rows_b, rows_a)
+        small = np.where(swap, rows_a, rows_b)
+        out = np.zeros(len(rows_a))
+        for k in np.unique(size[small]):
+            sel = np.flatnonzero(size[small] == k)
+            big, little = large[sel], small[sel]
+            ml = self._members[big, : size[big].max()]
+            ms = self._members[little, :k]
+            a_new = (ml >= 0) & ~self._contains(self._bits[little], ml)
+            b_new = ~self._contains(self._bits[big], ms)
+            h = self._h[np.maximum(ml, 0)[:, :, None], ms[:, None, :]]
+            out[sel] = np.sum(h * (a_new[:, :, None] & b_new[:, None, :]), axis=(1, 2))
+        return out
+
+    @staticmethod
+    def _contains(bits: np.ndarray, candidates: np.ndarray) -> np.ndarray:
+        """Whether each row's bitset contains each candidate index in that row of `candidates`."""
+        safe = np.maximum(candidates, 0)
+        words = np.take_along_axis(bits, safe // 64, axis=1)
+        return ((words >> (safe % 64).astype(np.uint64)) & np.uint64(1)).astype(bool)
+
+    def _insert(self, bits: np.ndarray, scores: np.ndarray) -> np.ndarray:
+        """Add merged sets (duplicates keep the larger score); return the rows that are new."""
+        unique, inverse = _unique_rows(bits)
+        best = np.full(len(unique), -np.inf)
+        np.maximum.at(best, inverse, scores)
+        new_mask = np.ones(len(unique), dtype=bool)
+        for i, row_bits in enumerate(unique):
+            row = self._row_of.get(row_bits.tobytes())
+            if row is not None:
+                new_mask[i] = False
+                self._score[row] = max(self._score[row], best[i])
+        if not new_mask.any():
+            return np.zeros(0, dtype=np.int64)
+        added = unique[new_mask]
+        members = _members(added, len(self._cand_g))
+        return self._append(added, members, best[new_mask])
+
+    def _append(self, bits: np.ndarray, members: np.ndarray, scores: np.ndarray) -> np.ndarray:
+        start = len(self._bits)
+        width = max(self._members.shape[1], members.shape[1])
+        self._members = np.vstack([_pad(self._members, width), _pad(members, width)])
+        self._bits = np.vstack([self._bits, bits])
+        self._common = np.vstack([self._common, self._common_of(members)])
+        self._score = np.concatenate([self._score, scores])
+        self._last_merge = np.concatenate(
+            [self._last_merge, np.full(len(scores), self.step, dtype=np.int64)]
+        )
+        rows = np.arange(start, start + len(scores))
+        for r in rows:
+            self._row_of[self._bits[r].tobytes()] = int(r)
+        return rows
+
+    # ------------------------------------------------------------------------------------
+    # Pruning
+    def _ranking(self) -> np.ndarray:
+        """Rows best first: score (rounded), size, then an order-independent hash."""
+        valid = self._members >= 0
+        size = valid.sum(axis=1)
+        set_hash = np.sum(
+            np.where(valid, self._cand_hash[np.maximum(self._members, 0)], np.uint64(0)),
+            axis=1,
+            dtype=np.uint64,
+        )
+        return np.lexsort((set_hash, -size, -np.round(self._score, 9)))
+
+    def _prune(self, frontier: np.ndarray) -> np.ndarray:
+        """Keep the top K sets; return the surviving part of the frontier (renumbered)."""
+        if len(self._score) <= self.capacity:
+            return frontier
+        keep = np.zeros(len(self._score), dtype=bool)
+        keep[self._ranking()[: self.capacity]] = True
+        is_frontier = np.zeros(len(self._score), dtype=bool)
+        is_frontier[frontier] = True
+        self._keep_rows(keep)
+        return np.flatnonzero(is_frontier[keep])
+
+    def _expire(self) -> None:
+        old = self.step - self._last_merge > self.config.expiry_updates
+        if not old.any():
+            return
+        protected = np.zeros(len(old), dtype=bool)
+        protected[self._ranking()[: self.config.protect_top]] = True
+        self._keep_rows(~old | protected)
+
+    def _keep_rows(self, keep: np.ndarray) -> None:
+        self._bits = self._bits[keep]
+        self._common = self._common[keep]
+        self._members = self._members[keep]
+        self._score = self._score[keep]
+        self._last_merge = self._last_merge[keep]
+        self._row_of = {self._bits[r].tobytes(): r for r in range(len(self._bits))}
+
+
+_HASH_MULTIPLIERS = np.array(
+    [0x9E3779B97F4A7C15, 0xC2B2AE3D27D4EB4F, 0x165667B19E3779F9, 0xD6E8FEB86659FD93],
+    dtype=np.uint64,
+)
+
+
+def _unique_rows(bits: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Distinct rows of a uint64 matrix and the inverse index (fast path through a hash)."""
+    words = bits.shape[1]
+    multipliers = _HASH_MULTIPLIERS[np.arange(words) % len(_HASH_MULTIPLIERS)] + np.uint64(
+        2
+    ) * np.arange(words, dtype=np.uint64)
+    keys = np.bitwise_xor.reduce(bits * multipliers, axis=1) if words > 1 else bits[:, 0]
+    _, first, inverse = np.unique(keys, return_index=True, return_inverse=True)
+    unique = bits[first]
+    if np.array_equal(unique[inverse], bits):
+        return unique, inverse
+    unique, inverse = np.unique(bits, axis=0, return_inverse=True)  # hash collision
+    return unique, inverse.ravel()
+
+
+def _pad(members: np.ndarray, width: int) -> np.ndarray:
+    if members.shape[1] == width:
+        return members
+    out = np.full((len(members), width), -1, dtype=np.int64)
+    out[:, : members.shape[1]] = members
+    return out

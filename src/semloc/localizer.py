@@ -1,0 +1,382 @@
+"""The Localizer: association → clustering → pose → decision, one incremental update at a time.
+
+`Localizer(global_map, config).update(objects)` takes the local objects that are new or were
+re-detected (same id = updated), grows the association sets, turns the best of them into
+distinct pose hypotheses and decides:
+
+    localized   the best hypothesis has ≥ `min_pairs` pairs and its score dominates the best
+                *rival* by the factor (1 + margin); a rival is a hypothesis with a different
+                pose that shares less than `rival_overlap` of its pairs with the best one
+                (one swapped association is a variant of the same answer, not a rival);
+    ambiguous   hypotheses exist (≥ 2 pairs) but none dominates;
+    failed      no association set has 2 or more pairs.
+
+Hypotheses are distinct locations: walking down the ranked association sets, a set whose
+closed-form pose is within `distinct_rotation_deg` / `distinct_translation` of a hypothesis
+already listed (or whose pairs are a subset of one) is skipped, so the top-k are k different
+answers.  Only the chosen hypotheses get the full pose recovery (global search, robust ICP).
+
+`localize(global_map, local_map)` replays a local map by its `seen` keyframes.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+from semloc.association import AssociationConfig, CandidateIndex
+from semloc.clustering import AssociationSet, ClusteringConfig, HierarchicalClustering
+from semloc.maps import MapError, ObjectMap, SemanticObject
+from semloc.pose import PoseConfig, PoseEstimate, align_positions, estimate_pose
+
+Status = Literal["localized", "ambiguous", "failed"]
+
+
+class DecisionConfig(BaseModel):
+    """When a hypothesis counts as the answer, and when two hypotheses are the same place."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    min_pairs: int = Field(3, ge=2, description="Pairs the best set needs to be 'localized'.")
+    margin: float = Field(
+        0.25, ge=0, description="Best score must exceed (1 + margin) x the best different one."
+    )
+    rival_overlap: float = Field(
+        0.5,
+        ge=0,
+        le=1,
+        description="A hypothesis sharing at least this share of pairs with the best one is a "
+        "variant of it, not a rival, when deciding dominance.",
+    )
+    distinct_rotation_deg: float = Field(
+        10.0, gt=0, description="Hypotheses closer than this in rotation are the same place."
+    )
+    distinct_translation: float = Field(
+        0.3, gt=0, description="Hypotheses closer than this (m) in translation are the same place."
+    )
+
+
+_COMPONENTS: dict[str, type[BaseModel]] = {
+    "association": AssociationConfig,
+    "clustering": ClusteringConfig,
+    "pose": PoseConfig,
+    "decision": DecisionConfig,
+}
+
+
+class LocalizerConfig(BaseModel):
+    """All settings, one model per component.  Component fields may also be given flat:
+    `LocalizerConfig(gamma=0.7, delta=0.4)` sets `clustering.gamma` and `association.delta`."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    association: AssociationConfig = Field(default_factory=AssociationConfig)
+    clustering: ClusteringConfig = Field(default_factory=ClusteringConfig)
+    pose: PoseConfig = Field(default_factory=PoseConfig)
+    decision: DecisionConfig = Field(default_factory=DecisionConfig)
+    top_k: int = Field(10, ge=1, description="How many distinct hypotheses are reported.")
+    rank_by: Literal["score", "fitness"] = Field(
+        "score", description="Order of the reported hypotheses: clustering score or pose fitness."
+    )
+
+    @model_validator(mode="before")
+    @classmethod
+    def _route_flat_fields(cls, data: Any) -> Any:
+        if not isinstance(data, dict):
+            return data
+        data = dict(data)
+        for key in [k for k in data if k not in cls.model_fields]:
+            owners = [name for name, model in _COMPONENTS.items() if key in model.model_fields]
+            if len(owners) == 1:
+                section = data.get(owners[0], {})
+                if isinstance(section, BaseModel):
+                    section = section.model_dump()
+                data[owners[0]] = {**section, key: data.pop(key)}
+        return data
+
+    @property
+    def gamma(self) -> float:
+        return self.clustering.gamma
+
+    @property
+    def delta(self) -> float:
+        return self.association.delta
+
+
+@dataclass
+class Hypothesis:
+    """One candidate answer: an association set and the pose it implies."""
+
+    rank: int
+    score: float
+    pairs: list[tuple[str, str]]  # (global id, local id)
+    pose: np.ndarray | None
+    fitness: float | None = None
+    rmse: float | None = None
+    method: str = ""
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "rank": self.rank,
+            "score": round(self.score, 6),
+            "pairs": [{"global": g, "local": l} for g, l in self.pairs],
+            "pose": None if self.pose is None else np.round(self.pose, 9).tolist(),
+            "fitness": None if self.fitness is None else round(self.fitness, 6),
+            "rmse": None if self.rmse is None else round(self.rmse, 6),
+            "method": self.method,
+        }
+
+
+@dataclass
+class Step:
+    """What one update did: local objects so far, sets in the pool, top scores, time."""
+
+    step: int
+    n_local: int
+    n_sets: int
+    top_scores: list[float]
+    ms: float
+    status: Status = "failed"
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "step": self.step,
+            "n_local": self.n_local,
+            "n_sets": self.n_sets,
+            "top_scores": [round(s, 6) for s in self.top_scores],
+            "ms": round(self.ms, 3),
+            "status": self.status,
+        }
+
+
+@dataclass
+class Result:
+    """The answer after an update: status, best pose, ranked hypotheses and per-step records."""
+
+    status: Status
+    pose: np.ndarray | None
+    hypotheses: list[Hypothesis]
+    steps: list[Step] = field(default_factory=list)
+    timing_ms: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def best(self) -> Hypothesis | None:
+        return self.hypotheses[0] if self.hypotheses else None
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "status": self.status,
+            "pose": None if self.pose is None else np.round(self.pose, 9).tolist(),
+            "hypotheses": [h.to_dict() for h in self.hypotheses],
+            "steps": [s.to_dict() for s in self.steps],
+            "timing_ms": {k: round(v, 3) for k, v in self.timing_ms.items()},
+        }
+
+
+class Localizer:
+    """Incremental object-level relocalization against one global map."""
+
+    def __init__(
+        self,
+        global_map: ObjectMap,
+        config: LocalizerConfig | None = None,
+        local_up: Any = None,
+        **overrides: Any,
+    ) -> None:
+        if config is None:
+            config = LocalizerConfig(**overrides)
+        elif overrides:
+            config = LocalizerConfig(**{**config.model_dump(), **overrides})
+        self.config = config
+        self.global_map = global_map
+        self.local_up = None if local_up is None else np.asarray(local_up, dtype=float)
+        self._candidates = CandidateIndex(global_map, config.association)
+        self._clustering = HierarchicalClustering(
+            global_map.positions, list(global_map.ids), config.clustering
+        )
+        self._local: dict[str, SemanticObject] = {}
+        self._local_index: dict[str, int] = {}
+        self._steps: list[Step] = []
+        self._timing = {"association": 0.0, "clustering": 0.0, "pose": 0.0, "total": 0.0}
+
+    @property
+    def local_map(self) -> ObjectMap:
+        """The local objects received so far (latest version of each)."""
+        return ObjectMap(self._local.values(), up=self.local_up, name="local")
+
+    @property
+    def n_sets(self) -> int:
+        return self._clustering.n_sets
+
+    def update(self, objects: Iterable[SemanticObject] | ObjectMap) -> Result:
+        """Add new or re-detected local objects and return the current answer."""
+        start = time.perf_counter()
+        if isinstance(objects, ObjectMap) and objects.up is not None and self.local_up is None:
+            self.local_up = objects.up
+        objects = list(objects)
+        for obj in objects:
+            if not isinstance(obj, SemanticObject):
+                raise MapError(f"update() takes SemanticObject items, got {type(obj).__name__}")
+        detections = self._associate(objects)
+        tick = time.perf_counter()
+        if detections:
+            self._clustering.update(
+                np.array([o.position for o in self._local.values()]).reshape(-1, 3),
+                list(self._local),
+                detections,
+            )
+        tock = time.perf_counter()
+        hypotheses = self._hypotheses()
+        status = self._decide(hypotheses)
+        end = time.perf_counter()
+        self._add_timing(tick - start, tock - tick, end - tock)
+        self._steps.append(
+            Step(
+                step=len(self._steps),
+                n_local=len(self._local),
+                n_sets=self._clustering.n_sets,
+                top_scores=[h.score for h in hypotheses],
+                ms=(end - start) * 1e3,
+                status=status,
+            )
+        )
+        return Result(
+            status=status,
+            pose=hypotheses[0].pose if hypotheses and status != "failed" else None,
+            hypotheses=hypotheses,
+            steps=list(self._steps),
+            timing_ms=dict(self._timing),
+        )
+
+    def _add_timing(self, association: float, clustering: float, pose: float) -> None:
+        for key, seconds in (
+            ("association", association),
+            ("clustering", clustering),
+            ("pose", pose),
+            ("total", association + clustering + pose),
+        ):
+            self._timing[key] += seconds * 1e3
+
+    def _associate(self, objects: list[SemanticObject]) -> dict[int, np.ndarray]:
+        """Register objects; return candidate global indices per local index."""
+        detections: dict[int, np.ndarray] = {}
+        for obj in objects:
+            index = self._local_index.setdefault(obj.id, len(self._local_index))
+            self._local[obj.id] = obj
+            detections[index] = self._candidates.candidates(obj)
+        return detections
+
+    # Hypotheses -------------------------------------------------------------------------
+    def _hypotheses(self) -> list[Hypothesis]:
+        cfg = self.config
+        chosen: list[tuple[AssociationSet, np.ndarray | None]] = []
+        for candidate in self._clustering.top(cfg.top_k * 20, min_size=2):
+            if len(chosen) == cfg.top_k:
+                break
+            rough = self._closed_form(candidate)
+            if not any(self._same_place(candidate, rough, *other) for other in chosen):
+                chosen.append((candidate, rough))
+        hypotheses = [self._hypothesis(rank, s) for rank, (s, _) in enumerate(chosen, 1)]
+        if cfg.rank_by == "fitness":
+            hypotheses.sort(key=lambda h: -(h.fitness if h.fitness is not None else -1.0))
+            for rank, h in enumerate(hypotheses, 1):
+                h.rank = rank
+        return hypotheses
+
+    def _matched(self, aset: AssociationSet) -> tuple[list[SemanticObject], list[SemanticObject]]:
+        local_objects = list(self._local.values())
+        return (
+            [self.global_map[g] for g, _ in aset.pairs],
+            [local_objects[l] for _, l in aset.pairs],
+        )
+
+    def _closed_form(self, aset: AssociationSet) -> np.ndarray | None:
+        globals_, locals_ = self._matched(aset)
+        try:
+            return align_positions(
+                np.array([o.position for o in locals_]),
+                np.array([o.position for o in globals_]),
+                self.local_up,
+                self.global_map.up,
+            )
+        except ValueError:
+            return None
+
+    def _same_place(
+        self,
+        candidate: AssociationSet,
+        pose: np.ndarray | None,
+        other: AssociationSet,
+        other_pose: np.ndarray | None,
+    ) -> bool:
+        if set(candidate.pairs) <= set(other.pairs):
+            return True
+        if pose is None or other_pose is None:
+            return False
+        rotation, translation = pose_difference(pose, other_pose)
+        d = self.config.decision
+        return rotation < d.distinct_rotation_deg and translation < d.distinct_translation
+
+    def _hypothesis(self, rank: int, aset: AssociationSet) -> Hypothesis:
+        globals_, locals_ = self._matched(aset)
+        estimate: PoseEstimate | None = estimate_pose(
+            np.array([o.position for o in locals_]),
+            np.array([o.position for o in globals_]),
+            [o.points for o in locals_],
+            [o.points for o in globals_],
+            self.local_up,
+            self.global_map.up,
+            self.config.pose,
+        )
+        return Hypothesis(
+            rank=rank,
+            score=aset.score,
+            pairs=[(g.id, l.id) for g, l in zip(globals_, locals_)],
+            pose=None if estimate is None else estimate.T,
+            fitness=None if estimate is None else estimate.fitness,
+            rmse=None if estimate is None else estimate.rmse,
+            method="" if estimate is None else estimate.method,
+        )
+
+    def _decide(self, hypotheses: list[Hypothesis]) -> Status:
+        if not hypotheses:
+            return "failed"
+        best, d = hypotheses[0], self.config.decision
+        if len(best.pairs) < d.min_pairs or best.pose is None:
+            return "ambiguous"
+        rivals = [h.score for h in hypotheses[1:] if _is_rival(best, h, d.rival_overlap)]
+        if rivals and best.score < (1.0 + d.margin) * max(rivals):
+            return "ambiguous"
+        return "localized"
+
+
+def _is_rival(best: Hypothesis, other: Hypothesis, max_overlap: float) -> bool:
+    """Whether `other` is a different answer: it shares few of its pairs with `best`."""
+    shared = len(set(best.pairs) & set(other.pairs))
+    return shared < max_overlap * min(len(best.pairs), len(other.pairs))
+
+
+def pose_difference(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
+    """Rotation angle (degrees) and translation distance between two 4x4 poses."""
+    relative = a[:3, :3].T @ b[:3, :3]
+    cos = np.clip((np.trace(relative) - 1.0) / 2.0, -1.0, 1.0)
+    return float(np.degrees(np.arccos(cos))), float(np.linalg.norm(a[:3, 3] - b[:3, 3]))
+
+
+def localize(
+    global_map: ObjectMap,
+    local_map: ObjectMap,
+    config: LocalizerConfig | None = None,
+    **overrides: Any,
+) -> Result:
+    """Replay `local_map` by its `seen` keyframes (one update per keyframe); the last Result."""
+    localizer = Localizer(global_map, config, local_up=local_map.up, **overrides)
+    result = Result(status="failed", pose=None, hypotheses=[])
+    for keyframe in sorted(set(local_map.seen.tolist())):
+        result = localizer.update([o for o in local_map if o.seen == keyframe])
+    return result
