@@ -53,6 +53,7 @@ def save_figure(fig: Figure, path: str | os.PathLike[str]) -> Path:
     os.close(fd)
     try:
         fig.savefig(tmp, format="png", bbox_inches="tight")
+        os.chmod(tmp, 0o644)
         os.replace(tmp, path)
     finally:
         plt.close(fig)
@@ -214,18 +215,21 @@ def plot_scores(
     """Top-1 and top-2 association-set scores after each update (the paper's incremental plot)."""
     x = [int(getattr(s, "step", i)) for i, s in enumerate(steps)]
     top = [list(getattr(s, "top_scores", []) or []) for s in steps]
-    first = [t[0] if len(t) > 0 else 0.0 for t in top]
-    second = [t[1] if len(t) > 1 else 0.0 for t in top]
+    first = np.array([t[0] if len(t) > 0 else np.nan for t in top], dtype=float)
+    second = np.array([t[1] if len(t) > 1 else np.nan for t in top], dtype=float)
     ax.plot(x, first, "-o", ms=3.5, color="#1f77b4", label="best association set")
-    ax.plot(x, second, "-s", ms=3.0, color="#ff7f0e", label="second best")
-    ax.fill_between(x, second, first, color="#1f77b4", alpha=0.12, label="margin")
+    ax.plot(x, second, "-s", ms=3.0, color="#ff7f0e", label="second best (another pose)")
+    lower = np.where(np.isfinite(second), second, first)
+    ax.fill_between(x, lower, first, color="#1f77b4", alpha=0.12, label="margin")
+    positive = first[np.isfinite(first) & (first > 0)]
+    if len(positive) and positive.max() > 100 * positive.min():
+        ax.set_yscale("log")
     if statuses is not None:
         done = [xi for xi, s in zip(x, statuses, strict=False) if s == "localized"]
         if done:
-            ax.axvline(
-                done[0], color="green", ls="--", lw=1, label=f"first 'localized' (update {done[0]})"
-            )
-    ax.set_xlabel("update (keyframe with new or updated objects)")
+            label = f"first 'localized' (at {done[0]})"
+            ax.axvline(done[0], color="green", ls="--", lw=1, label=label)
+    ax.set_xlabel("update")
     ax.set_ylabel("association-set score")
     ax.grid(True, lw=0.3, alpha=0.5)
     ax.legend(fontsize=8, loc="upper left")

@@ -2,10 +2,11 @@
 
 Feed `ObjectFusion.integrate` the segments of one keyframe (label, points, optional score) in
 the odometry frame, or in the camera frame together with the frame pose `T_odom_camera`.  Each
-segment is associated with the existing object whose (coarse) voxels it overlaps most, with a
+segment joins the existing object it overlaps most (share of its points within `match_radius`
+of the object's points; a same-label partial view inside the object's box counts too), with a
 bonus for agreeing labels, or starts a new object.  Objects keep voxel-downsampled points, a
 centre (mean of the fused points), a score-weighted label vote and `seen` (the keyframe of the
-first detection).  An object is published once it was seen `min_observations` times; each call
+first detection).  An object is published once seen `min_observations` times; each call
 reports which published objects are new and which changed, which is exactly what
 `Localizer.update` wants.  Works the same for simulated and real detections.
 """
@@ -18,8 +19,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
+from scipy.spatial import cKDTree
 
-from semloc.frontend.voxel import voxel_accumulate, voxel_keys
+from semloc.frontend.voxel import voxel_accumulate, voxel_downsample
 from semloc.maps import MapError, ObjectMap, SemanticObject
 
 
@@ -29,11 +31,11 @@ class FusionConfig(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
     voxel_size: float = Field(0.05, gt=0, description="Voxel size of the fused object points (m).")
-    match_voxel_size: float = Field(
-        0.15, gt=0, description="Coarse voxels used to measure overlap (m)."
+    match_radius: float = Field(
+        0.1, gt=0, description="A segment point overlaps an object if this close to it (m)."
     )
     min_overlap: float = Field(
-        0.25, ge=0, le=1, description="Share of a segment's coarse voxels an object must cover."
+        0.25, ge=0, le=1, description="Share of a segment's points that must overlap an object."
     )
     label_bonus: float = Field(0.15, ge=0, description="Added to the overlap when labels agree.")
     outlier_factor: float = Field(
@@ -93,7 +95,9 @@ class _Track:
     keys: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     sums: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     counts: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    coarse: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    tree: cKDTree | None = None
+    lo: np.ndarray | None = None
+    hi: np.ndarray | None = None
     votes: dict[str, float] = field(default_factory=lambda: defaultdict(float))
     observations: int = 0
     score_sum: float = 0.0
@@ -104,6 +108,12 @@ class _Track:
     @property
     def points(self) -> np.ndarray:
         return self.sums / self.counts[:, None]
+
+    def refresh(self) -> None:
+        """Rebuild the search structures after the points changed."""
+        points = self.points
+        self.tree = cKDTree(points)
+        self.lo, self.hi = points.min(axis=0), points.max(axis=0)
 
     @property
     def centre(self) -> np.ndarray:
@@ -182,19 +192,23 @@ class ObjectFusion:
         return points[d <= self.config.outlier_factor * np.median(d) + self.config.voxel_size]
 
     def _associate(self, points: np.ndarray, label: str) -> _Track:
-        coarse = np.unique(voxel_keys(points, self.config.match_voxel_size))
-        lo, hi = points.min(axis=0), points.max(axis=0)
+        query = voxel_downsample(points, self.config.voxel_size)
+        lo, hi, centre = query.min(axis=0), query.max(axis=0), query.mean(axis=0)
         best, best_score = None, self.config.min_overlap
         for track in self._tracks.values():
-            t_points = track.points
-            if np.any(t_points.min(axis=0) > hi + 0.3) or np.any(t_points.max(axis=0) < lo - 0.3):
+            if np.any(track.lo > hi + 0.3) or np.any(track.hi < lo - 0.3):
                 continue
-            overlap = np.count_nonzero(np.isin(coarse, track.coarse, assume_unique=True)) / len(
-                coarse
-            )
+            distances, _ = track.tree.query(query, distance_upper_bound=self.config.match_radius)
+            overlap = np.count_nonzero(np.isfinite(distances)) / len(query)
+            same_label = track.label == label
+            r = self.config.match_radius
+            if same_label and (
+                _inside(centre, track.lo, track.hi, r) or _inside(track.centre, lo, hi, r)
+            ):
+                overlap = max(overlap, self.config.min_overlap)  # a partial view of the same object
             if overlap <= 0:
                 continue
-            score = overlap + (self.config.label_bonus if track.label == label else 0.0)
+            score = overlap + (self.config.label_bonus if same_label else 0.0)
             if score >= best_score:
                 best, best_score = track, score
         if best is None:
@@ -213,7 +227,7 @@ class ObjectFusion:
         track.counts = np.bincount(
             inverse, weights=np.concatenate([track.counts, counts]), minlength=len(unique)
         )
-        track.coarse = np.union1d(track.coarse, voxel_keys(points, self.config.match_voxel_size))
+        track.refresh()
         weight = 1.0 if seg.score is None else float(seg.score)
         track.votes[seg.label] += weight
         track.observations += 1
@@ -266,3 +280,7 @@ class ObjectFusion:
         """The local object map (odometry frame, `up` set); only published objects by default."""
         ids = list(self._tracks) if include_unconfirmed else self.published_ids()
         return ObjectMap(self.objects(ids), up=self.up, name=self.name)
+
+
+def _inside(point: np.ndarray, lo: np.ndarray, hi: np.ndarray, margin: float) -> bool:
+    return bool(np.all(point >= lo - margin) and np.all(point <= hi + margin))
