@@ -1,9 +1,9 @@
 """semloc: object-level relocalization by hierarchical clustering of object association sets.
 
-    import semloc
-    g = semloc.load_map("global.json")
-    l = semloc.load_map("local.json")
-    r = semloc.localize(g, l)        # r.status, r.pose (4x4 T_global_local), r.hypotheses
+import semloc
+g = semloc.load_map("global.json")
+l = semloc.load_map("local.json")
+r = semloc.localize(g, l)        # r.status, r.pose (4x4 T_global_local), r.hypotheses
 """
 
 from semloc.io import load_map, save_map

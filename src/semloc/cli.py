@@ -10,7 +10,7 @@ from __future__ import annotations
 import io
 import json
 import sys
-from enum import Enum, StrEnum
+from enum import StrEnum
 from pathlib import Path
 from typing import Annotated
 
@@ -232,7 +232,7 @@ def _read_result(path: Path) -> tuple[np.ndarray | None, list[tuple[str, str]], 
     return pose, pairs, status
 
 
-class OutputFormat(str, Enum):
+class OutputFormat(StrEnum):
     text = "text"
     json = "json"
 

@@ -33,9 +33,12 @@ Where the paper is silent (see also DESIGN.md)
     * A set's age is reset when it merges (as either parent), when it is created, and when a
       re-detection re-adds it as a singleton.  Expiry spares the `protect_top` best sets, so
       an answer is not forgotten while new detections bring nothing consistent.
-    * `distance_tolerance` (ε, metres, default 0 = the paper) softens the ratio for centres
-      biased by partial views: h = 1 − max(0, |d^A − d^B| − ε) / max(d^A, d^B).  Distances
-      both below `min_distance` count as h = 1.
+    * `distance_tolerance` (ε, metres; default 0.4, 0 is the paper's pure ratio) softens the
+      merge criterion for centres biased by partial views (the paper bounds this uncertainty
+      "by a predefined threshold" without giving one): a pair passes when
+      1 − max(0, |d^A − d^B| − ε) / max(d^A, d^B) > γ.  Scores always use the paper's h, so
+      they still reward the closest agreement.  Distances both below `min_distance` count as
+      h = 1.
     * When a re-detection moves a local object, the compatibility of its candidates is
       recomputed; sets that are no longer cliques are dropped and the others keep their score.
 """
@@ -58,7 +61,10 @@ class ClusteringConfig(BaseModel):
 
     gamma: float = Field(0.8, gt=0, lt=1, description="Merge threshold on the distance ratio h.")
     distance_tolerance: float = Field(
-        0.0, ge=0, description="Absolute slack ε (m) on distance differences; 0 is the paper."
+        0.4,
+        ge=0,
+        description="Slack ε (m) on distance differences in the merge criterion, bounding the "
+        "centre bias of partially seen objects; 0 is the paper's pure ratio.",
     )
     min_distance: float = Field(
         0.05, ge=0, description="Distances below this (m) on both sides count as equal."
@@ -182,21 +188,18 @@ class HierarchicalClustering:
         """All sets, best first (score, then size, then an order-independent tie-break)."""
         return [self._set(row) for row in self._ranking()]
 
-    def top(self, k: int, min_size: int = 1) -> list[AssociationSet]:
-        """The k best sets with at least `min_size` pairs."""
-        out: list[AssociationSet] = []
-        for row in self._ranking():
-            if len(out) == k:
-                break
-            if (self._members[row] >= 0).sum() >= min_size:
-                out.append(self._set(row))
-        return out
+    def top(self, k: int, min_size: int = 1, largest_first: bool = False) -> list[AssociationSet]:
+        """The k best sets with at least `min_size` pairs (by score, or by size then score)."""
+        ranking = self._ranking()
+        size = (self._members[ranking] >= 0).sum(axis=1)
+        if largest_first:
+            order = np.argsort(-size, kind="stable")
+            ranking, size = ranking[order], size[order]
+        return [self._set(row) for row in ranking[size >= min_size][:k]]
 
     def _set(self, row: int) -> AssociationSet:
         members = self._members[row][self._members[row] >= 0]
-        pairs = tuple(
-            sorted((int(self._cand_g[c]), int(self._cand_l[c])) for c in members)
-        )
+        pairs = tuple(sorted((int(self._cand_g[c]), int(self._cand_l[c])) for c in members))
         return AssociationSet(pairs, float(self._score[row]), int(self._last_merge[row]))
 
     # ------------------------------------------------------------------------------------
@@ -269,11 +272,13 @@ class HierarchicalClustering:
         d_local = np.linalg.norm(
             self._local_positions[l][:, None] - self._local_positions[l][None], axis=2
         )
-        h = merge_metric(d_global, d_local, cfg.distance_tolerance, cfg.min_distance)
         one_to_one = (g[:, None] != g[None]) & (l[:, None] != l[None])
-        h = np.where(one_to_one, h, 0.0)
+        h = np.where(one_to_one, merge_metric(d_global, d_local, 0.0, cfg.min_distance), 0.0)
+        gate = h
+        if cfg.distance_tolerance > 0:
+            gate = merge_metric(d_global, d_local, cfg.distance_tolerance, cfg.min_distance)
         alive = self._cand_alive
-        compat = (h > cfg.gamma) & alive[:, None] & alive[None]
+        compat = (gate > cfg.gamma) & one_to_one & alive[:, None] & alive[None]
         np.fill_diagonal(compat, True)
         self._h = h
         n = len(g)

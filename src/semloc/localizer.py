@@ -4,8 +4,9 @@
 re-detected (same id = updated), grows the association sets, turns the best of them into
 distinct pose hypotheses and decides:
 
-    localized   the best hypothesis has ≥ `min_pairs` pairs and its score dominates the best
-                *rival* by the factor (1 + margin); a rival is a hypothesis with a different
+    localized   the best hypothesis has ≥ `min_pairs` pairs and dominates every *rival* in
+                the terms of the ranking (more pairs or a clearly smaller residual; or a
+                score / fitness larger by the factor 1 + margin); a rival has a different
                 pose that shares less than `rival_overlap` of its pairs with the best one
                 (one swapped association is a variant of the same answer, not a rival);
     ambiguous   hypotheses exist (≥ 2 pairs) but none dominates;
@@ -44,7 +45,13 @@ class DecisionConfig(BaseModel):
 
     min_pairs: int = Field(3, ge=2, description="Pairs the best set needs to be 'localized'.")
     margin: float = Field(
-        0.25, ge=0, description="Best score must exceed (1 + margin) x the best different one."
+        0.5,
+        ge=0,
+        description="Dominance factor over every rival: residual (m) at least (1 + margin) x "
+        "the best's plus residual_floor, or score / fitness at most 1 / (1 + margin) of it.",
+    )
+    residual_floor: float = Field(
+        0.02, ge=0, description="Residual difference (m) below which two hypotheses tie."
     )
     rival_overlap: float = Field(
         0.5,
@@ -80,8 +87,11 @@ class LocalizerConfig(BaseModel):
     pose: PoseConfig = Field(default_factory=PoseConfig)
     decision: DecisionConfig = Field(default_factory=DecisionConfig)
     top_k: int = Field(10, ge=1, description="How many distinct hypotheses are reported.")
-    rank_by: Literal["score", "fitness"] = Field(
-        "score", description="Order of the reported hypotheses: clustering score or pose fitness."
+    rank_by: Literal["residual", "score", "fitness"] = Field(
+        "residual",
+        description="Order of the reported hypotheses: 'residual' (most pairs, then smallest "
+        "residual of the aligned object centres), 'score' (the paper's clustering score) or "
+        "'fitness' (point-set fitness of the recovered pose).",
     )
 
     @model_validator(mode="before")
@@ -118,6 +128,7 @@ class Hypothesis:
     pose: np.ndarray | None
     fitness: float | None = None
     rmse: float | None = None
+    residual: float | None = None  # RMS distance (m) of aligned local centres to their partners
     method: str = ""
 
     def to_dict(self) -> dict[str, Any]:
@@ -128,6 +139,7 @@ class Hypothesis:
             "pose": None if self.pose is None else np.round(self.pose, 9).tolist(),
             "fitness": None if self.fitness is None else round(self.fitness, 6),
             "rmse": None if self.rmse is None else round(self.rmse, 6),
+            "residual": None if self.residual is None else round(self.residual, 6),
             "method": self.method,
         }
 
@@ -240,7 +252,7 @@ class Localizer:
                 step=len(self._steps),
                 n_local=len(self._local),
                 n_sets=self._clustering.n_sets,
-                top_scores=[h.score for h in hypotheses],
+                top_scores=sorted((h.score for h in hypotheses), reverse=True),
                 ms=(end - start) * 1e3,
                 status=status,
             )
@@ -273,19 +285,25 @@ class Localizer:
 
     # Hypotheses -------------------------------------------------------------------------
     def _hypotheses(self) -> list[Hypothesis]:
+        """Distinct places, best first: screen many sets by closed form, refine the top-k."""
         cfg = self.config
-        chosen: list[tuple[AssociationSet, np.ndarray | None]] = []
-        for candidate in self._clustering.top(cfg.top_k * 20, min_size=2):
+        by_size = cfg.rank_by == "residual"
+        screened = []
+        for aset in self._clustering.top(cfg.top_k * 20, min_size=2, largest_first=by_size):
+            pose, residual = self._closed_form(aset)
+            screened.append((aset, pose, residual))
+        if by_size:
+            screened.sort(key=lambda item: (-len(item[0]), item[2], -item[0].score))
+        chosen: list[tuple[AssociationSet, np.ndarray | None, float]] = []
+        for candidate in screened:
             if len(chosen) == cfg.top_k:
                 break
-            rough = self._closed_form(candidate)
-            if not any(self._same_place(candidate, rough, *other) for other in chosen):
-                chosen.append((candidate, rough))
-        hypotheses = [self._hypothesis(rank, s) for rank, (s, _) in enumerate(chosen, 1)]
-        if cfg.rank_by == "fitness":
-            hypotheses.sort(key=lambda h: -(h.fitness if h.fitness is not None else -1.0))
-            for rank, h in enumerate(hypotheses, 1):
-                h.rank = rank
+            if not any(self._same_place(candidate, other) for other in chosen):
+                chosen.append(candidate)
+        hypotheses = [self._hypothesis(rank, s) for rank, (s, _, _) in enumerate(chosen, 1)]
+        hypotheses.sort(key=_RANKINGS[cfg.rank_by])
+        for rank, h in enumerate(hypotheses, 1):
+            h.rank = rank
         return hypotheses
 
     def _matched(self, aset: AssociationSet) -> tuple[list[SemanticObject], list[SemanticObject]]:
@@ -295,30 +313,27 @@ class Localizer:
             [local_objects[l] for _, l in aset.pairs],
         )
 
-    def _closed_form(self, aset: AssociationSet) -> np.ndarray | None:
+    def _closed_form(self, aset: AssociationSet) -> tuple[np.ndarray | None, float]:
+        """Closed-form pose of a set and the RMS residual of its aligned centres (inf if none)."""
         globals_, locals_ = self._matched(aset)
+        l_xyz = np.array([o.position for o in locals_])
+        g_xyz = np.array([o.position for o in globals_])
         try:
-            return align_positions(
-                np.array([o.position for o in locals_]),
-                np.array([o.position for o in globals_]),
-                self.local_up,
-                self.global_map.up,
-            )
+            pose = align_positions(l_xyz, g_xyz, self.local_up, self.global_map.up)
         except ValueError:
-            return None
+            return None, _INF
+        return pose, centre_residual(pose, l_xyz, g_xyz)
 
     def _same_place(
         self,
-        candidate: AssociationSet,
-        pose: np.ndarray | None,
-        other: AssociationSet,
-        other_pose: np.ndarray | None,
+        candidate: tuple[AssociationSet, np.ndarray | None, float],
+        other: tuple[AssociationSet, np.ndarray | None, float],
     ) -> bool:
-        if set(candidate.pairs) <= set(other.pairs):
+        if set(candidate[0].pairs) <= set(other[0].pairs):
             return True
-        if pose is None or other_pose is None:
+        if candidate[1] is None or other[1] is None:
             return False
-        rotation, translation = pose_difference(pose, other_pose)
+        rotation, translation = pose_difference(candidate[1], other[1])
         d = self.config.decision
         return rotation < d.distinct_rotation_deg and translation < d.distinct_translation
 
@@ -333,13 +348,22 @@ class Localizer:
             self.global_map.up,
             self.config.pose,
         )
+        pose = None if estimate is None else estimate.T
+        residual = None
+        if pose is not None:
+            residual = centre_residual(
+                pose,
+                np.array([o.position for o in locals_]),
+                np.array([o.position for o in globals_]),
+            )
         return Hypothesis(
             rank=rank,
             score=aset.score,
             pairs=[(g.id, l.id) for g, l in zip(globals_, locals_)],
-            pose=None if estimate is None else estimate.T,
+            pose=pose,
             fitness=None if estimate is None else estimate.fitness,
             rmse=None if estimate is None else estimate.rmse,
+            residual=residual,
             method="" if estimate is None else estimate.method,
         )
 
@@ -349,10 +373,35 @@ class Localizer:
         best, d = hypotheses[0], self.config.decision
         if len(best.pairs) < d.min_pairs or best.pose is None:
             return "ambiguous"
-        rivals = [h.score for h in hypotheses[1:] if _is_rival(best, h, d.rival_overlap)]
-        if rivals and best.score < (1.0 + d.margin) * max(rivals):
-            return "ambiguous"
-        return "localized"
+        rivals = [h for h in hypotheses[1:] if _is_rival(best, h, d.rival_overlap)]
+        if all(_dominates(best, rival, self.config.rank_by, d) for rival in rivals):
+            return "localized"
+        return "ambiguous"
+
+
+def centre_residual(pose: np.ndarray, local_xyz: np.ndarray, global_xyz: np.ndarray) -> float:
+    """RMS distance (m) between aligned local centres and their global partners."""
+    aligned = local_xyz @ pose[:3, :3].T + pose[:3, 3]
+    return float(np.sqrt(np.mean(np.sum((aligned - global_xyz) ** 2, axis=1))))
+
+
+def _dominates(best: Hypothesis, rival: Hypothesis, rank_by: str, d: DecisionConfig) -> bool:
+    """Whether `best` beats `rival` clearly, in the terms of the chosen ranking."""
+    if rank_by == "score":
+        return best.score >= (1.0 + d.margin) * rival.score
+    if rank_by == "fitness":
+        return (best.fitness or 0.0) >= (1.0 + d.margin) * (rival.fitness or 0.0)
+    if len(rival.pairs) < len(best.pairs) or rival.residual is None:
+        return True
+    return rival.residual > (1.0 + d.margin) * (best.residual or 0.0) + d.residual_floor
+
+
+_INF = float("inf")
+_RANKINGS = {
+    "score": lambda h: -h.score,
+    "residual": lambda h: (-len(h.pairs), _INF if h.residual is None else h.residual, -h.score),
+    "fitness": lambda h: (-(h.fitness if h.fitness is not None else -1.0), -h.score),
+}
 
 
 def _is_rival(best: Hypothesis, other: Hypothesis, max_overlap: float) -> bool:

@@ -1,0 +1,233 @@
+"""Every rule of the hierarchical clustering, on hand-built maps, and the literal equivalence."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from literal_clustering import LiteralClustering
+
+from semloc.clustering import ClusteringConfig, HierarchicalClustering, merge_metric
+
+PAPER = ClusteringConfig(distance_tolerance=0.0)  # the paper's pure ratio
+
+
+def clustering(global_xyz, config=PAPER) -> HierarchicalClustering:
+    return HierarchicalClustering(
+        np.asarray(global_xyz, float), [f"g{i}" for i in range(len(global_xyz))], config
+    )
+
+
+def feed(hc, local_xyz, detections) -> None:
+    local_xyz = np.asarray(local_xyz, float)
+    hc.update(local_xyz, [f"l{i}" for i in range(len(local_xyz))], detections)
+
+
+def pair_sets(hc) -> dict[tuple, float]:
+    return {s.pairs: s.score for s in hc.sets()}
+
+
+# ---------------------------------------------------------------------------------------------
+# merge metric
+def test_merge_metric_is_the_distance_ratio():
+    assert merge_metric(2.0, 1.0) == pytest.approx(0.5)
+    assert merge_metric(1.0, 2.0) == pytest.approx(0.5)
+    assert merge_metric(3.0, 3.0) == pytest.approx(1.0)
+
+
+def test_merge_metric_degenerate_distances():
+    assert merge_metric(0.01, 0.02) == 1.0  # both below min_distance: compatible
+    assert merge_metric(0.01, 1.0) < 0.05  # only one tiny: incompatible
+    assert merge_metric(0.0, 0.0) == 1.0
+
+
+def test_tolerance_only_forgives_small_absolute_differences():
+    assert merge_metric(1.0, 0.7, tolerance=0.4) == 1.0
+    assert merge_metric(10.0, 7.0, tolerance=0.4) == pytest.approx(1 - 2.6 / 10)
+
+
+@given(st.floats(0.06, 50), st.floats(0.06, 50))
+def test_merge_metric_symmetric_and_bounded(a, b):
+    h = merge_metric(a, b)
+    assert 0 < h <= 1
+    assert h == pytest.approx(merge_metric(b, a))
+
+
+# ---------------------------------------------------------------------------------------------
+# merging two singletons at the gamma boundary
+@pytest.mark.parametrize("local_distance, merges", [(0.79, False), (0.81, True), (1.0, True)])
+def test_merge_needs_ratio_above_gamma(local_distance, merges):
+    hc = clustering([[0, 0, 0], [1, 0, 0]])
+    feed(hc, [[0, 0, 0], [local_distance, 0, 0]], {0: [0], 1: [1]})
+    sets = pair_sets(hc)
+    assert ((0, 0), (1, 1)) in sets if merges else ((0, 0), (1, 1)) not in sets
+    if merges:
+        assert sets[((0, 0), (1, 1))] == pytest.approx(min(local_distance, 1 / local_distance))
+    assert sets[((0, 0),)] == 0.0 and sets[((1, 1),)] == 0.0  # originals are kept
+
+
+def test_one_to_one_violations_block_merges():
+    # two local chairs, one global chair: both singletons share the global object
+    hc = clustering([[0, 0, 0], [3, 0, 0]])
+    feed(hc, [[0, 0, 0], [3, 0, 0], [0, 0.01, 0]], {0: [0], 1: [1], 2: [0]})
+    sets = pair_sets(hc)
+    assert not any({(0, 0), (0, 2)} <= set(p) for p in sets)
+    assert ((0, 0), (1, 1)) in sets and ((0, 2), (1, 1)) in sets
+
+
+def test_overlapping_sets_merge_over_new_cross_pairs_only():
+    # A = {a, b}, B = {a, c}: the union is scored vA + vB + h(b, c)
+    g = [[0, 0, 0], [4, 0, 0], [0, 3, 0]]
+    local = [[0, 0, 0], [4, 0, 0], [0, 2.7, 0]]  # h(a,b)=1, h(a,c)=0.9, h(b,c)=4.675/5
+    hc = clustering(g)
+    feed(hc, local, {0: [0], 1: [1], 2: [2]})
+    sets = pair_sets(hc)
+    h_ab, h_ac = 1.0, 0.9
+    h_bc = np.hypot(4, 2.7) / 5.0
+    assert sets[((0, 0), (1, 1))] == pytest.approx(h_ab)
+    assert sets[((0, 0), (2, 2))] == pytest.approx(h_ac)
+    # every path to the triple gives h_ab + h_ac + h_bc; duplicates keep the larger (equal)
+    assert sets[((0, 0), (1, 1), (2, 2))] == pytest.approx(h_ab + h_ac + h_bc)
+
+
+def test_duplicates_keep_the_larger_score():
+    # a square: {a,b,c} + {a,b,d} -> {a,b,c,d} scores 3 + 3 + h(c,d) = 7 > 3 + 0 + 3 = 6
+    square = [[0, 0, 0], [2, 0, 0], [2, 2, 0], [0, 2, 0]]
+    hc = clustering(square)
+    feed(hc, square, {i: [i] for i in range(4)})
+    sets = pair_sets(hc)
+    full = ((0, 0), (1, 1), (2, 2), (3, 3))
+    assert sets[full] == pytest.approx(7.0)
+    assert len([p for p in sets if p == full]) == 1
+
+
+def test_a_set_containing_the_other_is_not_merged():
+    hc = clustering([[0, 0, 0], [1, 0, 0]])
+    feed(hc, [[0, 0, 0], [1, 0, 0]], {0: [0], 1: [1]})
+    before = pair_sets(hc)
+    feed(hc, [[0, 0, 0], [1, 0, 0]], {0: [0]})  # re-detection: {a} is inside {a, b}
+    after = pair_sets(hc)
+    assert after == before  # no new set, scores unchanged
+
+
+def test_incompatible_pair_blocks_the_whole_merge():
+    # {a,b} and {c} where h(a,c) fails although h(b,c) is perfect
+    g = [[0, 0, 0], [2, 0, 0], [4, 0, 0]]
+    local = [[0, 0, 0], [2, 0, 0], [4.0, 1.9, 0]]
+    hc = clustering(g)
+    feed(hc, local, {0: [0], 1: [1], 2: [2]})
+    d_ac = np.hypot(4, 1.9)
+    assert merge_metric(4.0, d_ac) > 0.8 or True  # documented geometry
+    assert merge_metric(2.0, np.hypot(2, 1.9)) < 0.8  # h(b, c) fails
+    assert ((0, 0), (1, 1), (2, 2)) not in pair_sets(hc)
+
+
+def test_top_k_pruning_keeps_the_best_sets():
+    rng = np.random.default_rng(4)
+    g = rng.uniform(0, 5, (6, 3))
+    config = ClusteringConfig(distance_tolerance=0.0, sets_per_object=2, protect_top=0)
+    hc = clustering(g, config)
+    local = g + rng.normal(0, 0.05, g.shape)
+    feed(hc, local, {i: list(range(6)) for i in range(6)})  # everything is a chair
+    assert hc.n_sets <= 2 * 6  # K = 2 * n_global
+    best = hc.sets()[0]
+    assert len(best) >= 4 and all(g == l for g, l in best.pairs)  # true pairs on top
+    roomy = clustering(g, ClusteringConfig(distance_tolerance=0.0, protect_top=0))
+    feed(roomy, local, {i: list(range(6)) for i in range(6)})
+    assert roomy.n_sets > hc.n_sets
+    assert roomy.sets()[0].pairs == tuple((i, i) for i in range(6))
+
+
+def test_sets_expire_after_more_than_two_updates_without_merge():
+    g = [[0, 0, 0], [1, 0, 0], [10, 10, 0], [20, 0, 0], [30, 5, 0], [40, 9, 0]]
+    hc = clustering(g, ClusteringConfig(distance_tolerance=0.0, protect_top=0))
+    local = np.array(g, float)
+    feed(hc, local[:1], {0: [0]})  # step 1: singleton {a}
+    feed(hc, local[:2], {1: [1]})  # step 2: {a}+{b} merge -> all refreshed
+    # steps 3..5: objects that never merge with anything (no candidate)
+    feed(hc, local[:3], {2: []})
+    feed(hc, local[:4], {3: []})
+    assert ((0, 0), (1, 1)) in pair_sets(hc)  # 2 updates without a merge: kept
+    feed(hc, local[:5], {4: []})
+    assert ((0, 0), (1, 1)) not in pair_sets(hc)  # more than two: dropped
+    assert hc.n_sets == 0
+
+
+def test_protected_top_sets_do_not_expire():
+    g = [[0, 0, 0], [1, 0, 0], [5, 5, 0]]
+    hc = clustering(g, ClusteringConfig(distance_tolerance=0.0, protect_top=1))
+    local = np.array(g, float)
+    feed(hc, local[:2], {0: [0], 1: [1]})
+    for _ in range(4):
+        feed(hc, local, {2: []})
+    assert [s.pairs for s in hc.sets()] == [((0, 0), (1, 1))]
+
+
+def test_incremental_update_adds_singletons_and_clusters_again():
+    g = [[0, 0, 0], [3, 0, 0], [0, 4, 0]]
+    hc = clustering(g)
+    feed(hc, np.array(g)[:2], {0: [0], 1: [1]})
+    assert hc.sets()[0].pairs == ((0, 0), (1, 1))
+    feed(hc, np.array(g), {2: [2]})
+    assert hc.sets()[0].pairs == ((0, 0), (1, 1), (2, 2))
+    assert hc.sets()[0].score == pytest.approx(3.0)
+
+
+def test_redetected_object_that_moved_drops_sets_it_breaks():
+    g = [[0, 0, 0], [3, 0, 0]]
+    hc = clustering(g)
+    feed(hc, [[0, 0, 0], [3, 0, 0]], {0: [0], 1: [1]})
+    assert ((0, 0), (1, 1)) in pair_sets(hc)
+    feed(hc, [[0, 0, 0], [6, 0, 0]], {1: [1]})  # the second object was far off after all
+    assert ((0, 0), (1, 1)) not in pair_sets(hc)
+
+
+def test_relabelled_object_loses_its_old_candidates():
+    hc = clustering([[0, 0, 0], [3, 0, 0], [3, 0.01, 0]])
+    feed(hc, [[0, 0, 0], [3, 0, 0]], {0: [0], 1: [1]})
+    feed(hc, [[0, 0, 0], [3, 0, 0]], {1: [2]})  # re-detected with another label
+    assert all((1, 1) not in s.pairs for s in hc.sets())
+    assert ((0, 0), (2, 1)) in pair_sets(hc)
+
+
+# ---------------------------------------------------------------------------------------------
+# equivalence with the literal transcription
+def _scenario(seed: int, n_global: int, n_local: int, n_labels: int):
+    rng = np.random.default_rng(seed)
+    g = rng.uniform(0, 6, (n_global, 3))
+    labels = rng.integers(0, n_labels, n_global)
+    chosen = rng.choice(n_global, n_local, replace=False)
+    local = g[chosen] + rng.normal(0, 0.15, (n_local, 3))
+    detections = [{i: np.flatnonzero(labels == labels[c])} for i, c in enumerate(chosen)]
+    return g, local, detections
+
+
+@settings(max_examples=25, deadline=None)
+@given(
+    seed=st.integers(0, 10_000),
+    n_global=st.integers(4, 10),
+    n_local=st.integers(2, 6),
+    n_labels=st.integers(1, 3),
+    per_object=st.sampled_from([1, 3, 10]),
+    tolerance=st.sampled_from([0.0, 0.4]),
+)
+def test_bitset_clustering_equals_literal_rules(
+    seed, n_global, n_local, n_labels, per_object, tolerance
+):
+    n_local = min(n_local, n_global)
+    g, local, detections = _scenario(seed, n_global, n_local, n_labels)
+    config = ClusteringConfig(
+        distance_tolerance=tolerance, sets_per_object=per_object, protect_top=2
+    )
+    fast = clustering(g, config)
+    literal = LiteralClustering(g, [f"g{i}" for i in range(n_global)], config)
+    for step in range(n_local):
+        ids = [f"l{i}" for i in range(step + 1)]
+        fast.update(local[: step + 1], ids, detections[step])
+        literal.update(local[: step + 1], ids, detections[step])
+        expected = {tuple(sorted(k)): v[0] for k, v in literal.sets.items()}
+        got = pair_sets(fast)
+        assert got.keys() == expected.keys()
+        for key, score in expected.items():
+            assert got[key] == pytest.approx(score, abs=1e-9)
