@@ -187,7 +187,7 @@ def view(
     title: Annotated[str | None, typer.Option(help="Title of the picture.")] = None,
 ) -> None:
     """Draw MAP from above as a PNG, optionally with a localization result and a local map."""
-    from semloc.viz import new_figure, plot_localization, save_figure
+    from semloc.viz import map_figure, plot_localization, save_figure
 
     objmap = load_map(map_file)
     pose, pairs, status = _read_result(result) if result is not None else (None, [], None)
@@ -197,7 +197,7 @@ def view(
     heading = title or f"{map_file.name}: {len(objmap)} objects" + (
         f" ({status})" if status else ""
     )
-    fig, ax = new_figure(11, 7)
+    fig, ax = map_figure(objmap.positions[:, :2])
     plot_localization(ax, objmap, local_map, pose, pairs, title=heading)
     path = save_figure(fig, output or map_file.with_suffix(".png"))
     console.print(f"wrote {path}")

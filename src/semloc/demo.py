@@ -27,7 +27,14 @@ from semloc.localizer import Localizer, LocalizerConfig, Result, pose_difference
 from semloc.sim.mapkinds import MAP_KINDS
 from semloc.sim.scenario import SimulatedSequence, simulate_sequence
 from semloc.sim.trajectory import PATHS
-from semloc.viz import new_figure, plot_localization, plot_scores, plot_world, save_figure
+from semloc.viz import (
+    map_figure,
+    new_figure,
+    plot_localization,
+    plot_scores,
+    plot_world,
+    save_figure,
+)
 
 _STATUS_STYLE = {"localized": "green", "ambiguous": "yellow", "failed": "red"}
 
@@ -134,6 +141,7 @@ def localize_sequence(
                 *(_score(s) for s in top),
                 f"[{_STATUS_STYLE[result.status]}]{result.status}[/]", f"{step.ms:.0f}",
             )  # fmt: skip
+    console.print()
     return result, keyframes, statuses
 
 
@@ -183,7 +191,7 @@ def write_outputs(
     ax.set_xlabel("keyframe")
     files = [save_figure(fig, out / "scores.png")]
     best = result.best
-    fig, ax = new_figure(11, 7)
+    fig, ax = map_figure(gmap.positions[:, :2])
     status = result.status + (
         ""
         if demo.translation_error_m is None
@@ -195,7 +203,8 @@ def write_outputs(
         title=f"{config.map_kind} map, local objects placed by the estimated pose ({status})",
     )  # fmt: skip
     files.append(save_figure(fig, out / "map.png"))
-    fig, ax = new_figure(11, 7)
+    lo, hi = seq.world.bounds
+    fig, ax = map_figure(np.array([lo, hi]))
     trajectory = np.array([kf.T_world_camera[:2, 3] for kf in seq.keyframes])
     plot_world(
         ax, seq.world, trajectory=trajectory, title=f"world (seed {config.seed}, {seq.world.size})"

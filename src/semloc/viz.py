@@ -35,14 +35,39 @@ _PALETTE = [
 ]  # fmt: skip
 
 
+CLASS_COLORS = {
+    "chair": "#2ca02c", "table": "#8c564b", "desk": "#d62728", "sofa": "#9467bd",
+    "armchair": "#c5b0d5", "coffee_table": "#c49c94", "bed": "#ff7f0e", "nightstand": "#ffbb78",
+    "cabinet": "#1f77b4", "low_cabinet": "#aec7e8", "bookshelf": "#17becf", "monitor": "#e377c2",
+    "tv": "#7f7f7f", "lamp": "#bcbd22", "plant": "#98df8a", "refrigerator": "#393b79",
+    "toilet": "#9edae5", "sink": "#637939", "whiteboard": "#843c39",
+}  # fmt: skip
+"""Fixed colours of the simulator's classes, so a class looks the same in every picture."""
+
+
 def label_colors(labels: Sequence[str]) -> dict[str, str]:
-    """A stable colour per label (sorted labels take palette colours in turn)."""
-    return {label: _PALETTE[i % len(_PALETTE)] for i, label in enumerate(sorted(set(labels)))}
+    """A colour per label: fixed for known classes, palette colours in turn for the others."""
+    colors, i = {}, 0
+    for label in sorted(set(labels)):
+        if label in CLASS_COLORS:
+            colors[label] = CLASS_COLORS[label]
+        else:
+            colors[label] = _PALETTE[i % len(_PALETTE)]
+            i += 1
+    return colors
 
 
 def new_figure(width: float = 9.0, height: float = 7.0) -> tuple[Figure, Axes]:
     fig, ax = plt.subplots(figsize=(width, height), dpi=110)
     return fig, ax
+
+
+def map_figure(xy: np.ndarray, width: float = 12.0) -> tuple[Figure, Axes]:
+    """A figure whose height suits the extent of the points `xy` (N, 2) in a top-down view."""
+    xy = np.asarray(xy, dtype=float).reshape(-1, 2)
+    span = np.ptp(xy, axis=0) + 2.0 if len(xy) else np.array([10.0, 10.0])
+    height = float(np.clip((width - 3.0) * span[1] / span[0] + 1.2, 4.0, 10.0))
+    return new_figure(width, height)
 
 
 def save_figure(fig: Figure, path: str | os.PathLike[str]) -> Path:
@@ -104,15 +129,15 @@ def plot_objects(
                 lw=1,
             )
             ax.add_patch(poly)
-        face = "none" if hollow else color
         ax.scatter(
             *obj.position[:2],
-            s=36 if hollow else 18,
+            s=42 if hollow else 18,
             marker=marker,
-            facecolors=face,
-            edgecolors=color,
-            lw=1.3,
-            zorder=4,
+            facecolors=color,
+            edgecolors="k" if hollow else color,
+            lw=1.0,
+            alpha=0.9,
+            zorder=4 if not hollow else 6,
         )
         if ids:
             ax.annotate(
@@ -129,7 +154,7 @@ def _finish_map_axes(
     ax.legend(
         handles=handles, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False
     )
-    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_aspect("equal", adjustable="box")
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
     ax.grid(True, lw=0.3, alpha=0.5)
@@ -166,7 +191,7 @@ def plot_localization(
                 [],
                 ls="none",
                 marker="D",
-                mfc="none",
+                mfc="#bbb",
                 mec="k",
                 label="local object (estimated pose)",
             )
@@ -192,7 +217,7 @@ def plot_localization(
             Line2D([], [], ls="none", marker="x", color="#555", label="local object (true pose)")
         )
     if pose is not None:
-        _draw_frame(ax, pose, "estimated frame")
+        _draw_frame(ax, pose, "local frame (estimated)")
     _finish_map_axes(ax, colors, extra, title)
     return ax
 
@@ -254,14 +279,9 @@ def plot_world(
         )
     for room in world.rooms:
         ax.text(
-            room.center[0],
-            room.hi[1] - 0.3,
-            f"{room.index}: {room.kind}",
-            ha="center",
-            va="top",
-            fontsize=8,
-            color="#333",
-        )
+            room.center[0], room.center[1], f"{room.index}: {room.kind}", ha="center", va="center",
+            fontsize=9, color="#222", zorder=8, bbox={"fc": "white", "ec": "none", "alpha": 0.7},
+        )  # fmt: skip
     for obj in world.objects:
         lo, hi = obj.model.mesh.bounds
         corners = np.array(

@@ -40,9 +40,9 @@ def write_sequence(seq: SimulatedSequence, out: Path, snapshots: bool = True) ->
             files.append(save_map(seq.local_map_at(kf.index), path))
     write_atomic(out / "ground_truth.json", json.dumps(seq.ground_truth(), indent=1) + "\n")
     files.append(out / "ground_truth.json")
-    from semloc.viz import new_figure, plot_world, save_figure
+    from semloc.viz import map_figure, plot_world, save_figure
 
-    fig, ax = new_figure(11, 7)
+    fig, ax = map_figure(np.array(seq.world.bounds))
     trajectory = np.array([kf.T_world_camera[:2, 3] for kf in seq.keyframes])
     plot_world(ax, seq.world, trajectory=trajectory, title=f"world seed {seq.world.seed}")
     files.append(save_figure(fig, out / "world.png"))

@@ -491,7 +491,8 @@ def _furnish_bedroom(p: _Placer) -> None:
     bed = p.at_wall("bed", "back", t=0.5)
     style = p.style("nightstand")
     if bed is not None:
-        for du in (-1.1, 1.1):
+        half = bed.model.extent[0] / 2 + 0.3
+        for du in (-half, half):
             uv = _local_of(p, bed.pose @ np.array([du, -0.8, 0.0, 1.0]))
             p.place("nightstand", uv[0], uv[1], 0.0, style=style)
     p.anywhere("cabinet", ("left", "right"))
