@@ -98,18 +98,23 @@ def demo(
     rooms: Annotated[int, typer.Option(min=1, help="Rooms the walk visits.")] = 2,
     resolution: Annotated[str, typer.Option(help=_RES_HELP)] = "240x180",
     gamma: Annotated[float, typer.Option(help="Merge threshold of the clustering.")] = 0.8,
+    drift: Annotated[
+        float,
+        typer.Option(min=0, max=0.2, help="Odometry drift, m per m travelled (heading: 25x in °)."),
+    ] = 0.0,
 ) -> None:
     """The main job: walk a camera through a generated world and relocalize incrementally.
 
-    Simulates the RGB-D sequence, fuses detections into local objects, runs the Localizer after
-    every keyframe (live table) and reports the pose error against ground truth.
+    Simulated RGB-D frames -> detections -> local objects -> Localizer.update per keyframe.
+
+    Prints a live table and the pose error against ground truth; writes scores.png and map.png.
     """
     from semloc.demo import DemoConfig, run_demo
 
     try:
         config = DemoConfig(
             seed=seed, size=size, map_kind=map_kind.value, path=path.value, keyframes=keyframes,
-            rooms=rooms, resolution=_parse_resolution(resolution), gamma=gamma, out=out,
+            rooms=rooms, resolution=_parse_resolution(resolution), gamma=gamma, drift=drift, out=out,
         )  # fmt: skip
         run_demo(config, console)
     except ValidationError as exc:
@@ -144,8 +149,9 @@ def simulate(
 ) -> None:
     """Write a world's global maps (reconstruction, CAD, dynamic), the local maps and ground truth.
 
-    OUT gets world.json/.png, global_<kind>.json, local.json, keyframes/local_XXXX.json and
-    ground_truth.json (T_global_local, camera poses, object correspondences per map kind).
+    Files: world.json/.png, global_<kind>.json, local.json, keyframes/local_XXXX.json.
+
+    ground_truth.json holds T_global_local, camera poses and correspondences per map kind.
     """
     from semloc.sim.export import write_sequence
     from semloc.sim.noise import DetectionNoise

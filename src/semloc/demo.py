@@ -25,6 +25,7 @@ from rich.table import Table
 from semloc.io.native import save_map, write_atomic
 from semloc.localizer import Localizer, LocalizerConfig, Result, pose_difference
 from semloc.sim.mapkinds import MAP_KINDS
+from semloc.sim.noise import DetectionNoise
 from semloc.sim.scenario import SimulatedSequence, simulate_sequence
 from semloc.sim.trajectory import PATHS
 from semloc.viz import (
@@ -52,6 +53,7 @@ class DemoConfig(BaseModel):
     rooms: int = Field(2, ge=1, description="Rooms visited by the walk.")
     resolution: tuple[int, int] = Field((240, 180), description="Depth image width, height.")
     gamma: float = Field(0.8, gt=0, lt=1, description="Merge threshold of the clustering.")
+    drift: float = Field(0.0, ge=0, le=0.2, description="Odometry drift, metres per metre.")
     out: Path = Field(Path("demo_out"), description="Output folder.")
 
 
@@ -95,12 +97,14 @@ def simulate(config: DemoConfig, console: Console) -> SimulatedSequence:
         BarColumn(),
         TextColumn("{task.completed}/{task.total}"),
         TimeElapsedColumn(),
-    )  # noqa: E501
+    )
+    noise = DetectionNoise(drift_translation=config.drift, drift_yaw_deg=25.0 * config.drift)
     with Progress(*columns, console=console, transient=True) as progress:
         task = progress.add_task("simulating keyframes", total=config.keyframes)
         return simulate_sequence(
             config.seed, config.size, config.map_kind, config.path,
             n_keyframes=config.keyframes, n_rooms=config.rooms, resolution=config.resolution,
+            noise=noise,
             progress=lambda done, total: progress.update(task, completed=done, total=total),
         )  # fmt: skip
 
