@@ -154,3 +154,29 @@ def test_noise_changes_labels_only_sometimes():
     wrong = Counter(seq.local_map.get(l).label == seq.world.object(w).label
                     for l, w in seq.local_truth.items() if w is not None)  # fmt: skip
     assert wrong[True] > 0
+
+
+def test_segments_from_masks_backproject_each_instance():
+    from semloc.frontend import segments_from_masks
+    from semloc.sim.sensor import DepthSensor, Intrinsics, look_at
+    from semloc.sim.shapes import box
+
+    K = Intrinsics.scannet(80, 60)
+    sensor = DepthSensor(
+        intrinsics=K, meshes=[box((3, -0.6, 1), (0.5, 0.5, 0.5)), box((3, 0.6, 1), (0.5, 0.5, 0.5))]
+    )
+    T = look_at(np.array([0.0, 0.0, 1.0]), np.array([3.0, 0.0, 1.0]))
+    frame = sensor.render(T)
+    depth_mm = np.round(frame.depth * 1000).astype(np.uint16)
+    masks = [frame.instance == 0, frame.instance == 1]
+    segments = segments_from_masks(
+        depth_mm, masks, ["cabinet", "plant"], K.matrix, [0.9, 0.8], depth_scale=0.001
+    )
+    assert [s.label for s in segments] == ["cabinet", "plant"]
+    fusion = ObjectFusion(FusionConfig(min_observations=1))
+    fusion.integrate(segments, T, frame="camera")
+    centres = fusion.local_map().positions
+    assert np.all((centres[:, 0] > 2.75) & (centres[:, 0] < 2.85))  # front faces + a bit of side
+    np.testing.assert_allclose(centres[:, 1], [-0.6, 0.6], atol=0.05)
+    with pytest.raises(MapError, match="masks"):
+        segments_from_masks(depth_mm, masks, ["cabinet"], K.matrix)

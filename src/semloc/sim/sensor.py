@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 import open3d as o3d
 
+from semloc.frontend.segments import backproject as backproject_matrix
 from semloc.sim.shapes import Mesh
 from semloc.sim.world import World
 
@@ -51,12 +52,7 @@ class Intrinsics:
 
 def backproject(depth: np.ndarray, K: Intrinsics, mask: np.ndarray | None = None) -> np.ndarray:
     """Camera-frame points (N, 3) of the valid depth pixels (inside `mask` if given)."""
-    valid = depth > 0
-    if mask is not None:
-        valid &= mask
-    v, u = np.nonzero(valid)
-    z = depth[v, u]
-    return np.stack([(u - K.cx) / K.fx * z, (v - K.cy) / K.fy * z, z], axis=1)
+    return backproject_matrix(depth, K.matrix, mask)
 
 
 def look_at(
