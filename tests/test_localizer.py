@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 
 import semloc
 from semloc import Localizer, LocalizerConfig, ObjectMap, SemanticObject
-from semloc.localizer import pose_difference
+from semloc.metrics import first_correct_rank, pose_error
 from semloc.synthetic import layout, observe
 
 
@@ -59,7 +59,7 @@ def test_exact_association_sets_in_a_room_of_identical_chairs():
     T = yaw_pose(-2.0, [1, 1, 0])
     result = semloc.localize(room, local_view(room, ids, T))
     assert sorted(result.hypotheses[0].pairs) == sorted((g, f"l{k}") for k, g in enumerate(ids))
-    rotation, translation = pose_difference(result.pose, T)
+    rotation, translation = pose_error(result.pose, T)
     assert rotation < 1e-4 and translation < 1e-4
 
 
@@ -221,16 +221,7 @@ def test_accuracy_target_on_repeated_objects():
     for trial in range(40):
         obs = observe(g, 5 + trial % 4, seed=1000 + trial)
         result = semloc.localize(g, obs.local_map)
-        ranks.append(first_correct_rank(result, obs.T_global_local))
+        ranks.append(first_correct_rank(result.hypotheses, obs.T_global_local))
     top1 = np.mean([r == 1 for r in ranks])
     top10 = np.mean([r is not None for r in ranks])
     assert top10 >= 0.9 and top1 >= 0.7, (top1, top10)
-
-
-def first_correct_rank(result, truth, rotation_deg=15.0, translation=0.5):
-    for h in result.hypotheses:
-        if h.pose is not None:
-            r, t = pose_difference(h.pose, truth)
-            if r < rotation_deg and t < translation:
-                return h.rank
-    return None

@@ -33,6 +33,7 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 from semloc.association import AssociationConfig, CandidateIndex
 from semloc.clustering import AssociationSet, ClusteringConfig, HierarchicalClustering
 from semloc.maps import MapError, ObjectMap, SemanticObject
+from semloc.metrics import pose_error
 from semloc.pose import PoseConfig, PoseEstimate, align_positions, estimate_pose
 
 Status = Literal["localized", "ambiguous", "failed"]
@@ -87,6 +88,9 @@ class LocalizerConfig(BaseModel):
     pose: PoseConfig = Field(default_factory=PoseConfig)
     decision: DecisionConfig = Field(default_factory=DecisionConfig)
     top_k: int = Field(10, ge=1, description="How many distinct hypotheses are reported.")
+    screened_sets: int = Field(
+        60, ge=1, description="Association sets screened by closed-form pose for hypotheses."
+    )
     rank_by: Literal["residual", "score", "fitness"] = Field(
         "residual",
         description="Order of the reported hypotheses: 'residual' (most pairs, then smallest "
@@ -289,7 +293,7 @@ class Localizer:
         cfg = self.config
         by_size = cfg.rank_by == "residual"
         screened = []
-        for aset in self._clustering.top(cfg.top_k * 20, min_size=2, largest_first=by_size):
+        for aset in self._clustering.top(cfg.screened_sets, min_size=2, largest_first=by_size):
             pose, residual = self._closed_form(aset)
             screened.append((aset, pose, residual))
         if by_size:
@@ -333,7 +337,7 @@ class Localizer:
             return True
         if candidate[1] is None or other[1] is None:
             return False
-        rotation, translation = pose_difference(candidate[1], other[1])
+        rotation, translation = pose_error(candidate[1], other[1])
         d = self.config.decision
         return rotation < d.distinct_rotation_deg and translation < d.distinct_translation
 
@@ -408,13 +412,6 @@ def _is_rival(best: Hypothesis, other: Hypothesis, max_overlap: float) -> bool:
     """Whether `other` is a different answer: it shares few of its pairs with `best`."""
     shared = len(set(best.pairs) & set(other.pairs))
     return shared < max_overlap * min(len(best.pairs), len(other.pairs))
-
-
-def pose_difference(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
-    """Rotation angle (degrees) and translation distance between two 4x4 poses."""
-    relative = a[:3, :3].T @ b[:3, :3]
-    cos = np.clip((np.trace(relative) - 1.0) / 2.0, -1.0, 1.0)
-    return float(np.degrees(np.arccos(cos))), float(np.linalg.norm(a[:3, 3] - b[:3, 3]))
 
 
 def localize(
