@@ -9,7 +9,7 @@ import pytest
 
 import semloc
 from semloc.cli import main
-from semloc.localizer import pose_difference
+from semloc.metrics import pose_error
 
 PNG = b"\x89PNG\r\n\x1a\n"
 
@@ -108,7 +108,7 @@ def test_demo_localizes_a_tiny_world_and_writes_the_pictures(tmp_path, capsys):
     result = json.loads((out / "result.json").read_text())
     truth = json.loads((out / "ground_truth.json").read_text())
     assert result["status"] == "localized"
-    rotation, translation = pose_difference(
+    rotation, translation = pose_error(
         np.asarray(result["pose"]), np.asarray(truth["T_global_local"])
     )
     assert rotation < 15 and translation < 0.5

@@ -23,7 +23,8 @@ from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
 from semloc.io.native import save_map, write_atomic
-from semloc.localizer import Localizer, LocalizerConfig, Result, pose_difference
+from semloc.localizer import Localizer, LocalizerConfig, Result
+from semloc.metrics import is_success, pose_error
 from semloc.sim.mapkinds import MAP_KINDS
 from semloc.sim.noise import DetectionNoise
 from semloc.sim.scenario import SimulatedSequence, simulate_sequence
@@ -71,12 +72,8 @@ class DemoResult:
 
     @property
     def success(self) -> bool:
-        return (
-            self.translation_error_m is not None
-            and self.translation_error_m < 0.5
-            and self.rotation_error_deg is not None
-            and self.rotation_error_deg < 15.0
-        )
+        """The paper's criterion: < 15 degrees and < 0.5 m."""
+        return is_success(self.result.pose, self.sequence.T_global_local)
 
 
 def validate(config: DemoConfig) -> None:
@@ -167,7 +164,7 @@ def run_demo(config: DemoConfig, console: Console | None = None) -> DemoResult:
     t2 = time.perf_counter()
     rot = trans = None
     if result.pose is not None:
-        rot, trans = pose_difference(result.pose, seq.T_global_local)
+        rot, trans = pose_error(result.pose, seq.T_global_local)
     truth = set(seq.correspondences(config.map_kind))
     correct = sum(1 for p in (result.best.pairs if result.best else []) if p in truth)
     demo = DemoResult(result, seq, rot, trans, correct, {"simulate": t1 - t0, "localize": t2 - t1})
