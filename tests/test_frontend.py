@@ -180,3 +180,25 @@ def test_segments_from_masks_backproject_each_instance():
     np.testing.assert_allclose(centres[:, 1], [-0.6, 0.6], atol=0.05)
     with pytest.raises(MapError, match="masks"):
         segments_from_masks(depth_mm, masks, ["cabinet"], K.matrix)
+
+
+def test_replay_from_a_later_keyframe_moves_the_odometry_origin(sequence):
+    from semloc.sim.trajectory import odometry_origin
+
+    same = sequence.replay(0)
+    np.testing.assert_array_equal(same.local_map.positions, sequence.local_map.positions)
+    later = sequence.replay(10, 20)
+    assert [kf.index for kf in later.keyframes] == list(range(10, 20))
+    np.testing.assert_allclose(
+        later.T_global_local, odometry_origin(later.keyframes[0].T_world_camera)
+    )
+    assert all(o.seen >= 10 for o in later.local_map)
+    placed = later.local_map.transformed(later.T_global_local)
+    for lid, wid in later.local_truth.items():
+        if wid is not None:
+            truth = sequence.world.object(wid)
+            assert np.linalg.norm(placed.get(lid).position - truth.box_center) < max(
+                0.5, 0.35 * truth.model.extent.max()
+            )
+    with pytest.raises(ValueError, match="start"):
+        sequence.replay(30)

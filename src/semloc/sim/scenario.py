@@ -6,20 +6,23 @@ requested global maps (world frame), walks the camera, renders and "detects" eve
 fuses the segments into a local map in the odometry frame (origin = first camera pose made
 gravity-aligned, so the true `T_global_local` is not the identity) and records what changed at
 each keyframe plus the ground truth (true transform, which global object each local one is).
+The detections are recorded, so `seq.replay(start, stop)` fuses the local map again from any
+keyframe (new odometry origin, new ground truth): relocalization attempts from random starts.
 """
 
 from __future__ import annotations
 
 from collections import Counter, defaultdict
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from semloc.frontend.fusion import FusionConfig, ObjectFusion, Segment
+from semloc.frontend.voxel import voxel_downsample
 from semloc.maps import ObjectMap, SemanticObject
 from semloc.sim.mapkinds import MAP_KINDS, DynamicChanges, cad_map, dynamic_map, reconstruction_map
-from semloc.sim.noise import DetectionNoise, detect, drift
+from semloc.sim.noise import Detection, DetectionNoise, detect, drift
 from semloc.sim.sensor import DepthSensor, Intrinsics
 from semloc.sim.trajectory import camera_path, odometry_origin
 from semloc.sim.world import World, generate_world
@@ -43,6 +46,17 @@ class Keyframe:
         return self.objects
 
 
+@dataclass(frozen=True)
+class Recording:
+    """What the camera recorded: true and odometry poses and the detections of every keyframe
+    (camera frame), so the local map can be fused again from any start keyframe."""
+
+    T_world_camera: np.ndarray
+    T_odom_camera: np.ndarray
+    detections: list[list[Detection]] = field(repr=False)
+    fusion: FusionConfig = field(default_factory=FusionConfig)
+
+
 @dataclass
 class SimulatedSequence:
     """Everything a simulated run produced; global maps in the world frame, local in odometry."""
@@ -54,6 +68,27 @@ class SimulatedSequence:
     T_global_local: np.ndarray
     local_truth: dict[str, str | None]
     dynamic_changes: DynamicChanges | None = None
+    recording: Recording | None = field(default=None, repr=False)
+
+    def replay(self, start: int = 0, stop: int | None = None, name: str = "") -> SimulatedSequence:
+        """The same world and maps, with the local map fused from keyframe `start` to `stop`.
+
+        The odometry origin moves to keyframe `start` (gravity-aligned), so `T_global_local`
+        changes too: this is how relocalization attempts from random keyframes are made.
+        """
+        if self.recording is None:
+            raise ValueError("this sequence has no recording to replay")
+        n = len(self.recording.detections)
+        stop = n if stop is None else stop
+        if not 0 <= start < stop <= n:
+            raise ValueError(f"need 0 <= start < stop <= {n}, got start={start}, stop={stop}")
+        name = name or f"{self.local_map.name or 'local'}-from{start}"
+        keyframes, local_map, T, truth = fuse_recording(
+            self.world, self.recording, start, stop, name
+        )
+        return replace(
+            self, keyframes=keyframes, local_map=local_map, T_global_local=T, local_truth=truth
+        )
 
     def correspondences(self, kind: str) -> list[tuple[str, str]]:
         """True (global_id, local_id) pairs for a map kind (deleted objects have none)."""
@@ -63,8 +98,9 @@ class SimulatedSequence:
     def local_map_at(self, k: int) -> ObjectMap:
         """The local map as it was after keyframe `k` (published objects only)."""
         latest: dict[str, SemanticObject] = {}
-        for kf in self.keyframes[: k + 1]:
-            latest.update({o.id: o for o in kf.objects})
+        for kf in self.keyframes:
+            if kf.index <= k:
+                latest.update({o.id: o for o in kf.objects})
         return ObjectMap(latest.values(), up=self.local_map.up, name=f"{self.local_map.name}-kf{k}")
 
     def ground_truth(self) -> dict:
@@ -115,39 +151,66 @@ def simulate_sequence(
     """Simulate one sequence (see the module docstring); deterministic for given arguments.
 
     `map_kinds`: "all", one kind, or several of "reconstruction", "cad", "dynamic".
-    `progress(done, total)` is called after each keyframe.
+    `progress(done, total)` is called after each rendered keyframe.
     """
     kinds = _kinds(map_kinds)
     noise = noise or DetectionNoise()
     world = generate_world(seed, size)
     global_maps, changes = _global_maps(world, kinds)
     T_world_camera = camera_path(world, path, n_keyframes, n_rooms, seed)
-    T_world_odom = odometry_origin(T_world_camera[0])
-    T_odom_true = np.linalg.inv(T_world_odom) @ T_world_camera
+    T_odom_true = np.linalg.inv(odometry_origin(T_world_camera[0])) @ T_world_camera
     rng = np.random.default_rng([seed, 23])
     T_odom_est = drift(T_odom_true, noise, rng)
     K = Intrinsics.scannet(*resolution)
     sensor = DepthSensor(world, K)
-    fuser = ObjectFusion(fusion, up=(0, 0, 1), name=f"{world.size}-{seed}-{path}-local")
-    votes: dict[str, Counter] = defaultdict(Counter)
-    keyframes = []
+    detections = []
     for k, T in enumerate(T_world_camera):
         frame = sensor.render(T, rng if noise.depth_noise else None)
-        detections = detect(frame, world, K, noise, rng)
+        detections.append([_compact(d) for d in detect(frame, world, K, noise, rng)])
+        if progress is not None:
+            progress(k + 1, len(T_world_camera))
+    recording = Recording(T_world_camera, T_odom_est, detections, fusion or FusionConfig())
+    seq = SimulatedSequence(
+        world, global_maps, [], ObjectMap([]), np.eye(4), {}, changes, recording
+    )
+    return seq.replay(0, name=f"{world.size}-{seed}-{path}-local")
+
+
+def _compact(det: Detection) -> Detection:
+    """A detection with its points thinned to 2 cm (keeps long recordings small)."""
+    points = voxel_downsample(det.points, 0.02).astype(np.float32)
+    return Detection(det.label, points, det.score, det.instance)
+
+
+def fuse_recording(
+    world: World, recording: Recording, start: int, stop: int, name: str
+) -> tuple[list[Keyframe], ObjectMap, np.ndarray, dict[str, str | None]]:
+    """Fuse keyframes start..stop-1 in an odometry frame whose origin is keyframe `start`.
+
+    Returns the keyframes, the local map, the true T_global_local and local -> world ids.
+    """
+    T_world_odom = odometry_origin(recording.T_world_camera[start])
+    T_est_origin = np.linalg.inv(odometry_origin(recording.T_odom_camera[start]))
+    fuser = ObjectFusion(recording.fusion, up=(0, 0, 1), name=name)
+    votes: dict[str, Counter] = defaultdict(Counter)
+    keyframes = []
+    for k in range(start, stop):
+        detections = recording.detections[k]
+        T_odom_camera = T_est_origin @ recording.T_odom_camera[k]
         segments = [Segment(d.label, d.points, d.score) for d in detections]
-        update = fuser.integrate(segments, T_odom_est[k], frame="camera", keyframe=k)
+        update = fuser.integrate(segments, T_odom_camera, frame="camera", keyframe=k)
         for det, lid in zip(detections, update.assignments, strict=True):
             if lid is not None:
                 votes[lid][world.objects[det.instance].id] += len(det.points)
-        objects = fuser.objects(update.changed)
         keyframes.append(
-            Keyframe(k, T, T_odom_est[k], len(segments), update.new, update.updated, objects)
-        )
-        if progress is not None:
-            progress(k + 1, len(T_world_camera))
+            Keyframe(
+                k, recording.T_world_camera[k], T_odom_camera, len(segments), update.new,
+                update.updated, fuser.objects(update.changed),
+            )
+        )  # fmt: skip
     local_map = fuser.local_map()
     truth = {lid: _majority(votes[lid]) for lid in local_map.ids}
-    return SimulatedSequence(world, global_maps, keyframes, local_map, T_world_odom, truth, changes)
+    return keyframes, local_map, T_world_odom, truth
 
 
 def _kinds(map_kinds: str | Sequence[str]) -> list[str]:
