@@ -6,6 +6,8 @@ from collections import Counter
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from semloc.frontend import FusionConfig, ObjectFusion, Segment, voxel_downsample
 from semloc.maps import MapError
@@ -202,3 +204,18 @@ def test_replay_from_a_later_keyframe_moves_the_odometry_origin(sequence):
             )
     with pytest.raises(ValueError, match="start"):
         sequence.replay(30)
+
+
+@given(
+    st.lists(st.tuples(*[st.floats(-50, 50, allow_nan=False)] * 3), min_size=1, max_size=60),
+    st.sampled_from([0.01, 0.05, 0.3]),
+)
+@settings(max_examples=60, deadline=None, derandomize=True)
+def test_voxel_downsample_gives_one_centroid_inside_each_occupied_voxel(points, size):
+    from semloc.frontend.voxel import voxel_keys
+
+    points = np.array(points)
+    out = voxel_downsample(points, size)
+    assert len(out) == len(np.unique(voxel_keys(points, size)))
+    assert len(np.unique(voxel_keys(out, size))) == len(out)  # centroids stay in their voxel
+    assert set(voxel_keys(out, size).tolist()) == set(voxel_keys(points, size).tolist())
