@@ -186,10 +186,8 @@ def write_outputs(
         for s, kf in zip(result.steps, keyframes, strict=False)
     ]
     fig, ax = new_figure(8, 4.5)
-    plot_scores(
-        ax, steps, statuses=statuses, title=f"top-2 association-set scores ({config.map_kind} map)"
-    )
-    ax.set_xlabel("keyframe")
+    title = f"top-2 association-set scores ({config.map_kind} map)"
+    plot_scores(ax, steps, statuses=statuses, title=title, x_label="keyframe")
     files = [save_figure(fig, out / "scores.png")]
     best = result.best
     fig, ax = map_figure(gmap.positions[:, :2])

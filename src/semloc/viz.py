@@ -235,7 +235,12 @@ def _draw_frame(ax: Axes, T: np.ndarray, label: str) -> None:
 
 
 def plot_scores(
-    ax: Axes, steps: Sequence[Any], *, statuses: Sequence[str] | None = None, title: str = ""
+    ax: Axes,
+    steps: Sequence[Any],
+    *,
+    statuses: Sequence[str] | None = None,
+    title: str = "",
+    x_label: str = "update",
 ) -> Axes:
     """Top-1 and top-2 association-set scores after each update (the paper's incremental plot)."""
     x = [int(getattr(s, "step", i)) for i, s in enumerate(steps)]
@@ -252,9 +257,9 @@ def plot_scores(
     if statuses is not None:
         done = [xi for xi, s in zip(x, statuses, strict=False) if s == "localized"]
         if done:
-            label = f"first 'localized' (at {done[0]})"
+            label = f"first 'localized' ({x_label} {done[0]})"
             ax.axvline(done[0], color="green", ls="--", lw=1, label=label)
-    ax.set_xlabel("update")
+    ax.set_xlabel(x_label)
     ax.set_ylabel("association-set score")
     ax.grid(True, lw=0.3, alpha=0.5)
     ax.legend(fontsize=8, loc="upper left")
