@@ -53,6 +53,191 @@ def _root() -> None:
 # Commands are defined below this line (and registered by the modules that own them). -------
 
 
+# --- Simulation: `demo`, `simulate`, `view` (issue 3; heavy imports stay inside) ---------------
+class MapKindChoice(StrEnum):
+    reconstruction = "reconstruction"
+    cad = "cad"
+    dynamic = "dynamic"
+
+
+class PathChoice(StrEnum):
+    walk = "walk"
+    orbit = "orbit"
+
+
+_SIZE_HELP = (
+    "World size: tiny (1 room), small (3), medium (6), large (12), building (24), or a room count."
+)
+_RES_HELP = "Depth image resolution WIDTHxHEIGHT (ScanNet intrinsics scaled)."
+
+
+def _parse_resolution(text: str) -> tuple[int, int]:
+    try:
+        width, height = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        fail(f"--resolution must look like 240x180, got {text!r}")
+    if not (16 <= width <= 1280 and 12 <= height <= 960):
+        fail(f"--resolution must be between 16x12 and 1280x960, got {text}")
+    return width, height
+
+
+@app.command()
+def demo(
+    out: Annotated[
+        Path, typer.Option(help="Folder for scores.png, map.png, world.png, result.json, maps.")
+    ] = Path("demo_out"),
+    seed: Annotated[int, typer.Option(help="World and noise seed.")] = 0,
+    size: Annotated[str, typer.Option(help=_SIZE_HELP)] = "small",
+    map_kind: Annotated[
+        MapKindChoice, typer.Option(help="Global map: scan reconstruction, CAD models, or moved.")
+    ] = MapKindChoice.reconstruction,
+    path: Annotated[
+        PathChoice, typer.Option(help="Camera path: walk through rooms, or orbit in one room.")
+    ] = PathChoice.walk,
+    keyframes: Annotated[int, typer.Option(min=2, max=2000, help="Number of keyframes.")] = 40,
+    rooms: Annotated[int, typer.Option(min=1, help="Rooms the walk visits.")] = 2,
+    resolution: Annotated[str, typer.Option(help=_RES_HELP)] = "240x180",
+    gamma: Annotated[float, typer.Option(help="Merge threshold of the clustering.")] = 0.8,
+    drift: Annotated[
+        float,
+        typer.Option(min=0, max=0.2, help="Odometry drift, m per m travelled (heading: 25x in °)."),
+    ] = 0.0,
+) -> None:
+    """The main job: walk a camera through a generated world and relocalize incrementally.
+
+    Simulated RGB-D frames -> detections -> local objects -> Localizer.update per keyframe.
+
+    Prints a live table and the pose error against ground truth; writes scores.png and map.png.
+    """
+    from semloc.demo import DemoConfig, run_demo
+
+    try:
+        config = DemoConfig(
+            seed=seed, size=size, map_kind=map_kind.value, path=path.value, keyframes=keyframes,
+            rooms=rooms, resolution=_parse_resolution(resolution), gamma=gamma, drift=drift, out=out,
+        )  # fmt: skip
+        run_demo(config, console)
+    except ValidationError as exc:
+        fail(f"invalid option: {_first_error(exc)}")
+    except ValueError as exc:
+        fail(str(exc))
+
+
+@app.command()
+def simulate(
+    out: Annotated[Path, typer.Argument(help="Folder to write (created if missing).")],
+    seed: Annotated[int, typer.Option(help="World and noise seed.")] = 0,
+    size: Annotated[str, typer.Option(help=_SIZE_HELP)] = "small",
+    path: Annotated[
+        PathChoice, typer.Option(help="Camera path: walk through rooms, or orbit in one room.")
+    ] = PathChoice.walk,
+    keyframes: Annotated[int, typer.Option(min=1, max=5000, help="Number of keyframes.")] = 40,
+    rooms: Annotated[int, typer.Option(min=1, help="Rooms the walk visits.")] = 2,
+    resolution: Annotated[str, typer.Option(help=_RES_HELP)] = "240x180",
+    snapshots: Annotated[
+        bool, typer.Option(help="Also write the local map after every keyframe.")
+    ] = True,
+    perfect: Annotated[
+        bool, typer.Option(help="Perfect detections (no misses, confusions or mask errors).")
+    ] = False,
+    drift: Annotated[
+        float, typer.Option(min=0, help="Odometry drift in metres per metre travelled.")
+    ] = 0.0,
+    drift_yaw: Annotated[
+        float, typer.Option(min=0, help="Odometry heading drift in degrees per metre.")
+    ] = 0.0,
+) -> None:
+    """Write a world's global maps (reconstruction, CAD, dynamic), the local maps and ground truth.
+
+    Files: world.json/.png, global_<kind>.json, local.json, keyframes/local_XXXX.json.
+
+    ground_truth.json holds T_global_local, camera poses and correspondences per map kind.
+    """
+    from semloc.sim.export import write_sequence
+    from semloc.sim.noise import DetectionNoise
+    from semloc.sim.scenario import simulate_sequence
+
+    noise = DetectionNoise.perfect() if perfect else DetectionNoise()
+    noise = noise.model_copy(update={"drift_translation": drift, "drift_yaw_deg": drift_yaw})
+    try:
+        seq = simulate_sequence(
+            seed, size, "all", path.value, n_keyframes=keyframes, n_rooms=rooms,
+            resolution=_parse_resolution(resolution), noise=noise,
+        )  # fmt: skip
+    except ValueError as exc:
+        fail(str(exc))
+    files = write_sequence(seq, out, snapshots=snapshots)
+    table = Table(title=f"simulated world seed {seed} -> {out}", title_justify="left")
+    for column in ("map", "objects", "file"):
+        table.add_column(column)
+    for kind, gmap in seq.global_maps.items():
+        table.add_row(f"global {kind}", str(len(gmap)), f"global_{kind}.json")
+    table.add_row("local (final)", str(len(seq.local_map)), "local.json")
+    console.print(table)
+    console.print(f"{len(seq.keyframes)} keyframes; {len(files)} files written")
+
+
+@app.command()
+def view(
+    map_file: Annotated[Path, typer.Argument(metavar="MAP", help="A semloc map (JSON).")],
+    result: Annotated[
+        Path | None,
+        typer.Option(help="Result JSON (semloc localize --format json) or ground_truth.json."),
+    ] = None,
+    local: Annotated[
+        Path | None, typer.Option(help="Local map to place into MAP by the result's pose.")
+    ] = None,
+    output: Annotated[
+        Path | None, typer.Option("--output", "-o", help="PNG to write (default: MAP.png).")
+    ] = None,
+    title: Annotated[str | None, typer.Option(help="Title of the picture.")] = None,
+) -> None:
+    """Draw MAP from above as a PNG, optionally with a localization result and a local map."""
+    from semloc.viz import map_figure, plot_localization, save_figure
+
+    objmap = load_map(map_file)
+    pose, pairs, status = _read_result(result) if result is not None else (None, [], None)
+    local_map = load_map(local) if local is not None else None
+    if local_map is not None and pose is None:
+        fail("--local needs a --result with a pose to place the local objects")
+    heading = title or f"{map_file.name}: {len(objmap)} objects" + (
+        f" ({status})" if status else ""
+    )
+    fig, ax = map_figure(objmap.positions[:, :2])
+    plot_localization(ax, objmap, local_map, pose, pairs, title=heading)
+    path = save_figure(fig, output or map_file.with_suffix(".png"))
+    console.print(f"wrote {path}")
+
+
+def _read_result(path: Path) -> tuple[np.ndarray | None, list[tuple[str, str]], str | None]:
+    """Pose, best pairs and status of a result file (or the true pose of a ground_truth.json)."""
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        fail(f"{path}: file not found")
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        fail(f"{path}: not valid JSON ({exc})")
+    if not isinstance(data, dict) or not ("pose" in data or "T_global_local" in data):
+        fail(f"{path}: not a localization result (no 'pose') nor a ground truth file")
+    raw = data.get("pose", data.get("T_global_local"))
+    pose = None
+    if raw is not None:
+        try:
+            pose = np.asarray(raw, dtype=float)
+        except (TypeError, ValueError):
+            fail(f"{path}: pose must be a 4 x 4 array of numbers")
+        if pose.shape != (4, 4) or not np.all(np.isfinite(pose)):
+            fail(f"{path}: pose must be a finite 4 x 4 array, got shape {pose.shape}")
+    pairs: list[tuple[str, str]] = []
+    hypotheses = data.get("hypotheses") or []
+    if isinstance(hypotheses, list) and hypotheses and isinstance(hypotheses[0], dict):
+        for pair in hypotheses[0].get("pairs", []):
+            if isinstance(pair, dict) and "global" in pair and "local" in pair:
+                pairs.append((str(pair["global"]), str(pair["local"])))
+    status = data.get("status") if isinstance(data.get("status"), str) else None
+    return pose, pairs, status
+
+
 class OutputFormat(StrEnum):
     text = "text"
     json = "json"

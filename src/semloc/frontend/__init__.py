@@ -1,0 +1,15 @@
+"""Building a local object map from per-frame 3D instance segments (simulated or real)."""
+
+from semloc.frontend.fusion import FusionConfig, FusionUpdate, ObjectFusion, Segment
+from semloc.frontend.segments import backproject, segments_from_masks
+from semloc.frontend.voxel import voxel_downsample
+
+__all__ = [
+    "FusionConfig",
+    "FusionUpdate",
+    "ObjectFusion",
+    "Segment",
+    "backproject",
+    "segments_from_masks",
+    "voxel_downsample",
+]

@@ -1,0 +1,34 @@
+"""Voxel grids for point sets: integer voxel keys and voxel-centroid downsampling (numpy only)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+_OFFSET = 1 << 20  # keys cover +-1,048 km at 1 mm voxels; plenty for indoor maps
+
+
+def voxel_keys(points: np.ndarray, voxel_size: float) -> np.ndarray:
+    """One int64 key per point: its voxel (x, y, z indices packed 21 bits each)."""
+    idx = np.floor(np.asarray(points, float) / voxel_size).astype(np.int64) + _OFFSET
+    return (idx[:, 0] << 42) | (idx[:, 1] << 21) | idx[:, 2]
+
+
+def voxel_accumulate(
+    points: np.ndarray, voxel_size: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Unique voxel keys of `points` with the per-voxel point sums (K, 3) and counts (K,)."""
+    keys = voxel_keys(points, voxel_size)
+    unique, inverse = np.unique(keys, return_inverse=True)
+    sums = np.zeros((len(unique), 3))
+    np.add.at(sums, inverse, points)
+    counts = np.bincount(inverse, minlength=len(unique)).astype(float)
+    return unique, sums, counts
+
+
+def voxel_downsample(points: np.ndarray, voxel_size: float) -> np.ndarray:
+    """The centroid of the points in each occupied voxel (order: by voxel key)."""
+    points = np.asarray(points, float).reshape(-1, 3)
+    if len(points) == 0:
+        return points
+    _, sums, counts = voxel_accumulate(points, voxel_size)
+    return sums / counts[:, None]

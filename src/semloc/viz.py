@@ -1,0 +1,311 @@
+"""Plots (matplotlib, Agg backend): top-down maps, localization results, score curves, worlds.
+
+Every `plot_*` function draws into a given `Axes` and returns it; `save_figure` writes a PNG
+atomically (temporary file in the same folder, then rename).  Colours are fixed per label so
+the same class looks the same in every picture; axes are in metres with equal aspect.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from collections.abc import Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+from matplotlib.axes import Axes  # noqa: E402
+from matplotlib.figure import Figure  # noqa: E402
+from matplotlib.lines import Line2D  # noqa: E402
+from matplotlib.patches import Patch, Polygon  # noqa: E402
+
+from semloc.maps import ObjectMap  # noqa: E402
+
+if TYPE_CHECKING:
+    from semloc.sim.world import World
+
+_PALETTE = [
+    "#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f",
+    "#bcbd22", "#17becf", "#393b79", "#637939", "#8c6d31", "#843c39", "#7b4173", "#3182bd",
+    "#e6550d", "#31a354", "#756bb1", "#636363",
+]  # fmt: skip
+
+
+CLASS_COLORS = {
+    "chair": "#2ca02c", "table": "#8c564b", "desk": "#d62728", "sofa": "#9467bd",
+    "armchair": "#c5b0d5", "coffee_table": "#c49c94", "bed": "#ff7f0e", "nightstand": "#ffbb78",
+    "cabinet": "#1f77b4", "low_cabinet": "#aec7e8", "bookshelf": "#17becf", "monitor": "#e377c2",
+    "tv": "#7f7f7f", "lamp": "#bcbd22", "plant": "#98df8a", "refrigerator": "#393b79",
+    "toilet": "#9edae5", "sink": "#637939", "whiteboard": "#843c39",
+}  # fmt: skip
+"""Fixed colours of the simulator's classes, so a class looks the same in every picture."""
+
+
+def label_colors(labels: Sequence[str]) -> dict[str, str]:
+    """A colour per label: fixed for known classes, palette colours in turn for the others."""
+    colors, i = {}, 0
+    for label in sorted(set(labels)):
+        if label in CLASS_COLORS:
+            colors[label] = CLASS_COLORS[label]
+        else:
+            colors[label] = _PALETTE[i % len(_PALETTE)]
+            i += 1
+    return colors
+
+
+def new_figure(width: float = 9.0, height: float = 7.0) -> tuple[Figure, Axes]:
+    fig, ax = plt.subplots(figsize=(width, height), dpi=110)
+    return fig, ax
+
+
+def map_figure(xy: np.ndarray, width: float = 12.0) -> tuple[Figure, Axes]:
+    """A figure whose height suits the extent of the points `xy` (N, 2) in a top-down view."""
+    xy = np.asarray(xy, dtype=float).reshape(-1, 2)
+    span = np.ptp(xy, axis=0) + 2.0 if len(xy) else np.array([10.0, 10.0])
+    height = float(np.clip((width - 3.0) * span[1] / span[0] + 1.2, 4.0, 10.0))
+    return new_figure(width, height)
+
+
+def save_figure(fig: Figure, path: str | os.PathLike[str]) -> Path:
+    """Save `fig` as a PNG at `path` atomically, then close it."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=".png", dir=path.parent)
+    os.close(fd)
+    try:
+        fig.savefig(tmp, format="png", bbox_inches="tight")
+        os.chmod(tmp, 0o644)
+        os.replace(tmp, path)
+    finally:
+        plt.close(fig)
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+    return path
+
+
+def _footprint(position: np.ndarray, size: np.ndarray, rotation: np.ndarray) -> np.ndarray:
+    half = size[:2] / 2
+    corners = np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]]) * np.r_[half, 0]
+    return (corners @ rotation.T + position)[:, :2]
+
+
+def plot_objects(
+    ax: Axes,
+    objmap: ObjectMap,
+    colors: dict[str, str],
+    *,
+    T: np.ndarray | None = None,
+    hollow: bool = False,
+    points: bool = True,
+    marker: str = "o",
+    ids: bool = False,
+) -> Axes:
+    """Draw a map's objects from above: oriented boxes where known, points, and centres.
+
+    `T` (4x4) moves the objects first (e.g. local objects placed by an estimated pose);
+    `hollow` draws outlines only (used for local objects over a global map).
+    """
+    if T is not None:
+        objmap = objmap.transformed(T)
+    for obj in objmap:
+        color = colors.get(obj.label, "#444444")
+        if points and obj.points is not None and len(obj.points):
+            pts = obj.points[:: max(1, len(obj.points) // 300)]
+            ax.scatter(
+                pts[:, 0], pts[:, 1], s=1.0, color=color, alpha=0.25 if not hollow else 0.5, lw=0
+            )
+        if obj.size is not None and not hollow:
+            rot = obj.rotation if obj.rotation is not None else np.eye(3)
+            poly = Polygon(
+                _footprint(obj.position, obj.size, rot),
+                closed=True,
+                fc=color,
+                ec=color,
+                alpha=0.35,
+                lw=1,
+            )
+            ax.add_patch(poly)
+        ax.scatter(
+            *obj.position[:2],
+            s=42 if hollow else 18,
+            marker=marker,
+            facecolors=color,
+            edgecolors="k" if hollow else color,
+            lw=1.0,
+            alpha=0.9,
+            zorder=4 if not hollow else 6,
+        )
+        if ids:
+            ax.annotate(
+                obj.id, obj.position[:2], fontsize=6, xytext=(3, 3), textcoords="offset points"
+            )
+    return ax
+
+
+def _finish_map_axes(
+    ax: Axes, colors: dict[str, str], extra: list[Any] | None = None, title: str = ""
+) -> None:
+    handles: list[Any] = [Patch(fc=c, ec=c, alpha=0.6, label=label) for label, c in colors.items()]
+    handles += extra or []
+    ax.legend(
+        handles=handles, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False
+    )
+    ax.set_aspect("equal", adjustable="box")
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    ax.grid(True, lw=0.3, alpha=0.5)
+    if title:
+        ax.set_title(title, fontsize=11)
+
+
+def plot_localization(
+    ax: Axes,
+    global_map: ObjectMap,
+    local_map: ObjectMap | None = None,
+    pose: np.ndarray | None = None,
+    pairs: Sequence[tuple[str, str]] = (),
+    *,
+    true_pose: np.ndarray | None = None,
+    title: str = "",
+) -> Axes:
+    """Global map, local objects placed by `pose`, association lines (global centre to local).
+
+    With `true_pose`, the local objects' true places are drawn as small grey crosses.
+    """
+    labels = list(global_map.labels) + ([] if local_map is None else list(local_map.labels))
+    colors = label_colors(labels)
+    plot_objects(ax, global_map, colors)
+    extra: list[Any] = [
+        Line2D([], [], ls="none", marker="o", mfc="#999", mec="#999", label="global object")
+    ]
+    if local_map is not None and len(local_map) and pose is not None:
+        placed = local_map.transformed(pose)
+        plot_objects(ax, placed, colors, hollow=True, marker="D")
+        extra.append(
+            Line2D(
+                [],
+                [],
+                ls="none",
+                marker="D",
+                mfc="#bbb",
+                mec="k",
+                label="local object (estimated pose)",
+            )
+        )
+        for gid, lid in pairs:
+            if gid in global_map and lid in placed:
+                a, b = global_map.get(gid).position, placed.get(lid).position
+                ax.plot([a[0], b[0]], [a[1], b[1]], color="k", lw=1.2, alpha=0.8, zorder=5)
+        if pairs:
+            extra.append(Line2D([], [], color="k", lw=1.2, label="association"))
+    elif pairs:
+        for gid, _ in pairs:
+            if gid in global_map:
+                p = global_map.get(gid).position
+                ax.scatter(p[0], p[1], s=90, facecolors="none", edgecolors="k", lw=1.5, zorder=5)
+        extra.append(
+            Line2D([], [], ls="none", marker="o", mfc="none", mec="k", ms=9, label="associated")
+        )
+    if true_pose is not None and local_map is not None and len(local_map):
+        truth = local_map.transformed(true_pose).positions
+        ax.scatter(truth[:, 0], truth[:, 1], marker="x", s=22, color="#555", lw=1, zorder=6)
+        extra.append(
+            Line2D([], [], ls="none", marker="x", color="#555", label="local object (true pose)")
+        )
+    if pose is not None:
+        _draw_frame(ax, pose, "local frame (estimated)")
+    _finish_map_axes(ax, colors, extra, title)
+    return ax
+
+
+def _draw_frame(ax: Axes, T: np.ndarray, label: str) -> None:
+    o, x = T[:2, 3], T[:2, 0]
+    n = np.linalg.norm(x)
+    if n > 1e-9:
+        x = x / n * 0.8
+        ax.annotate(
+            "", xy=o + x, xytext=o, arrowprops={"arrowstyle": "->", "color": "crimson", "lw": 2}
+        )
+    ax.scatter(*o, color="crimson", s=25, zorder=7, label=None)
+    ax.annotate(label, o, fontsize=7, color="crimson", xytext=(4, -10), textcoords="offset points")
+
+
+def plot_scores(
+    ax: Axes,
+    steps: Sequence[Any],
+    *,
+    statuses: Sequence[str] | None = None,
+    title: str = "",
+    x_label: str = "update",
+) -> Axes:
+    """Top-1 and top-2 association-set scores after each update (the paper's incremental plot)."""
+    x = [int(getattr(s, "step", i)) for i, s in enumerate(steps)]
+    top = [list(getattr(s, "top_scores", []) or []) for s in steps]
+    first = np.array([t[0] if len(t) > 0 else np.nan for t in top], dtype=float)
+    second = np.array([t[1] if len(t) > 1 else np.nan for t in top], dtype=float)
+    ax.plot(x, first, "-o", ms=3.5, color="#1f77b4", label="best association set")
+    ax.plot(x, second, "-s", ms=3.0, color="#ff7f0e", label="second best (another pose)")
+    lower = np.where(np.isfinite(second), second, first)
+    ax.fill_between(x, lower, first, color="#1f77b4", alpha=0.12, label="margin")
+    positive = first[np.isfinite(first) & (first > 0)]
+    if len(positive) and positive.max() > 100 * positive.min():
+        ax.set_yscale("log")
+    if statuses is not None:
+        done = [xi for xi, s in zip(x, statuses, strict=False) if s == "localized"]
+        if done:
+            label = f"first 'localized' ({x_label} {done[0]})"
+            ax.axvline(done[0], color="green", ls="--", lw=1, label=label)
+    ax.set_xlabel(x_label)
+    ax.set_ylabel("association-set score")
+    ax.grid(True, lw=0.3, alpha=0.5)
+    ax.legend(fontsize=8, loc="upper left")
+    if title:
+        ax.set_title(title, fontsize=11)
+    return ax
+
+
+def plot_world(
+    ax: Axes, world: World, *, trajectory: np.ndarray | None = None, title: str = ""
+) -> Axes:
+    """A world from above: walls, rooms by kind, object footprints by class, a camera path."""
+    colors = label_colors([o.label for o in world.objects])
+    for mesh in world.background[1:]:
+        lo, hi = mesh.bounds
+        ax.add_patch(
+            Polygon(
+                [[lo[0], lo[1]], [hi[0], lo[1]], [hi[0], hi[1]], [lo[0], hi[1]]],
+                fc="#333",
+                ec="#333",
+            )
+        )
+    for room in world.rooms:
+        ax.text(
+            room.center[0], room.center[1], f"{room.index}: {room.kind}", ha="center", va="center",
+            fontsize=9, color="#222", zorder=8, bbox={"fc": "white", "ec": "none", "alpha": 0.7},
+        )  # fmt: skip
+    for obj in world.objects:
+        lo, hi = obj.model.mesh.bounds
+        corners = np.array(
+            [[lo[0], lo[1], 0, 1], [hi[0], lo[1], 0, 1], [hi[0], hi[1], 0, 1], [lo[0], hi[1], 0, 1]]
+        )
+        xy = (corners @ obj.pose.T)[:, :2]
+        color = colors[obj.label]
+        ax.add_patch(
+            Polygon(
+                xy, closed=True, fc=color, ec="k", alpha=0.7, lw=0.5, zorder=3 if obj.support else 2
+            )
+        )
+        front = obj.pose[:2, 1] * 0.25
+        c = obj.pose[:2, 3]
+        ax.plot([c[0], c[0] + front[0]], [c[1], c[1] + front[1]], color="k", lw=0.5, zorder=4)
+    extra: list[Any] = []
+    if trajectory is not None and len(trajectory):
+        ax.plot(trajectory[:, 0], trajectory[:, 1], "-", color="crimson", lw=1.2, zorder=6)
+        ax.scatter(trajectory[:, 0], trajectory[:, 1], s=6, color="crimson", zorder=6)
+        extra.append(Line2D([], [], color="crimson", marker="o", ms=3, label="camera keyframes"))
+    _finish_map_axes(ax, colors, extra, title)
+    return ax
