@@ -20,7 +20,7 @@ from pydantic import ValidationError
 from rich.console import Console
 from rich.table import Table
 
-from semloc.io import load_map, write_atomic
+from semloc.io import load_map, read_json, write_atomic
 from semloc.localizer import LocalizerConfig, Result
 from semloc.localizer import localize as run_localize
 from semloc.maps import MapError
@@ -211,12 +211,7 @@ def view(
 
 def _read_result(path: Path) -> tuple[np.ndarray | None, list[tuple[str, str]], str | None]:
     """Pose, best pairs and status of a result file (or the true pose of a ground_truth.json)."""
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        fail(f"{path}: file not found")
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        fail(f"{path}: not valid JSON ({exc})")
+    data = read_json(path)
     if not isinstance(data, dict) or not ("pose" in data or "T_global_local" in data):
         fail(f"{path}: not a localization result (no 'pose') nor a ground truth file")
     raw = data.get("pose", data.get("T_global_local"))
@@ -291,12 +286,7 @@ def localize(
 def _read_config(path: Path | None) -> dict:
     if path is None:
         return {}
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        fail(f"{path}: file not found")
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        fail(f"{path}: not valid JSON ({exc})")
+    data = read_json(path)
     if not isinstance(data, dict):
         fail(f"{path}: must hold a JSON object of settings")
     return data
@@ -470,12 +460,7 @@ def crop(
 
 
 def _read_pose(path: Path) -> np.ndarray:
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        fail(f"{path}: file not found (--transform takes 'random', 'none' or a JSON file)")
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        fail(f"{path}: not valid JSON ({exc})")
+    data = read_json(path, what="--transform takes 'random', 'none' or a JSON file")
     if isinstance(data, dict):
         data = data.get("T_global_local")
     try:

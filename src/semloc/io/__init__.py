@@ -6,7 +6,14 @@ imported on first use, so that `import semloc` stays light.
 
 from typing import Any
 
-from semloc.io.native import load_map, map_from_dict, map_to_dict, save_map, write_atomic
+from semloc.io.native import (
+    load_map,
+    map_from_dict,
+    map_to_dict,
+    read_json,
+    save_map,
+    write_atomic,
+)
 
 _IMPORTERS = {
     "load_scannet": "semloc.io.scannet",
@@ -15,7 +22,15 @@ _IMPORTERS = {
     "load_rscan": "semloc.io.rscan",
 }
 
-__all__ = ["load_map", "map_from_dict", "map_to_dict", "save_map", "write_atomic", *_IMPORTERS]
+__all__ = [
+    "read_json",
+    "load_map",
+    "map_from_dict",
+    "map_to_dict",
+    "save_map",
+    "write_atomic",
+    *_IMPORTERS,
+]
 
 
 def __getattr__(name: str) -> Any:

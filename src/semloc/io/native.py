@@ -32,21 +32,30 @@ _TOP_KEYS = {"format", "version", "name", "up", "objects", "points_file"}
 def load_map(path: str | os.PathLike[str]) -> ObjectMap:
     """Read a native map file (and its `points_file`); raise `MapError` on any problem."""
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise MapError(f"{path}: file not found") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise MapError(f"{path}: cannot read ({exc.__class__.__name__}: {exc})") from None
-    try:
-        document = json.loads(text, parse_constant=_reject_constant)
-    except json.JSONDecodeError as exc:
-        raise MapError(f"{path}: not valid JSON ({exc.msg} at line {exc.lineno})") from None
-    except ValueError as exc:
-        raise MapError(f"{path}: {exc}") from None
+    document = read_json(path)
     try:
         return map_from_dict(document, base_dir=path.parent)
     except MapError as exc:
+        raise MapError(f"{path}: {exc}") from None
+
+
+def read_json(path: str | os.PathLike[str], what: str = "") -> Any:
+    """Parse a JSON file; `MapError` naming the file on any problem (NaN/Infinity refused).
+
+    `what` adds a hint to the not-found message (e.g. what the file was expected to be).
+    """
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise MapError(f"{path}: file not found{f' ({what})' if what else ''}") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise MapError(f"{path}: cannot read ({exc.__class__.__name__}: {exc})") from None
+    try:
+        return json.loads(text, parse_constant=_reject_constant)
+    except json.JSONDecodeError as exc:
+        raise MapError(f"{path}: not valid JSON ({exc.msg} at line {exc.lineno})") from None
+    except ValueError as exc:
         raise MapError(f"{path}: {exc}") from None
 
 

@@ -17,7 +17,7 @@ import numpy as np
 
 from semloc.io.geometry import quaternion_matrix, sample_box_surface
 from semloc.io.labels import is_structural, is_unlabeled
-from semloc.io.scannet import _read_json
+from semloc.io.native import read_json
 from semloc.maps import MapError, ObjectMap, SemanticObject
 
 
@@ -39,7 +39,7 @@ def load_replica(
     path = Path(path)
     if path.is_dir():
         path = path / "info_semantic.json"
-    document = _read_json(path)
+    document = read_json(path)
     if not isinstance(document, dict) or not isinstance(document.get("objects"), list):
         raise MapError(f"{path}: missing key 'objects' (a list)")
     up = _up(document, path)

@@ -16,7 +16,6 @@ clustering (ids from `len(aligned_models)` on).  Both maps are in the scan frame
 
 from __future__ import annotations
 
-import json
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -35,6 +34,7 @@ from semloc.io.geometry import (
     voxel_downsample,
 )
 from semloc.io.labels import NYU40, is_structural
+from semloc.io.native import read_json
 from semloc.io.ply import read_ply
 from semloc.maps import MapError, ObjectMap, SemanticObject
 
@@ -122,14 +122,7 @@ def _annotation_path(path: Path) -> Path:
 
 
 def _select_scan(path: Path, scene: str | None) -> dict[str, Any]:
-    try:
-        document = json.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise MapError(f"{path}: file not found") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise MapError(f"{path}: cannot read ({exc})") from None
-    except json.JSONDecodeError as exc:
-        raise MapError(f"{path}: not valid JSON ({exc.msg} at line {exc.lineno})") from None
+    document = read_json(path)
     entries = document if isinstance(document, list) else [document]
     if not entries or not all(isinstance(e, dict) for e in entries):
         raise MapError(f"{path}: expected a list of scan annotations")

@@ -11,7 +11,6 @@ box centre as position.  The frame is the mesh frame, `up` = +z.
 
 from __future__ import annotations
 
-import json
 import os
 from collections.abc import Mapping
 from pathlib import Path
@@ -21,6 +20,7 @@ import numpy as np
 
 from semloc.io.geometry import upright_box, voxel_downsample
 from semloc.io.labels import NYU40, is_structural
+from semloc.io.native import read_json
 from semloc.io.ply import read_ply
 from semloc.maps import MapError, ObjectMap, SemanticObject
 
@@ -102,20 +102,9 @@ def _one(folder: Path, pattern: str) -> Path:
     return found[0]
 
 
-def _read_json(path: Path) -> Any:
-    try:
-        return json.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise MapError(f"{path}: file not found") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise MapError(f"{path}: cannot read ({exc})") from None
-    except json.JSONDecodeError as exc:
-        raise MapError(f"{path}: not valid JSON ({exc.msg} at line {exc.lineno})") from None
-
-
 def read_aggregation(path: Path) -> list[dict[str, Any]]:
     """The `segGroups` of an aggregation file, validated (objectId, label, segments)."""
-    document = _read_json(path)
+    document = read_json(path)
     if not isinstance(document, dict) or "segGroups" not in document:
         raise MapError(f"{path}: missing key 'segGroups'")
     groups = document["segGroups"]
@@ -143,7 +132,7 @@ def read_aggregation(path: Path) -> list[dict[str, Any]]:
 
 def read_segments(path: Path) -> np.ndarray:
     """The per-vertex segment ids (`segIndices`) of a `.segs.json` file."""
-    document = _read_json(path)
+    document = read_json(path)
     if not isinstance(document, dict) or "segIndices" not in document:
         raise MapError(f"{path}: missing key 'segIndices'")
     try:
