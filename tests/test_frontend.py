@@ -212,7 +212,7 @@ def test_replay_from_a_later_keyframe_moves_the_odometry_origin(sequence):
 )
 @settings(max_examples=60, deadline=None, derandomize=True)
 def test_voxel_downsample_gives_one_centroid_inside_each_occupied_voxel(points, size):
-    from semloc.frontend.voxel import voxel_keys
+    from semloc.pointsets import voxel_keys
 
     points = np.array(points)
     out = voxel_downsample(points, size)

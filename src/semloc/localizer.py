@@ -34,6 +34,7 @@ from semloc.association import AssociationConfig, CandidateIndex
 from semloc.clustering import AssociationSet, ClusteringConfig, HierarchicalClustering
 from semloc.maps import MapError, ObjectMap, SemanticObject
 from semloc.metrics import pose_error
+from semloc.pointsets import voxel_downsample
 from semloc.pose import PoseConfig, PoseEstimate, align_positions, estimate_pose
 
 Status = Literal["localized", "ambiguous", "failed"]
@@ -90,6 +91,12 @@ class LocalizerConfig(BaseModel):
     top_k: int = Field(10, ge=1, description="How many distinct hypotheses are reported.")
     screened_sets: int = Field(
         60, ge=1, description="Association sets screened by closed-form pose for hypotheses."
+    )
+    refine_top: int = Field(
+        3,
+        ge=0,
+        description="How many of the best hypotheses get robust ICP (the rest: closed "
+        "form or search, with fitness).",
     )
     rank_by: Literal["residual", "score", "fitness"] = Field(
         "residual",
@@ -212,6 +219,9 @@ class Localizer:
         self.global_map = global_map
         self.local_up = None if local_up is None else np.asarray(local_up, dtype=float)
         self._candidates = CandidateIndex(global_map, config.association)
+        self._pose_unrefined = config.pose.model_copy(update={"refine": False})
+        self._global_clouds: dict[int, np.ndarray | None] = {}
+        self._local_clouds: dict[str, np.ndarray | None] = {}
         self._clustering = HierarchicalClustering(
             global_map.positions, list(global_map.ids), config.clustering
         )
@@ -284,6 +294,7 @@ class Localizer:
         for obj in objects:
             index = self._local_index.setdefault(obj.id, len(self._local_index))
             self._local[obj.id] = obj
+            self._local_clouds[obj.id] = _cloud(obj.points, self.config.pose)
             detections[index] = self._candidates.candidates(obj)
         return detections
 
@@ -304,7 +315,9 @@ class Localizer:
                 break
             if not any(self._same_place(candidate, other) for other in chosen):
                 chosen.append(candidate)
-        hypotheses = [self._hypothesis(rank, s) for rank, (s, _, _) in enumerate(chosen, 1)]
+        hypotheses = [
+            self._hypothesis(rank, s, residual) for rank, (s, _, residual) in enumerate(chosen, 1)
+        ]
         hypotheses.sort(key=_RANKINGS[cfg.rank_by])
         for rank, h in enumerate(hypotheses, 1):
             h.rank = rank
@@ -341,25 +354,23 @@ class Localizer:
         d = self.config.decision
         return rotation < d.distinct_rotation_deg and translation < d.distinct_translation
 
-    def _hypothesis(self, rank: int, aset: AssociationSet) -> Hypothesis:
+    def _hypothesis(self, rank: int, aset: AssociationSet, residual: float) -> Hypothesis:
+        """Full pose recovery of one set; `residual` is its closed-form centre residual."""
         globals_, locals_ = self._matched(aset)
+        l_xyz = np.array([o.position for o in locals_])
+        g_xyz = np.array([o.position for o in globals_])
         estimate: PoseEstimate | None = estimate_pose(
-            np.array([o.position for o in locals_]),
-            np.array([o.position for o in globals_]),
-            [o.points for o in locals_],
-            [o.points for o in globals_],
+            l_xyz,
+            g_xyz,
+            [self._local_clouds[o.id] for o in locals_],
+            [self._global_cloud(self.global_map.index_of(o.id)) for o in globals_],
             self.local_up,
             self.global_map.up,
-            self.config.pose,
+            self.config.pose if rank <= self.config.refine_top else self._pose_unrefined,
         )
         pose = None if estimate is None else estimate.T
-        residual = None
-        if pose is not None:
-            residual = centre_residual(
-                pose,
-                np.array([o.position for o in locals_]),
-                np.array([o.position for o in globals_]),
-            )
+        if pose is not None and not np.isfinite(residual):  # pose found by the search
+            residual = centre_residual(pose, l_xyz, g_xyz)
         return Hypothesis(
             rank=rank,
             score=aset.score,
@@ -367,9 +378,15 @@ class Localizer:
             pose=pose,
             fitness=None if estimate is None else estimate.fitness,
             rmse=None if estimate is None else estimate.rmse,
-            residual=residual,
+            residual=None if pose is None else residual,
             method="" if estimate is None else estimate.method,
         )
+
+    def _global_cloud(self, index: int) -> np.ndarray | None:
+        """The global object's points, downsampled once for pose recovery."""
+        if index not in self._global_clouds:
+            self._global_clouds[index] = _cloud(self.global_map[index].points, self.config.pose)
+        return self._global_clouds[index]
 
     def _decide(self, hypotheses: list[Hypothesis]) -> Status:
         if not hypotheses:
@@ -381,6 +398,13 @@ class Localizer:
         if all(_dominates(best, rival, self.config.rank_by, d) for rival in rivals):
             return "localized"
         return "ambiguous"
+
+
+def _cloud(points: np.ndarray | None, pose: PoseConfig) -> np.ndarray | None:
+    """An object's points voxel-downsampled as pose recovery would (None when it has none)."""
+    if points is None or len(points) == 0:
+        return None
+    return voxel_downsample(points, pose.icp_voxel)
 
 
 def centre_residual(pose: np.ndarray, local_xyz: np.ndarray, global_xyz: np.ndarray) -> float:

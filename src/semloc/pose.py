@@ -33,6 +33,8 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 from scipy.spatial import cKDTree
 
+from semloc.pointsets import voxel_downsample
+
 __all__ = ["PoseConfig", "PoseEstimate", "align_positions", "estimate_pose"]
 
 _TOL = 1e-9  # spread (m) below which positions are mathematically degenerate
@@ -256,19 +258,7 @@ def align_positions(
 
 def _downsample(points: np.ndarray, voxel: float, max_points: int, rng) -> np.ndarray:
     """Voxel-grid means, then a seeded random subsample of at most `max_points`."""
-    if voxel > 0 and len(points) > 1:
-        keys = np.floor(points / voxel).astype(np.int64)
-        keys -= keys.min(axis=0)
-        dims = keys.max(axis=0) + 1
-        if np.prod(dims.astype(float)) < 2.0**62:  # one integer key per voxel
-            flat = (keys[:, 0] * dims[1] + keys[:, 1]) * dims[2] + keys[:, 2]
-            _, inverse, counts = np.unique(flat, return_inverse=True, return_counts=True)
-        else:
-            _, inverse, counts = np.unique(keys, axis=0, return_inverse=True, return_counts=True)
-        inverse = inverse.reshape(-1)
-        sums = np.zeros((len(counts), 3))
-        np.add.at(sums, inverse, points)
-        points = sums / counts[:, None]
+    points = voxel_downsample(points, voxel)
     if len(points) > max_points:
         points = points[np.sort(rng.choice(len(points), max_points, replace=False))]
     return points

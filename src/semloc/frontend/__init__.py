@@ -2,7 +2,7 @@
 
 from semloc.frontend.fusion import FusionConfig, FusionUpdate, ObjectFusion, Segment
 from semloc.frontend.segments import backproject, segments_from_masks
-from semloc.frontend.voxel import voxel_downsample
+from semloc.pointsets import voxel_downsample
 
 __all__ = [
     "FusionConfig",

@@ -21,8 +21,8 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 from scipy.spatial import cKDTree
 
-from semloc.frontend.voxel import voxel_accumulate, voxel_downsample
 from semloc.maps import MapError, ObjectMap, SemanticObject
+from semloc.pointsets import voxel_accumulate, voxel_downsample
 
 
 class FusionConfig(BaseModel):

@@ -10,18 +10,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import ConvexHull, QhullError
 
-
-def voxel_downsample(points: np.ndarray, voxel: float) -> np.ndarray:
-    """One point per occupied voxel of edge `voxel` (the mean of its points); 0 keeps all."""
-    points = np.asarray(points, dtype=float).reshape(-1, 3)
-    if voxel <= 0 or len(points) == 0:
-        return points
-    keys = np.floor(points / voxel).astype(np.int64)
-    _, inverse, counts = np.unique(keys, axis=0, return_inverse=True, return_counts=True)
-    inverse = inverse.ravel()
-    sums = np.zeros((len(counts), 3))
-    np.add.at(sums, inverse, points)
-    return sums / counts[:, None]
+from semloc.pointsets import voxel_downsample  # noqa: F401  (re-exported for importers)
 
 
 def up_basis(up: np.ndarray | None) -> np.ndarray:

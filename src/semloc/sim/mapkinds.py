@@ -19,8 +19,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from semloc.frontend.voxel import voxel_downsample
 from semloc.maps import ObjectMap, SemanticObject
+from semloc.pointsets import voxel_downsample
 from semloc.sim.sensor import DepthSensor, Intrinsics, backproject, look_at
 from semloc.sim.shapes import model, other_style
 from semloc.sim.world import ObjectInstance, World, yaw_pose

@@ -19,8 +19,8 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from semloc.frontend.fusion import FusionConfig, ObjectFusion, Segment
-from semloc.frontend.voxel import voxel_downsample
 from semloc.maps import ObjectMap, SemanticObject
+from semloc.pointsets import voxel_downsample
 from semloc.sim.mapkinds import MAP_KINDS, DynamicChanges, cad_map, dynamic_map, reconstruction_map
 from semloc.sim.noise import Detection, DetectionNoise, detect, drift
 from semloc.sim.sensor import DepthSensor, Intrinsics

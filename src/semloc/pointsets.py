@@ -1,4 +1,8 @@
-"""Voxel grids for point sets: integer voxel keys and voxel-centroid downsampling (numpy only)."""
+"""Point-set utilities shared by every stage: voxel keys and voxel-centroid downsampling.
+
+Pure numpy; used by the front-end (fusion), the simulator, the dataset importers and pose
+recovery, so that "downsample with voxel v" means the same everywhere.
+"""
 
 from __future__ import annotations
 
@@ -26,9 +30,9 @@ def voxel_accumulate(
 
 
 def voxel_downsample(points: np.ndarray, voxel_size: float) -> np.ndarray:
-    """The centroid of the points in each occupied voxel (order: by voxel key)."""
+    """The centroid of the points in each occupied voxel (order: by voxel key); 0 keeps all."""
     points = np.asarray(points, float).reshape(-1, 3)
-    if len(points) == 0:
+    if len(points) == 0 or voxel_size <= 0:
         return points
     _, sums, counts = voxel_accumulate(points, voxel_size)
     return sums / counts[:, None]
