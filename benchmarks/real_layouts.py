@@ -28,6 +28,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from rich.console import Console
+from rich.progress import Progress
 
 from semloc.crop import crop_with_truth
 from semloc.io.datasets import real_data_dir
@@ -96,18 +98,26 @@ def crop_trials(
     radii = list(radii)
     up = np.array([0.0, 0.0, 1.0]) if full.up is None else full.up
     height = float(np.median(full.positions @ up))
-    trials = []
-    while len(trials) < count:
-        anchor = full.positions[rng.integers(len(full))]
-        center = anchor + np.append(rng.uniform(-1, 1, 2), 0.0)
-        center = center + up * (height - up @ center)  # at the median object height
-        radius = radii[len(trials) % len(radii)]
-        pose_seed = int(rng.integers(2**31))
-        local, truth = crop_with_truth(full, center, radius, "random", pose_seed, recentre=recentre)
-        if len(local) == 0:
-            continue
-        trials.append(run_trial(check, full, local, truth.T_global_local))
+    trials: list[Trial] = []
+    progress = Progress(transient=True, console=Console(stderr=True))
+    task = progress.add_task(check, total=count)
+    with progress:
+        while len(trials) < count:
+            _one_crop(trials, check, full, rng, radii, up, height, recentre)
+            progress.update(task, completed=len(trials))
     return trials
+
+
+def _one_crop(trials, check, full, rng, radii, up, height, recentre) -> None:
+    """Draw one crop and append its trial (nothing when the crop holds no object)."""
+    anchor = full.positions[rng.integers(len(full))]
+    center = anchor + np.append(rng.uniform(-1, 1, 2), 0.0)
+    center = center + up * (height - up @ center)  # at the median object height
+    radius = radii[len(trials) % len(radii)]
+    pose_seed = int(rng.integers(2**31))
+    local, truth = crop_with_truth(full, center, radius, "random", pose_seed, recentre=recentre)
+    if len(local) > 0:
+        trials.append(run_trial(check, full, local, truth.T_global_local))
 
 
 def all_trials(data: Path, crops: int, seed: int) -> list[Trial]:
