@@ -46,7 +46,9 @@ def walk_descriptors(
     if n == 0:
         return []
     dist = np.linalg.norm(xyz[:, None] - xyz[None], axis=2)
-    neighbours = [np.flatnonzero((dist[i] < cfg.edge_distance) & (np.arange(n) != i)) for i in range(n)]
+    neighbours = [
+        np.flatnonzero((dist[i] < cfg.edge_distance) & (np.arange(n) != i)) for i in range(n)
+    ]
     out = []
     for start in range(n):
         walks: Counter = Counter()
