@@ -91,7 +91,7 @@ def test_tiny_run_is_reproducible(tmp_path):
 
     config = BenchConfig(
         sequences=1, size="tiny", keyframes=40, starts=1, map_kinds=["cad"],
-        methods=["semloc", "clipper"], gammas=[0.8], ablation_starts=0, seed=3,
+        methods=["semloc", "clipper"], gammas=[0.8], ablation_starts=0, seed=3, real=False,
     )  # fmt: skip
     output = run_benchmark(config, tmp_path, workers=1, progress=False)
     header = (tmp_path / "results.csv").read_text().splitlines()[0]

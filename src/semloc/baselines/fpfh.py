@@ -15,12 +15,15 @@ RANSAC pose is kept.  Hypotheses are ranked by the point fitness of the final po
 whole global cloud.
 
 Simplifications: sub-maps are retrieved by the vocabulary instead of registering against every
-sub-map (hundreds per room; too slow for a benchmark); Open3D runs single-threaded in workers.
+sub-map (hundreds per room; too slow for a benchmark); Open3D runs single-threaded in workers; what depends only on the global map
+is cached per process (the last 8 maps).
 The sub-map radius is the paper's 1.5 m while local maps usually span more: RANSAC matches the
 local cloud to a sub-map, the pose is then checked against the whole map.
 """
 
 from __future__ import annotations
+
+import hashlib
 
 import numpy as np
 from pydantic import Field
@@ -68,6 +71,55 @@ def _features(array: np.ndarray):
     return feature
 
 
+def _normalise(hist: np.ndarray, idf: np.ndarray) -> np.ndarray:
+    weighted = hist / np.maximum(hist.sum(axis=-1, keepdims=True), 1) * idf
+    return weighted / np.maximum(np.linalg.norm(weighted, axis=-1, keepdims=True), 1e-12)
+
+
+def _fingerprint(global_map, cfg: FpfhConfig) -> str:
+    digest = hashlib.sha1(cfg.model_dump_json().encode())
+    digest.update(np.ascontiguousarray(global_map.positions).tobytes())
+    for obj in global_map:
+        if obj.points is not None:
+            digest.update(np.ascontiguousarray(obj.points[:50]).tobytes())
+    return digest.hexdigest()
+
+
+class _GlobalIndex:
+    """What depends only on the global map: cloud, FPFH, vocabulary and sub-map histograms."""
+
+    def __init__(self, global_map, cfg: FpfhConfig) -> None:
+        from sklearn.cluster import KMeans
+
+        chunks = [o.points for o in global_map if o.points is not None and len(o.points)]
+        if not chunks:
+            chunks = [global_map.positions]
+        self.pcd, self.fpfh = _cloud(np.vstack(chunks), cfg)
+        self.xyz = np.asarray(self.pcd.points)
+        self.tree = cKDTree(self.xyz)
+        rng = np.random.default_rng(cfg.seed)
+        sample = self.fpfh[rng.choice(len(self.fpfh), min(len(self.fpfh), 5000), replace=False)]
+        n_words = min(cfg.words, len(sample))
+        self.kmeans = KMeans(n_words, n_init=1, random_state=cfg.seed).fit(sample)
+        words = self.kmeans.predict(self.fpfh)
+        lo, hi = self.xyz[:, :2].min(axis=0), self.xyz[:, :2].max(axis=0)
+        gx, gy = np.meshgrid(*(np.arange(a, b + cfg.grid, cfg.grid) for a, b in zip(lo, hi)))
+        centres = np.column_stack([gx.ravel(), gy.ravel()])
+        members = cKDTree(self.xyz[:, :2]).query_ball_point(centres, cfg.radius)
+        keep = [i for i, m in enumerate(members) if len(m) >= 50]
+        self.centres = centres[keep]
+        self.members = [np.array(members[i]) for i in keep]
+        hist = np.zeros((len(keep), n_words))
+        for row, m in enumerate(self.members):
+            hist[row] = np.bincount(words[m], minlength=n_words)
+        self.idf = np.log((len(keep) + 1) / (1 + (hist > 0).sum(axis=0)))
+        self.hist = _normalise(hist, self.idf)
+
+
+_GLOBAL_CACHE: dict[str, _GlobalIndex] = {}
+_CACHE_SIZE = 8
+
+
 class FpfhRansacBaseline(ObjectBaseline):
     """FPFH features, vocabulary retrieval of sub-maps, RANSAC registration, shared pose."""
 
@@ -78,39 +130,21 @@ class FpfhRansacBaseline(ObjectBaseline):
     def __init__(self, global_map, config: FpfhConfig | None = None, local_up=None) -> None:
         super().__init__(global_map, config, local_up)
         import open3d as o3d
-        from sklearn.cluster import KMeans
 
         o3d.utility.random.seed(self.config.seed)
         o3d.utility.set_verbosity_level(o3d.utility.VerbosityLevel.Error)
-        cfg = self.config
         self._labels = np.array([canonical_label(lb, {}) for lb in global_map.labels], dtype=object)
-        chunks = [o.points for o in global_map if o.points is not None and len(o.points)]
-        if not chunks:
-            chunks = [global_map.positions]
-        self._pcd, self._fpfh = _cloud(np.vstack(chunks), cfg)
-        self._xyz = np.asarray(self._pcd.points)
-        self._tree = cKDTree(self._xyz)
-        rng = np.random.default_rng(cfg.seed)
-        sample = self._fpfh[rng.choice(len(self._fpfh), min(len(self._fpfh), 5000), replace=False)]
-        n_words = min(cfg.words, len(sample))
-        self._kmeans = KMeans(n_words, n_init=1, random_state=cfg.seed).fit(sample)
-        words = self._kmeans.predict(self._fpfh)
-        lo, hi = self._xyz[:, :2].min(axis=0), self._xyz[:, :2].max(axis=0)
-        gx, gy = np.meshgrid(*(np.arange(a, b + cfg.grid, cfg.grid) for a, b in zip(lo, hi)))
-        centres = np.column_stack([gx.ravel(), gy.ravel()])
-        members = cKDTree(self._xyz[:, :2]).query_ball_point(centres, cfg.radius)
-        keep = [i for i, m in enumerate(members) if len(m) >= 50]
-        self._centres = centres[keep]
-        self._members = [np.array(members[i]) for i in keep]
-        hist = np.zeros((len(keep), n_words))
-        for row, m in enumerate(self._members):
-            hist[row] = np.bincount(words[m], minlength=n_words)
-        self._idf = np.log((len(keep) + 1) / (1 + (hist > 0).sum(axis=0)))
-        self._hist = self._normalise(hist)
+        key = _fingerprint(global_map, self.config)
+        index = _GLOBAL_CACHE.pop(key, None) or _GlobalIndex(global_map, self.config)
+        _GLOBAL_CACHE[key] = index  # most recently used last
+        while len(_GLOBAL_CACHE) > _CACHE_SIZE:
+            _GLOBAL_CACHE.pop(next(iter(_GLOBAL_CACHE)))
+        self._pcd, self._fpfh, self._xyz, self._tree = index.pcd, index.fpfh, index.xyz, index.tree
+        self._kmeans, self._centres, self._members = index.kmeans, index.centres, index.members
+        self._idf, self._hist = index.idf, index.hist
 
     def _normalise(self, hist: np.ndarray) -> np.ndarray:
-        weighted = hist / np.maximum(hist.sum(axis=-1, keepdims=True), 1) * self._idf
-        return weighted / np.maximum(np.linalg.norm(weighted, axis=-1, keepdims=True), 1e-12)
+        return _normalise(hist, self._idf)
 
     def _groups(self, local: list[SemanticObject]) -> list[Group]:
         return []  # registration gives poses directly; see _hypotheses

@@ -20,7 +20,14 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from semloc.eval.metrics import HYPOTHESIS_COLUMNS, RESULT_COLUMNS, format_rows
-from semloc.eval.protocol import BenchConfig, run_attempts, simulate, start_keyframes
+from semloc.eval.protocol import (
+    REAL_PAIRS,
+    BenchConfig,
+    run_attempts,
+    run_real_attempt,
+    simulate,
+    start_keyframes,
+)  # fmt: skip
 
 _ONE_THREAD = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
 
@@ -43,6 +50,18 @@ def _sequence_task(config: BenchConfig, index: int):
 def _chain_task(seq, sequence: str, start: int, kind: str, method: str, label: str,
                 gamma: float | None, top_k: int):  # fmt: skip
     return run_attempts(seq, sequence, start, kind, method, label, gamma, top_k)
+
+
+def _real_data() -> str | None:
+    """The real samples' folder when the importers' data is present (all pairs' files)."""
+    from semloc.io.datasets import real_data_dir
+
+    folder = real_data_dir()
+    if folder is None:
+        return None
+    needed = [folder / "3rscan_subscans" / "scene_1", folder / "3rscan_subscans" / "scene_2",
+              folder / "scan2cad" / "scene0470_00"]  # fmt: skip
+    return str(folder) if all(p.exists() for p in needed) else None
 
 
 def _order(row: dict, methods: list[str]) -> tuple:
@@ -115,6 +134,10 @@ def run_benchmark(
                 gamma, top_k, pure=False,
             )  # fmt: skip
             futures[future] = ablation
+        data = _real_data() if config.real else None
+        for pair in REAL_PAIRS if data else []:
+            for method in config.methods:
+                futures[client.submit(run_real_attempt, data, pair, method, pure=False)] = False
         rows, hyps, ablation_rows = [], [], []
         columns = [
             "[progress.description]{task.description}", BarColumn(), MofNCompleteColumn(),
