@@ -221,3 +221,20 @@ def test_cli_train_without_torch(capsys):
 
     assert main(["train-descriptor", "--epochs", "1"]) == 2
     assert "pip install 'semloc[train]'" in capsys.readouterr().err
+
+
+def test_calibrate_quantile_and_removed_share():
+    from semloc.descriptors.evaluate import calibrate
+
+    true = np.linspace(0.0, 1.0, 101).tolist()
+    wrong = np.linspace(0.5, 2.0, 100).tolist()
+    c = calibrate({"cad": {"true": true, "wrong": wrong}}, 0.98)
+    assert c["delta"] == pytest.approx(0.99)
+    assert c["maps"]["cad"]["true_pass"] >= 0.98
+    expected = np.mean(np.asarray(wrong) >= c["delta"])
+    assert c["maps"]["cad"]["wrong_removed"] == pytest.approx(expected)
+
+
+def test_calibrated_deltas_are_positive():
+    assert set(descriptors.DELTAS) == set(descriptors.KINDS)
+    assert all(d > 0 for d in descriptors.DELTAS.values())

@@ -556,12 +556,20 @@ def descriptors_eval(
     sequences: Annotated[
         int, typer.Option(min=0, help="Simulated sequences for calibration and the gate effect.")
     ] = 3,
+    attempts: Annotated[
+        int, typer.Option(min=1, help="Relocalization attempts per sequence and map kind.")
+    ] = 8,
+    window: Annotated[
+        int, typer.Option(min=2, help="Keyframes fused into the local map of an attempt.")
+    ] = 6,
 ) -> None:
     """Retrieval (top-1/top-5) on held-out styles, the Scan2CAD check, δ and the gate's effect."""
     from semloc.descriptors.evaluate import EvalConfig, print_report, run_evaluation
 
     kinds = ["geometric", "voxnet"] if kind is DescriptorChoice.both else [kind.value]
-    config = EvalConfig(kinds=kinds, seed=seed, views=views, sequences=sequences)
+    config = EvalConfig(
+        kinds=kinds, seed=seed, views=views, sequences=sequences, attempts=attempts, window=window
+    )
     report = run_evaluation(config, log=console.print)
     print_report(report, console)
     if out is not None:

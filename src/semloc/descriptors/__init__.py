@@ -17,13 +17,13 @@ from typing import Literal
 
 import numpy as np
 
-from semloc.descriptors.geometric import geometric_descriptor
-from semloc.descriptors.voxnet import forward, occupancy_grid
+from semloc.descriptors.geometric import LENGTH, geometric_descriptor
+from semloc.descriptors.voxnet import EMBEDDING, forward, occupancy_grid
 from semloc.maps import ObjectMap, SemanticObject
 
 Kind = Literal["geometric", "voxnet"]
 KINDS: tuple[str, ...] = ("geometric", "voxnet")
-DELTAS: dict[str, float] = {"geometric": 0.5, "voxnet": 0.5}
+DELTAS: dict[str, float] = {"geometric": 2.31, "voxnet": 1.30}
 """Calibrated gate δ per descriptor kind (distance below which a pair stays a candidate)."""
 MIN_POINTS = 10
 
@@ -43,10 +43,10 @@ def compute_batch(point_sets: Sequence[np.ndarray], kind: str = "geometric") -> 
     _check_kind(kind)
     if kind == "geometric":
         rows = [geometric_descriptor(p) for p in point_sets]
-        return np.stack(rows) if rows else np.zeros((0, 40))
+        return np.stack(rows) if rows else np.zeros((0, LENGTH))
     grids = np.stack([occupancy_grid(p) for p in point_sets]) if len(point_sets) else None
     if grids is None:
-        return np.zeros((0, 64), dtype=np.float32)
+        return np.zeros((0, EMBEDDING), dtype=np.float32)
     return forward(grids)
 
 
