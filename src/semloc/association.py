@@ -3,12 +3,15 @@
 A local object may be associated with a global object when their labels agree (compared after
 an optional label map of synonyms, case- and space-insensitive) and, when both carry shape
 descriptors of the same length, the descriptor distance is below `delta`.  Every candidate
-becomes a singleton association set with score 0.
+becomes a singleton association set with score 0.  With `descriptor` set, the Localizer
+computes descriptors of that kind for objects with points (semloc.descriptors) and the bound is
+`descriptor_delta`, by default the kind's calibrated δ.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Literal
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
@@ -31,6 +34,28 @@ class AssociationConfig(BaseModel):
     use_descriptors: bool = Field(
         True, description="Gate candidates by descriptor distance when both objects have one."
     )
+    descriptor: Literal["geometric", "voxnet"] | None = Field(
+        None,
+        description="Compute shape descriptors of this kind for objects with points that lack "
+        "one (semloc.descriptors); None: use only descriptors the maps carry.",
+    )
+    descriptor_delta: float | None = Field(
+        None,
+        gt=0,
+        description="Gate bound when `descriptor` is set; None: the calibrated δ of the kind "
+        "(semloc.descriptors.DELTAS).",
+    )
+
+    @property
+    def gate(self) -> float:
+        """The descriptor distance bound in effect."""
+        if self.descriptor is None:
+            return self.delta
+        if self.descriptor_delta is not None:
+            return self.descriptor_delta
+        from semloc.descriptors import DELTAS
+
+        return DELTAS[self.descriptor]
 
 
 def canonical_label(label: str, label_map: dict[str, str]) -> str:
@@ -51,6 +76,7 @@ class CandidateIndex:
         for label in sorted(set(labels)):
             self._by_label[label] = np.flatnonzero(np.array(labels, dtype=object) == label)
         self._descriptors = global_map.descriptors
+        self._gate = config.gate
 
     @property
     def labels(self) -> set[str]:
@@ -70,7 +96,7 @@ class CandidateIndex:
     def _descriptor_ok(self, global_descriptor: np.ndarray | None, local: np.ndarray) -> bool:
         if global_descriptor is None or global_descriptor.shape != local.shape:
             return True
-        return float(np.linalg.norm(global_descriptor - local)) < self.config.delta
+        return float(np.linalg.norm(global_descriptor - local)) < self._gate
 
 
 def candidate_pairs(

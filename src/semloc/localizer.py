@@ -216,6 +216,10 @@ class Localizer:
         elif overrides:
             config = LocalizerConfig(**{**config.model_dump(), **overrides})
         self.config = config
+        if config.association.descriptor is not None and config.association.use_descriptors:
+            from semloc.descriptors import with_descriptors
+
+            global_map = with_descriptors(global_map, config.association.descriptor)
         self.global_map = global_map
         self.local_up = None if local_up is None else np.asarray(local_up, dtype=float)
         self._candidates = CandidateIndex(global_map, config.association)
@@ -291,6 +295,11 @@ class Localizer:
     def _associate(self, objects: list[SemanticObject]) -> dict[int, np.ndarray]:
         """Register objects; return candidate global indices per local index."""
         detections: dict[int, np.ndarray] = {}
+        kind = self.config.association.descriptor
+        if kind is not None and self.config.association.use_descriptors:
+            from semloc.descriptors import describe_objects
+
+            objects = describe_objects(objects, kind)
         for obj in objects:
             index = self._local_index.setdefault(obj.id, len(self._local_index))
             self._local[obj.id] = obj
