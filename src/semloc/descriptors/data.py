@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 
-from semloc.frontend.voxel import voxel_downsample
+from semloc.pointsets import voxel_downsample
 from semloc.sim.sensor import DepthSensor, Intrinsics, backproject, look_at
 from semloc.sim.shapes import STYLES, box, model
 
