@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pytest
 
 from semloc.cli import main
@@ -121,3 +122,30 @@ def test_bad_bench_input_exits_2_with_one_line(argv, capsys):
     assert main(argv) == 2
     err = capsys.readouterr().err.strip()
     assert err.startswith("semloc: error:") and "\n" not in err
+
+
+@pytest.mark.parametrize("kind", ["geometric", "voxnet"])
+def test_descriptor_variant_gates_with_calibrated_delta(kind):
+    """`semloc+KIND` is the Localizer with descriptors of KIND on the global map."""
+    from semloc.descriptors import DELTAS
+    from semloc.eval.protocol import make_method
+    from semloc.localizer import Localizer
+    from semloc.maps import ObjectMap, SemanticObject
+
+    rng = np.random.default_rng(0)
+    objects = [
+        SemanticObject(f"c{i}", "chair", np.array([i, 0.0, 0.4]),
+                       points=rng.uniform(-0.3, 0.3, (200, 3)) + [i, 0.0, 0.4])
+        for i in range(4)
+    ]  # fmt: skip
+    method = make_method(f"semloc+{kind}", ObjectMap(objects, up=[0, 0, 1]), np.array([0, 0, 1]))
+    assert isinstance(method, Localizer)
+    assert method.config.association.descriptor == kind
+    assert method.config.association.gate == pytest.approx(DELTAS[kind])
+    assert all(d is not None for d in method.global_map.descriptors)
+
+
+def test_bench_accepts_descriptor_variants_only_by_name(capsys):
+    assert main(["bench", "--methods", "semloc+fancy"]) == 2
+    err = capsys.readouterr().err
+    assert "semloc+geometric" in err and "semloc+voxnet" in err

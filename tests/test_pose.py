@@ -8,7 +8,13 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
-from semloc.pose import PoseConfig, PoseEstimate, align_positions, estimate_pose
+from semloc.pose import (
+    PoseConfig,
+    PoseEstimate,
+    align_positions,
+    align_positions_batch,
+    estimate_pose,
+)
 
 Z = np.array([0.0, 0.0, 1.0])
 seeds = st.integers(0, 2**32 - 1)
@@ -91,6 +97,34 @@ def test_align_4dof_recovers_yaw_and_translation(seed: int, n: int) -> None:
     T_true = random_T(rng, yaw_only=True)
     T = align_positions(local, apply(T_true, local), up_local=Z, up_global=Z)
     assert np.allclose(T, T_true, atol=1e-6)
+
+
+@settings(max_examples=50, deadline=None)
+@given(seed=seeds, n=st.integers(2, 6), sets=st.integers(1, 6), yaw_only=st.booleans())
+def test_align_batch_equals_one_by_one(seed: int, n: int, sets: int, yaw_only: bool) -> None:
+    """The batched closed form gives each set's `align_positions` pose, and flags exactly the
+    sets that `align_positions` rejects as under-determined."""
+    rng = np.random.default_rng(seed)
+    local = rng.uniform(-3, 3, (sets, n, 3))
+    global_ = local + rng.normal(0, 0.2, local.shape)
+    local[0, :, :2] = local[0, :1, :2]  # stacked vertically: degenerate in both modes
+    up = (Z, Z) if yaw_only else (None, None)
+    T, determined = align_positions_batch(local, global_, *up)
+    for i in range(sets):
+        try:
+            expected = align_positions(local[i], global_[i], *up)
+        except ValueError:
+            assert not determined[i]
+            continue
+        assert determined[i]
+        assert np.allclose(T[i], expected, atol=1e-9)
+
+
+def test_align_batch_rejects_bad_shapes() -> None:
+    with pytest.raises(ValueError, match=r"\(S, m, 3\)"):
+        align_positions_batch(np.zeros((2, 3)), np.zeros((2, 3)))
+    with pytest.raises(ValueError, match="non-finite"):
+        align_positions_batch(np.full((1, 2, 3), np.nan), np.zeros((1, 2, 3)))
 
 
 @settings(max_examples=50, deadline=None)

@@ -20,6 +20,7 @@ from pydantic import ValidationError
 from rich.console import Console
 from rich.table import Table
 
+from semloc.eval.protocol import DEFAULT_METHODS, DESCRIPTOR_VARIANTS
 from semloc.io import load_map, read_json, write_atomic
 from semloc.localizer import LocalizerConfig, Result
 from semloc.localizer import localize as run_localize
@@ -473,7 +474,8 @@ def _read_pose(path: Path) -> np.ndarray:
 
 
 # --- Benchmark: `bench` (issue 4; heavy imports stay inside) ----------------------------------
-_BENCH_METHODS = ("semloc", "clipper", "random-walk", "segmatch", "fpfh-ransac")
+_BENCH_METHODS = DEFAULT_METHODS
+_BENCH_VARIANTS = DESCRIPTOR_VARIANTS
 
 
 @app.command()
@@ -499,7 +501,11 @@ def bench(
     ] = None,
     seed: Annotated[int, typer.Option(help="Seed of the worlds, start keyframes and methods.")] = 0,
     methods: Annotated[
-        str, typer.Option(help=f"Comma-separated methods to compare: {','.join(_BENCH_METHODS)}.")
+        str,
+        typer.Option(
+            help=f"Comma-separated methods to compare: {','.join(_BENCH_METHODS)}; opt-in: "
+            f"{','.join(_BENCH_VARIANTS)} (semloc with the shape-descriptor gate)."
+        ),
     ] = ",".join(_BENCH_METHODS),
     sequences: Annotated[
         int | None, typer.Option(min=1, max=1000, help="Simulated sequences (default 6; quick 2).")
@@ -519,9 +525,10 @@ def bench(
     from semloc.eval.protocol import BenchConfig
 
     chosen = [m.strip() for m in methods.split(",") if m.strip()]
-    unknown = [m for m in chosen if m not in _BENCH_METHODS]
+    known = _BENCH_METHODS + _BENCH_VARIANTS
+    unknown = [m for m in chosen if m not in known]
     if unknown or not chosen:
-        fail(f"--methods: unknown {unknown or methods!r}; choose from {','.join(_BENCH_METHODS)}")
+        fail(f"--methods: unknown {unknown or methods!r}; choose from {','.join(known)}")
     if scheduler is not None and workers is not None:
         fail("--workers applies to the local cluster; leave it out with --scheduler")
     overrides: dict = {"seed": seed, "methods": list(dict.fromkeys(chosen))}

@@ -388,15 +388,14 @@ class HierarchicalClustering:
         found_a, found_b = [], []
         for start in range(0, len(frontier), chunk):
             rows = frontier[start : start + chunk]
-            # a pair of two frontier sets is tried once, from its lower row
-            ok = ~in_frontier[None, :] | (np.arange(n_pool)[None, :] > rows[:, None])
-            if floor > -np.inf:  # merges that cannot reach the top K would be pruned at once
-                bound = self._score[rows][:, None] + self._score[None, :]
-                ok &= bound + np.outer(size[rows], size) >= floor
             # b ⊆ M(a) (the union is a clique); folding the words with OR keeps ⊆, so a
             # one-word test screens the pairs before the exact test on every word
-            ok &= (folded_bits[None, :] & ~folded_common[rows][:, None]) == 0
-            ia, ib = np.nonzero(ok)
+            ia, ib = np.nonzero((folded_bits[None, :] & ~folded_common[rows][:, None]) == 0)
+            once = ~in_frontier[ib] | (ib > rows[ia])  # two frontier sets: tried from the lower
+            ia, ib = ia[once], ib[once]
+            if floor > -np.inf:  # merges that cannot reach the top K would be pruned at once
+                fits = self._score[rows[ia]] + self._score[ib] + size[rows[ia]] * size[ib] >= floor
+                ia, ib = ia[fits], ib[fits]
             exact = np.all((self._bits[ib] & ~self._common[rows[ia]]) == 0, axis=1)
             ia, ib = rows[ia[exact]], ib[exact]
             a, b = self._bits[ia], self._bits[ib]

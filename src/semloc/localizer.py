@@ -35,7 +35,7 @@ from semloc.clustering import AssociationSet, ClusteringConfig, HierarchicalClus
 from semloc.maps import MapError, ObjectMap, SemanticObject
 from semloc.metrics import pose_error
 from semloc.pointsets import voxel_downsample
-from semloc.pose import PoseConfig, PoseEstimate, align_positions, estimate_pose
+from semloc.pose import PoseConfig, PoseEstimate, align_positions_batch, estimate_pose
 
 Status = Literal["localized", "ambiguous", "failed"]
 
@@ -312,10 +312,8 @@ class Localizer:
         """Distinct places, best first: screen many sets by closed form, refine the top-k."""
         cfg = self.config
         by_size = cfg.rank_by == "residual"
-        screened = []
-        for aset in self._clustering.top(cfg.screened_sets, min_size=2, largest_first=by_size):
-            pose, residual = self._closed_form(aset)
-            screened.append((aset, pose, residual))
+        sets = self._clustering.top(cfg.screened_sets, min_size=2, largest_first=by_size)
+        screened = list(zip(sets, *self._closed_forms(sets)))
         if by_size:
             screened.sort(key=lambda item: (-len(item[0]), item[2], -item[0].score))
         chosen: list[tuple[AssociationSet, np.ndarray | None, float]] = []
@@ -339,16 +337,27 @@ class Localizer:
             [local_objects[l] for _, l in aset.pairs],
         )
 
-    def _closed_form(self, aset: AssociationSet) -> tuple[np.ndarray | None, float]:
-        """Closed-form pose of a set and the RMS residual of its aligned centres (inf if none)."""
-        globals_, locals_ = self._matched(aset)
-        l_xyz = np.array([o.position for o in locals_])
-        g_xyz = np.array([o.position for o in globals_])
-        try:
-            pose = align_positions(l_xyz, g_xyz, self.local_up, self.global_map.up)
-        except ValueError:
-            return None, _INF
-        return pose, centre_residual(pose, l_xyz, g_xyz)
+    def _closed_forms(
+        self, sets: list[AssociationSet]
+    ) -> tuple[list[np.ndarray | None], list[float]]:
+        """Closed-form pose of each set and the RMS residual of its aligned centres (None and
+        inf where under-determined); sets of one size are aligned in one batch."""
+        poses: list[np.ndarray | None] = [None] * len(sets)
+        residuals = [_INF] * len(sets)
+        local_xyz = np.array([o.position for o in self._local.values()]).reshape(-1, 3)
+        global_xyz = self.global_map.positions
+        sizes = np.array([len(s) for s in sets])
+        for size in np.unique(sizes):
+            rows = np.flatnonzero(sizes == size)
+            pairs = np.array([sets[i].pairs for i in rows])  # (S, size, 2): global, local
+            l_xyz, g_xyz = local_xyz[pairs[..., 1]], global_xyz[pairs[..., 0]]
+            T, determined = align_positions_batch(l_xyz, g_xyz, self.local_up, self.global_map.up)
+            aligned = l_xyz @ np.swapaxes(T[:, :3, :3], 1, 2) + T[:, None, :3, 3]
+            rms = np.sqrt(np.mean(np.sum((aligned - g_xyz) ** 2, axis=2), axis=1))
+            for i, pose, ok, r in zip(rows, T, determined, rms):
+                if ok:
+                    poses[i], residuals[i] = pose, float(r)
+        return poses, residuals
 
     def _same_place(
         self,

@@ -35,7 +35,13 @@ from scipy.spatial import cKDTree
 
 from semloc.pointsets import voxel_downsample
 
-__all__ = ["PoseConfig", "PoseEstimate", "align_positions", "estimate_pose"]
+__all__ = [
+    "PoseConfig",
+    "PoseEstimate",
+    "align_positions",
+    "align_positions_batch",
+    "estimate_pose",
+]
 
 _TOL = 1e-9  # spread (m) below which positions are mathematically degenerate
 _CENTRE_INLIER = 0.5  # m: centre-based fitness threshold (no points)
@@ -185,42 +191,53 @@ def _rot_z(theta: np.ndarray | float) -> np.ndarray:
     return R
 
 
+# The closed-form solvers broadcast over leading axes: (..., m, 3) points with (..., m) weights,
+# so that many small association sets are aligned in one call (see `align_positions_batch`).
+
+
+def _mean(w: np.ndarray, xyz: np.ndarray) -> np.ndarray:
+    return (w[..., None, :] @ xyz)[..., 0, :]
+
+
 def _centroids(src, dst, w):
-    w = w / w.sum()
-    return w @ src, w @ dst, w
+    w = w / w.sum(axis=-1, keepdims=True)
+    return _mean(w, src), _mean(w, dst), w
 
 
 def _kabsch(src: np.ndarray, dst: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     cs, cd, w = _centroids(src, dst, w)
-    H = (src - cs).T @ ((dst - cd) * w[:, None])
+    H = np.swapaxes(src - cs[..., None, :], -1, -2) @ ((dst - cd[..., None, :]) * w[..., None])
     U, _, Vt = np.linalg.svd(H)
-    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(Vt.T @ U.T)) or 1.0])
-    R = Vt.T @ D @ U.T
-    return R, cd - R @ cs
+    V, Ut = np.swapaxes(Vt, -1, -2), np.swapaxes(U, -1, -2)
+    sign = np.sign(np.linalg.det(V @ Ut))
+    V = V.copy()
+    V[..., :, 2] *= np.where(sign == 0, 1.0, sign)[..., None]  # V @ diag(1, 1, sign)
+    R = V @ Ut
+    return R, cd - (R @ cs[..., None])[..., 0]
 
 
 def _yaw(src: np.ndarray, dst: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Weighted yaw about +z and translation (frames already z-up)."""
     cs, cd, w = _centroids(src, dst, w)
-    a, b = src[:, :2] - cs[:2], dst[:, :2] - cd[:2]
-    sin = w @ (a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0])
-    cos = w @ (a[:, 0] * b[:, 0] + a[:, 1] * b[:, 1])
+    a, b = src[..., :2] - cs[..., None, :2], dst[..., :2] - cd[..., None, :2]
+    sin = np.sum(w * (a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]), axis=-1)
+    cos = np.sum(w * (a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1]), axis=-1)
     R = _rot_z(np.arctan2(sin, cos))
-    return R, cd - R @ cs
+    return R, cd - (R @ cs[..., None])[..., 0]
 
 
-def _spread(xyz: np.ndarray, w: np.ndarray, horizontal: bool) -> float:
+def _spread(xyz: np.ndarray, w: np.ndarray, horizontal: bool) -> np.ndarray:
     """Horizontal RMS spread (z-up frame) or RMS distance off the best-fit line (6-DoF)."""
-    w = w / w.sum()
-    d = xyz - w @ xyz
-    cov = d.T @ (d * w[:, None])
+    w = w / w.sum(axis=-1, keepdims=True)
+    d = xyz - _mean(w, xyz)[..., None, :]
+    cov = np.swapaxes(d, -1, -2) @ (d * w[..., None])
     if horizontal:
-        return float(np.sqrt(max(cov[0, 0] + cov[1, 1], 0.0)))
-    return float(np.sqrt(max(np.sum(np.linalg.eigvalsh(cov)[:2]), 0.0)))
+        return np.sqrt(np.maximum(cov[..., 0, 0] + cov[..., 1, 1], 0.0))
+    return np.sqrt(np.maximum(np.sum(np.linalg.eigvalsh(cov)[..., :2], axis=-1), 0.0))
 
 
-def _degenerate(src, dst, w, yaw_only: bool, tol: float) -> bool:
-    return min(_spread(src, w, yaw_only), _spread(dst, w, yaw_only)) <= tol
+def _degenerate(src, dst, w, yaw_only: bool, tol: float) -> np.ndarray:
+    return np.minimum(_spread(src, w, yaw_only), _spread(dst, w, yaw_only)) <= tol
 
 
 # --------------------------------------------------------------------------- closed form
@@ -241,16 +258,41 @@ def align_positions(
     """
     src, dst = _pairs(local_xyz, global_xyz)
     w = _weights(weights, len(src))
+    T, determined = _align(src[None], dst[None], w[None], up_local, up_global)
+    if not determined[0]:
+        if up_local is not None and up_global is not None:
+            raise ValueError("4-DoF alignment needs >= 2 positions separated horizontally")
+        raise ValueError("6-DoF alignment needs >= 3 non-collinear positions")
+    return T[0]
+
+
+def align_positions_batch(
+    local_xyz: np.ndarray,
+    global_xyz: np.ndarray,
+    up_local: np.ndarray | None = None,
+    up_global: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """`align_positions` of S sets of m pairs at once: (S, m, 3) arrays in, (S, 4, 4) poses out,
+    with a boolean (S,) saying which are determined (the others are not meaningful)."""
+    src, dst = np.asarray(local_xyz, dtype=float), np.asarray(global_xyz, dtype=float)
+    if src.ndim != 3 or src.shape[2] != 3 or src.shape != dst.shape:
+        raise ValueError(f"expected two (S, m, 3) arrays, got {src.shape} and {dst.shape}")
+    if not (np.all(np.isfinite(src)) and np.all(np.isfinite(dst))):
+        raise ValueError("positions have non-finite values")
+    return _align(src, dst, np.ones(src.shape[:2]), up_local, up_global)
+
+
+def _align(src, dst, w, up_local, up_global) -> tuple[np.ndarray, np.ndarray]:
+    """Batched closed form over (S, m, 3) pairs: poses (S, 4, 4) and which are determined."""
+    T = np.tile(np.eye(4), (len(src), 1, 1))
     if up_local is not None and up_global is not None:
         A_l, A_g = _rot_to_z(_unit(up_local, "up_local")), _rot_to_z(_unit(up_global, "up_global"))
         src, dst = src @ A_l.T, dst @ A_g.T
-        if _degenerate(src, dst, w, True, _TOL):
-            raise ValueError("4-DoF alignment needs >= 2 positions separated horizontally")
         R, t = _yaw(src, dst, w)
-        return _transform(A_g.T @ R @ A_l, A_g.T @ t)
-    if _degenerate(src, dst, w, False, _TOL):
-        raise ValueError("6-DoF alignment needs >= 3 non-collinear positions")
-    return _transform(*_kabsch(src, dst, w))
+        T[:, :3, :3], T[:, :3, 3] = A_g.T @ R @ A_l, t @ A_g
+        return T, ~_degenerate(src, dst, w, True, _TOL)
+    T[:, :3, :3], T[:, :3, 3] = _kabsch(src, dst, w)
+    return T, ~_degenerate(src, dst, w, False, _TOL)
 
 
 # --------------------------------------------------------------------------- point sets

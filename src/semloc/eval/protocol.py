@@ -24,6 +24,9 @@ from pydantic import BaseModel, ConfigDict, Field
 from semloc.metrics import first_correct_rank, pose_error
 
 OFFSETS = (0, 15, 30)
+DEFAULT_METHODS = ("semloc", "clipper", "random-walk", "segmatch", "fpfh-ransac")
+DESCRIPTOR_VARIANTS = ("semloc+geometric", "semloc+voxnet")
+"""Opt-in methods: semloc with the shape-descriptor gate of that kind at its calibrated δ."""
 
 
 class BenchConfig(BaseModel):
@@ -37,9 +40,7 @@ class BenchConfig(BaseModel):
     keyframes: int = Field(80, ge=40, description="Keyframes per sequence.")
     starts: int = Field(8, ge=1, description="Random start keyframes per sequence.")
     map_kinds: list[str] = Field(default_factory=lambda: ["reconstruction", "cad", "dynamic"])
-    methods: list[str] = Field(
-        default_factory=lambda: ["semloc", "clipper", "random-walk", "segmatch", "fpfh-ransac"]
-    )
+    methods: list[str] = Field(default_factory=lambda: list(DEFAULT_METHODS))
     gammas: list[float] = Field(
         default_factory=lambda: [0.5, 0.6, 0.7, 0.8, 0.9, 0.95],
         description="Ablation over the clustering threshold (semloc, reconstruction maps).",
@@ -82,11 +83,13 @@ def make_method(name: str, global_map, local_up, gamma: float | None = None, top
     from semloc.baselines import METHODS
     from semloc.localizer import LocalizerConfig
 
-    if name == "semloc":
+    if name == "semloc" or name in DESCRIPTOR_VARIANTS:
         overrides: dict[str, Any] = {"top_k": top_k}
         if gamma is not None:
             overrides["gamma"] = gamma
-        return METHODS[name](global_map, LocalizerConfig(**overrides), local_up)
+        if name in DESCRIPTOR_VARIANTS:
+            overrides["descriptor"] = name.removeprefix("semloc+")
+        return METHODS["semloc"](global_map, LocalizerConfig(**overrides), local_up)
     return METHODS[name](global_map, None, local_up)
 
 
