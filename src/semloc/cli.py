@@ -546,7 +546,7 @@ def bench(
         output = run_benchmark(config, out, scheduler, workers, progress=progress)
     except ValueError as exc:
         fail(str(exc))
-    console.print(summary_table(output.rows, config.methods))
+    console.print(summary_table(output.rows, config.methods), soft_wrap=True)
     console.print(f"{len(output.rows)} attempts in {output.seconds:.0f} s; wrote {out}/report.md")
 
 
