@@ -111,3 +111,56 @@ def test_console_script_has_no_traceback(tmp_path):
         [sys.executable, "-m", "semloc.cli", "localize"], capture_output=True, text=True
     )
     assert missing.returncode == 2 and "Traceback" not in missing.stderr
+
+
+def test_settings_file_is_kept_unless_an_option_overrides_it(maps, capsys, tmp_path):
+    folder, _ = maps
+    settings = tmp_path / "s.json"
+    settings.write_text(json.dumps({"top_k": 1}))
+    args = ["localize", str(folder / "global.json"), str(folder / "local.json"),
+            "--config", str(settings), "--format", "json"]  # fmt: skip
+    assert main(args) == 0
+    assert len(json.loads(capsys.readouterr().out)["hypotheses"]) == 1
+    assert main([*args, "--top-k", "3"]) == 0
+    assert len(json.loads(capsys.readouterr().out)["hypotheses"]) == 3
+
+
+def _with_box_points(objects, rng):
+    """Objects with points on the surface of their boxes (0.4-1.2 m), so descriptors exist."""
+    out = []
+    for obj in objects:
+        size = rng.uniform(0.4, 1.2, 3)
+        p = rng.uniform(-0.5, 0.5, (300, 3)) * size
+        axis = rng.integers(0, 3, 300)
+        p[np.arange(300), axis] = np.sign(rng.uniform(-1, 1, 300)) * size[axis] / 2
+        out.append(obj.replace(points=p + obj.position))
+    return out
+
+
+def test_descriptor_gate_from_the_command_line(tmp_path, capsys):
+    rng = np.random.default_rng(3)
+    g = layout(40, seed=2)
+    g = semloc.ObjectMap(_with_box_points(g, rng), up=g.up)
+    obs = observe(g, 6, seed=4, spurious=0, wrong_label_rate=0.0, bias=(0.0, 0.0))
+    T = obs.T_global_local
+    local = [o.replace(points=(g.get(gid).points - T[:3, 3]) @ T[:3, :3])
+             for o in obs.local_map for gid, lid in obs.true_pairs if lid == o.id]  # fmt: skip
+    semloc.save_map(g, tmp_path / "global.json")
+    semloc.save_map(semloc.ObjectMap(local, up=obs.local_map.up), tmp_path / "local.json")
+    args = ["localize", str(tmp_path / "global.json"), str(tmp_path / "local.json"),
+            "--format", "json"]  # fmt: skip
+    assert main([*args, "--descriptor", "geometric"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["status"] == "localized"
+    np.testing.assert_allclose(np.array(out["pose"]), T, atol=0.05)
+    assert main([*args, "--descriptor", "geometric", "--descriptor-delta", "0.05"]) == 0
+    assert json.loads(capsys.readouterr().out)["status"] == "localized"
+    # objects twice their map size: same places, other shapes; a tight gate removes them all
+    grown = [o.replace(points=2.0 * (o.points - o.position) + o.position) for o in local]
+    semloc.save_map(semloc.ObjectMap(grown, up=obs.local_map.up), tmp_path / "local.json")
+    assert main(args) == 0
+    assert json.loads(capsys.readouterr().out)["status"] == "localized"
+    assert main([*args, "--descriptor", "geometric", "--descriptor-delta", "0.05"]) == 0
+    assert json.loads(capsys.readouterr().out)["status"] == "failed"
+    assert main([*args, "--descriptor", "shape-context"]) == 2
+    assert "shape-context" in capsys.readouterr().err

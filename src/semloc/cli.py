@@ -239,20 +239,55 @@ class OutputFormat(StrEnum):
     json = "json"
 
 
+class DescriptorKind(StrEnum):
+    geometric = "geometric"
+    voxnet = "voxnet"
+
+
 @app.command()
 def localize(
     global_map: Annotated[Path, typer.Argument(help="Global (prior) map, semloc JSON.")],
     local_map: Annotated[
         Path, typer.Argument(help="Local map of detected objects, semloc JSON; replayed by `seen`.")
     ],
-    gamma: Annotated[float, typer.Option(help="Merge threshold on the distance ratio.")] = 0.8,
-    delta: Annotated[float, typer.Option(help="Descriptor distance bound for candidates.")] = 0.5,
-    top_k: Annotated[int, typer.Option(help="Number of distinct hypotheses to report.")] = 10,
+    gamma: Annotated[
+        float | None,
+        typer.Option(help="Merge threshold on the distance ratio.", show_default="0.8"),
+    ] = None,
+    delta: Annotated[
+        float | None,
+        typer.Option(
+            help="Distance bound of the descriptors stored in the maps.", show_default="0.5"
+        ),
+    ] = None,
+    top_k: Annotated[
+        int | None,
+        typer.Option(help="Number of distinct hypotheses to report.", show_default="10"),
+    ] = None,
     tolerance: Annotated[
-        float, typer.Option(help="Slack (m) on distance differences for biased centres.")
-    ] = LocalizerConfig().clustering.distance_tolerance,
+        float | None,
+        typer.Option(
+            help="Slack (m) on distance differences for biased centres.",
+            show_default=str(LocalizerConfig().clustering.distance_tolerance),
+        ),
+    ] = None,
+    descriptor: Annotated[
+        DescriptorKind | None,
+        typer.Option(
+            help="Compute shape descriptors of this kind for objects with points and gate "
+            "candidates with them (semloc.descriptors)."
+        ),
+    ] = None,
+    descriptor_delta: Annotated[
+        float | None,
+        typer.Option(help="Gate bound with --descriptor (default: the kind's calibrated δ)."),
+    ] = None,
     config: Annotated[
-        Path | None, typer.Option(help="JSON file with LocalizerConfig fields (flat or nested).")
+        Path | None,
+        typer.Option(
+            help="JSON file with LocalizerConfig fields (flat or nested); options given on "
+            "the command line take precedence."
+        ),
     ] = None,
     output_format: Annotated[
         OutputFormat, typer.Option("--format", help="Text (tables) or JSON.")
@@ -263,7 +298,10 @@ def localize(
 ) -> None:
     """Localize LOCAL in GLOBAL: association sets, hypotheses and the pose T_global_local."""
     settings = _read_config(config)
-    settings.update(gamma=gamma, delta=delta, top_k=top_k, distance_tolerance=tolerance)
+    given = dict(gamma=gamma, delta=delta, top_k=top_k, distance_tolerance=tolerance,
+                 descriptor=None if descriptor is None else descriptor.value,
+                 descriptor_delta=descriptor_delta)  # fmt: skip
+    settings.update({key: value for key, value in given.items() if value is not None})
     try:
         cfg = LocalizerConfig(**settings)
     except ValidationError as exc:
