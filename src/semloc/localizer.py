@@ -187,6 +187,14 @@ class Result:
     steps: list[Step] = field(default_factory=list)
     timing_ms: dict[str, float] = field(default_factory=dict)
 
+    @classmethod
+    def of(
+        cls, status: Status, hypotheses: list[Hypothesis], steps: list[Step], timing_ms: dict
+    ) -> Result:
+        """The result of an update: the pose is the best hypothesis's unless `failed`."""
+        pose = hypotheses[0].pose if hypotheses and status != "failed" else None
+        return cls(status, pose, hypotheses, list(steps), dict(timing_ms))
+
     @property
     def best(self) -> Hypothesis | None:
         return self.hypotheses[0] if self.hypotheses else None
@@ -275,13 +283,7 @@ class Localizer:
                 status=status,
             )
         )
-        return Result(
-            status=status,
-            pose=hypotheses[0].pose if hypotheses and status != "failed" else None,
-            hypotheses=hypotheses,
-            steps=list(self._steps),
-            timing_ms=dict(self._timing),
-        )
+        return Result.of(status, hypotheses, self._steps, self._timing)
 
     def _add_timing(self, association: float, clustering: float, pose: float) -> None:
         for key, seconds in (

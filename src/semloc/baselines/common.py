@@ -128,13 +128,7 @@ class ObjectBaseline:
             Step(len(self._steps), len(local), len(groups),
                  [h.score for h in hypotheses], (end - start) * 1e3, status)
         )  # fmt: skip
-        return Result(
-            status=status,
-            pose=hypotheses[0].pose if hypotheses and status != "failed" else None,
-            hypotheses=hypotheses,
-            steps=list(self._steps),
-            timing_ms=dict(self._timing),
-        )
+        return Result.of(status, hypotheses, self._steps, self._timing)
 
     # To implement -------------------------------------------------------------------------
     def _groups(self, local: list[SemanticObject]) -> list[Group]:
