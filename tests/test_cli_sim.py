@@ -42,6 +42,15 @@ def test_simulate_writes_loadable_maps_and_ground_truth(simulated):
     assert (simulated / "world.png").read_bytes()[:8] == PNG
 
 
+def test_simulate_can_store_descriptors(tmp_path):
+    argv = ["simulate", str(tmp_path), "--size", "tiny", "--keyframes", "3", "--resolution",
+            "64x48", "--no-snapshots", "--descriptor", "geometric"]  # fmt: skip
+    assert main(argv) == 0
+    for name in ("global_cad.json", "local.json"):
+        objects = [o for o in semloc.load_map(tmp_path / name) if o.points is not None]
+        assert objects and all(o.descriptor is not None for o in objects if len(o.points) >= 10)
+
+
 def test_ground_truth_places_local_objects_on_their_global_objects(simulated):
     truth = json.loads((simulated / "ground_truth.json").read_text())
     T = np.asarray(truth["T_global_local"])

@@ -234,3 +234,28 @@ def test_visible_points_keeps_the_facing_half():
     )
     kept = visible_points(obj, np.array([5.0, 0, 0]), min_points=1)
     np.testing.assert_allclose(kept, [[1, 0, 0], [0, 1, 0], [0.5, 0.5, 0]])
+
+
+def test_writers_store_descriptors_and_crop_drops_stale_ones(tmp_path):
+    from semloc import descriptors
+    from semloc.io import save_map
+
+    write_rscan(tmp_path / "rs")
+    out = tmp_path / "rs.json"
+    assert main(["convert", "3rscan", str(tmp_path / "rs"), "-o", str(out),
+                 "--descriptor", "geometric"]) == 0  # fmt: skip
+    from semloc.io import importers
+
+    imported = importers.convert("3rscan", tmp_path / "rs")[0]  # points before rounding to file
+    for obj, written in zip(imported, load_map(out)):
+        np.testing.assert_allclose(written.descriptor, descriptors.compute(obj.points), atol=1e-6)
+    # a map with whole-object descriptors: a crop keeps only visible points, so not those
+    save_map(descriptors.with_descriptors(_grid_map()), tmp_path / "g.json")
+    argv = ["crop", str(tmp_path / "g.json"), "--center", "2", "2", "0.5", "--radius", "2.1",
+            "-o", str(tmp_path / "l.json")]  # fmt: skip
+    assert main(argv) == 0
+    assert all(o.descriptor is None for o in load_map(tmp_path / "l.json"))
+    assert main([*argv, "--descriptor", "voxnet"]) == 0
+    local = load_map(tmp_path / "l.json")
+    assert all(o.descriptor is not None and o.descriptor.shape == (64,) for o in local)
+    assert np.all(np.isfinite(local.get("l0").descriptor))

@@ -54,6 +54,30 @@ def _root() -> None:
 # Commands are defined below this line (and registered by the modules that own them). -------
 
 
+# --- Shape descriptors stored by the map writers (simulate, convert, crop) -----------------
+class DescriptorKind(StrEnum):
+    geometric = "geometric"
+    voxnet = "voxnet"
+
+
+_DescribeOption = Annotated[
+    DescriptorKind | None,
+    typer.Option(
+        "--descriptor",
+        help="Store shape descriptors of this kind for objects with points (semloc.descriptors).",
+    ),
+]
+
+
+def _described(objmap, kind: DescriptorKind | None):
+    """The map with descriptors of `kind` for its objects with points (unchanged for None)."""
+    if kind is None:
+        return objmap
+    from semloc.descriptors import with_descriptors
+
+    return with_descriptors(objmap, kind.value, overwrite=True)
+
+
 # --- Simulation: `demo`, `simulate`, `view` (issue 3; heavy imports stay inside) ---------------
 class MapKindChoice(StrEnum):
     reconstruction = "reconstruction"
@@ -147,6 +171,7 @@ def simulate(
     drift_yaw: Annotated[
         float, typer.Option(min=0, help="Odometry heading drift in degrees per metre.")
     ] = 0.0,
+    descriptor: _DescribeOption = None,
 ) -> None:
     """Write a world's global maps (reconstruction, CAD, dynamic), the local maps and ground truth.
 
@@ -167,7 +192,9 @@ def simulate(
         )  # fmt: skip
     except ValueError as exc:
         fail(str(exc))
-    files = write_sequence(seq, out, snapshots=snapshots)
+    files = write_sequence(
+        seq, out, snapshots=snapshots, descriptor=None if descriptor is None else descriptor.value
+    )
     table = Table(title=f"simulated world seed {seed} -> {out}", title_justify="left")
     for column in ("map", "objects", "file"):
         table.add_column(column)
@@ -237,11 +264,6 @@ def _read_result(path: Path) -> tuple[np.ndarray | None, list[tuple[str, str]], 
 class OutputFormat(StrEnum):
     text = "text"
     json = "json"
-
-
-class DescriptorKind(StrEnum):
-    geometric = "geometric"
-    voxnet = "voxnet"
 
 
 @app.command()
@@ -425,6 +447,7 @@ def convert(
         typer.Option(help="scan2cad: where to write the scan-derived map (default OUT.scan.json)."),
     ] = None,
     seed: Annotated[int, typer.Option(help="Seed for sampled surface points.")] = 0,
+    descriptor: _DescribeOption = None,
 ) -> None:
     """Convert a dataset scene into a semloc map (ScanNet, Scan2CAD, Replica, 3RScan)."""
     from semloc.io import importers, save_map
@@ -446,11 +469,11 @@ def convert(
         if isinstance(exc, MapError):
             raise
         fail(str(exc))
-    save_map(maps[0], output)
+    save_map(_described(maps[0], descriptor), output)
     console.print(f"wrote {output}: {len(maps[0])} objects")
     if len(maps) > 1 and maps[1] is not None:
         second = scan_output or output.with_name(output.name.removesuffix(".json") + ".scan.json")
-        save_map(maps[1], second)
+        save_map(_described(maps[1], descriptor), second)
         console.print(f"wrote {second}: {len(maps[1])} objects (scan-derived)")
 
 
@@ -475,6 +498,7 @@ def crop(
     recentre: Annotated[
         bool, typer.Option(help="Re-fit each object's centre and box to its visible points.")
     ] = False,
+    descriptor: _DescribeOption = None,
 ) -> None:
     """Cut a local observation out of MAP (visible-side points, new frame, ground truth)."""
     from semloc.crop import crop_truth_to_dict, crop_with_truth
@@ -491,7 +515,7 @@ def crop(
     local, truth = crop_with_truth(objmap, center, radius, pose, seed, recentre=recentre)
     if len(local) == 0:
         fail(f"no object of {map_file} has its centre within {radius} m of {list(center)}")
-    save_map(local, output)
+    save_map(_described(local, descriptor), output)
     truth_path = output.with_name(output.name.removesuffix(".json") + ".gt.json")
     document = crop_truth_to_dict(truth, objmap.name)
     write_atomic(truth_path, json.dumps(document, indent=1) + "\n")

@@ -2,7 +2,8 @@
 
 `crop_map` keeps the objects whose centre is within `radius` of the viewpoint, keeps only the
 points on the side of each object that faces the viewpoint (half-space test about the object
-centre), renames the objects (`l0`, `l1`, ... in order of distance, which is also their `seen`
+centre; descriptors of objects with points are dropped, as they describe the whole object),
+renames the objects (`l0`, `l1`, ... in order of distance, which is also their `seen`
 order) and expresses everything in a new frame: `p_local = inv(T_global_local) @ p_global`.
 With a random transform the local frame sits at the viewpoint with a random heading, as a
 robot's own frame would.  The returned `CropTruth` holds `T_global_local` and the id pairs;
@@ -76,6 +77,8 @@ def crop_with_truth(
         obj = objmap[int(index)]
         points = visible_points(obj, center, min_points)
         seen_obj = obj.replace(id=f"l{rank}", seen=rank, points=points)
+        if points is not None:  # a descriptor of the whole object would not fit the cut points
+            seen_obj = seen_obj.replace(descriptor=None)
         if recentre and points is not None and len(points):
             position, size, rotation = upright_box(points, objmap.up)
             seen_obj = seen_obj.replace(position=position, size=size, rotation=rotation)

@@ -24,20 +24,33 @@ from semloc.io.native import save_map, write_atomic
 from semloc.sim.scenario import SimulatedSequence
 
 
-def write_sequence(seq: SimulatedSequence, out: Path, snapshots: bool = True) -> list[Path]:
-    """Write everything about `seq` under `out` (see the module docstring); the paths written."""
+def write_sequence(
+    seq: SimulatedSequence, out: Path, snapshots: bool = True, descriptor: str | None = None
+) -> list[Path]:
+    """Write everything about `seq` under `out` (see the module docstring); the paths written.
+
+    With `descriptor` ("geometric" or "voxnet") every map stores shape descriptors of that kind.
+    """
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
+
+    def save(objmap, path: Path) -> Path:
+        if descriptor is not None:
+            from semloc.descriptors import with_descriptors
+
+            objmap = with_descriptors(objmap, descriptor, overwrite=True)
+        return save_map(objmap, path)
+
     files = []
     write_atomic(out / "world.json", json.dumps(seq.world.summary(), indent=1) + "\n")
     files.append(out / "world.json")
     for kind, gmap in seq.global_maps.items():
-        files.append(save_map(gmap, out / f"global_{kind}.json"))
-    files.append(save_map(seq.local_map, out / "local.json"))
+        files.append(save(gmap, out / f"global_{kind}.json"))
+    files.append(save(seq.local_map, out / "local.json"))
     if snapshots:
         for kf in seq.keyframes:
             path = out / "keyframes" / f"local_{kf.index:04d}.json"
-            files.append(save_map(seq.local_map_at(kf.index), path))
+            files.append(save(seq.local_map_at(kf.index), path))
     write_atomic(out / "ground_truth.json", json.dumps(seq.ground_truth(), indent=1) + "\n")
     files.append(out / "ground_truth.json")
     from semloc.viz import map_figure, plot_world, save_figure
