@@ -32,12 +32,15 @@ OBJECT_BINS = [(3, 4), (5, 6), (7, 9), (10, 14), (15, 19), (20, 29), (30, 1000)]
 
 
 _COLORS = {"semloc": "black", "clipper": "C0", "random-walk": "C1", "segmatch": "C2",
-           "fpfh-ransac": "C3"}  # fmt: skip
+           "fpfh-ransac": "C3", "semloc+geometric": "C4", "semloc+voxnet": "C5"}  # fmt: skip
 
 
 def _style(method: str) -> dict:
+    """semloc bold; its descriptor variants dashed, so they read as variants of it."""
     width = 2.6 if method == "semloc" else 1.5
-    return {"linewidth": width, "color": _COLORS.get(method, "C4")}
+    dashed = method.startswith("semloc+")
+    return {"linewidth": width, "color": _COLORS.get(method, "C6"),
+            "linestyle": "--" if dashed else "-"}  # fmt: skip
 
 
 def comparison_figure(rows, hyps, methods: Sequence[str], kinds: Sequence[str]):
