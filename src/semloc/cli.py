@@ -580,9 +580,9 @@ def bench(
 ) -> None:
     """Reproduce the paper's comparison: semloc vs CLIPPER, random-walk, SegMatch, FPFH+RANSAC.
 
-    Relocalization attempts from random keyframes of simulated sequences (first when > 2
-    objects are seen, then +15 and +30 keyframes) against reconstruction, CAD and dynamic
-    global maps, plus ablations over gamma and the number of local objects; run with Dask.
+    Attempts from random keyframes of simulated sequences (when > 2 objects
+    are seen, then +15 and +30 keyframes) against reconstruction, CAD and
+    dynamic global maps, plus ablations over gamma and the local objects.
     """
     from semloc.eval.protocol import BenchConfig
 
