@@ -107,6 +107,9 @@ def test_tiny_run_is_reproducible(tmp_path):
     strip = [{k: v for k, v in r.items() if k != "ms"} for r in output.rows]
     assert strip == [{k: v for k, v in r.items() if k != "ms"} for r in serial]
     assert read_rows(tmp_path / "results.csv")[0]["offset"] == 0
+    # rows carry the method's status (read by benchmarks/status_reliability.py), not the CSV
+    assert {r["status"] for r in serial} <= {"localized", "ambiguous", "failed"}
+    assert "status" not in (tmp_path / "results.csv").read_text().splitlines()[0]
 
 
 @pytest.mark.parametrize(

@@ -98,6 +98,27 @@ def test_symmetric_observation_is_ambiguous():
     assert len(result.hypotheses) >= 2
 
 
+def test_localized_needs_points_that_land_on_the_map():
+    rng = np.random.default_rng(0)
+    room = layout(30, seed=5)
+    room = ObjectMap(
+        [o.replace(points=o.position + rng.uniform(-0.3, 0.3, (200, 3))) for o in room], up=room.up
+    )
+    ids = [room[i].id for i in (2, 3, 4, 5, 6)]
+    T = yaw_pose(-0.4, [1.0, 2.0, 0.0])
+    view = local_view(room, ids, T)
+    assert semloc.localize(room, view).status == "localized"
+    # same centres, but every object's points lifted 1 m off it: the associations still fit,
+    # the geometry does not, so the answer is not claimed unless the floor is switched off
+    lifted = ObjectMap([o.replace(points=o.points + [0, 0, 1.0]) for o in view], up=view.up)
+    result = semloc.localize(room, lifted, refine=False)
+    assert result.status == "ambiguous"
+    assert result.hypotheses[0].fitness < 0.3
+    assert sorted(result.hypotheses[0].pairs) == sorted((g, f"l{k}") for k, g in enumerate(ids))
+    off = semloc.localize(room, lifted, refine=False, min_fitness=0.0)
+    assert off.status == "localized"
+
+
 def test_label_map_allows_synonyms(building):
     ids = [building[i].id for i in (20, 21, 22, 23)]
     local = local_view(building, ids, yaw_pose(0.2, [0, 0, 0]))

@@ -4,7 +4,8 @@
 re-detected (same id = updated), grows the association sets, turns the best of them into
 distinct pose hypotheses and decides:
 
-    localized   the best hypothesis has ≥ `min_pairs` pairs and dominates every *rival* in
+    localized   the best hypothesis has ≥ `min_pairs` pairs, a fitness of at least
+                `min_fitness` (its points land on the map) and dominates every *rival* in
                 the terms of the ranking (more pairs or a clearly smaller residual; or a
                 score / fitness larger by the factor 1 + margin); a rival has a different
                 pose that shares less than `rival_overlap` of its pairs with the best one
@@ -46,6 +47,13 @@ class DecisionConfig(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
     min_pairs: int = Field(3, ge=2, description="Pairs the best set needs to be 'localized'.")
+    min_fitness: float = Field(
+        0.3,
+        ge=0,
+        le=1,
+        description="Fitness the best hypothesis needs to be 'localized': the share of its local "
+        "points (without points: of its matched centres) that land on the global map; 0 = off.",
+    )
     margin: float = Field(
         0.5,
         ge=0,
@@ -414,6 +422,8 @@ class Localizer:
         best, d = hypotheses[0], self.config.decision
         if len(best.pairs) < d.min_pairs or best.pose is None:
             return "ambiguous"
+        if best.fitness is not None and best.fitness < d.min_fitness:
+            return "ambiguous"  # consistent centres, but the objects' points do not overlap
         rivals = [h for h in hypotheses[1:] if _is_rival(best, h, d.rival_overlap)]
         if all(_dominates(best, rival, self.config.rank_by, d) for rival in rivals):
             return "localized"

@@ -145,6 +145,7 @@ def run_attempts(
                 **base, "n_local": result.steps[-1].n_local,
                 "rank_of_first_correct": first_correct_rank(result.hypotheses, truth),
                 "rot_err_deg": rot, "trans_err_m": trans, "ms": ms,
+                "status": result.status,  # not a results.csv column; benchmarks read it
             })  # fmt: skip
             for h in result.hypotheses:
                 if h.pose is not None:
