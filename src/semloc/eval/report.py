@@ -103,17 +103,18 @@ def objects_figure(rows: Sequence[dict], methods: Sequence[str]):
 
     fig, (left, right) = plt.subplots(1, 2, figsize=(10, 3.8), dpi=90)
     by_method = group_by(rows, "method")
-    x = np.arange(len(OBJECT_BINS))
+    bins = [(lo, hi) for lo, hi in OBJECT_BINS if any(lo <= r["n_local"] <= hi for r in rows)]
+    x = np.arange(len(bins))
     for method in methods:
         mrows = by_method.get((method,), [])
         recall, ms = [], []
-        for lo, hi in OBJECT_BINS:
+        for lo, hi in bins:
             inside = [r for r in mrows if lo <= r["n_local"] <= hi]
             recall.append(recall_at_k(inside, 10) if len(inside) >= 3 else np.nan)
             ms.append(np.median([r["ms"] for r in inside]) if len(inside) >= 3 else np.nan)
         left.plot(x, recall, marker="o", label=method, **_style(method))
         right.plot(x, ms, marker="o", label=method, **_style(method))
-    labels = [_bin_label(lo, hi) for lo, hi in OBJECT_BINS]
+    labels = [_bin_label(lo, hi) for lo, hi in bins]
     for ax in (left, right):
         ax.set_xticks(x, labels)
         ax.set_xlabel("local objects")
