@@ -231,3 +231,30 @@ def test_bitset_clustering_equals_literal_rules(
         assert got.keys() == expected.keys()
         for key, score in expected.items():
             assert got[key] == pytest.approx(score, abs=1e-9)
+
+
+def test_union_hash_collisions_fall_back_to_exact_bitsets(monkeypatch):
+    """Merges are grouped by a sum of candidate hashes; when that collides, bitsets decide."""
+    import semloc.clustering as module
+
+    g, local, detections = _scenario(7, 10, 6, 1)
+    config = ClusteringConfig(sets_per_object=1000, protect_top=2)  # no pruning ties
+
+    def final_sets():
+        hc = clustering(g, config)
+        for step in range(len(local)):
+            hc.update(local[: step + 1], [f"l{i}" for i in range(step + 1)], detections[step])
+        return pair_sets(hc)
+
+    expected = final_sets()
+    assert max(len(pairs) for pairs in expected) >= 3
+    # every candidate hashes to 1, so the first key of a union is its size: unions of one
+    # size collide, and only the second (independent) sum tells them apart
+    monkeypatch.setattr(module, "_pair_hash", lambda *_: 1)
+    monkeypatch.setattr(
+        module, "_mix", lambda x: np.random.default_rng(0).integers(0, 2**63, len(x), np.uint64)
+    )
+    collided = final_sets()
+    assert collided.keys() == expected.keys()
+    for pairs, score in expected.items():
+        assert collided[pairs] == pytest.approx(score, abs=1e-9)

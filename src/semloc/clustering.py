@@ -20,7 +20,10 @@ Formulation (equivalent to the literal pairwise test, see tests/test_clustering.
     (C[a, a] = True).  Every set is a clique of C (singletons trivially; a merge only joins
     sets whose new cross pairs are all compatible), so D1 ∪ D2 passes the literal test exactly
     when D2 ⊆ M(D1) = ⋂_{a ∈ D1} C[a].  Sets are bitsets over candidates (rows of uint64
-    words), M(D) is kept per set, and the test is a vectorised `D2 & ~M(D1) == 0`.
+    words), M(D) is kept per set, and the test is a vectorised `D2 & ~M(D1) == 0`, read
+    from D2's short member list.  The merges of an iteration are grouped by union through an
+    additive set hash (hash(A ∪ B) = hash(A) + Σ over B∖A), checked by a second hash and,
+    on disagreement, by the bitsets themselves.
 
 Where the paper is silent (see also DESIGN.md)
     * "Marking merged sets": every pair of sets is tried once.  A clustering round works on a
@@ -396,10 +399,12 @@ class HierarchicalClustering:
             if floor > -np.inf:  # merges that cannot reach the top K would be pruned at once
                 fits = self._score[rows[ia]] + self._score[ib] + size[rows[ia]] * size[ib] >= floor
                 ia, ib = ia[fits], ib[fits]
-            exact = np.all((self._bits[ib] & ~self._common[rows[ia]]) == 0, axis=1)
-            ia, ib = rows[ia[exact]], ib[exact]
-            a, b = self._bits[ia], self._bits[ib]
-            a_adds, b_adds = _popcount(a & ~b), _popcount(b & ~a)
+            ia = rows[ia]
+            b_members = self._members[ib]
+            inside = _contains_rows(self._common, ia, b_members) | (b_members < 0)
+            exact = np.all(inside, axis=1)
+            ia, ib = ia[exact], ib[exact]
+            a_adds, b_adds = self._adds(ia, ib, size)[:2]
             keep = (a_adds > 0) & (b_adds > 0)  # neither contains the other
             if floor > -np.inf:
                 keep &= self._score[ia] + self._score[ib] + a_adds * b_adds >= floor
@@ -427,10 +432,12 @@ class HierarchicalClustering:
         merges whose bound beats that score need their own exact score.  Same result as scoring
         every merge, at a fraction of the work.
         """
-        a_bits, b_bits = self._bits[rows_a], self._bits[rows_b]
-        unions, group = _unique_rows(a_bits | b_bits)
+        size = (self._members >= 0).sum(axis=1)
+        a_adds, b_adds, b_new = self._adds(rows_a, rows_b, size)
+        first, group = self._group_unions(rows_a, rows_b, b_new)
+        unions = self._bits[rows_a[first]] | self._bits[rows_b[first]]
         base = self._score[rows_a] + self._score[rows_b]
-        new_pairs = _popcount(a_bits & ~b_bits) * _popcount(b_bits & ~a_bits)
+        new_pairs = a_adds * b_adds
         bound = base + new_pairs
         order = np.lexsort((-base, group))  # per group, the largest v_A + v_B first
         first = order[np.r_[True, group[order][1:] != group[order][:-1]]]
@@ -441,6 +448,41 @@ class HierarchicalClustering:
             exact = base[todo] + self._cross_sum(rows_a[todo], rows_b[todo])
             np.maximum.at(best, group[todo], exact)
         return unions, best
+
+    def _adds(self, rows_a: np.ndarray, rows_b: np.ndarray, size: np.ndarray):
+        """|A∖B|, |B∖A| and B's members not in A (-1 elsewhere), for each merge (A, B).
+
+        Read from B's short member list against A's bitset: (merges x members) lookups
+        instead of whole (merges x words) bitset operations.
+        """
+        b_members = self._members[rows_b]
+        b_new = (b_members >= 0) & ~_contains_rows(self._bits, rows_a, b_members)
+        b_adds = b_new.sum(axis=1)
+        return size[rows_a] - size[rows_b] + b_adds, b_adds, np.where(b_new, b_members, -1)
+
+    def _group_unions(self, rows_a, rows_b, b_new) -> tuple[np.ndarray, np.ndarray]:
+        """One representative merge per distinct union A ∪ B, and each merge's group.
+
+        A set's hash is the wrapping sum of its candidates' 64-bit hashes, so hash(A ∪ B) =
+        hash(A) + Σ over B∖A (`b_new`: those members, -1 padded); a second, independent sum
+        checks every group, and the bitsets themselves are compared if the two disagree.
+        """
+        keys = []
+        for table in (self._cand_hash, _mix(self._cand_hash)):
+            padded = np.append(table, np.uint64(0))  # index -1 reads the 0
+            per_set = padded[self._members].sum(axis=1, dtype=np.uint64)
+            keys.append(per_set[rows_a] + padded[b_new].sum(axis=1, dtype=np.uint64))
+        key, check = keys
+        order = np.argsort(key)
+        starts = np.r_[True, key[order][1:] != key[order][:-1]]
+        group = np.empty(len(key), dtype=np.int64)
+        group[order] = np.cumsum(starts) - 1
+        first = order[starts]
+        if np.array_equal(check, check[first][group]):
+            return first, group
+        unions = self._bits[rows_a] | self._bits[rows_b]  # a hash collision: exact path
+        _, first, group = np.unique(unions, axis=0, return_index=True, return_inverse=True)
+        return first, group.ravel()
 
     def _cross_sum(self, rows_a: np.ndarray, rows_b: np.ndarray) -> np.ndarray:
         """Σ h over the new cross pairs (a ∈ A∖B, b ∈ B∖A) for each merge (A, B).
@@ -504,12 +546,9 @@ class HierarchicalClustering:
     # Pruning
     def _ranking(self) -> np.ndarray:
         """Rows best first: score (rounded), size, then an order-independent hash."""
-        valid = self._members >= 0
-        size = valid.sum(axis=1)
-        set_hash = np.sum(
-            np.where(valid, self._cand_hash[np.maximum(self._members, 0)], np.uint64(0)),
-            axis=1,
-            dtype=np.uint64,
+        size = (self._members >= 0).sum(axis=1)
+        set_hash = np.append(self._cand_hash, np.uint64(0))[self._members].sum(
+            axis=1, dtype=np.uint64
         )
         return np.lexsort((set_hash, -size, -np.round(self._score, 9)))
 
@@ -541,30 +580,18 @@ class HierarchicalClustering:
         self._row_of = {self._bits[r].tobytes(): r for r in range(len(self._bits))}
 
 
-_HASH_MULTIPLIERS = np.array(
-    [0x9E3779B97F4A7C15, 0xC2B2AE3D27D4EB4F, 0x165667B19E3779F9, 0xD6E8FEB86659FD93],
-    dtype=np.uint64,
-)
+def _mix(x: np.ndarray) -> np.ndarray:
+    """A bijective 64-bit mixer (splitmix64's finaliser): a second, independent hash."""
+    x = (x ^ (x >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+    x = (x ^ (x >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+    return x ^ (x >> np.uint64(31))
 
 
-def _unique_rows(bits: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Distinct rows of a uint64 matrix and the inverse index (fast path through a hash)."""
-    words = bits.shape[1]
-    multipliers = _HASH_MULTIPLIERS[np.arange(words) % len(_HASH_MULTIPLIERS)] + np.uint64(
-        2
-    ) * np.arange(words, dtype=np.uint64)
-    keys = np.bitwise_xor.reduce(bits * multipliers, axis=1) if words > 1 else bits[:, 0]
-    _, first, inverse = np.unique(keys, return_index=True, return_inverse=True)
-    unique = bits[first]
-    if np.array_equal(unique[inverse], bits):
-        return unique, inverse
-    unique, inverse = np.unique(bits, axis=0, return_inverse=True)  # hash collision
-    return unique, inverse.ravel()
-
-
-def _popcount(bits: np.ndarray) -> np.ndarray:
-    """Number of set bits per row of a uint64 matrix."""
-    return np.bitwise_count(bits).sum(axis=1, dtype=np.int64)
+def _contains_rows(bits: np.ndarray, rows: np.ndarray, candidates: np.ndarray) -> np.ndarray:
+    """Whether bitset `bits[rows[i]]` holds candidate `candidates[i, j]` (-1 entries: False)."""
+    dense = np.unpackbits(bits.astype("<u8").view(np.uint8), axis=1, bitorder="little")
+    dense = dense.view(bool)
+    return dense[rows[:, None], np.maximum(candidates, 0)] & (candidates >= 0)
 
 
 def _pad(members: np.ndarray, width: int) -> np.ndarray:
