@@ -368,18 +368,20 @@ class HierarchicalClustering:
     # Clustering round
     def _cluster(self, frontier: np.ndarray) -> None:
         while len(frontier):
-            parents_a, parents_b = self._find_merges(frontier)
+            bits = _dense(self._bits)  # the pool is fixed until the insert below
+            parents_a, parents_b = self._find_merges(frontier, bits)
             if not len(parents_a):
                 break
             self._last_merge[parents_a] = self.step
             self._last_merge[parents_b] = self.step
-            unions, scores = self._best_merges(parents_a, parents_b)
+            unions, scores = self._best_merges(parents_a, parents_b, bits)
             frontier = self._insert(unions, scores)
             frontier = self._prune(frontier)
         self._prune(np.zeros(0, dtype=np.int64))  # a round ends with at most K sets
 
-    def _find_merges(self, frontier: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """All (a, b) rows with a in the frontier whose union passes the merge criterion."""
+    def _find_merges(self, frontier: np.ndarray, bits: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """All (a, b) rows with a in the frontier whose union passes the merge criterion
+        (`bits`: the pool's sets as a dense boolean matrix)."""
         n_pool = len(self._bits)
         in_frontier = np.zeros(n_pool, dtype=bool)
         in_frontier[frontier] = True
@@ -388,6 +390,7 @@ class HierarchicalClustering:
         floor = self._survival_floor()
         folded_bits = np.bitwise_or.reduce(self._bits, axis=1)
         folded_common = np.bitwise_or.reduce(self._common, axis=1)
+        common = _dense(self._common)
         found_a, found_b = [], []
         for start in range(0, len(frontier), chunk):
             rows = frontier[start : start + chunk]
@@ -401,10 +404,10 @@ class HierarchicalClustering:
                 ia, ib = ia[fits], ib[fits]
             ia = rows[ia]
             b_members = self._members[ib]
-            inside = _contains_rows(self._common, ia, b_members) | (b_members < 0)
+            inside = _contains_rows(common, ia, b_members) | (b_members < 0)
             exact = np.all(inside, axis=1)
             ia, ib = ia[exact], ib[exact]
-            a_adds, b_adds = self._adds(ia, ib, size)[:2]
+            a_adds, b_adds = self._adds(bits, ia, ib, size)[:2]
             keep = (a_adds > 0) & (b_adds > 0)  # neither contains the other
             if floor > -np.inf:
                 keep &= self._score[ia] + self._score[ib] + a_adds * b_adds >= floor
@@ -424,7 +427,9 @@ class HierarchicalClustering:
         kth = np.partition(self._score, len(self._score) - self.capacity)
         return float(kth[len(self._score) - self.capacity]) - 1e-9
 
-    def _best_merges(self, rows_a: np.ndarray, rows_b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _best_merges(
+        self, rows_a: np.ndarray, rows_b: np.ndarray, bits: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
         """Distinct unions of the merges and, for each, the largest merge score.
 
         A merge scores v_A + v_B + Σh over |A∖B|·|B∖A| new pairs with h ≤ 1, which bounds it
@@ -433,7 +438,7 @@ class HierarchicalClustering:
         every merge, at a fraction of the work.
         """
         size = (self._members >= 0).sum(axis=1)
-        a_adds, b_adds, b_new = self._adds(rows_a, rows_b, size)
+        a_adds, b_adds, b_new = self._adds(bits, rows_a, rows_b, size)
         first, group = self._group_unions(rows_a, rows_b, b_new)
         unions = self._bits[rows_a[first]] | self._bits[rows_b[first]]
         base = self._score[rows_a] + self._score[rows_b]
@@ -442,21 +447,21 @@ class HierarchicalClustering:
         order = np.lexsort((-base, group))  # per group, the largest v_A + v_B first
         first = order[np.r_[True, group[order][1:] != group[order][:-1]]]
         best = np.full(len(unions), -np.inf)
-        best[group[first]] = base[first] + self._cross_sum(rows_a[first], rows_b[first])
+        best[group[first]] = base[first] + self._cross_sum(bits, rows_a[first], rows_b[first])
         todo = np.flatnonzero(bound > best[group] + 1e-12)
         if len(todo):
-            exact = base[todo] + self._cross_sum(rows_a[todo], rows_b[todo])
+            exact = base[todo] + self._cross_sum(bits, rows_a[todo], rows_b[todo])
             np.maximum.at(best, group[todo], exact)
         return unions, best
 
-    def _adds(self, rows_a: np.ndarray, rows_b: np.ndarray, size: np.ndarray):
+    def _adds(self, bits: np.ndarray, rows_a: np.ndarray, rows_b: np.ndarray, size: np.ndarray):
         """|A∖B|, |B∖A| and B's members not in A (-1 elsewhere), for each merge (A, B).
 
         Read from B's short member list against A's bitset: (merges x members) lookups
         instead of whole (merges x words) bitset operations.
         """
         b_members = self._members[rows_b]
-        b_new = (b_members >= 0) & ~_contains_rows(self._bits, rows_a, b_members)
+        b_new = (b_members >= 0) & ~_contains_rows(bits, rows_a, b_members)
         b_adds = b_new.sum(axis=1)
         return size[rows_a] - size[rows_b] + b_adds, b_adds, np.where(b_new, b_members, -1)
 
@@ -469,9 +474,7 @@ class HierarchicalClustering:
         """
         keys = []
         for table in (self._cand_hash, _mix(self._cand_hash)):
-            padded = np.append(table, np.uint64(0))  # index -1 reads the 0
-            per_set = padded[self._members].sum(axis=1, dtype=np.uint64)
-            keys.append(per_set[rows_a] + padded[b_new].sum(axis=1, dtype=np.uint64))
+            keys.append(_hash_sums(table, self._members)[rows_a] + _hash_sums(table, b_new))
         key, check = keys
         order = np.argsort(key)
         starts = np.r_[True, key[order][1:] != key[order][:-1]]
@@ -484,7 +487,7 @@ class HierarchicalClustering:
         _, first, group = np.unique(unions, axis=0, return_index=True, return_inverse=True)
         return first, group.ravel()
 
-    def _cross_sum(self, rows_a: np.ndarray, rows_b: np.ndarray) -> np.ndarray:
+    def _cross_sum(self, bits: np.ndarray, rows_a: np.ndarray, rows_b: np.ndarray) -> np.ndarray:
         """Σ h over the new cross pairs (a ∈ A∖B, b ∈ B∖A) for each merge (A, B).
 
         Each merge is oriented so that its smaller set is indexed by a short member list;
@@ -500,18 +503,11 @@ class HierarchicalClustering:
             big, little = large[sel], small[sel]
             ml = self._members[big, : size[big].max()]
             ms = self._members[little, :k]
-            a_new = (ml >= 0) & ~self._contains(self._bits[little], ml)
-            b_new = ~self._contains(self._bits[big], ms)
+            a_new = (ml >= 0) & ~_contains_rows(bits, little, ml)
+            b_new = ~_contains_rows(bits, big, ms)
             h = self._h[np.maximum(ml, 0)[:, :, None], ms[:, None, :]]
             out[sel] = np.sum(h * (a_new[:, :, None] & b_new[:, None, :]), axis=(1, 2))
         return out
-
-    @staticmethod
-    def _contains(bits: np.ndarray, candidates: np.ndarray) -> np.ndarray:
-        """Whether each row's bitset contains each candidate index in that row of `candidates`."""
-        safe = np.maximum(candidates, 0)
-        words = np.take_along_axis(bits, safe // 64, axis=1)
-        return ((words >> (safe % 64).astype(np.uint64)) & np.uint64(1)).astype(bool)
 
     def _insert(self, unique: np.ndarray, best: np.ndarray) -> np.ndarray:
         """Add distinct merged sets (duplicates keep the larger score); return new rows."""
@@ -547,9 +543,7 @@ class HierarchicalClustering:
     def _ranking(self) -> np.ndarray:
         """Rows best first: score (rounded), size, then an order-independent hash."""
         size = (self._members >= 0).sum(axis=1)
-        set_hash = np.append(self._cand_hash, np.uint64(0))[self._members].sum(
-            axis=1, dtype=np.uint64
-        )
+        set_hash = _hash_sums(self._cand_hash, self._members)
         return np.lexsort((set_hash, -size, -np.round(self._score, 9)))
 
     def _prune(self, frontier: np.ndarray) -> np.ndarray:
@@ -587,10 +581,18 @@ def _mix(x: np.ndarray) -> np.ndarray:
     return x ^ (x >> np.uint64(31))
 
 
-def _contains_rows(bits: np.ndarray, rows: np.ndarray, candidates: np.ndarray) -> np.ndarray:
-    """Whether bitset `bits[rows[i]]` holds candidate `candidates[i, j]` (-1 entries: False)."""
-    dense = np.unpackbits(bits.astype("<u8").view(np.uint8), axis=1, bitorder="little")
-    dense = dense.view(bool)
+def _hash_sums(table: np.ndarray, members: np.ndarray) -> np.ndarray:
+    """Per row of member indices (-1 padded), the wrapping sum of their hashes in `table`."""
+    return np.append(table, np.uint64(0))[members].sum(axis=1, dtype=np.uint64)  # -1 reads 0
+
+
+def _dense(bits: np.ndarray) -> np.ndarray:
+    """Bitset rows (uint64 words) as a boolean matrix over candidates."""
+    return np.unpackbits(bits.astype("<u8").view(np.uint8), axis=1, bitorder="little").view(bool)
+
+
+def _contains_rows(dense: np.ndarray, rows: np.ndarray, candidates: np.ndarray) -> np.ndarray:
+    """Whether set `rows[i]` (of a `_dense` matrix) holds `candidates[i, j]` (-1: False)."""
     return dense[rows[:, None], np.maximum(candidates, 0)] & (candidates >= 0)
 
 
