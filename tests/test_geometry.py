@@ -11,8 +11,8 @@ from semloc.io.geometry import (
     quaternion_matrix,
     sample_box_surface,
     upright_box,
-    voxel_downsample,
 )
+from semloc.pointsets import voxel_downsample
 
 _points = arrays(np.float64, st.tuples(st.integers(1, 40), st.just(3)),
                  elements=st.floats(-5, 5, allow_nan=False))  # fmt: skip

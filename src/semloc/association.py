@@ -47,6 +47,11 @@ class AssociationConfig(BaseModel):
     )
 
     @property
+    def computed_descriptor(self) -> str | None:
+        """The descriptor kind the Localizer computes for objects with points (None: none)."""
+        return self.descriptor if self.use_descriptors else None
+
+    @property
     def gate(self) -> float:
         """The descriptor distance bound in effect."""
         if self.descriptor is None:

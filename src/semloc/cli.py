@@ -71,11 +71,9 @@ _DescribeOption = Annotated[
 
 def _described(objmap, kind: DescriptorKind | None):
     """The map with descriptors of `kind` for its objects with points (unchanged for None)."""
-    if kind is None:
-        return objmap
-    from semloc.descriptors import with_descriptors
+    from semloc.descriptors import described
 
-    return with_descriptors(objmap, kind.value, overwrite=True)
+    return described(objmap, None if kind is None else kind.value)
 
 
 # --- Simulation: `demo`, `simulate`, `view` (issue 3; heavy imports stay inside) ---------------
@@ -536,8 +534,6 @@ def _read_pose(path: Path) -> np.ndarray:
 
 
 # --- Benchmark: `bench` (issue 4; heavy imports stay inside) ----------------------------------
-_BENCH_METHODS = DEFAULT_METHODS
-_BENCH_VARIANTS = DESCRIPTOR_VARIANTS
 
 
 @app.command()
@@ -565,10 +561,10 @@ def bench(
     methods: Annotated[
         str,
         typer.Option(
-            help=f"Comma-separated methods to compare: {','.join(_BENCH_METHODS)}; opt-in: "
-            f"{','.join(_BENCH_VARIANTS)} (semloc with the shape-descriptor gate)."
+            help=f"Comma-separated methods to compare: {','.join(DEFAULT_METHODS)}; opt-in: "
+            f"{','.join(DESCRIPTOR_VARIANTS)} (semloc with the shape-descriptor gate)."
         ),
-    ] = ",".join(_BENCH_METHODS),
+    ] = ",".join(DEFAULT_METHODS),
     sequences: Annotated[
         int | None, typer.Option(min=1, max=1000, help="Simulated sequences (default 6; quick 2).")
     ] = None,
@@ -587,7 +583,7 @@ def bench(
     from semloc.eval.protocol import BenchConfig
 
     chosen = [m.strip() for m in methods.split(",") if m.strip()]
-    known = _BENCH_METHODS + _BENCH_VARIANTS
+    known = DEFAULT_METHODS + DESCRIPTOR_VARIANTS
     unknown = [m for m in chosen if m not in known]
     if unknown or not chosen:
         fail(f"--methods: unknown {unknown or methods!r}; choose from {','.join(known)}")
@@ -647,7 +643,9 @@ def train_descriptor(
     import importlib.util
 
     if importlib.util.find_spec("torch") is None:
-        fail("training needs torch: pip install 'semloc[train]'")
+        from semloc.descriptors.train import TORCH_HINT
+
+        fail(TORCH_HINT)
     from semloc.descriptors.train import TrainConfig, save_weights, train
     from semloc.descriptors.voxnet import WEIGHTS_FILE, load_weights
 

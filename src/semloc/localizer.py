@@ -232,10 +232,10 @@ class Localizer:
         elif overrides:
             config = LocalizerConfig(**{**config.model_dump(), **overrides})
         self.config = config
-        if config.association.descriptor is not None and config.association.use_descriptors:
+        if config.association.computed_descriptor is not None:
             from semloc.descriptors import with_descriptors
 
-            global_map = with_descriptors(global_map, config.association.descriptor)
+            global_map = with_descriptors(global_map, config.association.computed_descriptor)
         self.global_map = global_map
         self.local_up = None if local_up is None else np.asarray(local_up, dtype=float)
         self._candidates = CandidateIndex(global_map, config.association)
@@ -305,8 +305,8 @@ class Localizer:
     def _associate(self, objects: list[SemanticObject]) -> dict[int, np.ndarray]:
         """Register objects; return candidate global indices per local index."""
         detections: dict[int, np.ndarray] = {}
-        kind = self.config.association.descriptor
-        if kind is not None and self.config.association.use_descriptors:
+        kind = self.config.association.computed_descriptor
+        if kind is not None:
             from semloc.descriptors import describe_objects
 
             objects = describe_objects(objects, kind)
@@ -362,8 +362,7 @@ class Localizer:
             pairs = np.array([sets[i].pairs for i in rows])  # (S, size, 2): global, local
             l_xyz, g_xyz = local_xyz[pairs[..., 1]], global_xyz[pairs[..., 0]]
             T, determined = align_positions_batch(l_xyz, g_xyz, self.local_up, self.global_map.up)
-            aligned = l_xyz @ np.swapaxes(T[:, :3, :3], 1, 2) + T[:, None, :3, 3]
-            rms = np.sqrt(np.mean(np.sum((aligned - g_xyz) ** 2, axis=2), axis=1))
+            rms = centre_residuals(T, l_xyz, g_xyz)
             for i, pose, ok, r in zip(rows, T, determined, rms):
                 if ok:
                     poses[i], residuals[i] = pose, float(r)
@@ -439,8 +438,13 @@ def _cloud(points: np.ndarray | None, pose: PoseConfig) -> np.ndarray | None:
 
 def centre_residual(pose: np.ndarray, local_xyz: np.ndarray, global_xyz: np.ndarray) -> float:
     """RMS distance (m) between aligned local centres and their global partners."""
-    aligned = local_xyz @ pose[:3, :3].T + pose[:3, 3]
-    return float(np.sqrt(np.mean(np.sum((aligned - global_xyz) ** 2, axis=1))))
+    return float(centre_residuals(pose[None], local_xyz[None], global_xyz[None])[0])
+
+
+def centre_residuals(poses: np.ndarray, local_xyz: np.ndarray, global_xyz: np.ndarray):
+    """`centre_residual` of S sets at once: (S, 4, 4) poses, (S, m, 3) centres -> (S,)."""
+    aligned = local_xyz @ np.swapaxes(poses[:, :3, :3], 1, 2) + poses[:, None, :3, 3]
+    return np.sqrt(np.mean(np.sum((aligned - global_xyz) ** 2, axis=2), axis=1))
 
 
 def _dominates(best: Hypothesis, rival: Hypothesis, rank_by: str, d: DecisionConfig) -> bool:

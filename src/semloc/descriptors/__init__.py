@@ -78,12 +78,18 @@ def with_descriptors(
     return objmap.with_objects(describe_objects(objmap, kind, overwrite))
 
 
+def described(objmap: ObjectMap, kind: str | None) -> ObjectMap:
+    """What the map writers store: fresh descriptors of `kind` (the map unchanged for None)."""
+    return objmap if kind is None else with_descriptors(objmap, kind, overwrite=True)
+
+
 __all__ = [
     "DELTAS",
     "KINDS",
     "Kind",
     "compute",
     "compute_batch",
+    "described",
     "describe_objects",
     "with_descriptors",
 ]

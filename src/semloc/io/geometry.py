@@ -10,8 +10,6 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import ConvexHull, QhullError
 
-from semloc.pointsets import voxel_downsample  # noqa: F401  (re-exported for importers)
-
 
 def up_basis(up: np.ndarray | None) -> np.ndarray:
     """A rotation whose third column is the unit `up` (z when `up` is None)."""

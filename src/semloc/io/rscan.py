@@ -15,9 +15,10 @@ from pathlib import Path
 
 import numpy as np
 
-from semloc.io.geometry import upright_box, voxel_downsample
+from semloc.io.geometry import upright_box
 from semloc.io.labels import LABEL_SETS, class_name, is_structural, is_unlabeled
 from semloc.maps import MapError, ObjectMap, SemanticObject
+from semloc.pointsets import voxel_downsample
 
 UP = np.array([0.0, 0.0, 1.0])
 _COLUMNS = {"nyu40": "NYU40", "eigen13": "Eigen13", "rio27": "RIO27"}

@@ -31,12 +31,12 @@ from semloc.io.geometry import (
     quaternion_matrix,
     sample_triangles,
     upright_box,
-    voxel_downsample,
 )
 from semloc.io.labels import NYU40, is_structural
 from semloc.io.native import read_json
 from semloc.io.ply import read_ply
 from semloc.maps import MapError, ObjectMap, SemanticObject
+from semloc.pointsets import voxel_downsample
 
 UP = np.array([0.0, 0.0, 1.0])
 # ShapeNet synsets of the Scan2CAD benchmark: (ShapeNet name, NYU40 class as ScanNet maps it)

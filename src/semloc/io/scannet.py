@@ -18,11 +18,12 @@ from typing import Any
 
 import numpy as np
 
-from semloc.io.geometry import upright_box, voxel_downsample
+from semloc.io.geometry import upright_box
 from semloc.io.labels import NYU40, is_structural
 from semloc.io.native import read_json
 from semloc.io.ply import read_ply
 from semloc.maps import MapError, ObjectMap, SemanticObject
+from semloc.pointsets import voxel_downsample
 
 UP = np.array([0.0, 0.0, 1.0])
 

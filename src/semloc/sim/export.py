@@ -35,11 +35,9 @@ def write_sequence(
     out.mkdir(parents=True, exist_ok=True)
 
     def save(objmap, path: Path) -> Path:
-        if descriptor is not None:
-            from semloc.descriptors import with_descriptors
+        from semloc.descriptors import described
 
-            objmap = with_descriptors(objmap, descriptor, overwrite=True)
-        return save_map(objmap, path)
+        return save_map(described(objmap, descriptor), path)
 
     files = []
     write_atomic(out / "world.json", json.dumps(seq.world.summary(), indent=1) + "\n")
