@@ -16,6 +16,7 @@ from semloc.eval.metrics import (
     recall_vs_tolerance,
     summary,
 )  # fmt: skip
+from semloc.eval.report import attempt_tables, summary_table
 
 RESULTS = """method,map_kind,sequence,start,offset,n_local,rank_of_first_correct,rot_err_deg,trans_err_m,ms
 semloc,cad,seq0,3,0,3,1,2.0,0.10,10
@@ -141,8 +142,11 @@ def test_descriptor_variant_gates_with_calibrated_delta(kind):
                        points=rng.uniform(-0.3, 0.3, (200, 3)) + [i, 0.0, 0.4])
         for i in range(4)
     ]  # fmt: skip
-    method = make_method(f"semloc+{kind}", ObjectMap(objects, up=[0, 0, 1]), np.array([0, 0, 1]))
+    settings = {"min_fitness": 0.0}
+    method = make_method(f"semloc+{kind}", ObjectMap(objects, up=[0, 0, 1]), np.array([0, 0, 1]),
+                         settings=settings)  # fmt: skip
     assert isinstance(method, Localizer)
+    assert method.config.decision.min_fitness == 0.0
     assert method.config.association.descriptor == kind
     assert method.config.association.gate == pytest.approx(DELTAS[kind])
     assert all(d is not None for d in method.global_map.descriptors)
@@ -152,3 +156,35 @@ def test_bench_accepts_descriptor_variants_only_by_name(capsys):
     assert main(["bench", "--methods", "semloc+fancy"]) == 2
     err = capsys.readouterr().err
     assert "semloc+geometric" in err and "semloc+voxnet" in err
+
+
+def test_attempt_tables_are_exact(rows):
+    results, _ = rows
+    real = dict(results[0], map_kind="real", sequence="3rscan", rank_of_first_correct=None)
+    dynamic = dict(results[4], map_kind="dynamic", rank_of_first_correct=1, n_local=5, ms=300)
+    text = attempt_tables([*results, real, dynamic], ["semloc", "clipper", "fpfh-ransac"])
+    by_attempt, per_kind = text.split("\nFirst attempt, top-1 per map kind:\n\n")
+    assert by_attempt.splitlines() == [
+        "| method | first (> 2 objects) | +15 keyframes | +30 keyframes |",
+        "|---|---|---|---|",
+        "| semloc | 1.00 (~4 objects, 25 ms) | 0.00 (~8 objects, 20 ms) | 0.00 (~12 objects, 30 ms) |",
+        "| clipper | 0.50 (~4 objects, 200 ms) | 0.00 (~8 objects, 200 ms) | – |",
+        "| fpfh-ransac | – | – | – |",
+    ]  # fmt: skip
+    assert per_kind.splitlines() == [
+        "| method | cad | dynamic |",
+        "|---|---|---|",
+        "| semloc | 1.00 | – |",
+        "| clipper | 0.00 | 1.00 |",
+        "| fpfh-ransac | – | – |",
+    ]
+
+
+def test_summary_table_is_exact(rows):
+    results, _ = rows
+    assert summary_table(results, ["semloc", "clipper"]).splitlines() == [
+        "| method | cad: top-1 / top-10 | median ms / update |",
+        "|---|---|---|",
+        "| semloc | 0.50 / 0.75 | 25 |",
+        "| clipper | 0.00 / 0.50 | 150 |",
+    ]

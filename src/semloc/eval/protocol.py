@@ -79,12 +79,21 @@ def start_keyframes(config: BenchConfig, index: int, n_keyframes: int, count: in
     return sorted(int(s) for s in rng.choice(last, size=count, replace=False))
 
 
-def make_method(name: str, global_map, local_up, gamma: float | None = None, top_k: int = 10):
+def make_method(
+    name: str,
+    global_map,
+    local_up,
+    gamma: float | None = None,
+    top_k: int = 10,
+    settings: dict[str, Any] | None = None,
+):
+    """A method by name; `settings` are further `LocalizerConfig` fields for semloc methods
+    (flat names such as `min_fitness`), ignored by the baselines."""
     from semloc.baselines import METHODS
     from semloc.localizer import LocalizerConfig
 
     if name == "semloc" or name in DESCRIPTOR_VARIANTS:
-        overrides: dict[str, Any] = {"top_k": top_k}
+        overrides: dict[str, Any] = {"top_k": top_k, **(settings or {})}
         if gamma is not None:
             overrides["gamma"] = gamma
         if name in DESCRIPTOR_VARIANTS:
@@ -102,6 +111,7 @@ def run_attempts(
     label: str | None = None,
     gamma: float | None = None,
     top_k: int = 10,
+    settings: dict[str, Any] | None = None,
 ) -> tuple[list[dict], list[dict]]:
     """One start, one map kind, one method: rows of results.csv and hypotheses.csv."""
     from semloc.localizer import Localizer
@@ -109,7 +119,7 @@ def run_attempts(
     replay = seq.replay(start, min(len(seq.recording.detections), start + 70))
     truth = replay.T_global_local
     gmap = replay.global_maps[kind]
-    loc = make_method(method, gmap, replay.local_map.up, gamma, top_k)
+    loc = make_method(method, gmap, replay.local_map.up, gamma, top_k, settings)
     incremental = isinstance(loc, Localizer)
     full_config = loc.config if incremental else None
     cheap = None

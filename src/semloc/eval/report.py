@@ -136,27 +136,28 @@ def _cell(value, fmt: str = "{:.2f}") -> str:
     )
 
 
+def _table(head: Sequence[str], body: Sequence[Sequence[str]]) -> str:
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    lines += ["| " + " | ".join(cells) + " |" for cells in body]
+    return "\n".join(lines) + "\n"
+
+
 def summary_table(rows: Sequence[dict], methods: Sequence[str]) -> str:
     """Markdown table: recall@1 / recall@10 per method (rows) and map kind (columns), ms."""
     stats = {(s["method"], s["map_kind"]): s for s in summary(rows)}
     kinds = sorted({k for _, k in stats}, key=lambda k: ["reconstruction", "cad", "dynamic"].index(k)
                    if k in ("reconstruction", "cad", "dynamic") else 9)  # fmt: skip
-    head = "| method | " + " | ".join(f"{k}: top-1 / top-10" for k in kinds)
-    head += " | median ms / update |\n|---|" + "---|" * (len(kinds) + 1) + "\n"
-    lines = []
+    body = []
     for method in methods:
-        cells = []
+        cells = [method]
         ms = []
         for kind in kinds:
             s = stats.get((method, kind))
-            if s is None:
-                cells.append("–")
-                continue
-            cells.append(f"{_cell(s['recall@1'])} / {_cell(s['recall@10'])}")
+            cells.append("–" if s is None else f"{_cell(s['recall@1'])} / {_cell(s['recall@10'])}")
             ms += [r["ms"] for r in rows if r["method"] == method and r["map_kind"] == kind]
-        median = float(np.median(ms)) if ms else None
-        lines.append(f"| {method} | " + " | ".join(cells) + f" | {_cell(median, '{:.0f}')} |")
-    return head + "\n".join(lines) + "\n"
+        body.append([*cells, _cell(float(np.median(ms)) if ms else None, "{:.0f}")])
+    head = ["method", *(f"{k}: top-1 / top-10" for k in kinds), "median ms / update"]
+    return _table(head, body)
 
 
 def write_outputs(out: Path, config, rows, hyps, ablation, seconds: float) -> list[Path]:
@@ -186,6 +187,38 @@ def write_outputs(out: Path, config, rows, hyps, ablation, seconds: float) -> li
     return [*files, out / "report.md", out / "config.json"]
 
 
+def _offset_name(offset: int) -> str:
+    return "first (> 2 objects)" if offset == 0 else f"+{offset} keyframes"
+
+
+def _attempt_cell(group: Sequence[dict]) -> str:
+    if not group:
+        return "–"
+    n_local = np.median([r["n_local"] for r in group])
+    ms = np.median([r["ms"] for r in group])
+    return f"{_cell(recall_at_k(group, 1))} (~{n_local:.0f} objects, {ms:.0f} ms)"
+
+
+def attempt_tables(rows: Sequence[dict], methods: Sequence[str]) -> str:
+    """Markdown: top-1 by attempt (simulated kinds pooled, with the median number of local
+    objects and time per update), then top-1 at the first attempt per simulated map kind."""
+    sim = [r for r in rows if r["map_kind"] != "real"]
+    if not sim:
+        return ""
+    offsets = sorted({r["offset"] for r in sim})
+    by_offset = group_by(sim, "method", "offset")
+    body = [[method, *(_attempt_cell(by_offset.get((method, offset), [])) for offset in offsets)]
+            for method in methods]  # fmt: skip
+    text = _table(["method", *map(_offset_name, offsets)], body)
+    kinds = [
+        k for k in ("reconstruction", "cad", "dynamic") if any(r["map_kind"] == k for r in sim)
+    ]
+    first = group_by([r for r in sim if r["offset"] == offsets[0]], "method", "map_kind")
+    body = [[method, *(_cell(recall_at_k(first.get((method, k), []), 1)) for k in kinds)]
+            for method in methods]  # fmt: skip
+    return text + "\nFirst attempt, top-1 per map kind:\n\n" + _table(["method", *kinds], body)
+
+
 def report_text(config, rows, ablation, methods, seconds: float, figures: list[str]) -> str:
     attempts = len(group_by(rows, "map_kind", "sequence", "start", "offset"))
     text = [
@@ -201,6 +234,8 @@ def report_text(config, rows, ablation, methods, seconds: float, figures: list[s
         "scene_2 in scene_1 and the Scan2CAD scan map of scene0470_00 in its CAD map.\n\n",
         "## Recall (top-1 / top-10) and time per update\n\n",
         summary_table(rows, methods),
+        "\n## Top-1 by attempt (simulated maps)\n\n",
+        attempt_tables(rows, methods),
     ]
     if ablation:
         text.append("\n## Ablation over γ (semloc, reconstruction map)\n\n")
