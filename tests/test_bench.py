@@ -16,7 +16,7 @@ from semloc.eval.metrics import (
     recall_vs_tolerance,
     summary,
 )  # fmt: skip
-from semloc.eval.report import attempt_tables, summary_table
+from semloc.eval.report import attempt_tables, gamma_table, summary_table
 
 RESULTS = """method,map_kind,sequence,start,offset,n_local,rank_of_first_correct,rot_err_deg,trans_err_m,ms
 semloc,cad,seq0,3,0,3,1,2.0,0.10,10
@@ -102,8 +102,8 @@ def test_tiny_run_is_reproducible(tmp_path):
         assert (tmp_path / name).exists()
     seq = simulate(config, 0)
     serial = []
-    for _, start, kind, method, label, gamma, top_k, _ in plan(config, config.keyframes):
-        serial += run_attempts(seq, "seq0", start, kind, method, label, gamma, top_k)[0]
+    for _, start, kind, method, label, settings, _ in plan(config, config.keyframes):
+        serial += run_attempts(seq, "seq0", start, kind, method, label, settings)[0]
     assert len(output.rows) == len(serial) == 6
     strip = [{k: v for k, v in r.items() if k != "ms"} for r in output.rows]
     assert strip == [{k: v for k, v in r.items() if k != "ms"} for r in serial]
@@ -187,4 +187,32 @@ def test_summary_table_is_exact(rows):
         "|---|---|---|",
         "| semloc | 0.50 / 0.75 | 25 |",
         "| clipper | 0.00 / 0.50 | 150 |",
+    ]
+
+
+def test_gamma_table_is_exact(rows):
+    results, _ = rows
+    semloc = [r for r in results if r["method"] == "semloc"]
+    ablation = [dict(r, method="semloc gamma=0.95") for r in semloc[:2]]
+    ablation += [dict(r, method="semloc gamma=0.5") for r in semloc]
+    assert gamma_table(ablation).splitlines() == [
+        "| γ | attempts | top-1 | top-5 | top-10 | top-20 | median ms |",
+        "|---|---|---|---|---|---|---|",
+        "| 0.5 | 4 | 0.50 | 0.75 | 0.75 | 0.75 | 25 |",
+        "| 0.95 | 2 | 0.50 | 1.00 | 1.00 | 1.00 | 15 |",
+    ]
+
+
+def test_plan_gives_ablation_chains_their_gamma_and_top_k():
+    from semloc.eval.protocol import BenchConfig
+    from semloc.eval.runner import plan
+
+    config = BenchConfig(sequences=1, starts=1, ablation_starts=1, gammas=[0.5, 0.9],
+                         methods=["semloc", "clipper"], map_kinds=["cad"])  # fmt: skip
+    jobs = plan(config, 80)
+    assert [(j[3], j[4], j[5], j[6]) for j in jobs] == [
+        ("semloc", "semloc", {}, False),
+        ("clipper", "clipper", {}, False),
+        ("semloc", "semloc gamma=0.5", {"gamma": 0.5, "top_k": 20}, True),
+        ("semloc", "semloc gamma=0.9", {"gamma": 0.9, "top_k": 20}, True),
     ]

@@ -79,23 +79,14 @@ def start_keyframes(config: BenchConfig, index: int, n_keyframes: int, count: in
     return sorted(int(s) for s in rng.choice(last, size=count, replace=False))
 
 
-def make_method(
-    name: str,
-    global_map,
-    local_up,
-    gamma: float | None = None,
-    top_k: int = 10,
-    settings: dict[str, Any] | None = None,
-):
-    """A method by name; `settings` are further `LocalizerConfig` fields for semloc methods
-    (flat names such as `min_fitness`), ignored by the baselines."""
+def make_method(name: str, global_map, local_up, settings: dict[str, Any] | None = None):
+    """A method by name. `settings` are `LocalizerConfig` fields for the semloc methods (flat
+    names such as `gamma`, `top_k`, `min_fitness`); the baselines have none."""
     from semloc.baselines import METHODS
     from semloc.localizer import LocalizerConfig
 
     if name == "semloc" or name in DESCRIPTOR_VARIANTS:
-        overrides: dict[str, Any] = {"top_k": top_k, **(settings or {})}
-        if gamma is not None:
-            overrides["gamma"] = gamma
+        overrides: dict[str, Any] = dict(settings or {})
         if name in DESCRIPTOR_VARIANTS:
             overrides["descriptor"] = name.removeprefix("semloc+")
         return METHODS["semloc"](global_map, LocalizerConfig(**overrides), local_up)
@@ -109,17 +100,16 @@ def run_attempts(
     kind: str,
     method: str,
     label: str | None = None,
-    gamma: float | None = None,
-    top_k: int = 10,
     settings: dict[str, Any] | None = None,
 ) -> tuple[list[dict], list[dict]]:
-    """One start, one map kind, one method: rows of results.csv and hypotheses.csv."""
+    """One start, one map kind, one method (with `make_method`'s `settings`): rows of
+    results.csv and hypotheses.csv."""
     from semloc.localizer import Localizer
 
     replay = seq.replay(start, min(len(seq.recording.detections), start + 70))
     truth = replay.T_global_local
     gmap = replay.global_maps[kind]
-    loc = make_method(method, gmap, replay.local_map.up, gamma, top_k, settings)
+    loc = make_method(method, gmap, replay.local_map.up, settings)
     incremental = isinstance(loc, Localizer)
     full_config = loc.config if incremental else None
     cheap = None

@@ -28,6 +28,7 @@ from semloc.io import write_atomic
 
 TOLERANCES = np.round(np.arange(0.05, 1.501, 0.05), 3)
 KS = list(range(1, 21))
+_KIND_ORDER = {"reconstruction": 0, "cad": 1, "dynamic": 2}
 OBJECT_BINS = [(3, 4), (5, 6), (7, 9), (10, 14), (15, 19), (20, 29), (30, 1000)]
 
 
@@ -142,20 +143,22 @@ def _table(head: Sequence[str], body: Sequence[Sequence[str]]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _kinds(rows: Sequence[dict]) -> list[str]:
+    """The map kinds present, simulated ones in their usual order, then any other ('real')."""
+    return sorted({r["map_kind"] for r in rows}, key=lambda k: (_KIND_ORDER.get(k, 9), k))
+
+
 def summary_table(rows: Sequence[dict], methods: Sequence[str]) -> str:
     """Markdown table: recall@1 / recall@10 per method (rows) and map kind (columns), ms."""
     stats = {(s["method"], s["map_kind"]): s for s in summary(rows)}
-    kinds = sorted({k for _, k in stats}, key=lambda k: ["reconstruction", "cad", "dynamic"].index(k)
-                   if k in ("reconstruction", "cad", "dynamic") else 9)  # fmt: skip
+    by_method = group_by(rows, "method")
+    kinds = _kinds(rows)
     body = []
     for method in methods:
-        cells = [method]
-        ms = []
-        for kind in kinds:
-            s = stats.get((method, kind))
-            cells.append("–" if s is None else f"{_cell(s['recall@1'])} / {_cell(s['recall@10'])}")
-            ms += [r["ms"] for r in rows if r["method"] == method and r["map_kind"] == kind]
-        body.append([*cells, _cell(float(np.median(ms)) if ms else None, "{:.0f}")])
+        cells = [f"{_cell(s['recall@1'])} / {_cell(s['recall@10'])}" if s else "–"
+                 for s in (stats.get((method, kind)) for kind in kinds)]  # fmt: skip
+        ms = [r["ms"] for r in by_method.get((method,), [])]
+        body.append([method, *cells, _cell(float(np.median(ms)) if ms else None, "{:.0f}")])
     head = ["method", *(f"{k}: top-1 / top-10" for k in kinds), "median ms / update"]
     return _table(head, body)
 
@@ -210,13 +213,22 @@ def attempt_tables(rows: Sequence[dict], methods: Sequence[str]) -> str:
     body = [[method, *(_attempt_cell(by_offset.get((method, offset), [])) for offset in offsets)]
             for method in methods]  # fmt: skip
     text = _table(["method", *map(_offset_name, offsets)], body)
-    kinds = [
-        k for k in ("reconstruction", "cad", "dynamic") if any(r["map_kind"] == k for r in sim)
-    ]
+    kinds = _kinds(sim)
     first = group_by([r for r in sim if r["offset"] == offsets[0]], "method", "map_kind")
     body = [[method, *(_cell(recall_at_k(first.get((method, k), []), 1)) for k in kinds)]
             for method in methods]  # fmt: skip
     return text + "\nFirst attempt, top-1 per map kind:\n\n" + _table(["method", *kinds], body)
+
+
+def gamma_table(ablation: Sequence[dict]) -> str:
+    """Markdown table of the γ ablation (rows labelled `semloc gamma=G`): recall at top-k, ms."""
+    body = []
+    for (method,), group in sorted(group_by(ablation, "method").items(),
+                                   key=lambda item: float(item[0][0].split("=")[1])):  # fmt: skip
+        recalls = [_cell(recall_at_k(group, k)) for k in (1, 5, 10, 20)]
+        ms = _cell(float(np.median([r["ms"] for r in group])), "{:.0f}")
+        body.append([method.split("=")[1], str(len(group)), *recalls, ms])
+    return _table(["γ", "attempts", "top-1", "top-5", "top-10", "top-20", "median ms"], body)
 
 
 def report_text(config, rows, ablation, methods, seconds: float, figures: list[str]) -> str:
@@ -239,13 +251,7 @@ def report_text(config, rows, ablation, methods, seconds: float, figures: list[s
     ]
     if ablation:
         text.append("\n## Ablation over γ (semloc, reconstruction map)\n\n")
-        text.append("| γ | attempts | top-1 | top-5 | top-10 | top-20 | median ms |\n"
-                    "|---|---|---|---|---|---|---|\n")  # fmt: skip
-        for (method,), group in sorted(group_by(ablation, "method").items(),
-                                       key=lambda item: float(item[0][0].split("=")[1])):  # fmt: skip
-            ms = float(np.median([r["ms"] for r in group]))
-            text.append(f"| {method.split('=')[1]} | {len(group)} | " + " | ".join(
-                _cell(recall_at_k(group, k)) for k in (1, 5, 10, 20)) + f" | {ms:.0f} |\n")  # fmt: skip
+        text.append(gamma_table(ablation))
     text.append("\n## Figures\n")
     captions = {
         "comparison.png": "Recall vs translation tolerance (top-10) and recall vs k "

@@ -47,11 +47,6 @@ def _sequence_task(config: BenchConfig, index: int):
     return simulate(config, index)
 
 
-def _chain_task(seq, sequence: str, start: int, kind: str, method: str, label: str,
-                gamma: float | None, top_k: int):  # fmt: skip
-    return run_attempts(seq, sequence, start, kind, method, label, gamma, top_k)
-
-
 def _real_data() -> str | None:
     """The real samples' folder when the importers' data is present (all pairs' files)."""
     from semloc.io.datasets import real_data_dir
@@ -72,21 +67,22 @@ def _order(row: dict, methods: list[str]) -> tuple:
 
 
 def plan(config: BenchConfig, n_keyframes: int) -> list[tuple]:
-    """All chains: (sequence index, start, map kind, method, label, gamma, top_k, ablation?)."""
+    """All chains: (sequence index, start, map kind, method, label, settings, ablation?)."""
     jobs = []
     for index in range(config.sequences):
         starts = start_keyframes(config, index, n_keyframes, config.starts)
         for start in starts:
             for kind in config.map_kinds:
                 for method in config.methods:
-                    jobs.append((index, start, kind, method, method, None, 10, False))
+                    jobs.append((index, start, kind, method, method, {}, False))
         ablation = start_keyframes(config, index, n_keyframes, config.ablation_starts)
         kind = "reconstruction" if "reconstruction" in config.map_kinds else config.map_kinds[0]
         for start in ablation if config.ablation_starts else []:
             for gamma in config.gammas:
-                label = f"semloc gamma={gamma:g}"
-                jobs.append((index, start, kind, "semloc", label, gamma,
-                             config.ablation_top_k, True))  # fmt: skip
+                settings = {"gamma": gamma, "top_k": config.ablation_top_k}
+                jobs.append(
+                    (index, start, kind, "semloc", f"semloc gamma={gamma:g}", settings, True)
+                )
     return jobs
 
 
@@ -128,11 +124,9 @@ def run_benchmark(
         jobs = plan(config, config.keyframes)
         futures = {}
         for job in jobs:
-            index, start, kind, method, label, gamma, top_k, ablation = job
-            future = client.submit(
-                _chain_task, sequences[index], f"seq{index}", start, kind, method, label,
-                gamma, top_k, pure=False,
-            )  # fmt: skip
+            index, start, kind, method, label, settings, ablation = job
+            future = client.submit(run_attempts, sequences[index], f"seq{index}", start, kind,
+                                   method, label, settings, pure=False)  # fmt: skip
             futures[future] = ablation
         data = _real_data() if config.real else None
         for pair in REAL_PAIRS if data else []:
