@@ -1,7 +1,7 @@
 """Localization on real object layouts (issue 6): four checks on the real samples.
 
     SEMLOC_DATA=/path/to/shared/data/real PYTHONPATH=src python benchmarks/real_layouts.py \
-        [--crops 100] [--seed 0] [--markdown TABLE.md]
+        [--crops 100] [--variants 20] [--seed 0] [--markdown TABLE.md]
 
 1. 3RScan `scene_2` (local) against `scene_1` (global); true transform: identity.
 2. Scan2CAD scene0470_00: the scan-derived map (local) against the CAD map (global); identity.
@@ -15,6 +15,11 @@ crops the local frame sits at the viewpoint, so this is the robot's position err
 the best hypothesis is right; top-10: one of the first ten is; localized: the Localizer said
 `localized` and its pose is right; wrongly localized: it said `localized` with a wrong pose.
 Results are grouped by the number of observed objects.
+
+5. The variants of `semloc.eval.variants` (ScanNet, Replica, 3RScan; clean, noisy, dynamic;
+   3 / 5 / 8 observed objects; `--variants` views per cell): top-1, top-10, claims right and
+   wrong, precision of the claims, coverage (share of views `localized` and right) and
+   same-place duplicates in the top-10.  `--crops 0` runs only these.
 The data are found by `semloc.eval.datasets.real_data_dir()`.
 """
 
@@ -33,6 +38,13 @@ from rich.progress import Progress
 
 from semloc.eval.datasets import real_data_dir
 from semloc.eval.success import is_success
+from semloc.eval.variants import (
+    OBJECT_COUNTS,
+    VARIANTS,
+    per_layout_claims,
+    run_variants,
+    variant_table,
+)
 from semloc.io.importers.replica import load_replica
 from semloc.io.importers.rscan import load_rscan
 from semloc.io.importers.scan2cad import load_scan2cad
@@ -191,9 +203,26 @@ def single_details(trials: list[Trial]) -> str:
     return "\n".join(out)
 
 
+def variants_text(data: Path, views: int, seed: int) -> str:
+    """The variant tables (check 5)."""
+    total = 3 * len(VARIANTS) * len(OBJECT_COUNTS) * views
+    progress = Progress(transient=True, console=Console(stderr=True))
+    task = progress.add_task("variants", total=total)
+    with progress:
+        outcomes = run_variants(data, views, seed, progress=lambda: progress.advance(task))
+    return (
+        f"Real-layout variants ({views} views per sample, variant and object count):\n\n"
+        + variant_table(outcomes)
+        + "\n\n"
+        + per_layout_claims(outcomes)
+        + "\n"
+    )
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--crops", type=int, default=100, help="crops per crop check")
+    parser.add_argument("--variants", type=int, default=20, help="views per variant cell")
     parser.add_argument("--seed", type=int, default=0, help="seed of the crops")
     parser.add_argument("--markdown", type=Path, help="also write the table to this file")
     args = parser.parse_args(argv)
@@ -201,8 +230,12 @@ def main(argv: list[str] | None = None) -> int:
     if data is None:
         print("real data not found: set SEMLOC_DATA (see ../shared/data/real)", file=sys.stderr)
         return 2
-    trials = all_trials(data, args.crops, args.seed)
-    text = table(trials) + "\n\n" + single_details(trials) + "\n"
+    text = ""
+    if args.crops > 0:
+        trials = all_trials(data, args.crops, args.seed)
+        text = table(trials) + "\n\n" + single_details(trials) + "\n\n"
+    if args.variants > 0:
+        text += variants_text(data, args.variants, args.seed)
     print(text)
     if args.markdown is not None:
         from semloc.io import write_atomic

@@ -27,6 +27,7 @@ class Hypothesis:
     rmse: float | None = None
     residual: float | None = None  # RMS distance (m) of aligned local centres to their partners
     method: str = ""
+    confidence: float | None = None  # calibrated probability that the pose is right
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -38,6 +39,7 @@ class Hypothesis:
             "rmse": None if self.rmse is None else round(self.rmse, 6),
             "residual": None if self.residual is None else round(self.residual, 6),
             "method": self.method,
+            "confidence": None if self.confidence is None else round(self.confidence, 6),
         }
 
 
