@@ -16,7 +16,7 @@ from pathlib import Path
 import semloc
 
 PACKAGE = Path(semloc.__file__).parent
-CORE = {"maps", "pointsets", "transforms", "association", "clustering", "pose", "results",
+CORE = {"maps", "pointsets", "transforms", "association", "clustering", "pose", "verification", "results",
         "decision", "localizer"}  # fmt: skip
 THIRD_PARTY_CORE = {"numpy", "scipy", "pydantic"}
 EXTRAS = ("open3d", "matplotlib", "dask", "distributed", "sklearn", "torch", "rerun")

@@ -1,15 +1,24 @@
-"""The decision: which candidates are distinct places, how they are ranked, and the status.
+"""The decision: which candidates are distinct places, how they are ranked, how sure, the status.
 
 Shared by the Localizer and the baselines (only their association step differs).
 
-    localized   the best hypothesis has ≥ `min_pairs` pairs, a fitness of at least
-                `min_fitness` (its points land on the map) and dominates every *rival* in
-                the terms of the ranking (more pairs or a clearly smaller residual; or a
-                score / fitness larger by the factor 1 + margin); a rival has a different
-                pose that shares less than `rival_overlap` of its pairs with the best one
-                (one swapped association is a variant of the same answer, not a rival);
-    ambiguous   hypotheses exist (≥ 2 pairs) but none dominates;
-    failed      no association set has 2 or more pairs.
+Confidence.  A hypothesis verified by the Localizer carries `features` (`FEATURES`: inlier
+pairs, share of rejected pairs, centre residual, point fitness, supporting and conflicting
+local objects outside the set; see `semloc.verification.Evidence`).  The shipped
+`ConfidenceModel` (`confidence.json` beside this module, fitted on simulated benchmark
+attempts by `benchmarks/calibrate_confidence.py`) turns them into an `evidence` logit, which
+ranks the hypotheses (`rank_by="evidence"`), and a calibrated `confidence`: the probability
+that the pose is right (15 deg / 0.5 m), from the evidence and the best rival's evidence.
+
+    localized   the best hypothesis has >= `min_pairs` pairs, a fitness of at least
+                `min_fitness`, and a confidence of at least `min_confidence` (chosen for >= 99 %
+                precision on the calibration attempts).  Hypotheses without a confidence (the
+                baselines') must instead dominate every *rival* in the terms of the ranking
+                (more pairs or a clearly smaller residual; or a score / fitness larger by the
+                factor 1 + margin); a rival has a different pose that shares less than
+                `rival_overlap` of its pairs with the best one;
+    ambiguous   hypotheses exist (>= 2 pairs) but the best is not trusted; `reason` says why;
+    failed      no association set has 2 or more pairs; `reason` says why.
 
 Hypotheses are distinct places: walking down the ranked candidates, one whose pose is within
 `distinct_rotation_deg` / `distinct_translation` of a place already listed (or whose pairs are
@@ -18,8 +27,12 @@ a subset of one) is skipped (`distinct`), so the top-k are k different answers.
 
 from __future__ import annotations
 
+import json
+import math
 from collections.abc import Callable, Collection, Iterable, Sequence
-from typing import Literal
+from functools import cache
+from pathlib import Path
+from typing import Literal, NamedTuple
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
@@ -27,8 +40,52 @@ from pydantic import BaseModel, ConfigDict, Field
 from semloc.results import Hypothesis, Status
 from semloc.transforms import pose_error
 
-RankBy = Literal["residual", "score", "fitness"]
+RankBy = Literal["evidence", "residual", "score", "fitness"]
 Place = tuple[Collection, np.ndarray | None]  # (pairs, pose) of a candidate answer
+
+
+FEATURES = ("pairs", "rejected_share", "residual", "fitness", "support", "conflict_share")
+SIGNS = {"pairs": 1, "rejected_share": -1, "residual": -1, "fitness": 1, "support": 1,
+         "conflict_share": -1}  # fmt: skip
+"""The direction in which each feature may move the evidence (the fit is constrained to it)."""
+MODEL_FILE = Path(__file__).with_name("confidence.json")
+
+
+class ConfidenceModel(BaseModel):
+    """Two logistic models: evidence = b + w . features; confidence = sigmoid(c0 + c1 *
+    evidence + c2 * rival), where rival = sigmoid(evidence of the best other place), 0 if none."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    evidence_bias: float
+    evidence_weights: dict[str, float]
+    confidence_bias: float
+    confidence_evidence: float = Field(ge=0)
+    confidence_rival: float = Field(le=0)
+    min_confidence: float = Field(ge=0, le=1, description="Operating point for >= 99 % precision.")
+    fitted_by: str = ""
+    data: str = ""
+
+    def evidence(self, features: dict[str, float]) -> float:
+        return self.evidence_bias + sum(self.evidence_weights[k] * features[k] for k in FEATURES)
+
+    def confidence(self, evidence: float, rival: float | None) -> float:
+        rival_share = 0.0 if rival is None else _sigmoid(rival)
+        return _sigmoid(
+            self.confidence_bias
+            + self.confidence_evidence * evidence
+            + self.confidence_rival * rival_share
+        )
+
+
+def _sigmoid(x: float) -> float:
+    return 1.0 / (1.0 + math.exp(-max(min(x, 50.0), -50.0)))
+
+
+@cache
+def shipped_model() -> ConfidenceModel:
+    """The confidence model shipped with the package (`confidence.json`)."""
+    return ConfidenceModel(**json.loads(MODEL_FILE.read_text()))
 
 
 class DecisionConfig(BaseModel):
@@ -43,6 +100,13 @@ class DecisionConfig(BaseModel):
         le=1,
         description="Fitness the best hypothesis needs to be 'localized': the share of its local "
         "points (without points: of its matched centres) that land on the global map; 0 = off.",
+    )
+    min_confidence: float = Field(
+        default_factory=lambda: shipped_model().min_confidence,
+        ge=0,
+        le=1,
+        description="Confidence the best hypothesis needs to be 'localized' (default: the "
+        "shipped model's operating point for >= 99 % precision on simulated attempts).",
     )
     margin: float = Field(
         0.5,
@@ -94,6 +158,7 @@ def distinct(places: Iterable[Place], top_k: int, config: DecisionConfig) -> lis
 
 _INF = float("inf")
 RANKINGS: dict[str, Callable[[Hypothesis], tuple | float]] = {
+    "evidence": lambda h: (-(h.evidence if h.evidence is not None else -_INF), -h.score),
     "score": lambda h: -h.score,
     "residual": lambda h: (-len(h.pairs), _INF if h.residual is None else h.residual, -h.score),
     "fitness": lambda h: (-(h.fitness if h.fitness is not None else -1.0), -h.score),
@@ -108,19 +173,89 @@ def rank(hypotheses: list[Hypothesis], rank_by: RankBy) -> list[Hypothesis]:
     return ordered
 
 
-def decide(hypotheses: Sequence[Hypothesis], config: DecisionConfig, rank_by: RankBy) -> Status:
-    """The status of ranked hypotheses (best first); see the module docstring."""
+def rank_places(
+    hypotheses: list[Hypothesis], rank_by: RankBy, config: DecisionConfig, model: ConfidenceModel
+) -> list[Hypothesis]:
+    """Evidence of every hypothesis with features, the order of `rank_by`, same-place
+    duplicates merged into the better-ranked one (poses after refinement), ranks 1, 2, ...
+    and confidences against the remaining rivals."""
+    for h in hypotheses:
+        if h.features is not None:
+            h.evidence = model.evidence(h.features)
+    ordered = rank(hypotheses, rank_by)
+    places = ((h.pairs, h.pose) for h in ordered)
+    kept = [ordered[i] for i in distinct(places, len(ordered), config)]
+    for position, h in enumerate(kept, 1):
+        h.rank = position
+    score_confidence(kept, model)
+    return kept
+
+
+class Decision(NamedTuple):
+    """A status and why (empty for `localized`)."""
+
+    status: Status
+    reason: str
+
+
+def score_confidence(hypotheses: Sequence[Hypothesis], model: ConfidenceModel) -> None:
+    """Set `evidence` and `confidence` of hypotheses that carry `features` (distinct places);
+    each one's rival is the best evidence among the others."""
+    scored = [h for h in hypotheses if h.features is not None]
+    for h in scored:
+        h.evidence = model.evidence(h.features)
+    for h in scored:
+        others = [o.evidence for o in scored if o is not h]
+        h.confidence = model.confidence(h.evidence, max(others) if others else None)
+
+
+def decide(hypotheses: Sequence[Hypothesis], config: DecisionConfig, rank_by: RankBy) -> Decision:
+    """The status of ranked hypotheses (best first) and its reason; see the module docstring."""
     if not hypotheses:
-        return "failed"
+        return Decision("failed", "no association set with 2 or more pairs")
     best = hypotheses[0]
-    if len(best.pairs) < config.min_pairs or best.pose is None:
-        return "ambiguous"
+    if best.pose is None:
+        return Decision("ambiguous", "the best hypothesis's pose is under-determined")
+    if len(best.pairs) < config.min_pairs:
+        return Decision(
+            "ambiguous",
+            f"too few pairs: the best hypothesis has {len(best.pairs)} agreeing pairs, "
+            f"{config.min_pairs} needed",
+        )
     if best.fitness is not None and best.fitness < config.min_fitness:
-        return "ambiguous"  # consistent centres, but the objects' points do not overlap
+        return Decision(
+            "ambiguous",
+            f"low fitness: {best.fitness:.2f} of the local points land on the map, "
+            f"{config.min_fitness:.2f} needed",
+        )
+    if best.confidence is not None:
+        return _by_confidence(best, hypotheses[1:], config)
     rivals = [h for h in hypotheses[1:] if _is_rival(best, h, config.rival_overlap)]
-    if all(_dominates(best, rival, rank_by, config) for rival in rivals):
-        return "localized"
-    return "ambiguous"
+    for rival in rivals:
+        if not _dominates(best, rival, rank_by, config):
+            return Decision(
+                "ambiguous", f"a rival place within the margin (rank {rival.rank}, {rank_by})"
+            )
+    return Decision("localized", "")
+
+
+def _by_confidence(best: Hypothesis, others: Sequence[Hypothesis], d: DecisionConfig) -> Decision:
+    assert best.confidence is not None
+    if best.confidence >= d.min_confidence:
+        return Decision("localized", "")
+    rivals = [h for h in others if h.evidence is not None and best.evidence is not None]
+    close = [h for h in rivals if h.evidence >= best.evidence - RIVAL_LOGIT_GAP]
+    if close:
+        return Decision(
+            "ambiguous",
+            f"a rival place within the margin: rank {close[0].rank} has nearly the same evidence "
+            f"(confidence {best.confidence:.2f} < {d.min_confidence:.2f})",
+        )
+    return Decision("ambiguous", f"low confidence: {best.confidence:.2f} < {d.min_confidence:.2f}")
+
+
+RIVAL_LOGIT_GAP = 2.0
+"""A rival whose evidence logit is within this of the best's is named as the reason."""
 
 
 def _dominates(best: Hypothesis, rival: Hypothesis, rank_by: RankBy, d: DecisionConfig) -> bool:

@@ -2,9 +2,12 @@
 
 `Localizer(global_map, config).update(objects)` takes the local objects that are new or were
 re-detected (same id = updated), grows the association sets, turns the best of them into
-distinct pose hypotheses and decides (`decision.py`).  Only the chosen hypotheses get the full
-pose recovery (global search, robust ICP); `update(objects, answer=False)` only grows the
-association sets, for callers that read the answer later (a replay reads only its last one).
+distinct pose hypotheses and decides (`decision.py`).  Each screened set is verified first
+(`verification.consensus`: the pairs that disagree with the pose the others agree on are
+rejected); only the chosen hypotheses get the full pose recovery (global search, robust ICP),
+after which their evidence is measured, they are ranked by it, same-place duplicates are
+merged and a calibrated confidence is attached.  `update(objects, answer=False)` only grows
+the association sets, for callers that read the answer later (a replay reads only its last one).
 
 `localize(global_map, local_map)` replays a local map by its `seen` keyframes.
 """
@@ -13,6 +16,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Iterable
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -20,17 +24,19 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from semloc.association import AssociationConfig, CandidateIndex, Describer
 from semloc.clustering import AssociationSet, ClusteringConfig, HierarchicalClustering
-from semloc.decision import DecisionConfig, RankBy, decide, distinct, rank
+from semloc.decision import DecisionConfig, RankBy, decide, distinct, rank_places, shipped_model
 from semloc.maps import MapError, ObjectMap, SemanticObject
 from semloc.pointsets import voxel_downsample
-from semloc.pose import PoseConfig, PoseEstimate, align_positions_batch, estimate_pose
+from semloc.pose import PoseConfig, PoseEstimate, estimate_pose
 from semloc.results import Hypothesis, Result, Status, Step
-from semloc.transforms import centre_residual, centre_residuals
+from semloc.transforms import centre_residual
+from semloc.verification import Evidence, MapSupport, VerificationConfig, consensus
 
 _COMPONENTS: dict[str, type[BaseModel]] = {
     "association": AssociationConfig,
     "clustering": ClusteringConfig,
     "pose": PoseConfig,
+    "verification": VerificationConfig,
     "decision": DecisionConfig,
 }
 
@@ -44,6 +50,7 @@ class LocalizerConfig(BaseModel):
     association: AssociationConfig = Field(default_factory=AssociationConfig)
     clustering: ClusteringConfig = Field(default_factory=ClusteringConfig)
     pose: PoseConfig = Field(default_factory=PoseConfig)
+    verification: VerificationConfig = Field(default_factory=VerificationConfig)
     decision: DecisionConfig = Field(default_factory=DecisionConfig)
     top_k: int = Field(10, ge=1, description="How many distinct hypotheses are reported.")
     screened_sets: int = Field(
@@ -56,10 +63,11 @@ class LocalizerConfig(BaseModel):
         "form or search, with fitness).",
     )
     rank_by: RankBy = Field(
-        "residual",
-        description="Order of the reported hypotheses: 'residual' (most pairs, then smallest "
-        "residual of the aligned object centres), 'score' (the paper's clustering score) or "
-        "'fitness' (point-set fitness of the recovered pose).",
+        "evidence",
+        description="Order of the reported hypotheses: 'evidence' (the confidence model's "
+        "evidence: agreeing pairs, fitness, residual, supporting and conflicting objects), "
+        "'residual' (most pairs, then smallest residual of the aligned object centres), "
+        "'score' (the paper's clustering score) or 'fitness' (point-set fitness of the pose).",
     )
 
     @model_validator(mode="before")
@@ -121,6 +129,7 @@ class Localizer:
         )
         self._local: dict[str, SemanticObject] = {}
         self._local_index: dict[str, int] = {}
+        self._candidates_of: dict[int, np.ndarray] = {}  # local index -> global indices
         self._steps: list[Step] = []
         self._timing = {"association": 0.0, "clustering": 0.0, "pose": 0.0, "total": 0.0}
 
@@ -158,10 +167,13 @@ class Localizer:
             )
         tock = time.perf_counter()
         status: Status | None = None
+        reason = ""
         hypotheses: list[Hypothesis] = []
         if answer:
             hypotheses = self._hypotheses()
-            status = decide(hypotheses, self.config.decision, self.config.rank_by)
+            status, reason = decide(hypotheses, self.config.decision, self.config.rank_by)
+            if not hypotheses:
+                reason = self._why_no_sets()
             scores = [h.score for h in hypotheses]
         else:
             scores = [s.score for s in self._clustering.top(self.config.top_k, min_size=2)]
@@ -179,7 +191,18 @@ class Localizer:
         )
         if status is None:
             return None
-        return Result.of(status, hypotheses, self._steps, self._timing)
+        return Result.of(status, hypotheses, self._steps, self._timing, reason)
+
+    def _why_no_sets(self) -> str:
+        """Why no association set has 2 pairs: too few objects, or too few with candidates."""
+        matched = sum(len(c) > 0 for c in self._candidates_of.values())
+        if len(self._local) < 2:
+            return f"too few local objects: {len(self._local)} seen, 2 needed"
+        if matched == 0:
+            return "no candidates for these labels: no local object has a map object it could be"
+        if matched == 1:
+            return "only one local object has candidates in the map (2 needed)"
+        return "no two local objects have consistent candidates (no set of 2 or more pairs)"
 
     def _add_timing(self, association: float, clustering: float, pose: float) -> None:
         for key, seconds in (
@@ -200,55 +223,56 @@ class Localizer:
             self._local[obj.id] = obj
             self._local_clouds[obj.id] = _cloud(obj.points, self.config.pose)
             detections[index] = self._candidates.candidates(obj)
+            self._candidates_of[index] = detections[index]
         return detections
 
     # Hypotheses -------------------------------------------------------------------------
     def _hypotheses(self) -> list[Hypothesis]:
-        """Distinct places, best first: screen many sets by closed form, refine the top-k."""
+        """Distinct places, best first: verify many sets by closed-form consensus, recover the
+        poses of the top-k, measure their evidence, rank, merge duplicates, attach confidence."""
         cfg = self.config
-        by_size = cfg.rank_by == "residual"
+        by_size = cfg.rank_by in ("residual", "evidence")
         sets = self._clustering.top(cfg.screened_sets, min_size=2, largest_first=by_size)
-        screened = list(zip(sets, *self._closed_forms(sets)))
-        if by_size:
-            screened.sort(key=lambda item: (-len(item[0]), item[2], -item[0].score))
-        places = [(s.pairs, pose) for s, pose, _ in screened]
+        local_xyz = np.array([o.position for o in self._local.values()]).reshape(-1, 3)
+        support = MapSupport(
+            [self.global_map.positions[self._candidates_of[j]] for j in range(len(local_xyz))],
+            cfg.verification,
+        )
+        screened = [self._verified(s, local_xyz, support) for s in sets]
+        if cfg.rank_by == "evidence":
+            screened.sort(key=lambda c: (-(len(c.pairs) + c.support), c.residual, -c.aset.score))
+        elif cfg.rank_by == "residual":
+            screened.sort(key=lambda c: (-len(c.pairs), c.residual, -c.aset.score))
+        places = [(c.pairs, c.pose) for c in screened]
         chosen = [screened[i] for i in distinct(places, cfg.top_k, cfg.decision)]
         hypotheses = [
-            self._hypothesis(rank, s, residual) for rank, (s, _, residual) in enumerate(chosen, 1)
+            self._hypothesis(rank, c, local_xyz, support) for rank, c in enumerate(chosen, 1)
         ]
-        return rank(hypotheses, cfg.rank_by)
+        return rank_places(hypotheses, cfg.rank_by, cfg.decision, shipped_model())
 
-    def _matched(self, aset: AssociationSet) -> tuple[list[SemanticObject], list[SemanticObject]]:
+    def _verified(
+        self, aset: AssociationSet, local_xyz: np.ndarray, support: MapSupport
+    ) -> _Verified:
+        """The set's pairs split by the consensus pose, and that pose's evidence on the map."""
+        pairs = np.array(aset.pairs).reshape(-1, 2)  # global index, local index
+        found = consensus(
+            local_xyz[pairs[:, 1]], self.global_map.positions[pairs[:, 0]], self.local_up,
+            self.global_map.up, self.config.verification,
+        )  # fmt: skip
+        inliers = [tuple(p) for p in pairs[found.inliers].tolist()]
+        rejected = [tuple(p) for p in pairs[~found.inliers].tolist()]
+        counts = (0, 0)
+        if found.pose is not None:
+            counts = support.counts(found.pose, local_xyz, pairs[found.inliers, 1])
+        return _Verified(aset, inliers, rejected, found.pose, found.residual, *counts)
+
+    def _hypothesis(
+        self, rank: int, verified: _Verified, local_xyz: np.ndarray, support: MapSupport
+    ) -> Hypothesis:
+        """Full pose recovery of a verified set's inlier pairs, and its evidence."""
         local_objects = list(self._local.values())
-        return (
-            [self.global_map[g] for g, _ in aset.pairs],
-            [local_objects[l] for _, l in aset.pairs],
-        )
-
-    def _closed_forms(
-        self, sets: list[AssociationSet]
-    ) -> tuple[list[np.ndarray | None], list[float]]:
-        """Closed-form pose of each set and the RMS residual of its aligned centres (None and
-        inf where under-determined); sets of one size are aligned in one batch."""
-        poses: list[np.ndarray | None] = [None] * len(sets)
-        residuals = [_INF] * len(sets)
-        local_xyz = np.array([o.position for o in self._local.values()]).reshape(-1, 3)
-        global_xyz = self.global_map.positions
-        sizes = np.array([len(s) for s in sets])
-        for size in np.unique(sizes):
-            rows = np.flatnonzero(sizes == size)
-            pairs = np.array([sets[i].pairs for i in rows])  # (S, size, 2): global, local
-            l_xyz, g_xyz = local_xyz[pairs[..., 1]], global_xyz[pairs[..., 0]]
-            T, determined = align_positions_batch(l_xyz, g_xyz, self.local_up, self.global_map.up)
-            rms = centre_residuals(T, l_xyz, g_xyz)
-            for i, pose, ok, r in zip(rows, T, determined, rms):
-                if ok:
-                    poses[i], residuals[i] = pose, float(r)
-        return poses, residuals
-
-    def _hypothesis(self, rank: int, aset: AssociationSet, residual: float) -> Hypothesis:
-        """Full pose recovery of one set; `residual` is its closed-form centre residual."""
-        globals_, locals_ = self._matched(aset)
+        globals_ = [self.global_map[g] for g, _ in verified.pairs]
+        locals_ = [local_objects[l] for _, l in verified.pairs]
         l_xyz = np.array([o.position for o in locals_])
         g_xyz = np.array([o.position for o in globals_])
         estimate: PoseEstimate | None = estimate_pose(
@@ -261,17 +285,28 @@ class Localizer:
             self.config.pose if rank <= self.config.refine_top else self._pose_unrefined,
         )
         pose = None if estimate is None else estimate.T
-        if pose is not None and not np.isfinite(residual):  # pose found by the search
-            residual = centre_residual(pose, l_xyz, g_xyz)
+        residual, features = verified.residual, None
+        if estimate is not None:
+            residual = centre_residual(estimate.T, l_xyz, g_xyz)
+            found, conflicts = support.counts(
+                estimate.T, local_xyz, np.array([l for _, l in verified.pairs])
+            )
+            features = Evidence(
+                len(verified.pairs), len(verified.rejected), residual, estimate.fitness,
+                found, conflicts, len(local_xyz),
+            ).features()  # fmt: skip
+        ids = self.global_map.ids
         return Hypothesis(
             rank=rank,
-            score=aset.score,
+            score=verified.aset.score,
             pairs=[(g.id, l.id) for g, l in zip(globals_, locals_)],
             pose=pose,
             fitness=None if estimate is None else estimate.fitness,
             rmse=None if estimate is None else estimate.rmse,
             residual=None if pose is None else residual,
             method="" if estimate is None else estimate.method,
+            features=features,
+            rejected=[(str(ids[g]), local_objects[l].id) for g, l in verified.rejected],
         )
 
     def _global_cloud(self, index: int) -> np.ndarray | None:
@@ -281,7 +316,18 @@ class Localizer:
         return self._global_clouds[index]
 
 
-_INF = float("inf")
+@dataclass
+class _Verified:
+    """A screened association set after the consensus: inlier and rejected (global index,
+    local index) pairs, the inliers' closed-form pose and residual, and its map evidence."""
+
+    aset: AssociationSet
+    pairs: list[tuple[int, int]]
+    rejected: list[tuple[int, int]]
+    pose: np.ndarray | None
+    residual: float
+    support: int
+    conflicts: int
 
 
 def _cloud(points: np.ndarray | None, pose: PoseConfig) -> np.ndarray | None:

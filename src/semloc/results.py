@@ -28,6 +28,9 @@ class Hypothesis:
     residual: float | None = None  # RMS distance (m) of aligned local centres to their partners
     method: str = ""
     confidence: float | None = None  # calibrated probability that the pose is right
+    evidence: float | None = None  # the confidence model's evidence logit (ranks hypotheses)
+    features: dict[str, float] | None = None  # its inputs (semloc.decision.FEATURES)
+    rejected: list[tuple[str, str]] = field(default_factory=list)  # pairs that disagreed
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -40,6 +43,11 @@ class Hypothesis:
             "residual": None if self.residual is None else round(self.residual, 6),
             "method": self.method,
             "confidence": None if self.confidence is None else round(self.confidence, 6),
+            "evidence": None if self.evidence is None else round(self.evidence, 6),
+            "features": None
+            if self.features is None
+            else {k: round(v, 6) for k, v in self.features.items()},
+            "rejected": [{"global": g, "local": l} for g, l in self.rejected],
         }
 
 
@@ -71,21 +79,30 @@ class Step:
 
 @dataclass
 class Result:
-    """The answer after an update: status, best pose, ranked hypotheses and per-step records."""
+    """The answer after an update: status, best pose, ranked hypotheses and per-step records.
+
+    `reason` says why an answer is `ambiguous` or `failed` (empty when `localized`); the pose
+    of an `ambiguous` result is the best candidate's, not a trusted answer."""
 
     status: Status
     pose: np.ndarray | None
     hypotheses: list[Hypothesis]
     steps: list[Step] = field(default_factory=list)
     timing_ms: dict[str, float] = field(default_factory=dict)
+    reason: str = ""
 
     @classmethod
     def of(
-        cls, status: Status, hypotheses: list[Hypothesis], steps: list[Step], timing_ms: dict
+        cls,
+        status: Status,
+        hypotheses: list[Hypothesis],
+        steps: list[Step],
+        timing_ms: dict,
+        reason: str = "",
     ) -> Result:
         """The result of an update: the pose is the best hypothesis's unless `failed`."""
         pose = hypotheses[0].pose if hypotheses and status != "failed" else None
-        return cls(status, pose, hypotheses, list(steps), dict(timing_ms))
+        return cls(status, pose, hypotheses, list(steps), dict(timing_ms), reason)
 
     @property
     def best(self) -> Hypothesis | None:
@@ -94,6 +111,7 @@ class Result:
     def to_dict(self) -> dict[str, Any]:
         return {
             "status": self.status,
+            "reason": self.reason,
             "pose": None if self.pose is None else np.round(self.pose, 9).tolist(),
             "hypotheses": [h.to_dict() for h in self.hypotheses],
             "steps": [s.to_dict() for s in self.steps],

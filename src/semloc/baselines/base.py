@@ -129,7 +129,7 @@ class ObjectBaseline:
         groups = self._groups(local) if len(local) >= 1 else []
         tick = time.perf_counter()
         hypotheses = self._hypotheses(groups, local)
-        status = decide(hypotheses, self.config.decision, "score")
+        status, reason = decide(hypotheses, self.config.decision, "score")
         end = time.perf_counter()
         for key, value in (("association", tick - start), ("pose", end - tick)):
             self._timing[key] += value * 1e3
@@ -138,7 +138,7 @@ class ObjectBaseline:
             Step(len(self._steps), len(local), len(groups),
                  [h.score for h in hypotheses], (end - start) * 1e3, status)
         )  # fmt: skip
-        return Result.of(status, hypotheses, self._steps, self._timing)
+        return Result.of(status, hypotheses, self._steps, self._timing, reason)
 
     # To implement -------------------------------------------------------------------------
     def _groups(self, local: list[SemanticObject]) -> list[Group]:
