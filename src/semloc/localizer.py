@@ -30,7 +30,13 @@ from semloc.pointsets import voxel_downsample
 from semloc.pose import PoseConfig, PoseEstimate, estimate_pose
 from semloc.results import Hypothesis, Result, Status, Step
 from semloc.transforms import centre_residual
-from semloc.verification import Evidence, MapSupport, VerificationConfig, consensus
+from semloc.verification import (
+    Evidence,
+    MapSupport,
+    VerificationConfig,
+    consensus,
+    least_squares,
+)
 
 _COMPONENTS: dict[str, type[BaseModel]] = {
     "association": AssociationConfig,
@@ -235,7 +241,8 @@ class Localizer:
         sets = self._clustering.top(cfg.screened_sets, min_size=2, largest_first=by_size)
         local_xyz = np.array([o.position for o in self._local.values()]).reshape(-1, 3)
         support = MapSupport(
-            [self.global_map.positions[self._candidates_of[j]] for j in range(len(local_xyz))],
+            [self._candidates_of[j] for j in range(len(local_xyz))],
+            self.global_map.positions,
             cfg.verification,
         )
         screened = [self._verified(s, local_xyz, support) for s in sets]
@@ -259,12 +266,19 @@ class Localizer:
             local_xyz[pairs[:, 1]], self.global_map.positions[pairs[:, 0]], self.local_up,
             self.global_map.up, self.config.verification,
         )  # fmt: skip
-        inliers = [tuple(p) for p in pairs[found.inliers].tolist()]
-        rejected = [tuple(p) for p in pairs[~found.inliers].tolist()]
-        counts = (0, 0)
-        if found.pose is not None:
-            counts = support.counts(found.pose, local_xyz, pairs[found.inliers, 1])
-        return _Verified(aset, inliers, rejected, found.pose, found.residual, *counts)
+        inliers = [(int(g), int(l)) for g, l in pairs[found.inliers]]
+        rejected = [(int(g), int(l)) for g, l in pairs[~found.inliers]]
+        if found.pose is None:
+            return _Verified(aset, inliers, rejected, None, found.residual, 0, 0)
+        grown, added, conflicts = support.extend(found.pose, local_xyz, inliers)
+        pose, residual = found.pose, found.residual
+        if added:
+            both = np.array(grown)
+            l_xyz, g_xyz = local_xyz[both[:, 1]], self.global_map.positions[both[:, 0]]
+            refit, error = least_squares(l_xyz, g_xyz, self.local_up, self.global_map.up)
+            if refit is not None:
+                pose, residual = refit, error
+        return _Verified(aset, grown, rejected, pose, residual, added, conflicts)
 
     def _hypothesis(
         self, rank: int, verified: _Verified, local_xyz: np.ndarray, support: MapSupport
@@ -288,12 +302,9 @@ class Localizer:
         residual, features = verified.residual, None
         if estimate is not None:
             residual = centre_residual(estimate.T, l_xyz, g_xyz)
-            found, conflicts = support.counts(
-                estimate.T, local_xyz, np.array([l for _, l in verified.pairs])
-            )
             features = Evidence(
                 len(verified.pairs), len(verified.rejected), residual, estimate.fitness,
-                found, conflicts, len(local_xyz),
+                verified.support, verified.conflicts, len(local_xyz),
             ).features()  # fmt: skip
         ids = self.global_map.ids
         return Hypothesis(

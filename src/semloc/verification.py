@@ -7,11 +7,11 @@ pairs (2 pairs in 4-DoF, 3 in 6-DoF; at most `max_samples` of them, seeded), kee
 that the most pairs agree with (ties: the smallest truncated squared error, MSAC), refits on
 those inliers and reports which pairs they are.
 
-`Evidence` is what a hypothesis has for it after pose recovery: inlier pairs, rejected pairs,
-the residual of its centres, point fitness, and what its pose says about the local objects
-outside the set: `support` (aligned, they land near a map object they could be) and
-`conflicts` (no map object of their kind anywhere near).  `MapSupport` computes the latter
-for many poses at once.  Pure numpy.
+`MapSupport` asks what the pose says about the local objects outside the set: those that land
+near a map object they could be join the hypothesis (guided matching: `support`), those with
+no map object of their kind anywhere near are `conflicts`.  `Evidence` is what a hypothesis
+has for it after pose recovery: agreeing pairs, rejected pairs, the residual of its centres,
+point fitness, support and conflicts.  Pure numpy.
 """
 
 from __future__ import annotations
@@ -101,6 +101,15 @@ def consensus(
     return Consensus(inliers, pose, _rms(pose, local_xyz, global_xyz, inliers))
 
 
+def least_squares(
+    local_xyz: np.ndarray, global_xyz: np.ndarray, up_local, up_global
+) -> tuple[np.ndarray | None, float]:
+    """The closed-form pose of all pairs and their RMS residual (None, inf if undetermined)."""
+    everything = np.ones(len(local_xyz), dtype=bool)
+    pose = _fit(local_xyz, global_xyz, everything, up_local, up_global)
+    return pose, _rms(pose, local_xyz, global_xyz, everything)
+
+
 def _samples(m: int, size: int, limit: int, seed: int) -> np.ndarray:
     """Index tuples of all `size`-subsets of range(m), or `limit` of them drawn with `seed`."""
     every = np.array(list(combinations(range(m), size)))
@@ -133,31 +142,46 @@ def _rms(pose, local_xyz, global_xyz, mask) -> float:
 class MapSupport:
     """Where the local objects land under a pose, against the map objects each could be.
 
-    `candidates[j]` are the global positions local object j could match (its label, its
-    descriptor gate); `counts(poses, matched)` says, per pose, how many of the local objects
-    not in `matched` land within `support_radius` of a candidate (support) and how many have
-    none within `conflict_radius` (conflicts)."""
+    `candidates[j]` are the global indices local object j could match (its label, its
+    descriptor gate), `global_xyz` the map's positions.  `extend(pose, local_xyz, pairs)` adds
+    to `pairs` the local objects outside them that land within `support_radius` of a free
+    candidate (nearest first, one-to-one: guided matching) and counts the conflicts: local
+    objects left with no candidate within `conflict_radius`."""
 
-    def __init__(self, candidates: list[np.ndarray], config: VerificationConfig) -> None:
+    def __init__(
+        self, candidates: list[np.ndarray], global_xyz: np.ndarray, config: VerificationConfig
+    ) -> None:
         width = max([len(c) for c in candidates] + [1])
-        self._positions = np.full((len(candidates), width, 3), np.nan)
-        for j, positions in enumerate(candidates):
-            self._positions[j, : len(positions)] = positions
+        self._index = np.full((len(candidates), width), -1)
+        for j, indices in enumerate(candidates):
+            self._index[j, : len(indices)] = indices
+        self._positions = np.full((*self._index.shape, 3), np.nan)
+        known = self._index >= 0
+        self._positions[known] = np.asarray(global_xyz, float).reshape(-1, 3)[self._index[known]]
         self.config = config
 
-    def counts(
-        self, pose: np.ndarray, local_xyz: np.ndarray, matched: np.ndarray
-    ) -> tuple[int, int]:
-        """(support, conflicts) of the local objects whose index is not in `matched`."""
-        free = np.setdiff1d(np.arange(len(local_xyz)), matched)
+    def extend(
+        self, pose: np.ndarray, local_xyz: np.ndarray, pairs: list[tuple[int, int]]
+    ) -> tuple[list[tuple[int, int]], int, int]:
+        """(pairs with the guided matches added, how many were added, conflicts)."""
+        used_local = {l for _, l in pairs}
+        used_global = {g for g, _ in pairs}
+        free = np.array([j for j in range(len(local_xyz)) if j not in used_local], dtype=int)
         if len(free) == 0:
-            return 0, 0
+            return list(pairs), 0, 0
         aligned = local_xyz[free] @ pose[:3, :3].T + pose[:3, 3]
         gaps = np.linalg.norm(self._positions[free] - aligned[:, None], axis=2)
-        nearest = np.min(np.where(np.isnan(gaps), np.inf, gaps), axis=1)
-        support = int(np.sum(nearest < self.config.support_radius))
-        conflicts = int(np.sum(nearest >= self.config.conflict_radius))
-        return support, conflicts
+        gaps = np.where(np.isnan(gaps), np.inf, gaps)
+        conflicts = int(np.sum(gaps.min(axis=1) >= self.config.conflict_radius))
+        added = list(pairs)
+        rows, cols = np.nonzero(gaps < self.config.support_radius)
+        for r, c in sorted(zip(rows, cols), key=lambda rc: gaps[rc]):
+            g, l = int(self._index[free[r], c]), int(free[r])
+            if g not in used_global and l not in used_local:
+                added.append((g, l))
+                used_global.add(g)
+                used_local.add(l)
+        return sorted(added, key=lambda p: p[1]), len(added) - len(pairs), conflicts
 
 
 @dataclass(frozen=True)
@@ -168,8 +192,8 @@ class Evidence:
     rejected: int  # pairs of the set that disagreed with the pose
     residual: float  # RMS distance (m) of the aligned inlier centres
     fitness: float  # point fitness (or centre fitness without points), 0..1
-    support: int  # unmatched local objects landing near a map object they could be
-    conflicts: int  # unmatched local objects with no such map object anywhere near
+    support: int  # pairs found by the pose (guided matching), not by the clustering
+    conflicts: int  # local objects left with no map object they could be anywhere near
     n_local: int  # local objects in all
 
     def features(self) -> dict[str, float]:
