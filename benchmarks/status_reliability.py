@@ -1,14 +1,17 @@
 """Can a user trust `localized`?  How often each method's status claim is right, per map kind.
 
     python benchmarks/status_reliability.py [--methods semloc,clipper] [--sequences 6]
-        [--starts 8] [--workers 2] [--min-fitness 0.3]
+        [--starts 8] [--workers 2] [--min-fitness 0.3] [--real-variants 20]
 
 The attempts of `semloc bench` (same sequences, starts, offsets and seed), counted by the
 method's status: `localized` and right (the best pose within 15 deg / 0.5 m), `localized` but
 wrong (a false claim: the costly case for a robot), `ambiguous` (the user gets ranked
 hypotheses and should wait for more objects) and `failed`.  `--min-fitness` sets semloc's
 floor on the best pose's point fitness for `localized` (default: the library's, 0.3; 0 shows
-how many false claims the floor removes).
+how many false claims the floor removes).  `coverage` is the share of attempts `localized` and
+right.  With `--real-variants N` (and the real data: `SEMLOC_DATA`), semloc's claims on the
+real-layout variants of `semloc.eval.variants` follow (N views per sample, variant and object
+count: clean / noisy / dynamic, 3 / 5 / 8 objects).
 """
 
 from __future__ import annotations
@@ -21,7 +24,9 @@ from functools import partial
 from rich.console import Console
 from rich.table import Table
 
+from semloc.eval.datasets import real_data_dir
 from semloc.eval.protocol import Attempt, BenchConfig, run_attempts, simulate, start_keyframes
+from semloc.eval.variants import per_layout_claims, run_variants, variant_table
 
 
 def sequence_rows(index: int, config: BenchConfig, settings: dict) -> list[dict]:
@@ -50,6 +55,7 @@ def main() -> None:
     parser.add_argument("--starts", type=int, default=8)
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--min-fitness", type=float, default=None)
+    parser.add_argument("--real-variants", type=int, default=0, help="views per variant cell")
     args = parser.parse_args()
     config = BenchConfig(
         sequences=args.sequences, starts=args.starts, methods=args.methods.split(",")
@@ -61,16 +67,22 @@ def main() -> None:
     counts = Counter((r["method"], r["map_kind"], outcome(r)) for r in rows)
     table = Table(title="status of each attempt (15 deg / 0.5 m)")
     for column in ("method", "map", "attempts", "localized, right", "localized, wrong",
-                   "ambiguous", "failed", "claims right"):  # fmt: skip
+                   "ambiguous", "failed", "claims right", "coverage"):  # fmt: skip
         table.add_column(column, justify="right")
     for method in config.methods:
         for kind in config.map_kinds:
             n = {o: counts[(method, kind, o)] for o in ("right", "wrong", "ambiguous", "failed")}
             total, claims = sum(n.values()), n["right"] + n["wrong"]
-            share = f"{n['right'] / claims:.0%}" if claims else "-"
+            share = f"{n['right'] / claims:.1%}" if claims else "-"
+            coverage = f"{n['right'] / total:.1%}" if total else "-"
             table.add_row(method, kind, str(total), str(n["right"]), str(n["wrong"]),
-                          str(n["ambiguous"]), str(n["failed"]), share)  # fmt: skip
+                          str(n["ambiguous"]), str(n["failed"]), share, coverage)  # fmt: skip
     Console(width=120).print(table)
+    data = real_data_dir()
+    if args.real_variants > 0 and data is not None:
+        outcomes = run_variants(data, args.real_variants, settings=settings)
+        print("\nsemloc on the real-layout variants:\n")
+        print(variant_table(outcomes) + "\n\n" + per_layout_claims(outcomes))
 
 
 if __name__ == "__main__":

@@ -35,7 +35,6 @@ from semloc.verification import (
     MapSupport,
     VerificationConfig,
     consensus,
-    least_squares,
 )
 
 _COMPONENTS: dict[str, type[BaseModel]] = {
@@ -272,12 +271,17 @@ class Localizer:
             return _Verified(aset, inliers, rejected, None, found.residual, 0, 0)
         grown, added, conflicts = support.extend(found.pose, local_xyz, inliers)
         pose, residual = found.pose, found.residual
-        if added:
+        if added:  # the guided matches are verified with the set's pairs
             both = np.array(grown)
-            l_xyz, g_xyz = local_xyz[both[:, 1]], self.global_map.positions[both[:, 0]]
-            refit, error = least_squares(l_xyz, g_xyz, self.local_up, self.global_map.up)
-            if refit is not None:
-                pose, residual = refit, error
+            again = consensus(
+                local_xyz[both[:, 1]], self.global_map.positions[both[:, 0]], self.local_up,
+                self.global_map.up, self.config.verification,
+            )  # fmt: skip
+            if again.pose is not None:
+                grown = [(int(g), int(l)) for g, l in both[again.inliers]]
+                rejected += [(int(g), int(l)) for g, l in both[~again.inliers]]
+                pose, residual = again.pose, again.residual
+                added = sum(p not in set(inliers) for p in grown)
         return _Verified(aset, grown, rejected, pose, residual, added, conflicts)
 
     def _hypothesis(

@@ -111,7 +111,6 @@ class Result:
     def to_dict(self) -> dict[str, Any]:
         return {
             "status": self.status,
-            "reason": self.reason,
             "pose": None if self.pose is None else np.round(self.pose, 9).tolist(),
             "hypotheses": [h.to_dict() for h in self.hypotheses],
             "steps": [s.to_dict() for s in self.steps],

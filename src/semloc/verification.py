@@ -38,10 +38,6 @@ class VerificationConfig(BaseModel):
     max_samples: int = Field(
         200, ge=1, description="Minimal samples tried per set (all of them when fewer)."
     )
-    support_radius: float = Field(
-        0.5, gt=0, description="An unmatched local object supports a pose when it lands this "
-        "close (m) to a map object it could be.",
-    )  # fmt: skip
     conflict_radius: float = Field(
         1.5, gt=0, description="An unmatched local object contradicts a pose when no map object "
         "it could be lies within this distance (m) of where it lands.",
@@ -82,23 +78,45 @@ def consensus(
     if not determined.any():
         return Consensus(everything, None, float("inf"))
     poses = poses[determined]
-    errors = _errors(poses, local_xyz, global_xyz)  # (S, m)
     tol = config.inlier_tolerance
-    count = (errors < tol).sum(axis=1)
-    cost = np.minimum(errors, tol) ** 2
-    best = int(np.lexsort((cost.sum(axis=1), -count))[0])
-    inliers, pose = errors[best] < tol, poses[best]
-    for _ in range(2):  # refit on the inliers; the inlier set may settle once more
+    errors = _errors(poses, local_xyz, global_xyz)  # (S, m)
+    order = np.lexsort((_cost(errors, tol), -(errors < tol).sum(axis=1)))
+    best: tuple[int, float, np.ndarray, np.ndarray] | None = None
+    for start in order[:LOCAL_OPTIMISATIONS]:
+        inliers, pose = _settle(errors[start] < tol, poses[start], local_xyz, global_xyz,
+                                up_local, up_global, tol)  # fmt: skip
+        error = _errors(pose[None], local_xyz, global_xyz)
+        key = (int(inliers.sum()), -float(_cost(error, tol)[0]))
+        if best is None or key > best[:2]:
+            best = (*key, inliers, pose)
+    assert best is not None
+    _, _, inliers, pose = best
+    return Consensus(inliers, pose, _rms(pose, local_xyz, global_xyz, inliers))
+
+
+LOCAL_OPTIMISATIONS = 5
+"""The best minimal samples whose inliers are refit until they settle (the best result wins)."""
+
+
+def _cost(errors: np.ndarray, tol: float) -> np.ndarray:
+    """MSAC cost per pose: squared errors truncated at the tolerance, summed over pairs."""
+    return np.sum(np.minimum(errors, tol) ** 2, axis=-1)
+
+
+def _settle(inliers, pose, local_xyz, global_xyz, up_local, up_global, tol):
+    """Refit on the inliers and recompute them, until they no longer change (3 rounds)."""
+    for _ in range(3):
         refit = _fit(local_xyz, global_xyz, inliers, up_local, up_global)
         if refit is None:
             break
         again = _errors(refit[None], local_xyz, global_xyz)[0] < tol
-        if again.sum() < inliers.sum():
+        if again.sum() < 2:
             break
-        pose, settled, inliers = refit, np.array_equal(again, inliers), again
+        settled = np.array_equal(again, inliers)
+        pose, inliers = refit, again
         if settled:
             break
-    return Consensus(inliers, pose, _rms(pose, local_xyz, global_xyz, inliers))
+    return inliers, pose
 
 
 def least_squares(
@@ -144,7 +162,7 @@ class MapSupport:
 
     `candidates[j]` are the global indices local object j could match (its label, its
     descriptor gate), `global_xyz` the map's positions.  `extend(pose, local_xyz, pairs)` adds
-    to `pairs` the local objects outside them that land within `support_radius` of a free
+    to `pairs` the local objects outside them that land within `inlier_tolerance` of a free
     candidate (nearest first, one-to-one: guided matching) and counts the conflicts: local
     objects left with no candidate within `conflict_radius`."""
 
@@ -174,7 +192,7 @@ class MapSupport:
         gaps = np.where(np.isnan(gaps), np.inf, gaps)
         conflicts = int(np.sum(gaps.min(axis=1) >= self.config.conflict_radius))
         added = list(pairs)
-        rows, cols = np.nonzero(gaps < self.config.support_radius)
+        rows, cols = np.nonzero(gaps < self.config.inlier_tolerance)
         for r, c in sorted(zip(rows, cols), key=lambda rc: gaps[rc]):
             g, l = int(self._index[free[r], c]), int(free[r])
             if g not in used_global and l not in used_local:

@@ -8,10 +8,14 @@ import sys
 
 import numpy as np
 import pytest
+from rich.console import Console
 
 import semloc
 from semloc.cli import main
+from semloc.cli.render import print_result
+from semloc.results import Hypothesis, Result
 from semloc.sim.layouts import layout, observe
+from semloc.transforms import yaw_pose
 
 
 @pytest.fixture(scope="module")
@@ -167,3 +171,15 @@ def test_descriptor_gate_from_the_command_line(tmp_path, capsys):
     assert json.loads(capsys.readouterr().out)["status"] == "failed"
     assert main([*args, "--descriptor", "shape-context"]) == 2
     assert "shape-context" in capsys.readouterr().err
+
+
+def test_an_ambiguous_pose_is_printed_with_a_warning():
+    h = Hypothesis(1, 1.0, [("a", "1"), ("b", "2")], yaw_pose(0.2), fitness=1.0, confidence=0.3)
+    out = Console(record=True, width=120)
+    print_result(Result.of("ambiguous", [h], [], {}, "too few pairs: 2 agreeing pairs"), out)
+    text = out.export_text()
+    assert "reason: too few pairs" in text and "warning: not localized" in text
+    assert "candidate pose T_global_local" in text and "confidence: 0.300" in text
+    out = Console(record=True, width=120)
+    print_result(Result.of("localized", [h], [], {}), out)
+    assert "warning" not in out.export_text() and "reason" not in out.export_text()

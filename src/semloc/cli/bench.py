@@ -10,7 +10,7 @@ import typer
 from semloc.baselines import DEFAULT_METHODS, VARIANTS
 from semloc.cli.app import app, console, fail
 from semloc.eval.protocol import BenchConfig
-from semloc.eval.report import summary_table
+from semloc.eval.report import claims_table, summary_table
 from semloc.eval.runner import run_benchmark
 
 
@@ -78,4 +78,5 @@ def bench(
     except ValueError as exc:
         fail(str(exc))
     console.print(summary_table(output.rows, config.methods), soft_wrap=True)
+    console.print(claims_table(output.rows, config.methods), soft_wrap=True)
     console.print(f"{len(output.rows)} attempts in {output.seconds:.0f} s; wrote {out}/report.md")

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 from rich.console import Console
+from rich.markup import escape
 from rich.table import Table
 
 from semloc.results import Result
@@ -15,13 +16,24 @@ STATUS_STYLE = {"localized": "green", "ambiguous": "yellow", "failed": "red"}
 def print_result(result: Result, out: Console) -> None:
     """Status line, pose, top hypotheses and timing of a Result."""
     out.print(f"status: [bold {STATUS_STYLE[result.status]}]{result.status}[/]")
-    if result.pose is not None:
+    best = result.best
+    if best is not None and best.confidence is not None:
+        out.print(f"confidence: {best.confidence:.3f}")
+    if result.reason:
+        out.print(f"reason: {escape(result.reason)}")
+    if result.pose is not None and result.status != "localized":
+        out.print(
+            "[bold yellow]warning:[/] not localized: the pose below is the best candidate's, "
+            "not a trusted answer"
+        )
+        out.print("candidate pose T_global_local:")
+    elif result.pose is not None:
         out.print("pose T_global_local:")
         for row in result.pose:
             out.print("  " + "  ".join(f"{v:9.4f}" for v in row))
     table = Table(title="hypotheses (best first)")
     for column, width in (("rank", 4), ("score", 7), ("pairs", 5), ("fitness", 7),
-                          ("yaw°", 6), ("t (m)", 17)):  # fmt: skip
+                          ("conf.", 5), ("yaw°", 6), ("t (m)", 17)):  # fmt: skip
         table.add_column(column, justify="right", no_wrap=True, min_width=width)
     table.add_column("associations local→global", no_wrap=True, overflow="ellipsis")
     for h in result.hypotheses:
@@ -31,8 +43,9 @@ def print_result(result: Result, out: Console) -> None:
             translation = " ".join(f"{v:.2f}" for v in h.pose[:3, 3])
         shown = ", ".join(f"{l}→{g}" for g, l in h.pairs[:6]) + (" …" if len(h.pairs) > 6 else "")
         fitness = "-" if h.fitness is None else f"{h.fitness:.2f}"
-        table.add_row(str(h.rank), f"{h.score:.2f}", str(len(h.pairs)), fitness, yaw,
-                      translation, shown)  # fmt: skip
+        confidence = "-" if h.confidence is None else f"{h.confidence:.2f}"
+        table.add_row(str(h.rank), f"{h.score:.2f}", str(len(h.pairs)), fitness, confidence,
+                      yaw, translation, escape(shown))  # fmt: skip
     if result.hypotheses:
         out.print(table)
     steps = len(result.steps)

@@ -2,8 +2,9 @@
 tolerance, a summary per method and map kind.  Pure functions of the rows, so exact and testable.
 
 `results.csv`: method,map_kind,sequence,start,offset,n_local,rank_of_first_correct,rot_err_deg,
-trans_err_m,ms (one row per attempt and method; rank empty when no hypothesis is within
-15 deg / 0.5 m; errors those of the best hypothesis, empty when there is none).
+trans_err_m,ms,status (one row per attempt and method; rank empty when no hypothesis is within
+15 deg / 0.5 m; errors those of the best hypothesis, empty when there is none; status the
+method's claim: localized, ambiguous or failed).
 `hypotheses.csv`: method,map_kind,sequence,start,offset,rank,rot_err_deg,trans_err_m (every
 reported hypothesis), which makes the top-k recall at any translation tolerance exact.
 """
@@ -22,7 +23,7 @@ from semloc.eval.success import ROTATION_TOLERANCE_DEG
 
 RESULT_COLUMNS = [
     "method", "map_kind", "sequence", "start", "offset", "n_local",
-    "rank_of_first_correct", "rot_err_deg", "trans_err_m", "ms",
+    "rank_of_first_correct", "rot_err_deg", "trans_err_m", "ms", "status",
 ]  # fmt: skip
 HYPOTHESIS_COLUMNS = [
     "method", "map_kind", "sequence", "start", "offset", "rank", "rot_err_deg", "trans_err_m",

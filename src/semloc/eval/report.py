@@ -162,6 +162,24 @@ def summary_table(rows: Sequence[dict], methods: Sequence[str]) -> str:
     return _table(head, body)
 
 
+def claims_table(rows: Sequence[dict], methods: Sequence[str]) -> str:
+    """Markdown: per method and map kind, `localized` claims right / wrong, their precision and
+    the coverage (share of attempts `localized` and right: the best pose within 15° / 0.5 m)."""
+    body = []
+    for method in methods:
+        for kind in _kinds(rows):
+            group = [r for r in rows if r["method"] == method and r["map_kind"] == kind]
+            if not group:
+                continue
+            claims = [r for r in group if r.get("status") == "localized"]
+            right = sum(r["rank_of_first_correct"] == 1 for r in claims)
+            precision = _cell(right / len(claims) if claims else None, "{:.1%}")
+            body.append([method, kind, str(len(group)), str(right), str(len(claims) - right),
+                         precision, _cell(right / len(group), "{:.1%}")])  # fmt: skip
+    head = ["method", "map", "attempts", "claims right", "claims wrong", "precision", "coverage"]
+    return _table(head, body)
+
+
 def write_outputs(out: Path, config, rows, hyps, ablation, seconds: float) -> list[Path]:
     from semloc.viz import save_figure
 
@@ -245,6 +263,8 @@ def report_text(config, rows, ablation, methods, seconds: float, figures: list[s
         "scene_2 in scene_1 and the Scan2CAD scan map of scene0470_00 in its CAD map.\n\n",
         "## Recall (top-1 / top-10) and time per update\n\n",
         summary_table(rows, methods),
+        "\n## Can `localized` be trusted? Claims and coverage per map kind\n\n",
+        claims_table(rows, methods),
         "\n## Top-1 by attempt (simulated maps)\n\n",
         attempt_tables(rows, methods),
     ]

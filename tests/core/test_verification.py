@@ -1,0 +1,225 @@
+"""Verification, evidence ranking, merging and confidence: one hand-built case per failure shape.
+
+1. a set with one wrong pair: the pair is rejected and the pose is right;
+2. two sets converging to one place after refinement: one hypothesis;
+3. the right place with better fitness but as many pairs: ranked first;
+and: the confidence is monotone in the evidence; every path of the decision says why.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import semloc
+from semloc.decision import (
+    FEATURES,
+    SIGNS,
+    DecisionConfig,
+    decide,
+    rank_places,
+    shipped_model,
+)
+from semloc.maps import ObjectMap, SemanticObject
+from semloc.results import Hypothesis
+from semloc.transforms import pose_error, yaw_pose
+from semloc.verification import Evidence, MapSupport, VerificationConfig, consensus
+
+UP = np.array([0.0, 0.0, 1.0])
+ROOM = np.array([[0, 0, 0.5], [3, 0, 0.4], [3, 2.5, 0.8], [0, 2, 0.3], [1.5, 4, 1.0], [4, 4, 0.6]])
+
+
+def _apply(T: np.ndarray, xyz: np.ndarray) -> np.ndarray:
+    return xyz @ T[:3, :3].T + T[:3, 3]
+
+
+# 1. one planted wrong pair ------------------------------------------------------------------
+@pytest.mark.parametrize("up", [UP, None], ids=["4dof", "6dof"])
+def test_a_planted_wrong_pair_is_rejected_and_the_pose_is_right(up):
+    truth = yaw_pose(0.7, [1.0, -2.0, 0.0])
+    global_xyz = ROOM.copy()
+    local_xyz = _apply(np.linalg.inv(truth), global_xyz)
+    global_xyz[2] += [0.9, -0.8, 0.0]  # pair 2 is wrong: its partner is elsewhere
+    least_squares_pose = semloc.pose.align_positions(local_xyz, global_xyz, up, up)
+    assert pose_error(least_squares_pose, truth)[1] > 0.05  # the wrong pair pulls the pose
+    found = consensus(local_xyz, global_xyz, up, up, VerificationConfig())
+    assert found.inliers.tolist() == [True, True, False, True, True, True]
+    rotation, translation = pose_error(found.pose, truth)
+    assert rotation < 1e-4 and translation < 1e-6
+    assert found.residual < 1e-9
+
+
+def test_a_set_as_small_as_a_minimal_sample_is_kept_whole():
+    found = consensus(ROOM[:2], ROOM[:2] + [0.1, 0, 0], UP, UP, VerificationConfig())
+    assert found.inliers.tolist() == [True, True]
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    yaw=st.floats(-np.pi, np.pi),
+    shift=st.tuples(st.floats(-5, 5), st.floats(-5, 5), st.floats(-1, 1)),
+    wrong=st.integers(0, 5),
+    offset=st.floats(1.5, 4.0),
+    direction=st.floats(-np.pi, np.pi),
+)
+def test_one_wrong_pair_of_six_is_always_found(yaw, shift, wrong, offset, direction):
+    truth = yaw_pose(yaw, shift)
+    global_xyz = ROOM.copy()
+    local_xyz = _apply(np.linalg.inv(truth), global_xyz)
+    global_xyz[wrong] += offset * np.array([np.cos(direction), np.sin(direction), 0.0])
+    found = consensus(local_xyz, global_xyz, UP, UP, VerificationConfig())
+    assert np.flatnonzero(~found.inliers).tolist() == [wrong]
+    rotation, translation = pose_error(found.pose, truth)
+    assert rotation < 1e-4 and translation < 1e-6
+
+
+def test_the_localizer_drops_a_wrong_pair_from_its_hypothesis():
+    """Six distinct labels; the local 'desk' is seen 0.7 m from where the map has it (a moved
+    object): the hypothesis keeps the five agreeing pairs, without the desk."""
+    labels = ["bed", "desk", "sofa", "lamp", "shelf", "tv"]
+    gmap = ObjectMap(
+        [SemanticObject(f"g{i}", labels[i], ROOM[i]) for i in range(6)], up=UP, name="room"
+    )
+    truth = yaw_pose(-1.1, [0.5, 0.3, 0.0])
+    local_xyz = _apply(np.linalg.inv(truth), ROOM)
+    local_xyz[1] = _apply(np.linalg.inv(truth), ROOM[1] + [0.0, 0.7, 0.0])
+    local = ObjectMap(
+        [SemanticObject(f"l{i}", labels[i], local_xyz[i], seen=i) for i in range(6)], up=UP
+    )
+    result = semloc.localize(gmap, local)
+    best = result.best
+    assert ("g1", "l1") not in best.pairs
+    assert sorted(best.pairs) == sorted((f"g{i}", f"l{i}") for i in (0, 2, 3, 4, 5))
+    rotation, translation = pose_error(best.pose, truth)
+    assert rotation < 1e-4 and translation < 1e-6
+
+
+def test_guided_matching_adds_objects_that_land_on_a_candidate():
+    support = MapSupport(
+        [np.array([0]), np.array([1, 2]), np.array([], int)], ROOM, VerificationConfig()
+    )
+    local_xyz = ROOM[[0, 1, 5]] + [0.1, 0.0, 0.0]
+    pairs, added, conflicts = support.extend(np.eye(4), local_xyz, [(0, 0)])
+    assert pairs == [(0, 0), (1, 1)] and added == 1
+    assert conflicts == 1  # object 2 has no candidate at all
+
+
+# 2. two sets converging to one place -------------------------------------------------------
+def _hyp(ids, pose, score=1.0, **features) -> Hypothesis:
+    base = dict(pairs=4.0, rejected_share=0.0, residual=0.05, fitness=0.9, support=0.0,
+                conflict_share=0.0)  # fmt: skip
+    return Hypothesis(rank=0, score=score, pairs=ids, pose=pose, fitness=features.get(
+        "fitness", base["fitness"]), residual=0.05, features=base | features)  # fmt: skip
+
+
+def test_two_sets_converging_to_one_place_are_one_hypothesis():
+    here = yaw_pose(0.3, [1.0, 2.0, 0.0])
+    nearly = yaw_pose(0.3 + 1e-4, [1.0005, 2.0, 0.0])
+    elsewhere = yaw_pose(2.0, [-3.0, 1.0, 0.0])
+    a = _hyp([("g0", "l0"), ("g1", "l1"), ("g2", "l2"), ("g3", "l3")], here)
+    b = _hyp([("g4", "l0"), ("g1", "l1"), ("g5", "l2"), ("g3", "l3")], nearly, fitness=0.8)
+    c = _hyp([("g6", "l0"), ("g7", "l1"), ("g8", "l2"), ("g9", "l3")], elsewhere, fitness=0.5)
+    ranked = rank_places([b, c, a], "evidence", DecisionConfig(), shipped_model())
+    assert [h is a for h in ranked] == [True, False] and ranked[1] is c
+    assert [h.rank for h in ranked] == [1, 2]
+
+
+def test_no_same_place_duplicates_in_the_localizers_top_k():
+    rng = np.random.default_rng(4)
+    labels = ["chair"] * 12 + ["table"] * 4 + ["lamp"] * 4
+    xyz = np.column_stack([rng.uniform(0, 12, 20), rng.uniform(0, 8, 20), rng.uniform(0, 1, 20)])
+    gmap = ObjectMap([SemanticObject(f"g{i}", labels[i], xyz[i]) for i in range(20)], up=UP)
+    truth = yaw_pose(0.4, [2.0, 1.0, 0.0])
+    seen = [0, 1, 12, 16, 2]
+    local = ObjectMap(
+        [SemanticObject(f"l{k}", labels[i], _apply(np.linalg.inv(truth), xyz[i]), seen=k)
+         for k, i in enumerate(seen)], up=UP,
+    )  # fmt: skip
+    result = semloc.localize(gmap, local)
+    poses = [h.pose for h in result.hypotheses if h.pose is not None]
+    for i in range(len(poses)):
+        for j in range(i):
+            rotation, translation = pose_error(poses[i], poses[j])
+            assert rotation >= 10.0 or translation >= 0.3
+    assert pose_error(result.pose, truth)[1] < 1e-6
+
+
+# 3. better fitness, equal pairs ------------------------------------------------------------
+def test_the_right_place_with_better_fitness_is_ranked_first():
+    wrong = _hyp([("g0", "l0"), ("g1", "l1"), ("g2", "l2")], yaw_pose(1.0), score=9.0,
+                 pairs=3.0, fitness=0.84)  # fmt: skip
+    right = _hyp([("g3", "l0"), ("g4", "l1"), ("g5", "l2")], yaw_pose(-1.0, [2, 0, 0]),
+                 score=5.0, pairs=3.0, fitness=1.0)  # fmt: skip
+    ranked = rank_places([wrong, right], "evidence", DecisionConfig(), shipped_model())
+    assert ranked[0] is right
+    assert ranked[0].confidence > ranked[1].confidence
+    assert rank_places([wrong, right], "score", DecisionConfig(), shipped_model())[0] is wrong
+
+
+# confidence --------------------------------------------------------------------------------
+FEATURE_RANGES = {"pairs": (2, 12), "rejected_share": (0, 0.6), "residual": (0, 0.5),
+                  "fitness": (0, 1), "support": (0, 6), "conflict_share": (0, 0.6)}  # fmt: skip
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    values=st.tuples(*(st.floats(*FEATURE_RANGES[k]) for k in FEATURES)),
+    feature=st.sampled_from(FEATURES),
+    step=st.floats(0.01, 1.0),
+    rival=st.one_of(st.none(), st.floats(-10, 10)),
+)
+def test_confidence_is_monotone_in_the_evidence(values, feature, step, rival):
+    model = shipped_model()
+    features = dict(zip(FEATURES, values))
+    lo, hi = FEATURE_RANGES[feature]
+    more = features | {feature: min(features[feature] + step * (hi - lo), hi)}
+    before = model.confidence(model.evidence(features), rival)
+    after = model.confidence(model.evidence(more), rival)
+    assert (after - before) * SIGNS[feature] >= -1e-12
+    if rival is not None:  # a stronger rival never raises the confidence
+        assert model.confidence(model.evidence(features), rival + 1.0) <= before + 1e-12
+
+
+def test_evidence_features_are_bounded():
+    f = Evidence(30, 2, 5.0, 0.5, 40, 3, 40).features()
+    assert set(f) == set(FEATURES)
+    assert f["pairs"] == 12 and f["support"] == 12 and f["residual"] == 1.0
+    assert f["rejected_share"] == pytest.approx(2 / 32)
+
+
+# reasons -----------------------------------------------------------------------------------
+def test_each_decision_path_says_why():
+    config = DecisionConfig(min_confidence=0.9)
+    pose = yaw_pose(0.0)
+    sure = Hypothesis(1, 1.0, [("a", "1"), ("b", "2"), ("c", "3")], pose, fitness=1.0,
+                      confidence=0.95, evidence=5.0)  # fmt: skip
+    assert decide([sure], config, "evidence") == ("localized", "")
+    assert decide([], config, "evidence").reason == "no association set with 2 or more pairs"
+    two = Hypothesis(1, 1.0, [("a", "1"), ("b", "2")], pose, fitness=1.0, confidence=0.95)
+    assert decide([two], config, "evidence").reason.startswith("too few pairs: ")
+    loose = Hypothesis(1, 1.0, sure.pairs, pose, fitness=0.1, confidence=0.95)
+    assert decide([loose], config, "evidence").reason.startswith("low fitness: 0.10")
+    unsure = Hypothesis(1, 1.0, sure.pairs, pose, fitness=1.0, confidence=0.5, evidence=1.0)
+    assert decide([unsure], config, "evidence") == ("ambiguous", "low confidence: 0.50 < 0.90")
+    rival = Hypothesis(2, 1.0, [("d", "1"), ("e", "2"), ("f", "3")], yaw_pose(2.0),
+                       fitness=1.0, confidence=0.4, evidence=0.5)  # fmt: skip
+    status, reason = decide([unsure, rival], config, "evidence")
+    assert status == "ambiguous" and reason.startswith("a rival place within the margin: rank 2")
+    undetermined = Hypothesis(1, 1.0, sure.pairs, None)
+    assert "under-determined" in decide([undetermined], config, "evidence").reason
+
+
+def test_failed_results_say_why():
+    gmap = ObjectMap([SemanticObject("g0", "bed", [0, 0, 0]), SemanticObject("g1", "sofa", [2, 0, 0])],
+                     up=UP)  # fmt: skip
+    one = ObjectMap([SemanticObject("l0", "bed", [0, 0, 0])], up=UP)
+    assert semloc.localize(gmap, one).reason == "too few local objects: 1 seen, 2 needed"
+    unknown = ObjectMap([SemanticObject("l0", "tv", [0, 0, 0]), SemanticObject("l1", "tv", [1, 0, 0])],
+                        up=UP)  # fmt: skip
+    result = semloc.localize(gmap, unknown)
+    assert result.status == "failed" and result.reason.startswith("no candidates for these labels")
+    half = ObjectMap([SemanticObject("l0", "bed", [0, 0, 0]), SemanticObject("l1", "tv", [1, 0, 0])],
+                     up=UP)  # fmt: skip
+    assert semloc.localize(gmap, half).reason.startswith("only one local object has candidates")
