@@ -45,9 +45,10 @@ Place = tuple[Collection, np.ndarray | None]  # (pairs, pose) of a candidate ans
 
 
 FEATURES = ("pairs", "rejected_share", "residual", "fitness", "support", "conflict_share")
-SIGNS = {"pairs": 1, "rejected_share": -1, "residual": -1, "fitness": 1, "support": 1,
+SIGNS = {"pairs": 1, "rejected_share": -1, "residual": -1, "fitness": 1, "support": 0,
          "conflict_share": -1}  # fmt: skip
-"""The direction in which each feature may move the evidence (the fit is constrained to it)."""
+"""The direction in which each feature may move the evidence (the fit is constrained to it; 0:
+free — `support` counts pairs that are also in `pairs`, found by the pose, not the clustering)."""
 MODEL_FILE = Path(__file__).with_name("confidence.json")
 
 

@@ -245,9 +245,7 @@ class Localizer:
             cfg.verification,
         )
         screened = [self._verified(s, local_xyz, support) for s in sets]
-        if cfg.rank_by == "evidence":
-            screened.sort(key=lambda c: (-(len(c.pairs) + c.support), c.residual, -c.aset.score))
-        elif cfg.rank_by == "residual":
+        if by_size:  # pairs include the guided matches
             screened.sort(key=lambda c: (-len(c.pairs), c.residual, -c.aset.score))
         places = [(c.pairs, c.pose) for c in screened]
         chosen = [screened[i] for i in distinct(places, cfg.top_k, cfg.decision)]

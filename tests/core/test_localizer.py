@@ -218,8 +218,10 @@ def test_scores_follow_the_merge_path():
         [SemanticObject(f"c{i}", f"x{i}", p) for i, p in enumerate(square)], up=[0, 0, 1]
     )
     local = local_view(room, ["c0", "c1", "c2", "c3"], np.eye(4))
-    incremental = semloc.localize(room, local)
-    batch = semloc.localize(room, local.with_objects(o.replace(seen=0) for o in local))
+    incremental = semloc.localize(room, local, rank_by="score")
+    batch = semloc.localize(
+        room, local.with_objects(o.replace(seen=0) for o in local), rank_by="score"
+    )
     assert sorted(incremental.hypotheses[0].pairs) == sorted(batch.hypotheses[0].pairs)
     assert batch.hypotheses[0].score == pytest.approx(7.0)
     assert incremental.hypotheses[0].score == pytest.approx(7.0)

@@ -90,7 +90,7 @@ def fit(samples: list[Sample], precision: float = 0.995, data: str = "") -> Conf
     while True:
         columns = [FEATURES.index(k) for k in used]
         w = logistic(X[:, columns], y)
-        wrong = [k for k, v in zip(used, w[1:]) if v * SIGNS[k] < 0]
+        wrong = [k for k, v in zip(used, w[1:]) if v * SIGNS[k] < 0]  # sign 0: free
         if not wrong:
             break
         used.remove(wrong[0])
