@@ -245,6 +245,7 @@ class Localizer:
             cfg.verification,
         )
         screened = [self._verified(s, local_xyz, support) for s in sets]
+        screened = [c for c in screened if len(c.pairs) >= 2]
         if by_size:  # pairs include the guided matches
             screened.sort(key=lambda c: (-len(c.pairs), c.residual, -c.aset.score))
         places = [(c.pairs, c.pose) for c in screened]

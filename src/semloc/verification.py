@@ -91,6 +91,8 @@ def consensus(
             best = (*key, inliers, pose)
     assert best is not None
     _, _, inliers, pose = best
+    if inliers.sum() < 2:  # no two pairs agree: the set is not one place
+        return Consensus(inliers, None, float("inf"))
     return Consensus(inliers, pose, _rms(pose, local_xyz, global_xyz, inliers))
 
 

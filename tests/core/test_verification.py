@@ -223,3 +223,10 @@ def test_failed_results_say_why():
     half = ObjectMap([SemanticObject("l0", "bed", [0, 0, 0]), SemanticObject("l1", "tv", [1, 0, 0])],
                      up=UP)  # fmt: skip
     assert semloc.localize(gmap, half).reason.startswith("only one local object has candidates")
+
+
+def test_a_set_where_no_two_pairs_agree_has_no_pose():
+    local_xyz = ROOM[:3]
+    global_xyz = ROOM[:3] * [3.0, -2.0, 1.0] + [0, 0, 2.0]  # stretched and lifted: no match
+    found = consensus(local_xyz, global_xyz, UP, UP, VerificationConfig(inlier_tolerance=0.1))
+    assert found.pose is None and found.inliers.sum() < 2
