@@ -159,7 +159,7 @@ def distinct(places: Iterable[Place], top_k: int, config: DecisionConfig) -> lis
 
 _INF = float("inf")
 RANKINGS: dict[str, Callable[[Hypothesis], tuple | float]] = {
-    "evidence": lambda h: (-(h.evidence if h.evidence is not None else -_INF), -h.score),
+    "evidence": lambda h: (-round(h.evidence if h.evidence is not None else -_INF, 9), -h.score),
     "score": lambda h: -h.score,
     "residual": lambda h: (-len(h.pairs), _INF if h.residual is None else h.residual, -h.score),
     "fitness": lambda h: (-(h.fitness if h.fitness is not None else -1.0), -h.score),

@@ -247,7 +247,7 @@ class Localizer:
         screened = [self._verified(s, local_xyz, support) for s in sets]
         screened = [c for c in screened if len(c.pairs) >= 2]
         if by_size:  # pairs include the guided matches
-            screened.sort(key=lambda c: (-len(c.pairs), c.residual, -c.aset.score))
+            screened.sort(key=lambda c: (-len(c.pairs), round(c.residual, 9), -c.aset.score))
         places = [(c.pairs, c.pose) for c in screened]
         chosen = [screened[i] for i in distinct(places, cfg.top_k, cfg.decision)]
         hypotheses = [
@@ -292,19 +292,29 @@ class Localizer:
         locals_ = [local_objects[l] for _, l in verified.pairs]
         l_xyz = np.array([o.position for o in locals_])
         g_xyz = np.array([o.position for o in globals_])
-        estimate: PoseEstimate | None = estimate_pose(
-            l_xyz,
-            g_xyz,
+        clouds = (
             [self._local_clouds[o.id] for o in locals_],
             [self._global_cloud(self.global_map.index_of(o.id)) for o in globals_],
-            self.local_up,
-            self.global_map.up,
-            self.config.pose if rank <= self.config.refine_top else self._pose_unrefined,
         )
-        pose = None if estimate is None else estimate.T
+        refine = rank <= self.config.refine_top
+        estimate: PoseEstimate | None = estimate_pose(
+            l_xyz, g_xyz, *clouds, self.local_up, self.global_map.up,
+            self.config.pose if refine else self._pose_unrefined,
+        )  # fmt: skip
         residual, features = verified.residual, None
+        tolerance = self.config.verification.inlier_tolerance
         if estimate is not None:
             residual = centre_residual(estimate.T, l_xyz, g_xyz)
+            if refine and residual > tolerance >= verified.residual:
+                # ICP on points that do not fit dragged the pose off the agreeing centres
+                estimate = estimate_pose(
+                    l_xyz, g_xyz, *clouds, self.local_up, self.global_map.up,
+                    self._pose_unrefined,
+                )  # fmt: skip
+                assert estimate is not None  # the closed form was determined before
+                residual = centre_residual(estimate.T, l_xyz, g_xyz)
+        pose = None if estimate is None else estimate.T
+        if estimate is not None:
             features = Evidence(
                 len(verified.pairs), len(verified.rejected), residual, estimate.fitness,
                 verified.support, verified.conflicts, len(local_xyz),

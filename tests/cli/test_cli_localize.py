@@ -163,9 +163,11 @@ def test_descriptor_gate_from_the_command_line(tmp_path, capsys):
     grown = [o.replace(points=2.0 * (o.points - o.position) + o.position) for o in local]
     semloc.save_map(semloc.ObjectMap(grown, up=obs.local_map.up), tmp_path / "local.json")
     assert main(args) == 0
-    # the associations are right, but the points do not land on the map: not claimed
-    best = json.loads(capsys.readouterr().out)["hypotheses"][0]
-    assert sorted((p["global"], p["local"]) for p in best["pairs"]) == sorted(obs.true_pairs)
+    # the associations are among the answers, but the points do not land on the map: not claimed
+    out = json.loads(capsys.readouterr().out)
+    best = out["hypotheses"][0]
+    found = [sorted((p["global"], p["local"]) for p in h["pairs"]) for h in out["hypotheses"]]
+    assert sorted(obs.true_pairs) in found[:3] and out["status"] == "ambiguous"
     assert best["fitness"] < 0.3
     assert main([*args, "--descriptor", "geometric", "--descriptor-delta", "0.05"]) == 0
     assert json.loads(capsys.readouterr().out)["status"] == "failed"
