@@ -10,6 +10,7 @@ from pydantic import ValidationError
 from rich.table import Table
 
 from semloc.cli.app import app, console, fail, first_error
+from semloc.cli.extras import need
 from semloc.cli.files import read_result
 from semloc.cli.options import (
     RESOLUTION_HELP,
@@ -54,6 +55,8 @@ def demo(
 
     Prints a live table and the pose error against ground truth; writes scores.png and map.png.
     """
+    need("demo", "sim")
+    need("demo", "viz", modules=("matplotlib",))
     try:
         config = DemoConfig(
             seed=seed, size=size, map_kind=map_kind.value, path=path.value, keyframes=keyframes,
@@ -97,6 +100,8 @@ def simulate(
 
     ground_truth.json holds T_global_local, camera poses and correspondences per map kind.
     """
+    need("simulate", "sim")
+    need("simulate", "viz", modules=("matplotlib",))
     noise = DetectionNoise.perfect() if perfect else DetectionNoise()
     noise = noise.model_copy(update={"drift_translation": drift, "drift_yaw_deg": drift_yaw})
     try:
@@ -135,6 +140,7 @@ def view(
     title: Annotated[str | None, typer.Option(help="Title of the picture.")] = None,
 ) -> None:
     """Draw MAP from above as a PNG, optionally with a localization result and a local map."""
+    need("view", "viz", modules=("matplotlib",))
     from semloc.viz import map_figure, plot_localization, save_figure  # matplotlib
 
     objmap = load_map(map_file)
