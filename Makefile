@@ -27,8 +27,8 @@ test-install: install
 	MPLCONFIGDIR=$${TMPDIR:-/tmp}/semloc-mpl $(BIN)/python -m pytest -m install
 
 lint: install
-	$(BIN)/ruff check src tests benchmarks
-	$(BIN)/ruff format --check src tests benchmarks
+	$(BIN)/ruff check src tests benchmarks examples
+	$(BIN)/ruff format --check src tests benchmarks examples
 
 bench: install
 	$(BIN)/python benchmarks/bench_localize.py
