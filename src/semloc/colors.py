@@ -37,10 +37,15 @@ def _more_colors(start: int) -> Iterable[str]:
         i += 1
 
 
-def label_colors(labels: Iterable[str]) -> dict[str, str]:
-    """A distinct hex colour per label (sorted): fixed for known classes, else the palette's."""
-    names = sorted(set(labels))
+def label_colors(labels: Iterable[str], known: dict[str, str] | None = None) -> dict[str, str]:
+    """A distinct hex colour per label (sorted): fixed for known classes, else the palette's.
+
+    With `known` (colours already handed out), those labels keep theirs and new labels take
+    colours not used yet (for labels that appear later, as in a growing local map)."""
+    known = dict(known or {})
+    names = sorted(set(labels) | set(known))
     colors = {label: CLASS_COLORS[label] for label in names if label in CLASS_COLORS}
+    colors.update(known)
     used = set(colors.values())
     free = (c for c in itertools.chain(PALETTE, _more_colors(0)) if c not in used)
     for label in names:

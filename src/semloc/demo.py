@@ -164,9 +164,14 @@ def run_demo(config: DemoConfig, console: Console | None = None) -> DemoResult:
         from semloc.viz3d import DemoRecording  # rerun
 
         recording = DemoRecording(config.rrd, gmap, seq.T_global_local, seq.local_map.labels)
-    result, keyframes, statuses = localize_sequence(
-        seq, config.map_kind, config.gamma, console, recording
-    )
+    try:
+        result, keyframes, statuses = localize_sequence(
+            seq, config.map_kind, config.gamma, console, recording
+        )
+    except BaseException:
+        if recording is not None:
+            recording.discard()
+        raise
     t2 = time.perf_counter()
     rot = trans = None
     if result.pose is not None:

@@ -41,6 +41,11 @@ class Recording:
         self.stream.save(self._partial)
         self.stream.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
 
+    def discard(self) -> None:
+        """Stop recording and remove the partial file (after a failure)."""
+        self.stream.disconnect()
+        self._partial.unlink(missing_ok=True)
+
     def close(self) -> Path:
         """Flush the recording and move it into place; returns its path."""
         self.stream.flush()
@@ -135,6 +140,8 @@ class DemoRecording:
     def update(self, keyframe: int, local_map: ObjectMap, result: Result) -> None:
         """Log the state after the update at `keyframe`."""
         stream, rec = self.recording.stream, self.recording
+        if set(local_map.labels) - set(self.colors):  # a label the final map does not have
+            self.colors = label_colors(local_map.labels, self.colors)
         stream.set_time("keyframe", sequence=keyframe)
         rec.log_map("local_true", local_map.transformed(self.true_pose), self.colors, 0.3, False)
         step = result.steps[-1] if result.steps else None
@@ -153,3 +160,6 @@ class DemoRecording:
 
     def close(self) -> Path:
         return self.recording.close()
+
+    def discard(self) -> None:
+        self.recording.discard()

@@ -210,3 +210,12 @@ def test_a_local_map_alone_is_labelled_local(simulated, tmp_path):
     plot_localization(ax, local, map_role="local")
     texts = [t.get_text() for t in ax.get_legend().get_texts()]
     assert "local object" in texts and "global object" not in texts
+
+
+def test_labels_appearing_later_keep_the_colours_handed_out():
+    from semloc.colors import label_colors
+
+    first = label_colors(["chair", "clock"])
+    later = label_colors(["bench", "armchair"], first)
+    assert {k: later[k] for k in first} == first
+    assert len(set(later.values())) == len(later) == 4
