@@ -158,8 +158,15 @@ def distinct(places: Iterable[Place], top_k: int, config: DecisionConfig) -> lis
 
 
 _INF = float("inf")
+EVIDENCE_TIE = 0.25
+"""Evidence logits in one bin of this width tie; the smaller centre residual ranks first then
+(repeated objects give near-equal fitness; their centres still tell them apart)."""
 RANKINGS: dict[str, Callable[[Hypothesis], tuple | float]] = {
-    "evidence": lambda h: (-round(h.evidence if h.evidence is not None else -_INF, 9), -h.score),
+    "evidence": lambda h: (
+        _INF if h.evidence is None else -np.floor(h.evidence / EVIDENCE_TIE),
+        _INF if h.residual is None else h.residual,
+        -h.score,
+    ),
     "score": lambda h: -h.score,
     "residual": lambda h: (-len(h.pairs), _INF if h.residual is None else h.residual, -h.score),
     "fitness": lambda h: (-(h.fitness if h.fitness is not None else -1.0), -h.score),
