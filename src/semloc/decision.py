@@ -158,13 +158,12 @@ def distinct(places: Iterable[Place], top_k: int, config: DecisionConfig) -> lis
 
 
 _INF = float("inf")
-EVIDENCE_TIE = 0.25
-"""Evidence logits in one bin of this width tie; the smaller centre residual ranks first then
-(repeated objects give near-equal fitness; their centres still tell them apart)."""
+RESIDUAL_RANK = 4.0
+"""Logit per metre of centre residual subtracted from the evidence when ranking (not in the
+confidence): repeated objects give near-equal fitness, their centres still tell them apart."""
 RANKINGS: dict[str, Callable[[Hypothesis], tuple | float]] = {
     "evidence": lambda h: (
-        _INF if h.evidence is None else -np.floor(h.evidence / EVIDENCE_TIE),
-        _INF if h.residual is None else h.residual,
+        _INF if h.evidence is None else -round(h.evidence - RESIDUAL_RANK * (h.residual or 0), 6),
         -h.score,
     ),
     "score": lambda h: -h.score,

@@ -115,7 +115,7 @@ def attempt_rows(
         **base, "n_local": result.steps[-1].n_local if result.steps else 0,
         "rank_of_first_correct": first_correct_rank(result.hypotheses, truth),
         "rot_err_deg": rot, "trans_err_m": trans, "ms": ms,
-        "status": result.status,
+        "status": result.status,  # not a results.csv column; benchmarks read it
     }  # fmt: skip
     hyps = []
     for h in result.hypotheses:

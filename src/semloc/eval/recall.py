@@ -2,9 +2,8 @@
 tolerance, a summary per method and map kind.  Pure functions of the rows, so exact and testable.
 
 `results.csv`: method,map_kind,sequence,start,offset,n_local,rank_of_first_correct,rot_err_deg,
-trans_err_m,ms,status (one row per attempt and method; rank empty when no hypothesis is within
-15 deg / 0.5 m; errors those of the best hypothesis, empty when there is none; status the
-method's claim: localized, ambiguous or failed; absent from files of older versions).
+trans_err_m,ms (one row per attempt and method; rank empty when no hypothesis is within
+15 deg / 0.5 m; errors those of the best hypothesis, empty when there is none).
 `hypotheses.csv`: method,map_kind,sequence,start,offset,rank,rot_err_deg,trans_err_m (every
 reported hypothesis), which makes the top-k recall at any translation tolerance exact.
 """
@@ -23,7 +22,7 @@ from semloc.eval.success import ROTATION_TOLERANCE_DEG
 
 RESULT_COLUMNS = [
     "method", "map_kind", "sequence", "start", "offset", "n_local",
-    "rank_of_first_correct", "rot_err_deg", "trans_err_m", "ms", "status",
+    "rank_of_first_correct", "rot_err_deg", "trans_err_m", "ms",
 ]  # fmt: skip
 HYPOTHESIS_COLUMNS = [
     "method", "map_kind", "sequence", "start", "offset", "rank", "rot_err_deg", "trans_err_m",
@@ -49,7 +48,7 @@ def read_rows(path: str | Path, columns: Sequence[str] = RESULT_COLUMNS) -> list
     """Rows of a results (or hypotheses) CSV; empty cells become None."""
     with open(path, newline="", encoding="utf-8") as handle:
         reader = csv.DictReader(handle)
-        missing = [c for c in columns if c not in (reader.fieldnames or []) and c != "status"]
+        missing = [c for c in columns if c not in (reader.fieldnames or [])]
         if missing:
             raise ValueError(f"{path}: missing columns {missing}")
         return [_parse(row) for row in reader]
