@@ -154,7 +154,9 @@ def free_space(scan: RealScan, clearance: float = 0.3) -> tuple[np.ndarray, np.n
     A cell is free floor when it lies inside the scan's footprint (holes of unscanned floor
     filled) and no geometry (3 vertices or more in a cell) between 0.2 m and 1.9 m above the
     floor is within `clearance`."""
-    v = scan.mesh.vertices
+    area = float(scan.mesh.areas().sum())
+    samples = scan.mesh.sample_surface(int(area / 0.04**2), np.random.default_rng(0))
+    v = np.concatenate([scan.mesh.vertices, samples])  # dense even where triangles are large
     lo = v[:, :2].min(axis=0)
     shape = tuple(np.ceil((v[:, :2].max(axis=0) - lo) / CELL).astype(int) + 1)
     cells = np.floor((v[:, :2] - lo) / CELL).astype(int)
@@ -165,7 +167,7 @@ def free_space(scan: RealScan, clearance: float = 0.3) -> tuple[np.ndarray, np.n
     obstacle = cells[(height > 0.2) & (height < 1.9)]
     counts = np.zeros(shape, int)
     np.add.at(counts, tuple(obstacle.T), 1)
-    blocked = counts >= 3  # a few stray vertices (scanning noise) block nothing
+    blocked = counts >= 3  # a few stray samples (scanning noise) block nothing
     reach = int(math.ceil(clearance / CELL))
     disk = np.hypot(*np.mgrid[-reach : reach + 1, -reach : reach + 1]) <= reach
     free = ndimage.binary_erosion(inside, iterations=2) & ~ndimage.binary_dilation(blocked, disk)
