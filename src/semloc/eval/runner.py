@@ -39,6 +39,7 @@ class BenchOutput:
     ablation: list[dict]
     files: list[Path]
     seconds: float
+    real_walks: list[dict] | None = None  # rows of real_walks.csv with --real-walks
 
 
 def _sequence_task(config: BenchConfig, index: int):
@@ -147,6 +148,10 @@ def run_benchmark(
                     rows += chain_rows
                     hyps += chain_hyps
                 bar.advance(task)
+        if config.real_walks:
+            from semloc.eval.realwalks import run_real_walks
+
+            real = run_real_walks(client, config, out, progress)
     finally:
         client.close()
         if cluster is not None:
@@ -156,6 +161,9 @@ def run_benchmark(
     ablation_rows.sort(key=lambda r: _order(r, config.methods))
     seconds = time.perf_counter() - begin
     files = write_outputs(out, config, rows, hyps, ablation_rows, seconds)
+    if config.real_walks:
+        files += real["files"]
+        return BenchOutput(rows, hyps, ablation_rows, files, seconds, real["rows"])
     return BenchOutput(rows, hyps, ablation_rows, files, seconds)
 
 

@@ -1,4 +1,4 @@
-"""Real scans as worlds for the simulator: ray-cast a real mesh, walk a camera through its free space.
+"""Real scans as simulator worlds: ray-cast a real mesh, walk a camera through its free space.
 
 `load_real_scan(folder)` reads a ScanNet scene folder (mesh, `.segs.json`, `.aggregation.json`)
 or a Scan2CAD scene folder (mesh, label mesh, `scan2cad_annotation.json`, ShapeNet models beside
