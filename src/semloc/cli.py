@@ -112,12 +112,18 @@ def demo(
     seed: Annotated[int, typer.Option(help="World and noise seed.")] = 0,
     size: Annotated[str, typer.Option(help=_SIZE_HELP)] = "small",
     map_kind: Annotated[
-        MapKindChoice, typer.Option(help="Global map: scan reconstruction, CAD models, or moved.")
-    ] = MapKindChoice.reconstruction,
+        MapKindChoice | None,
+        typer.Option(
+            help="Global map: scan reconstruction, CAD models, or moved (default: "
+            "reconstruction; with --scan of a Scan2CAD scene: cad)."
+        ),
+    ] = None,
     path: Annotated[
         PathChoice, typer.Option(help="Camera path: walk through rooms, or orbit in one room.")
     ] = PathChoice.walk,
-    keyframes: Annotated[int, typer.Option(min=2, max=2000, help="Number of keyframes.")] = 40,
+    keyframes: Annotated[
+        int | None, typer.Option(min=2, max=2000, help="Number of keyframes (40; --scan: 60).")
+    ] = None,
     rooms: Annotated[int, typer.Option(min=1, help="Rooms the walk visits.")] = 2,
     resolution: Annotated[str, typer.Option(help=_RES_HELP)] = "240x180",
     gamma: Annotated[float, typer.Option(help="Merge threshold of the clustering.")] = 0.8,
@@ -125,24 +131,44 @@ def demo(
         float,
         typer.Option(min=0, max=0.2, help="Odometry drift, m per m travelled (heading: 25x in °)."),
     ] = 0.0,
+    scan: Annotated[
+        Path | None,
+        typer.Option(
+            help="A real scan instead of a generated world: a ScanNet or Scan2CAD scene folder "
+            "(also looked up under $SEMLOC_DATA or ../shared/data/real, e.g. scene0000_00)."
+        ),
+    ] = None,
+    shapenet: Annotated[
+        Path | None, typer.Option(help="ShapeNet root of a Scan2CAD --scan (default: beside it).")
+    ] = None,
 ) -> None:
     """The main job: walk a camera through a generated world and relocalize incrementally.
 
     Simulated RGB-D frames -> detections -> local objects -> Localizer.update per keyframe.
+    With --scan the frames are ray-cast from a real scan's mesh and its instance labels.
 
     Prints a live table and the pose error against ground truth; writes scores.png and map.png.
     """
     from semloc.demo import DemoConfig, run_demo
 
+    common = {"seed": seed, "resolution": _parse_resolution(resolution), "gamma": gamma,
+              "drift": drift, "out": out}  # fmt: skip
+    if keyframes is not None:
+        common["keyframes"] = keyframes
     try:
-        config = DemoConfig(
-            seed=seed, size=size, map_kind=map_kind.value, path=path.value, keyframes=keyframes,
-            rooms=rooms, resolution=_parse_resolution(resolution), gamma=gamma, drift=drift, out=out,
-        )  # fmt: skip
+        if scan is not None:
+            from semloc.scandemo import ScanDemoConfig, run_scan_demo
+
+            kind = None if map_kind is None else map_kind.value
+            run_scan_demo(ScanDemoConfig(scan=scan, map_kind=kind, shapenet=shapenet, **common),
+                          console)  # fmt: skip
+            return
+        kind = (map_kind or MapKindChoice.reconstruction).value
+        config = DemoConfig(size=size, map_kind=kind, path=path.value, rooms=rooms, **common)
         run_demo(config, console)
     except ValidationError as exc:
         fail(f"invalid option: {_first_error(exc)}")
-    except ValueError as exc:
+    except (ValueError, MapError) as exc:
         fail(str(exc))
 
 
@@ -573,6 +599,13 @@ def bench(
         typer.Option(min=1, max=1000, help="Random starts per sequence (default 8; quick 3)."),
     ] = None,
     progress: Annotated[bool, typer.Option(help="Show a progress bar.")] = True,
+    real_walks: Annotated[
+        bool,
+        typer.Option(
+            help="Also the protocol on camera walks through the real scans (ScanNet "
+            "scene0000_00, Scan2CAD scene0470_00): real_walks.csv, .png, .md."
+        ),
+    ] = False,
 ) -> None:
     """Reproduce the paper's comparison: semloc vs CLIPPER, random-walk, SegMatch, FPFH+RANSAC.
 
@@ -596,6 +629,13 @@ def bench(
         overrides["starts"] = starts
     if "semloc" not in chosen:
         overrides["ablation_starts"] = 0
+    if real_walks:
+        from semloc.eval.realwalks import real_walk_data
+
+        if real_walk_data() is None:
+            fail("--real-walks: the real scans scannet/scene0000_00 and scan2cad/scene0470_00 "
+                 "are not under $SEMLOC_DATA or ../shared/data/real")  # fmt: skip
+        overrides["real_walks"] = True
     config = BenchConfig.quick(**overrides) if quick else BenchConfig(**overrides)
     from semloc.eval.report import summary_table
     from semloc.eval.runner import run_benchmark
@@ -605,6 +645,9 @@ def bench(
     except ValueError as exc:
         fail(str(exc))
     console.print(summary_table(output.rows, config.methods), soft_wrap=True)
+    if output.real_walks is not None:
+        console.print("real walks:")
+        console.print(summary_table(output.real_walks, config.methods), soft_wrap=True)
     console.print(f"{len(output.rows)} attempts in {output.seconds:.0f} s; wrote {out}/report.md")
 
 
