@@ -14,6 +14,7 @@ from __future__ import annotations
 import json
 import time
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
@@ -21,21 +22,14 @@ from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
 from semloc.demo import DemoResult, _report, localize_sequence
-from semloc.io.datasets import real_data_dir
+from semloc.eval.datasets import real_data_dir
 from semloc.io.native import save_map, write_atomic
 from semloc.maps import MapError
-from semloc.metrics import pose_error
 from semloc.sim.noise import DetectionNoise
 from semloc.sim.realscan import RealScan, load_real_scan, simulate_walk
 from semloc.sim.scenario import SimulatedSequence
-from semloc.viz import (
-    label_colors,
-    map_figure,
-    new_figure,
-    plot_localization,
-    plot_scores,
-    save_figure,
-)
+from semloc.sim.sensor import check_resolution
+from semloc.transforms import pose_error
 
 
 class ScanDemoConfig(BaseModel):
@@ -100,9 +94,7 @@ def walk(config: ScanDemoConfig, scan: RealScan, console: Console) -> SimulatedS
 def run_scan_demo(config: ScanDemoConfig, console: Console | None = None) -> DemoResult:
     """Load, walk, localize incrementally, report and write the pictures (module docstring)."""
     console = console or Console()
-    w, h = config.resolution
-    if not (16 <= w <= 1280 and 12 <= h <= 960):
-        raise ValueError(f"--resolution must be between 16x12 and 1280x960, got {w}x{h}")
+    check_resolution(*config.resolution)
     t0 = time.perf_counter()
     scan = load_real_scan(resolve_scan(config.scan), shapenet=config.shapenet)
     kind = map_kind_of(config, scan)
@@ -131,7 +123,14 @@ def write_outputs(
     out: Path, kind: str, scan: RealScan, demo: DemoResult, keyframes: list[int], statuses: list
 ) -> list[Path]:
     """scores.png, map.png, scan.png, result.json, ground_truth.json, global.json, local.json."""
-    from types import SimpleNamespace
+    from semloc.viz import (  # matplotlib (the pictures)
+        label_colors,
+        map_figure,
+        new_figure,
+        plot_localization,
+        plot_scores,
+        save_figure,
+    )
 
     seq, result = demo.sequence, demo.result
     out.mkdir(parents=True, exist_ok=True)
@@ -156,7 +155,9 @@ def write_outputs(
         f"{error})",
     )  # fmt: skip
     files.append(save_figure(fig, out / "map.png"))
-    files.append(save_figure(scan_figure(scan, seq), out / "scan.png"))
+    fig, ax = map_figure(np.array(scan.bounds), width=8.0)
+    draw_scan(ax, scan, seq, label_colors([o.label for o in scan.objects]))
+    files.append(save_figure(fig, out / "scan.png"))
     files.append(save_map(gmap, out / "global.json"))
     files.append(save_map(seq.local_map, out / "local.json"))
     write_atomic(out / "result.json", json.dumps(result.to_dict(), indent=1) + "\n")
@@ -164,13 +165,10 @@ def write_outputs(
     return [*files, out / "result.json", out / "ground_truth.json"]
 
 
-def scan_figure(scan: RealScan, seq: SimulatedSequence):
+def draw_scan(ax, scan: RealScan, seq: SimulatedSequence, colors: dict[str, str]) -> None:
     """Top-down view of the scan: mesh vertices coloured by instance label, and the walk."""
-    lo, hi = scan.bounds
-    fig, ax = map_figure(np.array([lo, hi]), width=8.0)
     vertices, faces = scan.mesh.vertices, scan.mesh.triangles
     labels = [o.label for o in scan.objects]
-    colors = label_colors(labels)
     ax.scatter(*vertices[::4, :2].T, s=0.3, c="#d0d0d0", linewidths=0)
     for index, label in enumerate(labels):
         ids = np.unique(faces[scan.face_instance == index])
@@ -183,4 +181,3 @@ def scan_figure(scan: RealScan, seq: SimulatedSequence):
               scale=25, width=0.003, color="black")  # fmt: skip
     ax.set_title(f"{scan.name}: instances and the camera walk ({len(poses)} keyframes)")
     ax.set_aspect("equal")
-    return fig

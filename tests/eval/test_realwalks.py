@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import pytest
 
-from semloc.eval.metrics import RESULT_COLUMNS, read_rows
 from semloc.eval.protocol import BenchConfig, run_attempts
 from semloc.eval.realwalks import SCENES, plan, real_walk_data, walk_seed, walk_sequence
+from semloc.eval.recall import RESULT_COLUMNS, read_rows
 
 
 def test_plan_covers_every_scene_walk_start_kind_and_method():

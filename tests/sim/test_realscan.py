@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-from semloc.io.datasets import real_sample
+from semloc.eval.datasets import real_sample
 from semloc.io.ply import read_ply, write_ply
 from semloc.maps import MapError
 from semloc.sim.noise import DetectionNoise

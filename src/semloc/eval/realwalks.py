@@ -19,8 +19,17 @@ import os
 from pathlib import Path
 from types import SimpleNamespace
 
-from semloc.eval.metrics import HYPOTHESIS_COLUMNS, RESULT_COLUMNS, format_rows
-from semloc.eval.protocol import BenchConfig, run_attempts, start_keyframes
+from dask.distributed import as_completed
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn
+
+from semloc.eval.datasets import real_data_dir
+from semloc.eval.protocol import Attempt, BenchConfig, run_attempts, start_keyframes
+from semloc.eval.recall import HYPOTHESIS_COLUMNS, RESULT_COLUMNS, format_rows
+from semloc.eval.report import comparison_figure, summary_table
+from semloc.io import write_atomic
+from semloc.localizer import Localizer, LocalizerConfig
+from semloc.sim.realscan import load_real_scan, simulate_walk
+from semloc.viz import plot_scores, save_figure
 
 SCENES = {
     "scene0000_00": ("scannet/scene0000_00", ("reconstruction",)),
@@ -30,13 +39,14 @@ SCENES = {
 PREFIX = "real "
 
 
-def real_walk_data() -> Path | None:
-    """The real-data folder when every walked scene is in it, else None."""
-    from semloc.io.datasets import real_data_dir
-
+def real_walk_data() -> Path:
+    """The real-data folder holding every walked scene; ValueError saying what is missing."""
     folder = real_data_dir()
     if folder is None or not all((folder / path).is_dir() for path, _ in SCENES.values()):
-        return None
+        raise ValueError(
+            f"--real-walks needs the real scans {', '.join(p for p, _ in SCENES.values())} under "
+            "$SEMLOC_DATA or ../shared/data/real"
+        )
     return folder
 
 
@@ -48,16 +58,22 @@ def walk_sequence(data: str, scene: str, seed: int, n_keyframes: int):
     """One rendered, detected and fused walk through a real scene (a Dask task)."""
     for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
         os.environ[var] = "1"
-    from semloc.sim.realscan import load_real_scan, simulate_walk
-
     scan = load_real_scan(Path(data) / SCENES[scene][0])
     return simulate_walk(scan, n_keyframes=n_keyframes, seed=seed)
 
 
+def run_walk_attempts(
+    seq, scene: str, walk: int, start: int, kind: str, method: str
+) -> tuple[list[dict], list[dict]]:
+    """`run_attempts` on a walk; rows name the walk and the map kind as "real <kind>"."""
+    rows, hyps = run_attempts(seq, Attempt(walk, start, kind, method))
+    for row in rows + hyps:
+        row["sequence"], row["map_kind"] = f"{scene}/walk{walk}", PREFIX + kind
+    return rows, hyps
+
+
 def score_trace(seq, kind: str, gamma: float) -> dict:
     """semloc incrementally over a whole walk: keyframes, top-2 scores and statuses."""
-    from semloc.localizer import Localizer, LocalizerConfig
-
     localizer = Localizer(seq.global_maps[kind], LocalizerConfig(gamma=gamma), local_up=(0, 0, 1))
     trace: dict = {"keyframes": [], "top_scores": [], "statuses": []}
     for kf in seq.keyframes:
@@ -85,23 +101,15 @@ def plan(config: BenchConfig) -> list[tuple[str, int, int, str, str]]:
 
 def run_real_walks(client, config: BenchConfig, out: Path, progress: bool = True) -> dict:
     """Submit the walks and attempts to a Dask `client`, write the outputs; rows and files."""
-    from dask.distributed import as_completed
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn
-
     data = real_walk_data()
-    if data is None:
-        raise ValueError(
-            "--real-walks needs the real scans (scannet/scene0000_00, scan2cad/scene0470_00) "
-            "under $SEMLOC_DATA or ../shared/data/real"
-        )
     walks = {
         (scene, walk): client.submit(walk_sequence, str(data), scene, walk_seed(config, walk),
                                      config.real_walk_keyframes, pure=False)
         for scene in SCENES for walk in range(config.real_walk_count)
     }  # fmt: skip
     futures = [
-        client.submit(run_attempts, walks[scene, walk], f"{scene}/walk{walk}", start, kind,
-                      method, pure=False)
+        client.submit(run_walk_attempts, walks[scene, walk], scene, walk, start, kind, method,
+                      pure=False)
         for scene, walk, start, kind, method in plan(config)
     ]  # fmt: skip
     traces = {
@@ -118,8 +126,6 @@ def run_real_walks(client, config: BenchConfig, out: Path, progress: bool = True
             rows += chain_rows
             hyps += chain_hyps
             bar.advance(task)
-    for row in rows + hyps:
-        row["map_kind"] = PREFIX + row["map_kind"]
     rows.sort(key=lambda r: _order(r, config.methods))
     hyps.sort(key=lambda r: _order(r, config.methods))
     files = write_outputs(out, config, rows, hyps, {s: f.result() for s, f in traces.items()})
@@ -141,8 +147,6 @@ def scores_figure(traces: dict[str, dict]):
     """The incremental top-2 score plot of each scene's first walk, side by side."""
     import matplotlib.pyplot as plt
 
-    from semloc.viz import plot_scores
-
     fig, axes = plt.subplots(1, len(traces), figsize=(6.4 * len(traces), 3.8), dpi=90,
                              squeeze=False)  # fmt: skip
     for ax, (scene, trace) in zip(axes[0], traces.items(), strict=True):
@@ -156,18 +160,12 @@ def scores_figure(traces: dict[str, dict]):
 
 
 def table_text(rows: list[dict], methods: list[str]) -> str:
-    from semloc.eval.report import summary_table
-
     return summary_table(rows, methods)
 
 
 def write_outputs(
     out: Path, config: BenchConfig, rows: list[dict], hyps: list[dict], traces: dict
 ) -> list[Path]:
-    from semloc.eval.report import comparison_figure
-    from semloc.io import write_atomic
-    from semloc.viz import save_figure
-
     out.mkdir(parents=True, exist_ok=True)
     write_atomic(out / "real_walks.csv", format_rows(rows, RESULT_COLUMNS))
     write_atomic(out / "real_walks_hypotheses.csv", format_rows(hyps, HYPOTHESIS_COLUMNS))

@@ -32,6 +32,8 @@ from scipy.sparse.csgraph import shortest_path
 from scipy.spatial import cKDTree
 
 from semloc.frontend.fusion import FusionConfig
+from semloc.io.importers.scan2cad import load_scan2cad
+from semloc.io.importers.scannet import load_scannet, scene_files
 from semloc.io.ply import read_ply
 from semloc.maps import MapError, ObjectMap
 from semloc.pointsets import voxel_downsample
@@ -104,8 +106,6 @@ def load_real_scan(
 
 
 def _scannet(path: Path) -> RealScan:
-    from semloc.io.scannet import load_scannet, scene_files
-
     files = scene_files(path)
     full = load_scannet(path, voxel=0)
     maps = {"reconstruction": load_scannet(path)}
@@ -113,8 +113,6 @@ def _scannet(path: Path) -> RealScan:
 
 
 def _scan2cad(path: Path, shapenet: str | os.PathLike[str] | None) -> RealScan:
-    from semloc.io.scan2cad import load_scan2cad
-
     full = load_scan2cad(path, shapenet=shapenet, voxel=0)
     if full.scan is None:
         raise MapError(f"{path}: the scan's *_vh_clean_2.labels.ply is missing")
