@@ -44,7 +44,10 @@ def bench(
         ),
     ] = ",".join(DEFAULT_METHODS),
     sequences: Annotated[
-        int | None, typer.Option(min=1, max=1000, help="Simulated sequences (default 6; quick 2).")
+        int | None,
+        typer.Option(
+            min=0, max=1000, help="Simulated sequences (default 6; quick 2; 0: only the real data)."
+        ),
     ] = None,
     starts: Annotated[
         int | None,

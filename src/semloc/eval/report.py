@@ -175,7 +175,7 @@ def write_outputs(out: Path, config, rows, hyps, ablation, seconds: float) -> li
     methods = [m for m in config.methods if any(r["method"] == m for r in rows)]
     kinds = [k for k in config.map_kinds if any(r["map_kind"] == k for r in rows)]
     figures = []
-    if rows:
+    if kinds:  # simulated rows (none with --sequences 0)
         figures.append(save_figure(comparison_figure(rows, hyps, methods, kinds),
                                    out / "comparison.png"))  # fmt: skip
         sim = [r for r in rows if r["map_kind"] != "real"]
