@@ -48,3 +48,24 @@ def test_real_walks_run_writes_rows_like_the_serial_protocol(tmp_path):
     assert [r["rank_of_first_correct"] for r in mine] == [r["rank_of_first_correct"]
                                                           for r in serial]  # fmt: skip
     assert [r["n_local"] for r in mine] == [r["n_local"] for r in serial]
+
+
+def test_missing_real_scans_fail_before_the_run(tmp_path, monkeypatch, capsys):
+    from semloc.cli import main
+
+    monkeypatch.setenv("SEMLOC_DATA", str(tmp_path))
+    assert main(["bench", "--real-walks", "--sequences", "0", "--out", str(tmp_path / "b")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("semloc: error: --real-walks needs the real scans") and "\n" not in err
+    assert not (tmp_path / "b").exists()
+
+
+def test_report_of_real_rows_only_has_no_comparison_figure(tmp_path):
+    from semloc.eval.report import write_outputs
+
+    rows = [dict(method="semloc", map_kind="real", sequence="pair", start=0, offset=0, n_local=5,
+                 rank_of_first_correct=1, rot_err_deg=1.0, trans_err_m=0.1, ms=3.0)]  # fmt: skip
+    files = write_outputs(tmp_path, BenchConfig(sequences=0), rows, [], [], 1.0)
+    assert {f.name for f in files} == {"results.csv", "hypotheses.csv", "ablation.csv",
+                                       "report.md", "config.json"}  # fmt: skip
+    assert "| semloc | 1.00 / 1.00 |" in (tmp_path / "report.md").read_text()

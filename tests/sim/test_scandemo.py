@@ -53,3 +53,13 @@ def test_short_names_are_found_in_the_data_folder():
     if data is None or not (data / "scannet" / "scene0000_00").is_dir():
         pytest.skip("real data sample scannet/scene0000_00 not found (set SEMLOC_DATA)")
     assert resolve_scan(Path("scene0000_00")) == data / "scannet" / "scene0000_00"
+
+
+def test_cli_demo_with_a_missing_scan_is_one_line_exit_2(tmp_path, monkeypatch, capsys):
+    from semloc.cli import main
+
+    monkeypatch.setenv("SEMLOC_DATA", str(tmp_path / "absent"))
+    assert main(["demo", "--scan", "scene9999_00", "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == ("semloc: error: --scan scene9999_00: no such scene folder, and no data folder "
+                   "($SEMLOC_DATA or ../shared/data/real) exists")  # fmt: skip
