@@ -253,10 +253,10 @@ def _densify(xy: np.ndarray, step: float) -> np.ndarray:
 
 def _room_centre(scan: RealScan, free: np.ndarray, origin: np.ndarray) -> np.ndarray:
     """Where a person looks when looking "into the room": the middle of the objects."""
-    positions = [scan.global_maps["reconstruction"].positions[:, :2]]
-    if not len(positions[0]):
-        return origin + (np.argwhere(free).mean(axis=0) + 0.5) * CELL
-    return np.median(positions[0], axis=0)
+    positions = scan.global_maps["reconstruction"].positions[:, :2]
+    if len(positions):
+        return np.median(positions, axis=0)
+    return origin + (np.argwhere(free).mean(axis=0) + 0.5) * CELL
 
 
 def _headings(xy: np.ndarray, centre: np.ndarray, sway: float = 0.6) -> np.ndarray:
