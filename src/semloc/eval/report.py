@@ -30,7 +30,8 @@ from semloc.sim.mapkinds import MAP_KINDS
 
 TOLERANCES = np.round(np.arange(0.05, 1.501, 0.05), 3)
 KS = list(range(1, 21))
-_KIND_ORDER = {kind: i for i, kind in enumerate(MAP_KINDS)}
+_KIND_ORDER = {kind: i for i, kind in enumerate([*MAP_KINDS, *(f"real {k}" for k in MAP_KINDS)])}
+"""Simulated map kinds first, then those of the real walks (eval.realwalks) in the same order."""
 OBJECT_BINS = [(3, 4), (5, 6), (7, 9), (10, 14), (15, 19), (20, 29), (30, 1000)]
 
 
