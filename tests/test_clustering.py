@@ -233,8 +233,9 @@ def test_bitset_clustering_equals_literal_rules(
             assert got[key] == pytest.approx(score, abs=1e-9)
 
 
-def test_union_hash_collisions_fall_back_to_exact_bitsets(monkeypatch):
-    """Merges are grouped by a sum of candidate hashes; when that collides, bitsets decide."""
+def test_union_key_collisions_fall_back_to_exact_member_lists(monkeypatch):
+    """Merges are grouped and sets looked up by a sum of candidate keys; when that collides,
+    the second key and the member lists decide."""
     import semloc.clustering as module
 
     g, local, detections = _scenario(7, 10, 6, 1)
@@ -248,12 +249,14 @@ def test_union_hash_collisions_fall_back_to_exact_bitsets(monkeypatch):
 
     expected = final_sets()
     assert max(len(pairs) for pairs in expected) >= 3
-    # every candidate hashes to 1, so the first key of a union is its size: unions of one
+    # every candidate's first key is 1, so the first key of a set is its size: sets of one
     # size collide, and only the second (independent) sum tells them apart
-    monkeypatch.setattr(module, "_pair_hash", lambda *_: 1)
-    monkeypatch.setattr(
-        module, "_mix", lambda x: np.random.default_rng(0).integers(0, 2**63, len(x), np.uint64)
-    )
+    original = module._candidate_keys
+
+    def colliding(candidates):
+        return np.ones(len(candidates), np.uint64), original(candidates)[1]
+
+    monkeypatch.setattr(module, "_candidate_keys", colliding)
     collided = final_sets()
     assert collided.keys() == expected.keys()
     for pairs, score in expected.items():
