@@ -191,6 +191,7 @@ class HierarchicalClustering:
         self._covered = np.zeros(0, dtype=np.int64)
         self._edges = np.zeros((2, 0), dtype=np.int64)
         self._live = np.zeros(0, dtype=np.int64)
+        self._live_index = np.zeros(0, dtype=np.int64)  # candidate -> row of the graph
         self._graph = sp.csr_matrix((0, 0), dtype=np.int64)
         # sets: member candidates (ascending, -1 padded), score, age, keys
         self._members = np.full((0, 1), -1, dtype=np.int64)
@@ -316,21 +317,32 @@ class HierarchicalClustering:
         self._covered = self._covered[~drop]
 
     def _cover_live(self) -> None:
-        """Know the compatibility among all live candidates; build its sparse graph N."""
+        """Know the compatibility among all live candidates; build its sparse graph N.
+
+        Edges are kept in both directions, sorted by their first candidate, so that the
+        graph's rows need no sort: filtering keeps the order and new edges are merged in.
+        """
         live = np.unique(self._members[self._members >= 0])
-        covered = np.intersect1d(self._covered, live, assume_unique=True)
         is_covered = np.zeros(len(self._cand_g), dtype=bool)
-        is_covered[covered] = True
+        is_covered[self._covered] = True
+        is_live = np.zeros(len(self._cand_g), dtype=bool)
+        is_live[live] = True
+        is_covered &= is_live
         edges = self._edges[:, is_covered[self._edges[0]] & is_covered[self._edges[1]]]
-        added = np.setdiff1d(live, covered, assume_unique=True)
+        added = live[~is_covered[live]]
         if len(added):
-            edges = np.hstack([edges, self._compatible_pairs(added, covered)])
+            found = self._compatible_pairs(added, live[is_covered[live]])
+            found = np.hstack([found, found[::-1]])
+            edges = np.hstack([edges, found[:, np.argsort(found[0], kind="stable")]])
+            edges = edges[:, np.argsort(edges[0], kind="stable")]  # a merge of two sorted runs
         self._edges, self._covered, self._live = edges, live, live
-        n = len(live)
-        a, b = np.searchsorted(live, edges[0]), np.searchsorted(live, edges[1])
-        rows = np.concatenate([a, b, np.arange(n)])
-        cols = np.concatenate([b, a, np.arange(n)])
-        self._graph = _csr(rows, cols, n)
+        index = np.zeros(len(self._cand_g), dtype=np.int64)
+        index[live] = np.arange(len(live))
+        self._live_index = index
+        counts = np.bincount(index[edges[0]], minlength=len(live))
+        indptr = np.concatenate([[0], np.cumsum(counts)])
+        data = np.ones(edges.shape[1], dtype=np.int64)
+        self._graph = sp.csr_matrix((data, index[edges[1]], indptr), shape=(len(live),) * 2)
 
     def _compatible_pairs(self, added: np.ndarray, covered: np.ndarray) -> np.ndarray:
         """All compatible (a, b) with a in `added` and b in `added` ∪ `covered` (2 x E)."""
@@ -426,12 +438,13 @@ class HierarchicalClustering:
     # Clustering round
     def _cluster(self, frontier: np.ndarray) -> None:
         while len(frontier):
-            rows_a, rows_b, shared = self._find_merges(frontier)
+            slots = self._slots()  # the pool is fixed until the insert below
+            rows_a, rows_b, shared = self._find_merges(frontier, slots)
             if not len(rows_a):
                 break
             self._last_merge[rows_a] = self.step
             self._last_merge[rows_b] = self.step
-            frontier = self._insert(*self._best_merges(rows_a, rows_b, shared))
+            frontier = self._insert(*self._best_merges(rows_a, rows_b, shared, slots))
             frontier = self._prune(frontier)
         self._prune(np.zeros(0, dtype=np.int64))  # a round ends with at most K sets
 
@@ -439,10 +452,12 @@ class HierarchicalClustering:
         """The pool's sets as a sparse (sets x live candidates) 0/1 matrix."""
         valid = self._members >= 0
         rows = np.repeat(np.arange(len(self._members)), valid.sum(axis=1))
-        cols = np.searchsorted(self._live, self._members[valid])
+        cols = self._live_index[self._members[valid]]
         return _csr(rows, cols, len(self._live), n_rows=len(self._members))
 
-    def _find_merges(self, frontier: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def _find_merges(
+        self, frontier: np.ndarray, slots: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """All (a, b) rows with a in the frontier whose union passes the merge criterion, and
         |A ∩ B| for each.
 
@@ -452,7 +467,7 @@ class HierarchicalClustering:
         """
         size = self._sizes()
         membership = self._membership()
-        slots = self._slots()
+        transposed = membership.T.tocsr()
         in_frontier = np.zeros(len(size), dtype=bool)
         in_frontier[frontier] = True
         floor = self._survival_floor()
@@ -460,7 +475,7 @@ class HierarchicalClustering:
         for start in range(0, len(frontier), _FRONTIER_CHUNK):
             rows = frontier[start : start + _FRONTIER_CHUNK]
             tally = self._extensions(rows, size, membership)
-            tally = (tally @ membership.T).tocoo()  # |B ∩ E(A)| for every B meeting E(A)
+            tally = (tally @ transposed).tocoo()  # |B ∩ E(A)| for every B meeting E(A)
             ia, ib, in_ext = rows[tally.row], tally.col.astype(np.int64), tally.data
             once = ~in_frontier[ib] | (ib > ia)  # two frontier sets: tried from the lower
             if floor > -np.inf:  # |A∖B| ≤ |A|: a first, cheap screen on the score bound
@@ -487,21 +502,15 @@ class HierarchicalClustering:
         """E(A) = M(A)∖A for the sets `rows`, as a sparse (rows x live candidates) 0/1 matrix."""
         own = membership[rows]
         if np.all(size[rows] == 1):  # singletons: E({c}) is c's neighbourhood
-            extensions = self._graph[own.indices] - own
-            extensions.eliminate_zeros()
-            return extensions
-        # counts[A, c]: members of A that c is compatible with (or equal to)
+            return self._graph[own.indices]
+        # counts[A, c]: members of A that c is compatible with; a member of A itself is
+        # compatible with the |A| - 1 others only, so E(A) is where the count is |A|
         counts = (own @ self._graph).tocoo()
         inside = counts.data == size[rows][counts.row]
-        extensions = (
-            sp.csr_matrix(
-                (np.ones(int(inside.sum()), np.int64), (counts.row[inside], counts.col[inside])),
-                shape=counts.shape,
-            )
-            - own
+        return sp.csr_matrix(
+            (np.ones(int(inside.sum()), np.int64), (counts.row[inside], counts.col[inside])),
+            shape=counts.shape,
         )
-        extensions.eliminate_zeros()
-        return extensions
 
     def _survival_floor(self) -> float:
         """The K-th best score in the pool (-inf while the pool is not full), less a hair.
@@ -529,7 +538,7 @@ class HierarchicalClustering:
         where = rows[:, None] * width + self._cand_l[np.maximum(members, 0)]
         return (members >= 0) & (np.take(slots.ravel(), where) != members)
 
-    def _best_merges(self, rows_a: np.ndarray, rows_b: np.ndarray, shared: np.ndarray):
+    def _best_merges(self, rows_a, rows_b, shared, slots: np.ndarray):
         """Distinct unions of the merges and, for each, the largest merge score.
 
         A merge scores v_A + v_B + Σh over |A∖B|·|B∖A| new pairs with h ≤ 1, which bounds it
@@ -538,7 +547,6 @@ class HierarchicalClustering:
         every merge, at a fraction of the work.
         """
         size = self._sizes()
-        slots = self._slots()
         a_adds, b_adds = size[rows_a] - shared, size[rows_b] - shared
         b_members = self._members[rows_b]
         b_new = np.where(self._not_in(slots, b_members, rows_a), b_members, -1)
