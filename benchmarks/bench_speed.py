@@ -6,17 +6,18 @@
 Maps: the real samples (ScanNet scene0000_00 via `load_scannet`, Replica office4 via
 `load_replica`; found by `semloc.io.datasets.real_data_dir()`, rows skipped with a note when
 absent) and simulated buildings of about 300 / 1k / 3k / 10k / 20k objects
-(`semloc.synthetic.layout`: classrooms, meeting rooms, offices, ... full of repeated objects;
+(`semloc.sim.layouts.layout`: classrooms, meeting rooms, offices, ... full of repeated objects;
 320 box-surface points per object).  Local views: the 3 / 5 / 8 objects nearest to a viewpoint
 near a random object (`crop_with_truth`: visible-side points, ~160 per object, random
-heading), replayed by `semloc.localize` one object per update (the crop's `seen` order), so
-every localization is also a stream of single-object updates.
+heading).  A localization is `semloc.localize` (one update per object in the crop's `seen`
+order, the answer at the last one); streaming feeds the same objects one per
+`Localizer.update`, with an answer at every update.
 
 Each map runs in its own process, pinned to one core (`--cpu`), and reports its peak resident
 memory (ru_maxrss: interpreter, map and points included).  Printed per map and view size:
 median / p90 / max ms of a full localization (`localize`, Localizer construction included),
-the same for one streaming update (`Result.steps[*].ms`), time by stage (`Result.timing_ms`,
-summed over the updates of a localization), success (rotation < 15°, translation < 0.5 m), and
+the same for one streaming update, time by stage (`Result.timing_ms` of the localization,
+summed over its updates), success (rotation < 15°, translation < 0.5 m), and
 a label-constrained RANSAC on centres on the same cases (2 same-label pairs per hypothesis,
 4-DoF closed form about gravity, inliers: local centres within 0.5 m of a same-label global
 centre; its per-map label trees built inside its timing), as the ratio semloc / RANSAC.  Last,
@@ -44,17 +45,14 @@ from dataclasses import asdict, dataclass, field  # noqa: E402
 import numpy as np  # noqa: E402
 from scipy.spatial import cKDTree  # noqa: E402
 
-from semloc.io.datasets import real_data_dir  # noqa: E402
-from semloc.localizer import localize  # noqa: E402
+from semloc.eval.datasets import real_data_dir  # noqa: E402
+from semloc.eval.success import is_success  # noqa: E402
+from semloc.io.importers.replica import load_replica  # noqa: E402
+from semloc.io.importers.scannet import load_scannet  # noqa: E402
+from semloc.localizer import Localizer, localize  # noqa: E402
 from semloc.maps import ObjectMap  # noqa: E402
-from semloc.metrics import is_success  # noqa: E402
-
-try:  # the package layout of the restructure (issue 15), or the one before it
-    from semloc.sim.crop import crop_with_truth  # type: ignore[import-not-found]
-    from semloc.sim.layouts import layout  # type: ignore[import-not-found]
-except ImportError:
-    from semloc.crop import crop_with_truth
-    from semloc.synthetic import layout
+from semloc.sim.crop import crop_with_truth  # noqa: E402
+from semloc.sim.layouts import layout  # noqa: E402
 
 POINTS_PER_OBJECT = 320  # about half of them face a viewpoint
 FULL = {"sizes": [300, 1000, 3000, 10000, 20000], "views": [3, 5, 8], "trials": 5}
@@ -98,12 +96,8 @@ def load_map(name: str) -> ObjectMap | None:
     if data is None:
         return None
     if name == "scannet":
-        from semloc.io.scannet import load_scannet
-
         folder = data / "scannet" / "scene0000_00"
         return load_scannet(folder) if folder.is_dir() else None
-    from semloc.io.replica import load_replica
-
     folder = data / "replica" / "office4"
     return load_replica(folder) if folder.is_dir() else None
 
@@ -188,13 +182,18 @@ def measure_case(global_map: ObjectMap, local: ObjectMap, truth: np.ndarray, see
     wall, cpu = time.perf_counter(), time.process_time()
     result = localize(global_map, local)
     cpu, wall = time.process_time() - cpu, time.perf_counter() - wall
+    localizer, update_ms = Localizer(global_map, local_up=local.up), []
+    for obj in sorted(local, key=lambda o: o.seen):  # streaming: an answer at every update
+        tick = time.process_time()
+        localizer.update([obj])
+        update_ms.append((time.process_time() - tick) * 1e3)
     ransac_cpu = time.process_time()
     pose = ransac(global_map, local, seed)
     ransac_cpu = time.process_time() - ransac_cpu
     return Case(
         ms=cpu * 1e3,
         wall_ms=wall * 1e3,
-        update_ms=[step.ms for step in result.steps],
+        update_ms=update_ms,
         stages={k: float(v) for k, v in result.timing_ms.items()},
         success=result.pose is not None and bool(is_success(result.pose, truth)),
         ransac_ms=ransac_cpu * 1e3,

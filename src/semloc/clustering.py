@@ -15,7 +15,7 @@ The paper's rules, as implemented
       kept.  Sets that have not merged for more than `expiry_updates` updates are dropped.
     * Each update adds the singletons of new or re-detected local objects, then clusters again.
 
-Formulation (equivalent to the literal pairwise test, see tests/test_clustering.py)
+Formulation (equivalent to the literal pairwise test, see tests/core/test_clustering.py)
     Two candidates are *compatible* when they are one-to-one and pass the merge criterion.
     Every set is a clique of compatible candidates (singletons trivially; a merge only joins
     sets whose new cross pairs are all compatible), so D1 ∪ D2 passes the literal test exactly
@@ -108,6 +108,36 @@ class ClusteringConfig(BaseModel):
     protect_top: int = Field(10, ge=0, description="The best sets are never expired.")
 
 
+@dataclass(frozen=True)
+class MergeCriterion:
+    """The merge criterion in one place: what two candidates add to a set's score, and whether
+    they may share a set at all.
+
+    * `score` is the paper's h = min(d^B/d^A, d^A/d^B) (with `min_distance`), at most
+      `UPPER_BOUND`; the clustering's exact pruning bounds (`_survival_floor`, `_best_merges`)
+      rely on that bound, so a new score must keep it or change `UPPER_BOUND`.
+    * `compatible` is the gate h_ε > γ, where h_ε is h with the slack ε (`tolerance`) taken
+      off the distance difference; one-to-one-ness is checked by the caller.
+    """
+
+    gamma: float
+    tolerance: float = 0.0
+    min_distance: float = 0.05
+
+    UPPER_BOUND = 1.0
+
+    @classmethod
+    def of(cls, config: ClusteringConfig) -> MergeCriterion:
+        return cls(config.gamma, config.distance_tolerance, config.min_distance)
+
+    def score(self, d_global: np.ndarray, d_local: np.ndarray) -> np.ndarray:
+        return merge_metric(d_global, d_local, 0.0, self.min_distance)
+
+    def compatible(self, d_global: np.ndarray, d_local: np.ndarray) -> np.ndarray:
+        gate = merge_metric(d_global, d_local, self.tolerance, self.min_distance)
+        return gate > self.gamma
+
+
 def merge_metric(
     d_global: np.ndarray,
     d_local: np.ndarray,
@@ -170,6 +200,7 @@ class HierarchicalClustering:
         config: ClusteringConfig | None = None,
     ) -> None:
         self.config = config or ClusteringConfig()
+        self.criterion = MergeCriterion.of(self.config)
         self._global_positions = np.asarray(global_positions, dtype=float).reshape(-1, 3)
         self._global_ids = list(global_ids)
         self.capacity = self.config.sets_per_object * max(len(self._global_ids), 1)
@@ -369,6 +400,7 @@ class HierarchicalClustering:
         positions in `tree`) and `ys` of `lb`."""
         cfg = self.config
         d_local = float(np.linalg.norm(self._local_positions[la] - self._local_positions[lb]))
+        # the gate 1 - max(0, |d^A - d^B| - ε) / max(d^A, d^B) > γ needs d^A < (d^B + ε) / γ
         reach = max((d_local + cfg.distance_tolerance) / cfg.gamma, cfg.min_distance)
         reach = reach * (1 + 1e-9) + 1e-12  # the exact test below decides at the boundary
         gx, gy = tree.points, self._global_positions[self._cand_g[ys]]
@@ -378,22 +410,21 @@ class HierarchicalClustering:
             found = tree.get().sparse_distance_matrix(cKDTree(gy), reach, output_type="ndarray")
             i, j = found["i"].astype(np.int64), found["j"].astype(np.int64)
         d_global = np.linalg.norm(gx[i] - gy[j], axis=1)
-        gate = merge_metric(d_global, d_local, cfg.distance_tolerance, cfg.min_distance)
-        ok = (gate > cfg.gamma) & (self._cand_g[xs[i]] != self._cand_g[ys[j]])
+        ok = self.criterion.compatible(d_global, d_local)
+        ok &= self._cand_g[xs[i]] != self._cand_g[ys[j]]
         return np.vstack([xs[i[ok]], ys[j[ok]]])
 
     def _gate_of_sets(self, members: np.ndarray) -> np.ndarray:
         """Whether every pair of members of each set (rows, -1 padded) passes the criterion."""
-        cfg = self.config
         valid = members >= 0
         m = np.maximum(members, 0)
         g = self._global_positions[self._cand_g[m]]
         l = self._local_positions[self._cand_l[m]]
         d_global = np.linalg.norm(g[:, :, None] - g[:, None], axis=3)
         d_local = np.linalg.norm(l[:, :, None] - l[:, None], axis=3)
-        gate = merge_metric(d_global, d_local, cfg.distance_tolerance, cfg.min_distance)
+        compatible = self.criterion.compatible(d_global, d_local)
         pair = valid[:, :, None] & valid[:, None, :] & ~np.eye(members.shape[1], dtype=bool)
-        return np.all((gate > cfg.gamma) | ~pair, axis=(1, 2))
+        return np.all(compatible | ~pair, axis=(1, 2))
 
     def _revalidate(self, stale: np.ndarray, moved: set[int]) -> list[int]:
         """Drop sets with stale candidates or broken cliques; sets with moved objects are fresh."""
@@ -479,7 +510,8 @@ class HierarchicalClustering:
             ia, ib, in_ext = rows[tally.row], tally.col.astype(np.int64), tally.data
             once = ~in_frontier[ib] | (ib > ia)  # two frontier sets: tried from the lower
             if floor > -np.inf:  # |A∖B| ≤ |A|: a first, cheap screen on the score bound
-                once &= self._score[ia] + self._score[ib] + size[ia] * in_ext >= floor
+                bound = self.criterion.UPPER_BOUND * size[ia] * in_ext
+                once &= self._score[ia] + self._score[ib] + bound >= floor
             rest = size[ib] - in_ext  # B's members outside E(A): all must be in A
             once &= rest < size[ia]  # (and A ⊄ B)
             ia, ib, in_ext, rest = ia[once], ib[once], in_ext[once], rest[once]
@@ -492,7 +524,8 @@ class HierarchicalClustering:
             a_adds = size[ia] - shared
             keep = shared == rest  # B ⊆ M(A)
             if floor > -np.inf:  # merges that cannot reach the top K would be pruned at once
-                keep &= self._score[ia] + self._score[ib] + a_adds * in_ext >= floor
+                bound = self.criterion.UPPER_BOUND * a_adds * in_ext
+                keep &= self._score[ia] + self._score[ib] + bound >= floor
             for out, values in zip(found, (ia, ib, shared)):
                 out.append(values[keep])
         ia, ib, shared = (np.concatenate(x).astype(np.int64) for x in found)
@@ -515,7 +548,7 @@ class HierarchicalClustering:
     def _survival_floor(self) -> float:
         """The K-th best score in the pool (-inf while the pool is not full), less a hair.
 
-        A merge scores at most v_A + v_B + |A∖B|·|B∖A| (h ≤ 1).  One that cannot reach the
+        A merge scores at most v_A + v_B + |A∖B|·|B∖A| (h ≤ UPPER_BOUND = 1).  One that cannot reach the
         K-th best score is pruned at the end of the iteration, and so are both of its parents
         (their scores are lower still), so such merges are skipped without changing the result.
         """
@@ -557,7 +590,7 @@ class HierarchicalClustering:
         first, group = self._group_unions(rows_a, keys, b_new)
         unions = _sorted_members(np.hstack([self._members[rows_a[first]], b_new[first]]))
         base = self._score[rows_a] + self._score[rows_b]
-        bound = base + a_adds * b_adds
+        bound = base + self.criterion.UPPER_BOUND * a_adds * b_adds
         order = np.lexsort((-base, group))  # per group, the largest v_A + v_B first
         best_of = order[np.r_[True, group[order][1:] != group[order][:-1]]]
         best = np.full(len(first), -np.inf)
@@ -615,8 +648,7 @@ class HierarchicalClustering:
         lb = self._local_positions[self._cand_l[b]]
         d_global = np.linalg.norm(ga[:, :, None] - gb[:, None], axis=3)
         d_local = np.linalg.norm(la[:, :, None] - lb[:, None], axis=3)
-        h = merge_metric(d_global, d_local, 0.0, self.config.min_distance)
-        return h.sum(axis=(1, 2))
+        return self.criterion.score(d_global, d_local).sum(axis=(1, 2))
 
     def _insert(self, members: np.ndarray, best: np.ndarray, key: np.ndarray, key2: np.ndarray):
         """Add distinct merged sets (duplicates keep the larger score); return new rows."""
