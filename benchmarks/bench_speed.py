@@ -90,11 +90,11 @@ class Row:
 
 # ---------------------------------------------------------------------------------------------
 # Maps and views
-def load_map(name: str) -> ObjectMap | None:
+def load_map(name: str, points: int = POINTS_PER_OBJECT) -> ObjectMap | None:
     """A map by name: 'scannet', 'replica' or 'building-N' (None: real data absent)."""
     if name.startswith("building-"):
         n = int(name.split("-")[1])
-        return layout(n, seed=n, points_per_object=POINTS_PER_OBJECT)
+        return layout(n, seed=n, points_per_object=points)
     data = real_data_dir()
     if data is None:
         return None
@@ -165,8 +165,8 @@ def _yaw_poses(l1, l2, g1, g2) -> np.ndarray:
 
 # ---------------------------------------------------------------------------------------------
 # One map (in its own process)
-def measure_map(name: str, view_sizes: list[int], trials: int, seed: int) -> list[Row]:
-    global_map = load_map(name)
+def measure_map(name: str, view_sizes: list[int], trials: int, seed: int, points: int):
+    global_map = load_map(name, points)
     if global_map is None:
         return []
     localizer_module.time = _ProcessClock  # Result.timing_ms in CPU ms, like the totals
@@ -220,6 +220,7 @@ def run_child(name: str, args: argparse.Namespace) -> list[Row]:
     """Measure one map in a fresh process pinned to one core; its rows."""
     command = [sys.executable, __file__, "--worker", name, "--trials", str(args.trials)]
     command += ["--views", *map(str, args.views), "--seed", str(args.seed)]
+    command += ["--points", str(args.points)]
     if args.cpu >= 0 and hasattr(os, "sched_setaffinity"):
         command = ["taskset", "-c", str(args.cpu), *command]
     done = subprocess.run(command, capture_output=True, text=True, check=False)
@@ -312,6 +313,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--cpu", type=int, default=0, help="core to pin to (-1: no pinning)")
     parser.add_argument("--markdown", help="also write the tables to this file")
+    parser.add_argument(
+        "--points", type=int, default=POINTS_PER_OBJECT, help="points per building object"
+    )
+    parser.add_argument("--no-real", action="store_true", help="buildings only")
     parser.add_argument("--worker", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     preset = QUICK if args.quick else FULL
@@ -319,12 +324,13 @@ def main(argv: list[str] | None = None) -> int:
     args.views = args.views or preset["views"]
     args.trials = args.trials or preset["trials"]
     if args.worker:
-        rows = measure_map(args.worker, args.views, args.trials, args.seed)
+        rows = measure_map(args.worker, args.views, args.trials, args.seed, args.points)
         print(json.dumps([asdict(row) for row in rows]))
         return 0
     start = time.perf_counter()
     rows, notes = [], []
-    for name in ["scannet", "replica", *(f"building-{n}" for n in args.sizes)]:
+    real = [] if args.no_real else ["scannet", "replica"]
+    for name in [*real, *(f"building-{n}" for n in args.sizes)]:
         found = run_child(name, args)
         if not found and not name.startswith("building-"):
             notes.append(f"{name}: real data not found (set SEMLOC_DATA), rows skipped")
