@@ -14,6 +14,7 @@ from semloc.pose import (
     align_positions,
     align_positions_batch,
     estimate_pose,
+    prepare_cloud,
 )
 
 Z = np.array([0.0, 0.0, 1.0])
@@ -56,9 +57,10 @@ def random_T(rng: np.random.Generator, yaw_only: bool = False) -> np.ndarray:
 
 
 def l_shape(rng: np.random.Generator, n: int = 3000) -> np.ndarray:
-    """Points on an asymmetric L-shaped solid (1.0 x 0.6 x 0.8 m), origin at a corner."""
-    a = rng.uniform([0, 0, 0], [1.0, 0.2, 0.8], (n // 2, 3))
-    b = rng.uniform([0, 0, 0], [0.2, 0.6, 0.5], (n - n // 2, 3))
+    """Points on the surfaces of an asymmetric L-shaped object (1.0 x 0.6 x 0.8 m: two boxes),
+    origin at a corner; surfaces, as scans, meshes and the simulator give them."""
+    a = box_surface(rng, [1.0, 0.2, 0.8], n // 2) + [0.5, 0.1, 0.4]
+    b = box_surface(rng, [0.2, 0.6, 0.5], n - n // 2) + [0.1, 0.3, 0.25]
     return np.vstack([a, b])
 
 
@@ -358,16 +360,19 @@ def test_6dof_pairs_with_coincident_global_centres_stay_finite() -> None:
     assert np.all(np.isfinite(est.T)) and 0.0 <= est.fitness <= 1.0
 
 
-def test_downsample_voxel_means_and_huge_ranges() -> None:
-    from semloc.pose import _downsample
-
+def test_prepared_cloud_voxel_means_cap_and_huge_ranges() -> None:
     pts = np.array([[0.01, 0.01, 0.01], [0.03, 0.03, 0.03], [1.0, 1.0, 1.0]])
-    out = _downsample(pts, 0.05, 100, np.random.default_rng(0))
-    assert np.allclose(out, [[0.02, 0.02, 0.02], [1.0, 1.0, 1.0]])
+    cloud = prepare_cloud(pts, PoseConfig(icp_voxel=0.05))
+    assert np.allclose(cloud.points, [[0.02, 0.02, 0.02], [1.0, 1.0, 1.0]])
+    assert np.allclose(np.linalg.norm(cloud.normals, axis=1), 1.0)
     far = np.vstack([pts, [[1e9, -1e9, 1e9]]])  # voxel keys no longer fit one int64
-    out = _downsample(far, 1e-6, 100, np.random.default_rng(0))
-    assert len(out) == 4 and np.allclose(np.sort(out[:, 0]), np.sort(far[:, 0]))
-    assert len(_downsample(far, 0.0, 2, np.random.default_rng(0))) == 2
+    cloud = prepare_cloud(far, PoseConfig(icp_voxel=1e-6))
+    assert len(cloud.points) == 4 and np.allclose(np.sort(cloud.points[:, 0]), np.sort(far[:, 0]))
+    capped = prepare_cloud(
+        np.random.default_rng(0).uniform(size=(50, 3)), PoseConfig(icp_voxel=0.0, icp_max_points=7)
+    )
+    assert len(capped.points) == 7
+    assert prepare_cloud(np.zeros((0, 3))) is None
 
 
 @pytest.mark.parametrize(
