@@ -21,8 +21,8 @@ from rich.progress import track
 from rich.table import Table
 
 import semloc
-from semloc.metrics import first_correct_rank
-from semloc.synthetic import layout, observe
+from semloc.eval.success import first_correct_rank
+from semloc.sim.layouts import layout, observe
 
 
 def run(trials: int, buildings: int, sizes: list[int], **config) -> dict[int, list]:

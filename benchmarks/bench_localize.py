@@ -24,7 +24,7 @@ from rich.console import Console  # noqa: E402
 from rich.table import Table  # noqa: E402
 
 from semloc import Localizer  # noqa: E402
-from semloc.synthetic import layout, observe  # noqa: E402
+from semloc.sim.layouts import layout, observe  # noqa: E402
 
 
 def time_replay(global_map, local_map) -> tuple[list[float], int]:

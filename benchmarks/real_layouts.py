@@ -15,7 +15,7 @@ crops the local frame sits at the viewpoint, so this is the robot's position err
 the best hypothesis is right; top-10: one of the first ten is; localized: the Localizer said
 `localized` and its pose is right; wrongly localized: it said `localized` with a wrong pose.
 Results are grouped by the number of observed objects.
-The data are found by `semloc.io.datasets.real_data_dir()`.
+The data are found by `semloc.eval.datasets.real_data_dir()`.
 """
 
 from __future__ import annotations
@@ -31,15 +31,16 @@ import numpy as np
 from rich.console import Console
 from rich.progress import Progress
 
-from semloc.crop import crop_with_truth
-from semloc.io.datasets import real_data_dir
-from semloc.io.replica import load_replica
-from semloc.io.rscan import load_rscan
-from semloc.io.scan2cad import load_scan2cad
-from semloc.io.scannet import load_scannet
+from semloc.eval.datasets import real_data_dir
+from semloc.eval.success import is_success
+from semloc.io.importers.replica import load_replica
+from semloc.io.importers.rscan import load_rscan
+from semloc.io.importers.scan2cad import load_scan2cad
+from semloc.io.importers.scannet import load_scannet
 from semloc.localizer import localize
 from semloc.maps import ObjectMap
-from semloc.metrics import is_success, pose_error
+from semloc.sim.crop import crop_with_truth
+from semloc.transforms import pose_error
 
 BINS = ((1, 2), (3, 4), (5, 6), (7, 9), (10, 10**6))
 RADII = (1.0, 1.5, 2.0, 3.0)

@@ -21,7 +21,7 @@ from functools import partial
 from rich.console import Console
 from rich.table import Table
 
-from semloc.eval.protocol import BenchConfig, run_attempts, simulate, start_keyframes
+from semloc.eval.protocol import Attempt, BenchConfig, run_attempts, simulate, start_keyframes
 
 
 def sequence_rows(index: int, config: BenchConfig, settings: dict) -> list[dict]:
@@ -32,7 +32,8 @@ def sequence_rows(index: int, config: BenchConfig, settings: dict) -> list[dict]
     for start in start_keyframes(config, index, n_keyframes, config.starts):
         for kind in config.map_kinds:
             for method in config.methods:
-                rows += run_attempts(seq, f"seq{index}", start, kind, method, settings=settings)[0]
+                own = settings if method.startswith("semloc") else {}
+                rows += run_attempts(seq, Attempt(index, start, kind, method, settings=own))[0]
     return rows
 
 

@@ -12,6 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
+from semloc.transforms import yaw_rotation as yaw_matrix
+
 GRID = np.array(
     [
         [x, y, z]
@@ -21,11 +23,6 @@ GRID = np.array(
         if (x, y, z) != (0, 0, 0)
     ]
 )
-
-
-def yaw_matrix(theta: float) -> np.ndarray:
-    c, s = np.cos(theta), np.sin(theta)
-    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
 
 def box_points(centre, size, yaw: float) -> np.ndarray:

@@ -6,9 +6,11 @@ l = semloc.load_map("local.json")
 r = semloc.localize(g, l)        # r.status, r.pose (4x4 T_global_local), r.hypotheses
 """
 
+from semloc import descriptors  # registers the descriptor kinds (numpy only)
 from semloc.io import load_map, save_map
-from semloc.localizer import Hypothesis, Localizer, LocalizerConfig, Result, Step, localize
+from semloc.localizer import Localizer, LocalizerConfig, localize
 from semloc.maps import MapError, ObjectMap, SemanticObject
+from semloc.results import Hypothesis, Result, Step
 
 __version__ = "0.1.0"
 __all__ = [
@@ -21,6 +23,7 @@ __all__ = [
     "SemanticObject",
     "Step",
     "__version__",
+    "descriptors",
     "load_map",
     "localize",
     "save_map",

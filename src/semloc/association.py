@@ -6,17 +6,35 @@ descriptors of the same length, the descriptor distance is below `delta`.  Every
 becomes a singleton association set with score 0.  With `descriptor` set, the Localizer
 computes descriptors of that kind for objects with points (semloc.descriptors) and the bound is
 `descriptor_delta`, by default the kind's calibrated δ.
+
+Descriptor kinds are a registry (`DESCRIBERS`, name -> `Describer`) that `semloc.descriptors`
+fills when semloc is imported; the Localizer resolves its describer and gate once, when it is
+built, and a user may pass a describer of their own.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Literal
+from typing import Protocol
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from semloc.maps import ObjectMap, SemanticObject
+
+
+class Describer(Protocol):
+    """A shape descriptor kind: computes descriptors, and the gate δ calibrated for them."""
+
+    delta: float
+
+    def describe(self, objects: Sequence[SemanticObject]) -> list[SemanticObject]:
+        """The objects with a descriptor for every one that has enough points and none yet."""
+        ...
+
+
+DESCRIBERS: dict[str, Describer] = {}
+"""The descriptor kinds by name (filled by `semloc.descriptors`)."""
 
 
 class AssociationConfig(BaseModel):
@@ -34,7 +52,7 @@ class AssociationConfig(BaseModel):
     use_descriptors: bool = Field(
         True, description="Gate candidates by descriptor distance when both objects have one."
     )
-    descriptor: Literal["geometric", "voxnet"] | None = Field(
+    descriptor: str | None = Field(
         None,
         description="Compute shape descriptors of this kind for objects with points that lack "
         "one (semloc.descriptors); None: use only descriptors the maps carry.",
@@ -46,21 +64,28 @@ class AssociationConfig(BaseModel):
         "(semloc.descriptors.DELTAS).",
     )
 
+    @field_validator("descriptor")
+    @classmethod
+    def _known_kind(cls, kind: str | None) -> str | None:
+        if kind is not None and kind not in DESCRIBERS:
+            raise ValueError(f"unknown descriptor kind {kind!r}; choose from {sorted(DESCRIBERS)}")
+        return kind
+
     @property
     def computed_descriptor(self) -> str | None:
         """The descriptor kind the Localizer computes for objects with points (None: none)."""
         return self.descriptor if self.use_descriptors else None
 
-    @property
-    def gate(self) -> float:
-        """The descriptor distance bound in effect."""
-        if self.descriptor is None:
-            return self.delta
-        if self.descriptor_delta is not None:
-            return self.descriptor_delta
-        from semloc.descriptors import DELTAS
+    def describer(self) -> Describer | None:
+        """The registered describer of `descriptor` when descriptors are computed (else None)."""
+        kind = self.computed_descriptor
+        return None if kind is None else DESCRIBERS[kind]
 
-        return DELTAS[self.descriptor]
+    def gate(self, describer: Describer | None) -> float:
+        """The descriptor distance bound in effect with `describer` (None: stored ones)."""
+        if describer is None:
+            return self.delta
+        return self.descriptor_delta if self.descriptor_delta is not None else describer.delta
 
 
 def canonical_label(label: str, label_map: dict[str, str]) -> str:
@@ -73,7 +98,9 @@ def canonical_label(label: str, label_map: dict[str, str]) -> str:
 class CandidateIndex:
     """Global objects grouped by label, ready to answer "which global objects may this be?"."""
 
-    def __init__(self, global_map: ObjectMap, config: AssociationConfig) -> None:
+    def __init__(
+        self, global_map: ObjectMap, config: AssociationConfig, gate: float | None = None
+    ) -> None:
         self.config = config
         self._label_map = {k.strip().lower(): v for k, v in config.label_map.items()}
         self._by_label: dict[str, np.ndarray] = {}
@@ -81,7 +108,7 @@ class CandidateIndex:
         for label in sorted(set(labels)):
             self._by_label[label] = np.flatnonzero(np.array(labels, dtype=object) == label)
         self._descriptors = global_map.descriptors
-        self._gate = config.gate
+        self._gate = config.delta if gate is None else gate
 
     @property
     def labels(self) -> set[str]:
@@ -102,13 +129,3 @@ class CandidateIndex:
         if global_descriptor is None or global_descriptor.shape != local.shape:
             return True
         return float(np.linalg.norm(global_descriptor - local)) < self._gate
-
-
-def candidate_pairs(
-    global_map: ObjectMap,
-    local_objects: Sequence[SemanticObject],
-    config: AssociationConfig | None = None,
-) -> list[tuple[int, int]]:
-    """All singleton candidates as (global index, index into `local_objects`) pairs."""
-    index = CandidateIndex(global_map, config or AssociationConfig())
-    return [(int(g), j) for j, obj in enumerate(local_objects) for g in index.candidates(obj)]

@@ -15,7 +15,7 @@ The paper's rules, as implemented
       kept.  Sets that have not merged for more than `expiry_updates` updates are dropped.
     * Each update adds the singletons of new or re-detected local objects, then clusters again.
 
-Formulation (equivalent to the literal pairwise test, see tests/test_clustering.py)
+Formulation (equivalent to the literal pairwise test, see tests/core/test_clustering.py)
     A boolean compatibility matrix C over candidates holds h(a, b) > γ for one-to-one pairs
     (C[a, a] = True).  Every set is a clique of C (singletons trivially; a merge only joins
     sets whose new cross pairs are all compatible), so D1 ∪ D2 passes the literal test exactly
@@ -87,6 +87,36 @@ class ClusteringConfig(BaseModel):
         2, ge=0, description="Drop sets that have not merged for more than this many updates."
     )
     protect_top: int = Field(10, ge=0, description="The best sets are never expired.")
+
+
+@dataclass(frozen=True)
+class MergeCriterion:
+    """The merge criterion in one place: what two candidates add to a set's score, and whether
+    they may share a set at all.
+
+    * `score` is the paper's h = min(d^B/d^A, d^A/d^B) (with `min_distance`), at most
+      `UPPER_BOUND`; the clustering's exact pruning bounds (`_survival_floor`, `_best_merges`)
+      rely on that bound, so a new score must keep it or change `UPPER_BOUND`.
+    * `compatible` is the gate h_ε > γ, where h_ε is h with the slack ε (`tolerance`) taken
+      off the distance difference; one-to-one-ness is checked by the caller.
+    """
+
+    gamma: float
+    tolerance: float = 0.0
+    min_distance: float = 0.05
+
+    UPPER_BOUND = 1.0
+
+    @classmethod
+    def of(cls, config: ClusteringConfig) -> MergeCriterion:
+        return cls(config.gamma, config.distance_tolerance, config.min_distance)
+
+    def score(self, d_global: np.ndarray, d_local: np.ndarray) -> np.ndarray:
+        return merge_metric(d_global, d_local, 0.0, self.min_distance)
+
+    def compatible(self, d_global: np.ndarray, d_local: np.ndarray) -> np.ndarray:
+        gate = merge_metric(d_global, d_local, self.tolerance, self.min_distance)
+        return gate > self.gamma
 
 
 def merge_metric(
@@ -161,6 +191,7 @@ class HierarchicalClustering:
         config: ClusteringConfig | None = None,
     ) -> None:
         self.config = config or ClusteringConfig()
+        self.criterion = MergeCriterion.of(self.config)
         self._global_positions = np.asarray(global_positions, dtype=float)
         self._global_ids = list(global_ids)
         self.capacity = self.config.sets_per_object * max(len(self._global_ids), 1)
@@ -309,7 +340,6 @@ class HierarchicalClustering:
 
     def _pair_rows(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """h and compatibility of the candidates `rows` against all candidates."""
-        cfg = self.config
         g, l = self._cand_g, self._cand_l
         d_global = np.linalg.norm(
             self._global_positions[g[rows]][:, None] - self._global_positions[g][None], axis=2
@@ -318,12 +348,10 @@ class HierarchicalClustering:
             self._local_positions[l[rows]][:, None] - self._local_positions[l][None], axis=2
         )
         one_to_one = (g[rows][:, None] != g[None]) & (l[rows][:, None] != l[None])
-        h = np.where(one_to_one, merge_metric(d_global, d_local, 0.0, cfg.min_distance), 0.0)
-        gate = h
-        if cfg.distance_tolerance > 0:
-            gate = merge_metric(d_global, d_local, cfg.distance_tolerance, cfg.min_distance)
+        h = np.where(one_to_one, self.criterion.score(d_global, d_local), 0.0)
         alive = self._cand_alive
-        compat = (gate > cfg.gamma) & one_to_one & alive[rows][:, None] & alive[None]
+        compatible = self.criterion.compatible(d_global, d_local)
+        compat = compatible & one_to_one & alive[rows][:, None] & alive[None]
         return h, compat
 
     def _common_of(self, members: np.ndarray) -> np.ndarray:
@@ -400,7 +428,8 @@ class HierarchicalClustering:
             once = ~in_frontier[ib] | (ib > rows[ia])  # two frontier sets: tried from the lower
             ia, ib = ia[once], ib[once]
             if floor > -np.inf:  # merges that cannot reach the top K would be pruned at once
-                fits = self._score[rows[ia]] + self._score[ib] + size[rows[ia]] * size[ib] >= floor
+                bound = self.criterion.UPPER_BOUND * size[rows[ia]] * size[ib]
+                fits = self._score[rows[ia]] + self._score[ib] + bound >= floor
                 ia, ib = ia[fits], ib[fits]
             ia = rows[ia]
             b_members = self._members[ib]
@@ -410,7 +439,8 @@ class HierarchicalClustering:
             a_adds, b_adds = self._adds(bits, ia, ib, size)[:2]
             keep = (a_adds > 0) & (b_adds > 0)  # neither contains the other
             if floor > -np.inf:
-                keep &= self._score[ia] + self._score[ib] + a_adds * b_adds >= floor
+                bound = self.criterion.UPPER_BOUND * a_adds * b_adds
+                keep &= self._score[ia] + self._score[ib] + bound >= floor
             found_a.append(ia[keep])
             found_b.append(ib[keep])
         return np.concatenate(found_a), np.concatenate(found_b)
@@ -418,7 +448,7 @@ class HierarchicalClustering:
     def _survival_floor(self) -> float:
         """The K-th best score in the pool (-inf while the pool is not full), less a hair.
 
-        A merge scores at most v_A + v_B + |A|·|B| (h ≤ 1).  One that cannot reach the K-th
+        A merge scores at most v_A + v_B + |A|·|B| (h ≤ UPPER_BOUND = 1).  One that cannot reach the K-th
         best score is pruned at the end of the iteration, and so are both of its parents
         (their scores are lower still), so such merges are skipped without changing the result.
         """
@@ -442,8 +472,7 @@ class HierarchicalClustering:
         first, group = self._group_unions(rows_a, rows_b, b_new)
         unions = self._bits[rows_a[first]] | self._bits[rows_b[first]]
         base = self._score[rows_a] + self._score[rows_b]
-        new_pairs = a_adds * b_adds
-        bound = base + new_pairs
+        bound = base + self.criterion.UPPER_BOUND * a_adds * b_adds
         order = np.lexsort((-base, group))  # per group, the largest v_A + v_B first
         first = order[np.r_[True, group[order][1:] != group[order][:-1]]]
         best = np.full(len(unions), -np.inf)

@@ -22,23 +22,17 @@ from rich.live import Live
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
+from semloc.cli.render import STATUS_STYLE
+from semloc.eval.success import is_success
 from semloc.io.native import save_map, write_atomic
-from semloc.localizer import Localizer, LocalizerConfig, Result
-from semloc.metrics import is_success, pose_error
+from semloc.localizer import Localizer, LocalizerConfig
+from semloc.results import Result
 from semloc.sim.mapkinds import MAP_KINDS
 from semloc.sim.noise import DetectionNoise
 from semloc.sim.scenario import SimulatedSequence, simulate_sequence
+from semloc.sim.sensor import check_resolution
 from semloc.sim.trajectory import PATHS
-from semloc.viz import (
-    map_figure,
-    new_figure,
-    plot_localization,
-    plot_scores,
-    plot_world,
-    save_figure,
-)
-
-_STATUS_STYLE = {"localized": "green", "ambiguous": "yellow", "failed": "red"}
+from semloc.transforms import pose_error
 
 
 class DemoConfig(BaseModel):
@@ -82,9 +76,7 @@ def validate(config: DemoConfig) -> None:
         raise ValueError(f"--map-kind must be one of {list(MAP_KINDS)}, got {config.map_kind!r}")
     if config.path not in PATHS:
         raise ValueError(f"--path must be one of {list(PATHS)}, got {config.path!r}")
-    w, h = config.resolution
-    if not (16 <= w <= 1280 and 12 <= h <= 960):
-        raise ValueError(f"--resolution must be between 16x12 and 1280x960, got {w}x{h}")
+    check_resolution(*config.resolution)
 
 
 def simulate(config: DemoConfig, console: Console) -> SimulatedSequence:
@@ -140,7 +132,7 @@ def localize_sequence(
                 str(kf.index), str(step.n_local), f"{len(kf.new)}/{len(kf.updated)}",
                 str(step.n_sets),
                 *(_score(s) for s in top),
-                f"[{_STATUS_STYLE[result.status]}]{result.status}[/]", f"{step.ms:.0f}",
+                f"[{STATUS_STYLE[result.status]}]{result.status}[/]", f"{step.ms:.0f}",
             )  # fmt: skip
     console.print()
     return result, keyframes, statuses
@@ -178,6 +170,15 @@ def write_outputs(
     config: DemoConfig, demo: DemoResult, keyframes: list[int], statuses: list[str]
 ) -> list[Path]:
     """scores.png, map.png, world.png, result.json, ground_truth.json, global.json, local.json."""
+    from semloc.viz import (
+        map_figure,
+        new_figure,
+        plot_localization,
+        plot_scores,
+        plot_world,
+        save_figure,  # matplotlib (the pictures)
+    )
+
     out, seq, result = config.out, demo.sequence, demo.result
     out.mkdir(parents=True, exist_ok=True)
     gmap = seq.global_maps[config.map_kind]
@@ -185,6 +186,7 @@ def write_outputs(
         SimpleNamespace(step=kf, top_scores=s.top_scores)
         for s, kf in zip(result.steps, keyframes, strict=False)
     ]
+
     fig, ax = new_figure(8, 4.5)
     title = f"top-2 association-set scores ({config.map_kind} map)"
     plot_scores(ax, steps, statuses=statuses, title=title, x_label="keyframe")
@@ -219,7 +221,7 @@ def write_outputs(
 
 def _report(demo: DemoResult, config: DemoConfig, console: Console) -> None:
     result = demo.result
-    colour = _STATUS_STYLE[result.status]
+    colour = STATUS_STYLE[result.status]
     console.print(f"final status: [bold {colour}]{result.status}[/]")
     if result.best is not None:
         console.print(

@@ -270,10 +270,6 @@ class ObjectMap(Sequence[SemanticObject]):
     def descriptors(self) -> list[np.ndarray | None]:
         return [o.descriptor for o in self._objects]
 
-    @property
-    def has_points(self) -> bool:
-        return any(o.points is not None and len(o.points) for o in self._objects)
-
     # Derived maps ----------------------------------------------------------------------------
     def with_objects(self, objects: Iterable[SemanticObject]) -> ObjectMap:
         """A map with the same frame metadata and other objects."""

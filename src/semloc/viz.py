@@ -1,14 +1,14 @@
 """Plots (matplotlib, Agg backend): top-down maps, localization results, score curves, worlds.
 
 Every `plot_*` function draws into a given `Axes` and returns it; `save_figure` writes a PNG
-atomically (temporary file in the same folder, then rename).  Colours are fixed per label so
+atomically (`semloc.io.write_atomic`).  Colours are fixed per label so
 the same class looks the same in every picture; axes are in metres with equal aspect.
 """
 
 from __future__ import annotations
 
+import io
 import os
-import tempfile
 from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -23,6 +23,7 @@ from matplotlib.figure import Figure  # noqa: E402
 from matplotlib.lines import Line2D  # noqa: E402
 from matplotlib.patches import Patch, Polygon  # noqa: E402
 
+from semloc.io import write_atomic  # noqa: E402
 from semloc.maps import ObjectMap  # noqa: E402
 
 if TYPE_CHECKING:
@@ -71,19 +72,14 @@ def map_figure(xy: np.ndarray, width: float = 12.0) -> tuple[Figure, Axes]:
 
 
 def save_figure(fig: Figure, path: str | os.PathLike[str]) -> Path:
-    """Save `fig` as a PNG at `path` atomically, then close it."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=".png", dir=path.parent)
-    os.close(fd)
+    """Save `fig` as a PNG at `path` atomically (`semloc.io.write_atomic`), then close it."""
+    buffer = io.BytesIO()
     try:
-        fig.savefig(tmp, format="png", bbox_inches="tight")
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, path)
+        fig.savefig(buffer, format="png", bbox_inches="tight")
     finally:
         plt.close(fig)
-        if os.path.exists(tmp):
-            os.unlink(tmp)
+    path = Path(path)
+    write_atomic(path, buffer.getvalue())
     return path
 
 

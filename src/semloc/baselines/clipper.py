@@ -20,7 +20,7 @@ import numpy as np
 from pydantic import Field
 
 from semloc.association import AssociationConfig, CandidateIndex
-from semloc.baselines.common import BaselineConfig, Group, ObjectBaseline
+from semloc.baselines.base import BaselineConfig, Group, ObjectBaseline
 from semloc.maps import SemanticObject
 
 

@@ -30,10 +30,10 @@ from pydantic import Field
 from scipy.spatial import cKDTree
 
 from semloc.association import canonical_label
-from semloc.baselines.common import BaselineConfig, Group, ObjectBaseline
-from semloc.localizer import Hypothesis
+from semloc.baselines.base import BaselineConfig, Group, ObjectBaseline
+from semloc.decision import distinct
 from semloc.maps import SemanticObject
-from semloc.metrics import pose_error
+from semloc.results import Hypothesis
 
 
 class FpfhConfig(BaselineConfig):
@@ -189,21 +189,11 @@ class FpfhRansacBaseline(ObjectBaseline):
             hypothesis.score = float(np.mean(np.isfinite(distance)))
             scored.append(hypothesis)
         scored.sort(key=lambda h: -h.score)
-        chosen: list[Hypothesis] = []
-        for h in scored:
-            if len(chosen) == cfg.top_k:
-                break
-            if not any(self._near(h.pose, other.pose) for other in chosen):
-                chosen.append(h)
+        places = [((), h.pose) for h in scored]  # distinct by pose only
+        chosen = [scored[i] for i in distinct(places, cfg.top_k, cfg.decision)]
         for rank, h in enumerate(chosen, 1):
             h.rank = rank
         return chosen
-
-    def _near(self, a: np.ndarray, b: np.ndarray) -> bool:
-        rotation, translation = pose_error(a, b)
-        return rotation < self.config.distinct_rotation_deg and (
-            translation < self.config.distinct_translation
-        )
 
     def _associate(self, T: np.ndarray, local: list[SemanticObject]) -> list[tuple[int, int]]:
         """Local objects paired with the nearest same-label global object after pose T."""
@@ -220,11 +210,3 @@ class FpfhRansacBaseline(ObjectBaseline):
                 pairs.append((i, j))
                 used.add(i)
         return pairs
-
-    def _decide(self, hypotheses):
-        if not hypotheses:
-            return "failed"
-        best = hypotheses[0]
-        if len(hypotheses) == 1 or best.score >= (1 + self.config.margin) * hypotheses[1].score:
-            return "localized"
-        return "ambiguous"

@@ -24,7 +24,7 @@ import numpy as np
 from pydantic import Field
 
 from semloc.association import canonical_label
-from semloc.baselines.common import BaselineConfig, Group, ObjectBaseline, consistency_groups
+from semloc.baselines.base import BaselineConfig, Group, ObjectBaseline, consistency_groups
 from semloc.maps import SemanticObject
 
 

@@ -5,32 +5,70 @@
     F = descriptors.compute_batch(point_sets, "voxnet")  # learned, shipped weights, numpy only
     gmap = descriptors.with_descriptors(gmap, "voxnet")  # store them in a map
 
-Both kinds work in a gravity-aligned frame (z up) with yaw and translation removed.  `DELTAS`
-holds the calibrated gate δ per kind (≥ 98 % of true simulated pairs pass; see
-docs/descriptors.md and `semloc descriptors-eval`).
+Both kinds work in a gravity-aligned frame (z up) with yaw and translation removed.  Each kind
+is registered in the one registry of descriptor kinds, `semloc.association.DESCRIBERS`, with its
+calibrated gate δ (≥ 98 % of true simulated pairs pass; see docs/descriptors.md and
+`semloc descriptors-eval`); `KINDS` and `DELTAS` are views of it.  Adding a kind: a module with
+its batch function, and one `_register` line below.
+
+This package is run-time code only (numpy); training and evaluation live in
+`semloc.eval.descriptors`.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from typing import Literal
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
+from semloc.association import DESCRIBERS
 from semloc.descriptors.geometric import LENGTH, geometric_descriptor
 from semloc.descriptors.voxnet import EMBEDDING, forward, occupancy_grid
 from semloc.maps import ObjectMap, SemanticObject
 
-Kind = Literal["geometric", "voxnet"]
-KINDS: tuple[str, ...] = ("geometric", "voxnet")
-DELTAS: dict[str, float] = {"geometric": 2.31, "voxnet": 1.30}
-"""Calibrated gate δ per descriptor kind (distance below which a pair stays a candidate)."""
 MIN_POINTS = 10
 
 
-def _check_kind(kind: str) -> None:
-    if kind not in KINDS:
-        raise ValueError(f"unknown descriptor kind {kind!r}; use one of {list(KINDS)}")
+@dataclass(frozen=True)
+class DescriptorKind:
+    """One registered kind: its name, calibrated gate δ and batch function."""
+
+    name: str
+    delta: float
+    batch: Callable[[Sequence[np.ndarray]], np.ndarray]
+
+    def describe(self, objects: Sequence[SemanticObject]) -> list[SemanticObject]:
+        return describe_objects(objects, self.name)
+
+
+def _geometric_batch(point_sets: Sequence[np.ndarray]) -> np.ndarray:
+    rows = [geometric_descriptor(p) for p in point_sets]
+    return np.stack(rows) if rows else np.zeros((0, LENGTH))
+
+
+def _voxnet_batch(point_sets: Sequence[np.ndarray]) -> np.ndarray:
+    if not len(point_sets):
+        return np.zeros((0, EMBEDDING), dtype=np.float32)
+    return forward(np.stack([occupancy_grid(p) for p in point_sets]))
+
+
+def _register(kind: DescriptorKind) -> None:
+    DESCRIBERS[kind.name] = kind
+
+
+_register(DescriptorKind("geometric", 2.31, _geometric_batch))
+_register(DescriptorKind("voxnet", 1.30, _voxnet_batch))
+
+KINDS: tuple[str, ...] = tuple(DESCRIBERS)
+DELTAS: dict[str, float] = {name: kind.delta for name, kind in DESCRIBERS.items()}
+"""Calibrated gate δ per descriptor kind (distance below which a pair stays a candidate)."""
+
+
+def _kind(name: str) -> DescriptorKind:
+    if name not in DESCRIBERS:
+        raise ValueError(f"unknown descriptor kind {name!r}; use one of {list(DESCRIBERS)}")
+    return DESCRIBERS[name]  # type: ignore[return-value]
 
 
 def compute(points: np.ndarray, kind: str = "geometric") -> np.ndarray:
@@ -40,14 +78,7 @@ def compute(points: np.ndarray, kind: str = "geometric") -> np.ndarray:
 
 def compute_batch(point_sets: Sequence[np.ndarray], kind: str = "geometric") -> np.ndarray:
     """Descriptors (M, L) of M point sets (each (N_i, 3), z up)."""
-    _check_kind(kind)
-    if kind == "geometric":
-        rows = [geometric_descriptor(p) for p in point_sets]
-        return np.stack(rows) if rows else np.zeros((0, LENGTH))
-    grids = np.stack([occupancy_grid(p) for p in point_sets]) if len(point_sets) else None
-    if grids is None:
-        return np.zeros((0, EMBEDDING), dtype=np.float32)
-    return forward(grids)
+    return _kind(kind).batch(point_sets)
 
 
 def describe_objects(
@@ -55,7 +86,7 @@ def describe_objects(
 ) -> list[SemanticObject]:
     """The objects with a descriptor of `kind` for every one that has ≥ 10 points and no
     descriptor yet (all such objects with `overwrite`); the others are returned unchanged."""
-    _check_kind(kind)
+    _kind(kind)
     objects = list(objects)
     todo = [
         i
@@ -86,7 +117,7 @@ def described(objmap: ObjectMap, kind: str | None) -> ObjectMap:
 __all__ = [
     "DELTAS",
     "KINDS",
-    "Kind",
+    "DescriptorKind",
     "compute",
     "compute_batch",
     "described",

@@ -4,7 +4,7 @@ The grid is built in the canonical object frame of `frame.canonical` (gravity up
 translation removed) with metric cells of `VOXEL` m, so the grid keeps the object's size:
 x, y in [-1.12, 1.12) m around the horizontal centroid, z in [0, 2.24) m from the lowest point.
 
-The network (trained by `semloc.descriptors.train` with a triplet loss; torch only there):
+The network (trained by `semloc.eval.descriptors.train` with a triplet loss; torch only there):
 
     conv1  1 -> 8,  5^3, stride 2, pad 2, ReLU          32^3 -> 16^3
     conv2  8 -> 16, 3^3, pad 1, ReLU, max-pool 2         16^3 -> 8^3
@@ -115,8 +115,3 @@ def forward(grids: np.ndarray, weights: dict[str, np.ndarray] | None = None) -> 
         x = x @ weights["fc2.weight"].T + weights["fc2.bias"]
         out.append(x / np.maximum(np.linalg.norm(x, axis=1, keepdims=True), 1e-12))
     return np.concatenate(out).astype(np.float32) if out else np.zeros((0, EMBEDDING), np.float32)
-
-
-def voxnet_descriptor(points: np.ndarray, weights: dict[str, np.ndarray] | None = None):
-    """The learned descriptor (float32, length 64, unit norm) of one object's points (N, 3)."""
-    return forward(occupancy_grid(points)[None], weights)[0]

@@ -5,28 +5,33 @@ map is fused again (`SimulatedSequence.replay`: new odometry origin and ground t
 method relocalizes against each global map kind: first as soon as more than 2 local objects
 are seen (offset 0), again after +15 and +30 keyframes.  Success: 15 deg / 0.5 m.
 
-The Localizer is incremental: it receives every keyframe's new or re-detected objects.  Between
-evaluation keyframes only its association sets matter, so those intermediate updates run with a
-cheap hypothesis stage (one set, closed form); the hypotheses are recomputed from the current
-sets at every update, so the evaluated results are the ones of the full configuration.  The
-baselines recompute everything from the local map, so they get the accumulated objects at the
-evaluation keyframes.  `ms` is the wall time of the update at the evaluation keyframe.
+Every method receives every keyframe's new or re-detected objects, and is asked for an answer
+(`update(objects)`) only at the evaluation keyframes; in between `update(objects,
+answer=False)` only grows the Localizer's association sets (the baselines, which recompute
+everything from the local map, just remember the objects).  `ms` is the wall time of the
+update at the evaluation keyframe.
 """
 
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
-from semloc.metrics import first_correct_rank, pose_error
+from semloc.baselines import DEFAULT_METHODS, make_method
+from semloc.eval.success import first_correct_rank
+from semloc.io.importers.rscan import load_rscan
+from semloc.io.importers.scan2cad import load_scan2cad
+from semloc.results import Result
+from semloc.sim.mapkinds import MAP_KINDS
+from semloc.sim.scenario import simulate_sequence
+from semloc.transforms import pose_error
 
 OFFSETS = (0, 15, 30)
-DEFAULT_METHODS = ("semloc", "clipper", "random-walk", "segmatch", "fpfh-ransac")
-DESCRIPTOR_VARIANTS = ("semloc+geometric", "semloc+voxnet")
-"""Opt-in methods: semloc with the shape-descriptor gate of that kind at its calibrated δ."""
 
 
 class BenchConfig(BaseModel):
@@ -39,7 +44,7 @@ class BenchConfig(BaseModel):
     size: str = Field("small", description="World size of the simulated sequences.")
     keyframes: int = Field(80, ge=40, description="Keyframes per sequence.")
     starts: int = Field(8, ge=1, description="Random start keyframes per sequence.")
-    map_kinds: list[str] = Field(default_factory=lambda: ["reconstruction", "cad", "dynamic"])
+    map_kinds: list[str] = Field(default_factory=lambda: list(MAP_KINDS))
     methods: list[str] = Field(default_factory=lambda: list(DEFAULT_METHODS))
     gammas: list[float] = Field(
         default_factory=lambda: [0.5, 0.6, 0.7, 0.8, 0.9, 0.95],
@@ -63,8 +68,6 @@ def sequence_seed(config: BenchConfig, index: int) -> int:
 
 def simulate(config: BenchConfig, index: int):
     """The simulated sequence `index` of a run (deterministic)."""
-    from semloc.sim import simulate_sequence
-
     return simulate_sequence(
         sequence_seed(config, index), config.size, config.map_kinds, "walk",
         n_keyframes=config.keyframes,
@@ -79,83 +82,86 @@ def start_keyframes(config: BenchConfig, index: int, n_keyframes: int, count: in
     return sorted(int(s) for s in rng.choice(last, size=count, replace=False))
 
 
-def make_method(name: str, global_map, local_up, settings: dict[str, Any] | None = None):
-    """A method by name. `settings` are `LocalizerConfig` fields for the semloc methods (flat
-    names such as `gamma`, `top_k`, `min_fitness`); the baselines have none."""
-    from semloc.baselines import METHODS
-    from semloc.localizer import LocalizerConfig
+@dataclass(frozen=True)
+class Attempt:
+    """One chain of attempts: a start keyframe of a sequence, a map kind and a method.
 
-    if name == "semloc" or name in DESCRIPTOR_VARIANTS:
-        overrides: dict[str, Any] = dict(settings or {})
-        if name in DESCRIPTOR_VARIANTS:
-            overrides["descriptor"] = name.removeprefix("semloc+")
-        return METHODS["semloc"](global_map, LocalizerConfig(**overrides), local_up)
-    return METHODS[name](global_map, None, local_up)
+    `label` names the method in the outputs (the method's name unless set); `settings` are its
+    config fields (`make_method`); `ablation` rows go to ablation.csv.
+    """
+
+    sequence: int
+    start: int
+    map_kind: str
+    method: str
+    label: str = ""
+    settings: dict[str, Any] = field(default_factory=dict)
+    ablation: bool = False
+
+    @property
+    def name(self) -> str:
+        return self.label or self.method
 
 
-def run_attempts(
-    seq,
-    sequence: str,
-    start: int,
-    kind: str,
-    method: str,
-    label: str | None = None,
-    settings: dict[str, Any] | None = None,
-) -> tuple[list[dict], list[dict]]:
-    """One start, one map kind, one method (with `make_method`'s `settings`): rows of
-    results.csv and hypotheses.csv."""
-    from semloc.localizer import Localizer
+def attempt_rows(
+    result: Result, truth: np.ndarray, base: dict[str, Any], ms: float
+) -> tuple[dict, list[dict]]:
+    """The results.csv row and the hypotheses.csv rows of one answer against `truth`."""
+    best = result.best
+    rot = trans = None
+    if best is not None and best.pose is not None:
+        rot, trans = pose_error(best.pose, truth)
+    row = {
+        **base, "n_local": result.steps[-1].n_local if result.steps else 0,
+        "rank_of_first_correct": first_correct_rank(result.hypotheses, truth),
+        "rot_err_deg": rot, "trans_err_m": trans, "ms": ms,
+        "status": result.status,  # not a results.csv column; benchmarks read it
+    }  # fmt: skip
+    hyps = []
+    for h in result.hypotheses:
+        if h.pose is not None:
+            r, t = pose_error(h.pose, truth)
+            hyps.append({**base, "rank": h.rank, "rot_err_deg": r, "trans_err_m": t})
+    return row, hyps
 
-    replay = seq.replay(start, min(len(seq.recording.detections), start + 70))
+
+def run_attempts(seq, attempt: Attempt) -> tuple[list[dict], list[dict]]:
+    """One start, one map kind, one method: rows of results.csv and hypotheses.csv.
+
+    Every keyframe's new or re-detected objects go to the method; only the evaluation
+    keyframes ask for an answer."""
+    replay = seq.replay(attempt.start, min(len(seq.recording.detections), attempt.start + 70))
     truth = replay.T_global_local
-    gmap = replay.global_maps[kind]
-    loc = make_method(method, gmap, replay.local_map.up, settings)
-    incremental = isinstance(loc, Localizer)
-    full_config = loc.config if incremental else None
-    cheap = None
-    if incremental:
-        pose = full_config.pose.model_copy(update={"refine": False})
-        cheap = full_config.model_copy(update={"top_k": 1, "screened_sets": 1, "pose": pose})
-    seen: set[str] = set()
-    targets: dict[int, int] = {}
+    method = make_method(
+        attempt.method, replay.global_maps[attempt.map_kind], replay.local_map.up,
+        attempt.settings,
+    )  # fmt: skip
+    targets = _targets(replay.keyframes)
+    rows, hyps = [], []
+    base = dict(method=attempt.name, map_kind=attempt.map_kind, sequence=f"seq{attempt.sequence}",
+                start=attempt.start)  # fmt: skip
     for kf in replay.keyframes:
+        if kf.index not in targets:
+            if kf.objects:
+                method.update(kf.objects, answer=False)
+            continue
+        tick = time.perf_counter()
+        result = method.update(kf.objects)
+        ms = (time.perf_counter() - tick) * 1e3
+        row, hyp_rows = attempt_rows(result, truth, {**base, "offset": targets[kf.index]}, ms)
+        rows.append(row)
+        hyps += hyp_rows
+    return rows, hyps
+
+
+def _targets(keyframes) -> dict[int, int]:
+    """Evaluation keyframes -> offset: when more than 2 objects are seen, then +15 and +30."""
+    seen: set[str] = set()
+    for kf in keyframes:
         seen.update(o.id for o in kf.objects)
         if len(seen) > 2:
-            targets = {kf.index + off: off for off in OFFSETS}
-            break
-    rows, hyps = [], []
-    pending: dict = {}
-    name = label or method
-    for kf in replay.keyframes:
-        pending.update({o.id: o for o in kf.objects})
-        if kf.index in targets:
-            if incremental:
-                loc.config = full_config
-            tick = time.perf_counter()
-            result = loc.update(list(pending.values()))
-            ms = (time.perf_counter() - tick) * 1e3
-            pending.clear()
-            best = result.hypotheses[0] if result.hypotheses else None
-            rot = trans = None
-            if best is not None and best.pose is not None:
-                rot, trans = pose_error(best.pose, truth)
-            base = dict(method=name, map_kind=kind, sequence=sequence, start=start,
-                        offset=targets[kf.index])  # fmt: skip
-            rows.append({
-                **base, "n_local": result.steps[-1].n_local,
-                "rank_of_first_correct": first_correct_rank(result.hypotheses, truth),
-                "rot_err_deg": rot, "trans_err_m": trans, "ms": ms,
-                "status": result.status,  # not a results.csv column; benchmarks read it
-            })  # fmt: skip
-            for h in result.hypotheses:
-                if h.pose is not None:
-                    r, t = pose_error(h.pose, truth)
-                    hyps.append({**base, "rank": h.rank, "rot_err_deg": r, "trans_err_m": t})
-        elif incremental and pending:
-            loc.config = cheap
-            loc.update(list(pending.values()))
-            pending.clear()
-    return rows, hyps
+            return {kf.index + off: off for off in OFFSETS}
+    return {}
 
 
 # Real layouts (the importers' samples), when their data is present -------------------------
@@ -167,16 +173,10 @@ REAL_PAIRS = {
 
 def real_maps(data: str, pair: str):
     """(global map, local map, true T_global_local) of a real pair under the folder `data`."""
-    from pathlib import Path
-
     root = Path(data)
     if REAL_PAIRS[pair] == "rscan":
-        from semloc.io.rscan import load_rscan
-
         folder = root / "3rscan_subscans"
         return load_rscan(folder / "scene_1"), load_rscan(folder / "scene_2"), np.eye(4)
-    from semloc.io.scan2cad import load_scan2cad
-
     maps = load_scan2cad(root / "scan2cad" / "scene0470_00")
     return maps.cad, maps.scan, np.eye(4)
 
@@ -189,16 +189,5 @@ def run_real_attempt(data: str, pair: str, method: str) -> tuple[list[dict], lis
     result = loc.update(list(local))
     ms = (time.perf_counter() - tick) * 1e3
     base = dict(method=method, map_kind="real", sequence=pair, start=0, offset=0)
-    best = result.hypotheses[0] if result.hypotheses else None
-    rot = trans = None
-    if best is not None and best.pose is not None:
-        rot, trans = pose_error(best.pose, truth)
-    row = {**base, "n_local": len(local), "rank_of_first_correct":
-           first_correct_rank(result.hypotheses, truth), "rot_err_deg": rot,
-           "trans_err_m": trans, "ms": ms}  # fmt: skip
-    hyps = []
-    for h in result.hypotheses:
-        if h.pose is not None:
-            r, t = pose_error(h.pose, truth)
-            hyps.append({**base, "rank": h.rank, "rot_err_deg": r, "trans_err_m": t})
+    row, hyps = attempt_rows(result, truth, base, ms)
     return [row], hyps

@@ -15,7 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
-from semloc.eval.metrics import (
+from semloc.baselines import METHODS
+from semloc.eval.recall import (
     HYPOTHESIS_COLUMNS,
     RESULT_COLUMNS,
     format_rows,
@@ -25,22 +26,20 @@ from semloc.eval.metrics import (
     summary,
 )  # fmt: skip
 from semloc.io import write_atomic
+from semloc.sim.mapkinds import MAP_KINDS
 
 TOLERANCES = np.round(np.arange(0.05, 1.501, 0.05), 3)
 KS = list(range(1, 21))
-_KIND_ORDER = {"reconstruction": 0, "cad": 1, "dynamic": 2}
+_KIND_ORDER = {kind: i for i, kind in enumerate(MAP_KINDS)}
 OBJECT_BINS = [(3, 4), (5, 6), (7, 9), (10, 14), (15, 19), (20, 29), (30, 1000)]
-
-
-_COLORS = {"semloc": "black", "clipper": "C0", "random-walk": "C1", "segmatch": "C2",
-           "fpfh-ransac": "C3", "semloc+geometric": "C4", "semloc+voxnet": "C5"}  # fmt: skip
 
 
 def _style(method: str) -> dict:
     """semloc bold; its descriptor variants dashed, so they read as variants of it."""
     width = 2.6 if method == "semloc" else 1.5
     dashed = method.startswith("semloc+")
-    return {"linewidth": width, "color": _COLORS.get(method, "C6"),
+    color = METHODS[method].color if method in METHODS else "C6"
+    return {"linewidth": width, "color": color,
             "linestyle": "--" if dashed else "-"}  # fmt: skip
 
 
@@ -172,7 +171,7 @@ def write_outputs(out: Path, config, rows, hyps, ablation, seconds: float) -> li
         ("hypotheses.csv", hyps, HYPOTHESIS_COLUMNS),
         ("ablation.csv", ablation, RESULT_COLUMNS),
     ):
-        files.append(write_atomic(out / name, format_rows(data, columns)) or out / name)
+        files.append(write_atomic(out / name, format_rows(data, columns)))
     methods = [m for m in config.methods if any(r["method"] == m for r in rows)]
     kinds = [k for k in config.map_kinds if any(r["map_kind"] == k for r in rows)]
     figures = []

@@ -19,15 +19,17 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-from semloc.eval.metrics import HYPOTHESIS_COLUMNS, RESULT_COLUMNS, format_rows
+from semloc.eval.datasets import real_data_dir
 from semloc.eval.protocol import (
     REAL_PAIRS,
+    Attempt,
     BenchConfig,
     run_attempts,
     run_real_attempt,
     simulate,
     start_keyframes,
 )  # fmt: skip
+from semloc.eval.report import write_outputs
 
 _ONE_THREAD = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
 
@@ -49,8 +51,6 @@ def _sequence_task(config: BenchConfig, index: int):
 
 def _real_data() -> str | None:
     """The real samples' folder when the importers' data is present (all pairs' files)."""
-    from semloc.io.datasets import real_data_dir
-
     folder = real_data_dir()
     if folder is None:
         return None
@@ -66,23 +66,22 @@ def _order(row: dict, methods: list[str]) -> tuple:
             row.get("rank", 0))  # fmt: skip
 
 
-def plan(config: BenchConfig, n_keyframes: int) -> list[tuple]:
-    """All chains: (sequence index, start, map kind, method, label, settings, ablation?)."""
+def plan(config: BenchConfig, n_keyframes: int) -> list[Attempt]:
+    """All chains of attempts: the comparison, then the γ ablation (semloc only)."""
     jobs = []
     for index in range(config.sequences):
         starts = start_keyframes(config, index, n_keyframes, config.starts)
         for start in starts:
             for kind in config.map_kinds:
                 for method in config.methods:
-                    jobs.append((index, start, kind, method, method, {}, False))
+                    jobs.append(Attempt(index, start, kind, method))
         ablation = start_keyframes(config, index, n_keyframes, config.ablation_starts)
         kind = "reconstruction" if "reconstruction" in config.map_kinds else config.map_kinds[0]
         for start in ablation if config.ablation_starts else []:
             for gamma in config.gammas:
                 settings = {"gamma": gamma, "top_k": config.ablation_top_k}
-                jobs.append(
-                    (index, start, kind, "semloc", f"semloc gamma={gamma:g}", settings, True)
-                )
+                label = f"semloc gamma={gamma:g}"
+                jobs.append(Attempt(index, start, kind, "semloc", label, settings, ablation=True))
     return jobs
 
 
@@ -97,8 +96,6 @@ def run_benchmark(
     """Run the whole benchmark (see the module docstring) and write the outputs into `out`."""
     from dask.distributed import Client, LocalCluster, as_completed
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn
-
-    from semloc.eval.report import write_outputs
 
     begin = time.perf_counter()
     out = Path(out)
@@ -124,10 +121,8 @@ def run_benchmark(
         jobs = plan(config, config.keyframes)
         futures = {}
         for job in jobs:
-            index, start, kind, method, label, settings, ablation = job
-            future = client.submit(run_attempts, sequences[index], f"seq{index}", start, kind,
-                                   method, label, settings, pure=False)  # fmt: skip
-            futures[future] = ablation
+            future = client.submit(run_attempts, sequences[job.sequence], job, pure=False)
+            futures[future] = job.ablation
         data = _real_data() if config.real else None
         for pair in REAL_PAIRS if data else []:
             for method in config.methods:
@@ -157,12 +152,3 @@ def run_benchmark(
     seconds = time.perf_counter() - begin
     files = write_outputs(out, config, rows, hyps, ablation_rows, seconds)
     return BenchOutput(rows, hyps, ablation_rows, files, seconds)
-
-
-def result_texts(output: BenchOutput) -> dict[str, str]:
-    """The CSV texts of a run (for tests and callers that do not want files)."""
-    return {
-        "results.csv": format_rows(output.rows, RESULT_COLUMNS),
-        "hypotheses.csv": format_rows(output.hypotheses, HYPOTHESIS_COLUMNS),
-        "ablation.csv": format_rows(output.ablation, RESULT_COLUMNS),
-    }

@@ -1,7 +1,8 @@
 """Reading and writing maps: the native semloc format, and importers for public datasets.
 
-The dataset importers (`load_scannet`, `load_scan2cad`, `load_replica`, `load_rscan`) are
-imported on first use, so that `import semloc` stays light.
+The dataset importers (`semloc.io.importers`, one registry; `load_scannet`, `load_scan2cad`,
+`load_replica`, `load_rscan` here) are imported on first use, so that `import semloc` stays
+light.
 """
 
 from typing import Any
@@ -15,12 +16,7 @@ from semloc.io.native import (
     write_atomic,
 )
 
-_IMPORTERS = {
-    "load_scannet": "semloc.io.scannet",
-    "load_scan2cad": "semloc.io.scan2cad",
-    "load_replica": "semloc.io.replica",
-    "load_rscan": "semloc.io.rscan",
-}
+_LOADERS = ("load_scannet", "load_scan2cad", "load_replica", "load_rscan")
 
 __all__ = [
     "read_json",
@@ -29,13 +25,14 @@ __all__ = [
     "map_to_dict",
     "save_map",
     "write_atomic",
-    *_IMPORTERS,
+    *_LOADERS,
 ]
 
 
 def __getattr__(name: str) -> Any:
-    if name in _IMPORTERS:
+    if name in _LOADERS:  # semloc.io.importers.<dataset>.load_<dataset>, read on first use
         import importlib
 
-        return getattr(importlib.import_module(_IMPORTERS[name]), name)
+        module = importlib.import_module(f"semloc.io.importers.{name.removeprefix('load_')}")
+        return getattr(module, name)
     raise AttributeError(f"module 'semloc.io' has no attribute {name!r}")

@@ -58,12 +58,6 @@ def _footprint_axis(xy: np.ndarray) -> np.ndarray:
     return best
 
 
-def box_corners(centre: np.ndarray, size: np.ndarray, rotation: np.ndarray) -> np.ndarray:
-    """The 8 corners of a box, (8, 3)."""
-    signs = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], float)
-    return (signs * np.asarray(size) / 2) @ np.asarray(rotation).T + centre
-
-
 def sample_box_surface(
     centre: np.ndarray,
     size: np.ndarray,

@@ -186,8 +186,19 @@ def save_map(objmap: ObjectMap, path: str | os.PathLike[str], points: str = "aut
     return path
 
 
-def write_atomic(path: str | os.PathLike[str], data: bytes | str) -> None:
-    """Write `data` to `path` through a temporary file in the same folder and a rename."""
+def require_keys(document: Any, keys: tuple[str, ...], where: str) -> dict[str, Any]:
+    """`document` if it is a JSON object holding `keys`; else MapError naming `where`."""
+    if not isinstance(document, dict):
+        raise MapError(f"{where}: must be an object")
+    for key in keys:
+        if key not in document:
+            raise MapError(f"{where}: missing key '{key}'")
+    return document
+
+
+def write_atomic(path: str | os.PathLike[str], data: bytes | str) -> Path:
+    """Write `data` to `path` through a temporary file in the same folder and a rename
+    (mode 0666 less the umask, like a plain write); returns the path."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     payload = data.encode() if isinstance(data, str) else data
@@ -203,6 +214,7 @@ def write_atomic(path: str | os.PathLike[str], data: bytes | str) -> None:
         if os.path.exists(tmp):
             os.unlink(tmp)
         raise
+    return path
 
 
 def _umask() -> int:

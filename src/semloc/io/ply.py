@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from semloc.io.native import write_atomic
 from semloc.maps import MapError
 
 _TYPES = {
@@ -269,7 +270,6 @@ def write_ply(
     binary: bool = True,
 ) -> None:
     """Write a structured vertex array (and triangles) as PLY; used for fixtures and exports."""
-    from semloc.io.native import write_atomic
 
     inverse = {v: k for k, v in reversed(_TYPES.items())}
     faces = np.zeros((0, 3), dtype=np.int64) if faces is None else np.asarray(faces)

@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from semloc.descriptors import described
 from semloc.io.native import save_map, write_atomic
 from semloc.sim.scenario import SimulatedSequence
 
@@ -35,7 +36,6 @@ def write_sequence(
     out.mkdir(parents=True, exist_ok=True)
 
     def save(objmap, path: Path) -> Path:
-        from semloc.descriptors import described
 
         return save_map(described(objmap, descriptor), path)
 

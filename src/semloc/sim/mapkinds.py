@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import math
 from collections import defaultdict
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -25,7 +26,6 @@ from semloc.sim.sensor import DepthSensor, Intrinsics, backproject, look_at
 from semloc.sim.shapes import model, other_style
 from semloc.sim.world import ObjectInstance, World, yaw_pose
 
-MAP_KINDS = ("reconstruction", "cad", "dynamic")
 VOXEL = 0.05
 
 
@@ -198,12 +198,16 @@ def dynamic_map(world: World) -> tuple[ObjectMap, DynamicChanges]:
     return objmap, changes
 
 
+MAP_KINDS: dict[str, Callable[[World], ObjectMap]] = {
+    "reconstruction": reconstruction_map,
+    "cad": cad_map,
+    "dynamic": lambda world: dynamic_map(world)[0],
+}
+"""The registry of global-map kinds (name -> builder), in the order reports show them."""
+
+
 def global_map(world: World, kind: str) -> ObjectMap:
     """One global map of `world` by kind name."""
-    if kind == "reconstruction":
-        return reconstruction_map(world)
-    if kind == "cad":
-        return cad_map(world)
-    if kind == "dynamic":
-        return dynamic_map(world)[0]
-    raise ValueError(f"unknown map kind {kind!r}; use one of {list(MAP_KINDS)}")
+    if kind not in MAP_KINDS:
+        raise ValueError(f"unknown map kind {kind!r}; use one of {list(MAP_KINDS)}")
+    return MAP_KINDS[kind](world)

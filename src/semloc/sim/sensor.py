@@ -13,11 +13,23 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-import open3d as o3d
 
 from semloc.frontend.segments import backproject as backproject_matrix
 from semloc.sim.shapes import Mesh
 from semloc.sim.world import World
+
+RESOLUTION_RANGE = ((16, 12), (1280, 960))
+"""Smallest and largest depth image (width, height) the simulator's commands accept."""
+
+
+def check_resolution(width: int, height: int) -> tuple[int, int]:
+    """(width, height) if within `RESOLUTION_RANGE`, else a ValueError saying the range."""
+    (w0, h0), (w1, h1) = RESOLUTION_RANGE
+    if not (w0 <= width <= w1 and h0 <= height <= h1):
+        raise ValueError(
+            f"--resolution must be between {w0}x{h0} and {w1}x{h1}, got {width}x{height}"
+        )
+    return width, height
 
 
 @dataclass(frozen=True)
@@ -107,6 +119,9 @@ class DepthSensor:
         self.noise = noise
         objects = [o.mesh for o in world.objects] if world is not None else list(meshes or [])
         bg = list(world.background) if world is not None else list(background or [])
+        import open3d as o3d  # heavy optional dependency (the `sim` extra)
+
+        self._o3d = o3d
         self._scene = o3d.t.geometry.RaycastingScene()
         self._instance_of: list[int] = []
         for i, mesh in enumerate(objects):
@@ -128,7 +143,7 @@ class DepthSensor:
         R, t = T_world_camera[:3, :3], T_world_camera[:3, 3]
         dirs = self._dirs @ R.T
         rays = np.concatenate([np.broadcast_to(t, dirs.shape), dirs], axis=1).astype(np.float32)
-        hits = self._scene.cast_rays(o3d.core.Tensor(rays))
+        hits = self._scene.cast_rays(self._o3d.core.Tensor(rays))
         depth = hits["t_hit"].numpy().astype(np.float32)  # |dir| has z = 1: t is the z-depth
         geometry = hits["geometry_ids"].numpy().astype(np.int64)
         invalid = ~np.isfinite(depth) | (depth > self.max_depth)

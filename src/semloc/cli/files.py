@@ -1,0 +1,55 @@
+"""Reading the small JSON inputs of the commands: settings, poses, localization results."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from semloc.cli.app import fail
+from semloc.io import read_json
+from semloc.transforms import as_pose
+
+
+def read_config(path: Path | None) -> dict:
+    """The settings of a `--config` file (a JSON object), or {} without one."""
+    if path is None:
+        return {}
+    data = read_json(path)
+    if not isinstance(data, dict):
+        fail(f"{path}: must hold a JSON object of settings")
+    return data
+
+
+def pose_of(path: Path, value: object) -> np.ndarray:
+    """A 4x4 pose read from `path`, or one line naming the file and the problem."""
+    try:
+        return as_pose(value)
+    except ValueError as exc:
+        fail(f"{path}: {exc}")
+        raise  # unreachable: fail() raises
+
+
+def read_pose(path: Path, what: str | None = None) -> np.ndarray:
+    """The 4x4 `T_global_local` of a file holding it (a list of 4 rows, or under that key)."""
+    data = read_json(path, what=what or "")
+    if isinstance(data, dict):
+        data = data.get("T_global_local")
+    return pose_of(path, data)
+
+
+def read_result(path: Path) -> tuple[np.ndarray | None, list[tuple[str, str]], str | None]:
+    """Pose, best pairs and status of a result file (or the true pose of a ground_truth.json)."""
+    data = read_json(path)
+    if not isinstance(data, dict) or not ("pose" in data or "T_global_local" in data):
+        fail(f"{path}: not a localization result (no 'pose') nor a ground truth file")
+    raw = data.get("pose", data.get("T_global_local"))
+    pose = None if raw is None else pose_of(path, raw)
+    pairs: list[tuple[str, str]] = []
+    hypotheses = data.get("hypotheses") or []
+    if isinstance(hypotheses, list) and hypotheses and isinstance(hypotheses[0], dict):
+        for pair in hypotheses[0].get("pairs", []):
+            if isinstance(pair, dict) and "global" in pair and "local" in pair:
+                pairs.append((str(pair["global"]), str(pair["local"])))
+    status = data.get("status") if isinstance(data.get("status"), str) else None
+    return pose, pairs, status

@@ -1,0 +1,74 @@
+"""Every baseline localizes an easy, noise-free case: a transformed crop of the global map."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from semloc.baselines import (
+    ClipperBaseline,
+    FpfhRansacBaseline,
+    RandomWalkBaseline,
+    SegMatchBaseline,
+)  # fmt: skip
+from semloc.baselines.base import consistency_groups
+from semloc.baselines.clipper import ClipperConfig, dense_cluster
+from semloc.eval.success import first_correct_rank, is_success
+from semloc.localizer import Result
+from semloc.maps import ObjectMap, SemanticObject
+
+
+@pytest.fixture(scope="module")
+def easy():
+    from semloc.sim.mapkinds import reconstruction_map
+    from semloc.sim.world import generate_world
+
+    gmap = reconstruction_map(generate_world(3, "tiny"))
+    anchor = gmap.positions[0]
+    near = [o for o in gmap if np.linalg.norm(o.position[:2] - anchor[:2]) < 3.0][:10]
+    angle = 0.7
+    T = np.eye(4)
+    T[:3, :3] = [[np.cos(angle), -np.sin(angle), 0], [np.sin(angle), np.cos(angle), 0], [0, 0, 1]]
+    T[:3, 3] = anchor + [0.5, -0.3, 0.0]
+    inv = np.linalg.inv(T)
+    local = ObjectMap(
+        [
+            SemanticObject(f"l{o.id}", o.label, inv[:3, :3] @ o.position + inv[:3, 3],
+                           points=o.points @ inv[:3, :3].T + inv[:3, 3], seen=i)
+            for i, o in enumerate(near)
+        ],
+        up=[0, 0, 1],
+    )  # fmt: skip
+    assert len(local) >= 5
+    return gmap, local, T
+
+
+@pytest.mark.parametrize(
+    "cls", [ClipperBaseline, RandomWalkBaseline, SegMatchBaseline, FpfhRansacBaseline]
+)
+def test_baseline_localizes_easy_case(easy, cls):
+    gmap, local, T = easy
+    method = cls(gmap, local_up=local.up)
+    result = method.update(local)
+    assert isinstance(result, Result)
+    assert result.hypotheses and result.hypotheses[0].rank == 1
+    assert first_correct_rank(result.hypotheses, T) == 1
+    assert is_success(result.pose, T)
+    assert result.steps[-1].n_local == len(local)
+
+
+def test_dense_cluster_finds_the_clique():
+    # 4 mutually consistent nodes (0-3) and 2 outliers consistent only with node 0
+    C = np.zeros((6, 6))
+    C[:4, :4] = 1
+    C[0, 4] = C[4, 0] = C[0, 5] = C[5, 0] = 1
+    np.fill_diagonal(C, 1)
+    assert sorted(dense_cluster(C.copy(), C, ClipperConfig()).tolist()) == [0, 1, 2, 3]
+
+
+def test_consistency_groups_are_one_to_one_and_consistent():
+    local = np.array([[0, 0, 0], [1, 0, 0], [0, 2, 0]], dtype=float)
+    glob = np.array([[5, 5, 0], [6, 5, 0], [5, 7, 0], [9, 9, 0]], dtype=float)
+    candidates = [(0, 0, 1.0), (1, 1, 1.0), (2, 2, 1.0), (3, 2, 0.5), (1, 0, 0.2)]
+    groups = consistency_groups(candidates, local, glob, 0.1)
+    assert sorted(groups[0][1]) == [(0, 0), (1, 1), (2, 2)]

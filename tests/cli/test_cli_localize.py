@@ -1,0 +1,169 @@
+"""`semloc localize` end to end: JSON contract, text output, exit codes, one-line errors."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import semloc
+from semloc.cli import main
+from semloc.sim.layouts import layout, observe
+
+
+@pytest.fixture(scope="module")
+def maps(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("maps")
+    g = layout(60, seed=5)
+    obs = observe(g, 7, seed=8, spurious=0, wrong_label_rate=0.0, bias=(0.0, 0.05))
+    semloc.save_map(g, folder / "global.json")
+    semloc.save_map(obs.local_map, folder / "local.json")
+    return folder, obs
+
+
+def test_json_output_follows_the_contract(maps, capsys):
+    folder, obs = maps
+    assert main(["localize", str(folder / "global.json"), str(folder / "local.json"),
+                 "--format", "json"]) == 0  # fmt: skip
+    out = json.loads(capsys.readouterr().out)
+    assert set(out) == {"status", "pose", "hypotheses", "steps", "timing_ms"}
+    assert out["status"] == "localized"
+    np.testing.assert_allclose(np.array(out["pose"]), obs.T_global_local, atol=0.1)
+    first = out["hypotheses"][0]
+    assert {"rank", "score", "pairs", "pose", "fitness"} <= set(first)
+    assert first["rank"] == 1
+    assert {(p["global"], p["local"]) for p in first["pairs"]} == set(obs.true_pairs)
+    assert [s["step"] for s in out["steps"]] == list(range(7))
+    assert {"step", "n_local", "n_sets", "top_scores", "ms"} <= set(out["steps"][0])
+    assert out["timing_ms"]["total"] > 0
+
+
+def test_text_output_and_output_file(maps, capsys, tmp_path):
+    folder, _ = maps
+    args = ["localize", str(folder / "global.json"), str(folder / "local.json"), "--top-k", "3"]
+    assert main(args) == 0
+    text = capsys.readouterr().out
+    assert "status: localized" in text and "hypotheses" in text and "T_global_local" in text
+    target = tmp_path / "r.json"
+    assert main([*args, "--format", "json", "-o", str(target)]) == 0
+    assert len(json.loads(target.read_text())["hypotheses"]) <= 3
+    assert main([*args, "-o", str(tmp_path / "r.txt")]) == 0
+    assert "status: localized" in (tmp_path / "r.txt").read_text()
+
+
+def test_settings_file_and_options(maps, capsys, tmp_path):
+    folder, _ = maps
+    settings = tmp_path / "s.json"
+    settings.write_text(json.dumps({"clustering": {"sets_per_object": 5}, "margin": 0.1}))
+    args = ["localize", str(folder / "global.json"), str(folder / "local.json")]
+    assert main([*args, "--config", str(settings), "--gamma", "0.85", "--format", "json"]) == 0
+    assert json.loads(capsys.readouterr().out)["status"] == "localized"
+
+
+@pytest.mark.parametrize(
+    "extra, message",
+    [
+        (["--gamma", "1.5"], "gamma"),
+        (["--format", "xml"], "xml"),
+        (["--top-k", "0"], "top_k"),
+        (["--config", "/nonexistent/s.json"], "file not found"),
+    ],
+)
+def test_bad_options_exit_2_with_one_line(maps, capsys, extra, message):
+    folder, _ = maps
+    code = main(["localize", str(folder / "global.json"), str(folder / "local.json"), *extra])
+    err = capsys.readouterr().err.strip()
+    assert code == 2
+    assert len(err.splitlines()) == 1 and err.startswith("semloc: error:") and message in err
+
+
+def test_bad_map_exits_2_naming_the_file(tmp_path, maps, capsys):
+    folder, _ = maps
+    bad = tmp_path / "bad.json"
+    bad.write_text('{"format": "semloc-map", "version": 1, "objects": [{"id": "a"}]}')
+    assert main(["localize", str(folder / "global.json"), str(bad)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and str(bad) in err and "missing key 'label'" in err
+
+
+def test_valid_input_that_cannot_localize_exits_0(tmp_path, maps, capsys):
+    folder, _ = maps
+    local = tmp_path / "aliens.json"
+    semloc.save_map(semloc.ObjectMap([semloc.SemanticObject("x", "ufo", [0, 0, 0])]), local)
+    assert main(["localize", str(folder / "global.json"), str(local), "--format", "json"]) == 0
+    assert json.loads(capsys.readouterr().out)["status"] == "failed"
+
+
+def test_console_script_has_no_traceback(tmp_path):
+    bad = tmp_path / "x.json"
+    bad.write_text("{")
+    run = subprocess.run(
+        [sys.executable, "-m", "semloc.cli", "localize", str(bad), str(bad)],
+        capture_output=True,
+        text=True,
+    )
+    assert run.returncode == 2
+    assert "Traceback" not in run.stderr and "not valid JSON" in run.stderr
+    missing = subprocess.run(
+        [sys.executable, "-m", "semloc.cli", "localize"], capture_output=True, text=True
+    )
+    assert missing.returncode == 2 and "Traceback" not in missing.stderr
+
+
+def test_settings_file_is_kept_unless_an_option_overrides_it(maps, capsys, tmp_path):
+    folder, _ = maps
+    settings = tmp_path / "s.json"
+    settings.write_text(json.dumps({"top_k": 1}))
+    args = ["localize", str(folder / "global.json"), str(folder / "local.json"),
+            "--config", str(settings), "--format", "json"]  # fmt: skip
+    assert main(args) == 0
+    assert len(json.loads(capsys.readouterr().out)["hypotheses"]) == 1
+    assert main([*args, "--top-k", "3"]) == 0
+    assert len(json.loads(capsys.readouterr().out)["hypotheses"]) == 3
+
+
+def _with_box_points(objects, rng):
+    """Objects with points on the surface of their boxes (0.4-1.2 m), so descriptors exist."""
+    out = []
+    for obj in objects:
+        size = rng.uniform(0.4, 1.2, 3)
+        p = rng.uniform(-0.5, 0.5, (300, 3)) * size
+        axis = rng.integers(0, 3, 300)
+        p[np.arange(300), axis] = np.sign(rng.uniform(-1, 1, 300)) * size[axis] / 2
+        out.append(obj.replace(points=p + obj.position))
+    return out
+
+
+def test_descriptor_gate_from_the_command_line(tmp_path, capsys):
+    rng = np.random.default_rng(3)
+    g = layout(40, seed=2)
+    g = semloc.ObjectMap(_with_box_points(g, rng), up=g.up)
+    obs = observe(g, 6, seed=4, spurious=0, wrong_label_rate=0.0, bias=(0.0, 0.0))
+    T = obs.T_global_local
+    local = [o.replace(points=(g.get(gid).points - T[:3, 3]) @ T[:3, :3])
+             for o in obs.local_map for gid, lid in obs.true_pairs if lid == o.id]  # fmt: skip
+    semloc.save_map(g, tmp_path / "global.json")
+    semloc.save_map(semloc.ObjectMap(local, up=obs.local_map.up), tmp_path / "local.json")
+    args = ["localize", str(tmp_path / "global.json"), str(tmp_path / "local.json"),
+            "--format", "json"]  # fmt: skip
+    assert main([*args, "--descriptor", "geometric"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["status"] == "localized"
+    np.testing.assert_allclose(np.array(out["pose"]), T, atol=0.05)
+    assert main([*args, "--descriptor", "geometric", "--descriptor-delta", "0.05"]) == 0
+    assert json.loads(capsys.readouterr().out)["status"] == "localized"
+    # objects twice their map size: same places, other shapes; a tight gate removes them all
+    grown = [o.replace(points=2.0 * (o.points - o.position) + o.position) for o in local]
+    semloc.save_map(semloc.ObjectMap(grown, up=obs.local_map.up), tmp_path / "local.json")
+    assert main(args) == 0
+    # the associations are right, but the points do not land on the map: not claimed
+    best = json.loads(capsys.readouterr().out)["hypotheses"][0]
+    assert sorted((p["global"], p["local"]) for p in best["pairs"]) == sorted(obs.true_pairs)
+    assert best["fitness"] < 0.3
+    assert main([*args, "--descriptor", "geometric", "--descriptor-delta", "0.05"]) == 0
+    assert json.loads(capsys.readouterr().out)["status"] == "failed"
+    assert main([*args, "--descriptor", "shape-context"]) == 2
+    assert "shape-context" in capsys.readouterr().err

@@ -1,0 +1,98 @@
+"""The folder tree is the architecture: the core imports nothing from the applications.
+
+Core modules (`CORE`) may import only each other (and numpy, scipy, pydantic, the standard
+library) — anywhere in the file, also inside functions.  The run-time descriptors import only
+the core.  Function-local imports of semloc's own modules stay few (heavy optional
+dependencies are the reason to import late).  `import semloc` loads no extra.
+"""
+
+from __future__ import annotations
+
+import ast
+import subprocess
+import sys
+from pathlib import Path
+
+import semloc
+
+PACKAGE = Path(semloc.__file__).parent
+CORE = {"maps", "pointsets", "transforms", "association", "clustering", "pose", "results",
+        "decision", "localizer"}  # fmt: skip
+THIRD_PARTY_CORE = {"numpy", "scipy", "pydantic"}
+EXTRAS = ("open3d", "matplotlib", "dask", "distributed", "sklearn", "torch", "rerun")
+MAX_LOCAL_SEMLOC_IMPORTS = 10
+
+
+def _imports(path: Path) -> list[tuple[list[str], bool]]:
+    """Per import statement of a file: the modules it may load, and whether it sits inside a
+    function.  `from a import b` may load `a` and `a.b`."""
+    found: list[tuple[list[str], bool]] = []
+
+    def visit(node: ast.AST, in_function: bool) -> None:
+        for child in ast.iter_child_nodes(node):
+            inside = in_function or isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef))
+            if isinstance(child, ast.Import):
+                found.append(([alias.name for alias in child.names], inside))
+            elif isinstance(child, ast.ImportFrom) and child.level == 0 and child.module:
+                names = [f"{child.module}.{alias.name}" for alias in child.names]
+                found.append(([child.module, *names], inside))
+            visit(child, inside)
+
+    visit(ast.parse(path.read_text()), False)
+    return found
+
+
+def _semloc_part(module: str) -> str | None:
+    """The first part below `semloc` of a module name (None for other modules)."""
+    parts = module.split(".")
+    return parts[1] if parts[0] == "semloc" and len(parts) > 1 else None
+
+
+def _module_files(*parts: str) -> list[Path]:
+    return sorted(PACKAGE.joinpath(*parts).rglob("*.py"))
+
+
+def _check_imports(path: Path, allowed: set[str]) -> None:
+    for modules, _ in _imports(path):
+        top = modules[0].split(".")[0]
+        if top == "semloc":
+            part = _semloc_part(modules[0])
+            assert part in allowed, f"{path.name} imports {modules[0]}"
+        else:
+            assert top in THIRD_PARTY_CORE or top in sys.stdlib_module_names, (
+                f"{path.name} imports {modules[0]}"
+            )
+
+
+def test_core_imports_only_the_core():
+    for name in CORE:
+        _check_imports(PACKAGE / f"{name}.py", CORE)
+
+
+def test_runtime_descriptors_import_only_the_core_and_themselves():
+    for path in _module_files("descriptors"):
+        _check_imports(path, CORE | {"descriptors"})
+
+
+def test_few_function_local_imports_of_semloc_modules():
+    local = [
+        f"{path.relative_to(PACKAGE)}: {modules[0]}"
+        for path in _module_files()
+        for modules, inside in _imports(path)
+        if inside and modules[0].split(".")[0] == "semloc"
+    ]
+    assert len(local) <= MAX_LOCAL_SEMLOC_IMPORTS, local
+
+
+def test_import_semloc_loads_no_extra():
+    code = "import sys, semloc; print(','.join(m for m in sys.modules if m.split('.')[0] in %r))"
+    out = subprocess.run(
+        [sys.executable, "-c", code % (EXTRAS,)], capture_output=True, text=True, check=True
+    ).stdout.strip()
+    assert out == "", f"import semloc loaded {out}"
+
+
+def test_a_planted_upward_import_is_caught(tmp_path):
+    bad = tmp_path / "bad.py"
+    bad.write_text("def f():\n    from semloc.sim.world import World\n    return World\n")
+    assert (["semloc.sim.world", "semloc.sim.world.World"], True) in _imports(bad)
