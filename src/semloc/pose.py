@@ -20,18 +20,20 @@ This module owns the last stage of the pipeline (paper, "Camera pose recovery"):
    `R @ up_local == up_global` holds exactly; 6-DoF updates the full rotation.  A refinement
    is kept only if it does not lower fitness.
 
-Per-object preparation (voxel downsampling, a cap of `object_points`, normals, KD-tree) is
-`prepare_cloud`; callers that localize many times against one map pass the prepared
-`ObjectCloud`s (the Localizer caches them per object), plain arrays are prepared on the fly.
+Per-object preparation (voxel downsampling, a cap of `icp_max_points`, normals, flatness,
+KD-tree) is `prepare_cloud`; `cached_cloud` keeps it per object while the object lives, so a
+map's objects are prepared once however many localizations use them.  `estimate_pose` takes
+prepared `ObjectCloud`s or plain arrays (prepared on the fly) and an optional warm start.
 Everything is pure computation on numpy arrays (no I/O, no plotting).
 Convention: `T_global_local`, i.e. `p_global = R @ p_local + t`.
 """
 
 from __future__ import annotations
 
+import weakref
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 import small_gicp
@@ -45,6 +47,7 @@ __all__ = [
     "PoseEstimate",
     "align_positions",
     "align_positions_batch",
+    "cached_cloud",
     "estimate_pose",
     "prepare_cloud",
 ]
@@ -314,7 +317,7 @@ def _align(src, dst, w, up_local, up_global) -> tuple[np.ndarray, np.ndarray]:
 
 @dataclass(frozen=True, eq=False)
 class ObjectCloud:
-    """One object's points prepared for pose recovery: downsampled to at most `object_points`
+    """One object's points prepared for pose recovery: downsampled to at most `icp_max_points`
     voxel means, with unoriented unit normals, how flat each neighbourhood is (the weight of
     the point-to-plane error there) and a small_gicp KD-tree over the points."""
 
@@ -344,6 +347,25 @@ def prepare_cloud(points: object, config: PoseConfig | None = None) -> ObjectClo
     points = np.ascontiguousarray(points)
     tree = small_gicp.KdTree(points)
     return ObjectCloud(points, *_normals(points, tree), tree)
+
+
+_CLOUDS: weakref.WeakKeyDictionary[Any, dict[tuple, ObjectCloud | None]] = (
+    weakref.WeakKeyDictionary()
+)
+
+
+def cached_cloud(owner: Any, config: PoseConfig | None = None) -> ObjectCloud | None:
+    """`prepare_cloud(owner.points, config)`, computed once per owner and preparation settings
+    while the owner lives.  The owner is an immutable object with `.points` (a
+    `SemanticObject`: a re-detection is a new object), so a map's objects are prepared once
+    per map, whichever Localizer asks, and a local object once per version."""
+    cfg = config or PoseConfig()
+    key = (cfg.icp_voxel, cfg.icp_max_points, cfg.seed)
+    clouds = _CLOUDS.setdefault(owner, {})
+    if key not in clouds:
+        points = owner.points
+        clouds[key] = None if points is None else prepare_cloud(points, cfg)
+    return clouds[key]
 
 
 def _normals(points: np.ndarray, tree: small_gicp.KdTree) -> tuple[np.ndarray, np.ndarray]:
@@ -628,7 +650,9 @@ def _search(src_c, dst_c, pairs: list, ups, cfg: PoseConfig) -> list[np.ndarray]
         _, s, Vt = np.linalg.svd(src_c - pivots[0])
         axis_g = ((src_c - pivots[0]) @ Vt[0]) @ (dst_c - pivots[1])  # matching global direction
         if s[0] <= cfg.min_spread or np.linalg.norm(axis_g) <= cfg.min_spread * s[0]:
-            rotations = _so3_search(pivots, _Pairs(pairs, min(_SEARCH_POINTS, cfg.local_points) // 2), cfg)
+            rotations = _so3_search(
+                pivots, _Pairs(pairs, min(_SEARCH_POINTS, cfg.local_points) // 2), cfg
+            )
         else:
             axis_g /= np.linalg.norm(axis_g)
             rotations = _sweep(_axis_rotations(Vt[0], axis_g), pivots, sample, cfg)
