@@ -39,7 +39,7 @@ import numpy as np
 import small_gicp
 from pydantic import BaseModel, ConfigDict, Field
 
-from semloc.pointsets import voxel_downsample
+from semloc.pointsets import voxel_downsample, voxel_keys
 
 __all__ = [
     "ObjectCloud",
@@ -61,6 +61,7 @@ _SO3_DIRECTIONS = 48  # Fibonacci directions of the 1-pair 6-DoF search (x yaw s
 _NORMAL_NEIGHBOURS = 8  # neighbours for normal estimation
 _MATCH_NEIGHBOURS = (16, 4)  # neighbours searched for a compatible normal: coarse, final
 _COARSE_POINTS = 200  # local points used by ICP while the kernel is above icp_kernel
+_NEAR_CELL = 0.1  # m: cells of the "near a point" index of an object (queries bounded by it)
 _FLAT_VARIATION = 0.05  # surface variation at which a neighbourhood stops counting as flat
 _CONVERGED = 0.003  # an ICP step moving the points less than this x kernel has converged
 _FITNESS_SLACK = 0.01  # a refinement may lose this much fitness (sampling noise) and be kept
@@ -319,18 +320,38 @@ def _align(src, dst, w, up_local, up_global) -> tuple[np.ndarray, np.ndarray]:
 class ObjectCloud:
     """One object's points prepared for pose recovery: downsampled to at most `icp_max_points`
     voxel means, with unoriented unit normals, how flat each neighbourhood is (the weight of
-    the point-to-plane error there) and a small_gicp KD-tree over the points."""
+    the point-to-plane error there), a small_gicp KD-tree over the points, and what is near
+    them (bounding box; `_NEAR_CELL` cells within one cell of a point) to skip far queries."""
 
     points: np.ndarray
     normals: np.ndarray
     flatness: np.ndarray  # (n,) in [0, 1]: 1 where the neighbourhood is a plane, 0 if not flat
     tree: small_gicp.KdTree
+    box: np.ndarray  # (2, 3): lower and upper corner
+    near_cells: np.ndarray | None  # sorted voxel keys; None where keys would not fit
 
-    def nearest(self, query: np.ndarray, k: int = 1) -> tuple[np.ndarray, np.ndarray]:
-        """Indices (n, k) and distances (n, k) of the k nearest cloud points of each query."""
-        k = min(k, len(self.points))
-        idx, sq = self.tree.batch_knn_search(query, k)
-        return idx.astype(np.intp), np.sqrt(sq)
+    def nearest(self, query: np.ndarray, k: int, bound: float) -> tuple[np.ndarray, np.ndarray]:
+        """Indices (n, k) and distances (n, k) of the k nearest cloud points of each query,
+        inf (index 0) where none is within `bound`.  The KD-tree is asked only about queries
+        that can have one: a search from far away is slow and its answer unused."""
+        idx = np.zeros((len(query), k), dtype=np.intp)
+        dist = np.full((len(query), k), np.inf)
+        maybe = self._maybe_near(query, bound)
+        if not maybe.any():
+            return idx, dist
+        found, sq = self.tree.batch_knn_search(query[maybe], min(k, len(self.points)))
+        idx[maybe, : found.shape[1]] = found
+        dist[maybe, : found.shape[1]] = np.sqrt(sq)
+        return idx, np.where(dist <= bound, dist, np.inf)
+
+    def _maybe_near(self, query: np.ndarray, bound: float) -> np.ndarray:
+        outside = np.maximum(self.box[0] - query, query - self.box[1])
+        maybe = np.all(outside <= bound, axis=1)
+        if bound <= _NEAR_CELL and self.near_cells is not None:
+            keys = voxel_keys(query[maybe], _NEAR_CELL)
+            at = np.minimum(np.searchsorted(self.near_cells, keys), len(self.near_cells) - 1)
+            maybe[maybe] = self.near_cells[at] == keys
+        return maybe
 
 
 def prepare_cloud(points: object, config: PoseConfig | None = None) -> ObjectCloud | None:
@@ -346,7 +367,19 @@ def prepare_cloud(points: object, config: PoseConfig | None = None) -> ObjectClo
         points = points[np.sort(keep)]
     points = np.ascontiguousarray(points)
     tree = small_gicp.KdTree(points)
-    return ObjectCloud(points, *_normals(points, tree), tree)
+    box = np.stack([points.min(axis=0), points.max(axis=0)])
+    return ObjectCloud(points, *_normals(points, tree), tree, box, _near_cells(points))
+
+
+def _near_cells(points: np.ndarray) -> np.ndarray | None:
+    """Sorted keys of the `_NEAR_CELL` voxels within one voxel of a point: every position
+    within `_NEAR_CELL` of a point lies in one of them."""
+    cells = np.unique(np.floor(points / _NEAR_CELL).astype(np.int64), axis=0)
+    if np.abs(cells).max() >= (1 << 20) - 2:  # beyond the keys' 21 bits
+        return None
+    steps = np.stack(np.meshgrid(*[np.arange(-1, 2)] * 3, indexing="ij"), -1).reshape(-1, 3)
+    around = (cells[:, None, :] + steps).reshape(-1, 3)
+    return np.unique(voxel_keys((around + 0.5) * _NEAR_CELL, _NEAR_CELL))
 
 
 _CLOUDS: weakref.WeakKeyDictionary[Any, dict[tuple, ObjectCloud | None]] = (
@@ -441,7 +474,7 @@ class _Pairs:
     partners' points (with normals and flatness); `limit` thins the local points evenly."""
 
     def __init__(self, pairs: list[tuple[ObjectCloud, ObjectCloud]], limit: int | None = None):
-        self.trees = [g.tree for _, g in pairs]
+        self.globals = [g for _, g in pairs]
         rows = [np.arange(len(p.points)) for p, _ in pairs]
         total = sum(len(r) for r in rows)
         if limit is not None and total > limit:
@@ -454,22 +487,19 @@ class _Pairs:
         self.dst_normals = np.concatenate([g.normals for _, g in pairs])
         self.dst_flatness = np.concatenate([g.flatness for _, g in pairs])
         self.offsets = np.cumsum([0] + [len(g.points) for _, g in pairs])[:-1]
-        self.sizes = [len(g.points) for _, g in pairs]
 
-    def nearest(self, moved: np.ndarray, k: int = 1, repeat: int = 1):
-        """Indices into `dst` (n, k) and distances (n, k) of each moved local point's k nearest
-        partner points; with `repeat`, each local row comes `repeat` times in a row."""
-        idx, sq = [], []
-        for tree, size, offset, a, b in zip(
-            self.trees, self.sizes, self.offsets, self.bounds[:-1], self.bounds[1:]
+    def nearest(self, moved: np.ndarray, k: int, bound: float, repeat: int = 1):
+        """Indices into `dst` (n, k) and distances (n, k; inf beyond `bound`) of each moved
+        local point's k nearest partner points; with `repeat`, each local row comes `repeat`
+        times in a row."""
+        idx, dist = [], []
+        for cloud, offset, a, b in zip(
+            self.globals, self.offsets, self.bounds[:-1], self.bounds[1:]
         ):
-            i, d = tree.batch_knn_search(moved[a * repeat : b * repeat], min(k, size))
-            if i.shape[1] < k:  # a partner with fewer than k points: repeat its farthest
-                i = np.pad(i, ((0, 0), (0, k - i.shape[1])), mode="edge")
-                d = np.pad(d, ((0, 0), (0, k - d.shape[1])), mode="edge")
-            idx.append(i.astype(np.intp) + offset)
-            sq.append(d)
-        return np.concatenate(idx), np.sqrt(np.concatenate(sq))
+            i, d = cloud.nearest(moved[a * repeat : b * repeat], k, bound)
+            idx.append(i + offset)
+            dist.append(d)
+        return np.concatenate(idx), np.concatenate(dist)
 
 
 def _apply(T: np.ndarray, points: np.ndarray) -> np.ndarray:
@@ -479,7 +509,7 @@ def _apply(T: np.ndarray, points: np.ndarray) -> np.ndarray:
 def _point_fitness(T: np.ndarray, pairs: _Pairs, radius: float) -> tuple[float, float, float]:
     """Inlier share, inlier RMS distance and the smooth score (mean of 1 - (d/r)^2, truncated)
     of the local points moved by T against their partners' points."""
-    d = pairs.nearest(_apply(T, pairs.src))[1][:, 0]
+    d = pairs.nearest(_apply(T, pairs.src), 1, radius)[1][:, 0]
     inliers = d[d < radius]
     rmse = float(np.sqrt(np.mean(inliers**2))) if len(inliers) else 0.0
     return len(inliers) / len(d), rmse, float(np.mean(np.maximum(0.0, 1 - (d / radius) ** 2)))
@@ -501,7 +531,7 @@ def _correspondences(pairs: _Pairs, moved, normals, kernel: float, cos_max: floa
     non-flat point is); returns the rows that have one, the partner indices and the distances.
     A large k lets a partial view find the face it sees behind closer faces it does not."""
     k = 1 if cos_max <= 0 else k
-    idx, d = pairs.nearest(moved, k)
+    idx, d = pairs.nearest(moved, k, kernel)
     ok = d < kernel
     if cos_max > 0:
         cos = np.abs(np.einsum("nkj,nj->nk", pairs.dst_normals[idx], normals))
@@ -584,7 +614,7 @@ def _score(rotations: np.ndarray, pivots, sample: _Pairs, radius: float) -> np.n
     """Smooth fitness (mean of 1 - (d/r)^2, truncated) of rotations about the matched pivots."""
     pivot_l, pivot_g = pivots
     moved = np.einsum("kij,pj->pki", rotations, sample.src - pivot_l) + pivot_g  # (P, K, 3)
-    d = sample.nearest(moved.reshape(-1, 3), repeat=len(rotations))[1][:, 0]
+    d = sample.nearest(moved.reshape(-1, 3), 1, radius, repeat=len(rotations))[1][:, 0]
     d = d.reshape(len(sample.src), len(rotations))
     return np.where(d < radius, 1.0 - (d / radius) ** 2, 0.0).mean(axis=0)
 
