@@ -39,7 +39,7 @@ import numpy as np
 import small_gicp
 from pydantic import BaseModel, ConfigDict, Field
 
-from semloc.pointsets import voxel_downsample, voxel_keys
+from semloc.pointsets import voxel_downsample
 
 __all__ = [
     "ObjectCloud",
@@ -61,9 +61,8 @@ _SO3_DIRECTIONS = 48  # Fibonacci directions of the 1-pair 6-DoF search (x yaw s
 _NORMAL_NEIGHBOURS = 8  # neighbours for normal estimation
 _MATCH_NEIGHBOURS = (16, 4)  # neighbours searched for a compatible normal: coarse, final
 _COARSE_POINTS = 200  # local points used by ICP while the kernel is above icp_kernel
-_NEAR_CELL = 0.1  # m: cells of the "near a point" index of an object (queries bounded by it)
 _FLAT_VARIATION = 0.05  # surface variation at which a neighbourhood stops counting as flat
-_CONVERGED = 0.003  # an ICP step moving the points less than this x kernel has converged
+_CONVERGED = 0.01  # an ICP step moving the points less than this x kernel has converged
 _FITNESS_SLACK = 0.01  # a refinement may lose this much fitness (sampling noise) and be kept
 _POINT_TO_POINT = 0.1  # weight of the point-to-point error next to the point-to-plane error
 
@@ -79,7 +78,7 @@ class PoseConfig(BaseModel):
         0.05, ge=0, description="Voxel size (m) for downsampling before ICP / fitness; 0 = off."
     )
     icp_max_points: int = Field(
-        4000, ge=3, description="Points kept per object after downsampling (seeded subsample)."
+        2000, ge=3, description="Points kept per object after downsampling (seeded subsample)."
     )
     local_points: int = Field(
         500,
@@ -320,38 +319,27 @@ def _align(src, dst, w, up_local, up_global) -> tuple[np.ndarray, np.ndarray]:
 class ObjectCloud:
     """One object's points prepared for pose recovery: downsampled to at most `icp_max_points`
     voxel means, with unoriented unit normals, how flat each neighbourhood is (the weight of
-    the point-to-plane error there), a small_gicp KD-tree over the points, and what is near
-    them (bounding box; `_NEAR_CELL` cells within one cell of a point) to skip far queries."""
+    the point-to-plane error there), its bounding box and a small_gicp KD-tree."""
 
     points: np.ndarray
     normals: np.ndarray
     flatness: np.ndarray  # (n,) in [0, 1]: 1 where the neighbourhood is a plane, 0 if not flat
-    tree: small_gicp.KdTree
     box: np.ndarray  # (2, 3): lower and upper corner
-    near_cells: np.ndarray | None  # sorted voxel keys; None where keys would not fit
+    tree: small_gicp.KdTree
 
     def nearest(self, query: np.ndarray, k: int, bound: float) -> tuple[np.ndarray, np.ndarray]:
         """Indices (n, k) and distances (n, k) of the k nearest cloud points of each query,
-        inf (index 0) where none is within `bound`.  The KD-tree is asked only about queries
-        that can have one: a search from far away is slow and its answer unused."""
+        inf (index 0) where none is within `bound`.  Only queries within `bound` of the
+        bounding box are looked up: a KD-tree search from far away is slow, its answer unused."""
+        near = np.all((query >= self.box[0] - bound) & (query <= self.box[1] + bound), axis=1)
         idx = np.zeros((len(query), k), dtype=np.intp)
-        dist = np.full((len(query), k), np.inf)
-        maybe = self._maybe_near(query, bound)
-        if not maybe.any():
-            return idx, dist
-        found, sq = self.tree.batch_knn_search(query[maybe], min(k, len(self.points)))
-        idx[maybe, : found.shape[1]] = found
-        dist[maybe, : found.shape[1]] = np.sqrt(sq)
-        return idx, np.where(dist <= bound, dist, np.inf)
-
-    def _maybe_near(self, query: np.ndarray, bound: float) -> np.ndarray:
-        outside = np.maximum(self.box[0] - query, query - self.box[1])
-        maybe = np.all(outside <= bound, axis=1)
-        if bound <= _NEAR_CELL and self.near_cells is not None:
-            keys = voxel_keys(query[maybe], _NEAR_CELL)
-            at = np.minimum(np.searchsorted(self.near_cells, keys), len(self.near_cells) - 1)
-            maybe[maybe] = self.near_cells[at] == keys
-        return maybe
+        sq = np.full((len(query), k), np.inf)
+        if near.any():
+            found, d2 = self.tree.batch_knn_search(query[near], min(k, len(self.points)))
+            idx[near, : found.shape[1]], sq[near, : found.shape[1]] = found, d2
+        dist = np.sqrt(sq)
+        dist[dist > bound] = np.inf
+        return idx, dist
 
 
 def prepare_cloud(points: object, config: PoseConfig | None = None) -> ObjectCloud | None:
@@ -368,18 +356,7 @@ def prepare_cloud(points: object, config: PoseConfig | None = None) -> ObjectClo
     points = np.ascontiguousarray(points)
     tree = small_gicp.KdTree(points)
     box = np.stack([points.min(axis=0), points.max(axis=0)])
-    return ObjectCloud(points, *_normals(points, tree), tree, box, _near_cells(points))
-
-
-def _near_cells(points: np.ndarray) -> np.ndarray | None:
-    """Sorted keys of the `_NEAR_CELL` voxels within one voxel of a point: every position
-    within `_NEAR_CELL` of a point lies in one of them."""
-    cells = np.unique(np.floor(points / _NEAR_CELL).astype(np.int64), axis=0)
-    if np.abs(cells).max() >= (1 << 20) - 2:  # beyond the keys' 21 bits
-        return None
-    steps = np.stack(np.meshgrid(*[np.arange(-1, 2)] * 3, indexing="ij"), -1).reshape(-1, 3)
-    around = (cells[:, None, :] + steps).reshape(-1, 3)
-    return np.unique(voxel_keys((around + 0.5) * _NEAR_CELL, _NEAR_CELL))
+    return ObjectCloud(points, *_normals(points, tree), box, tree)
 
 
 _CLOUDS: weakref.WeakKeyDictionary[Any, dict[tuple, ObjectCloud | None]] = (
@@ -483,23 +460,36 @@ class _Pairs:
         self.src = np.concatenate([p.points[r] for (p, _), r in zip(pairs, rows)])
         self.src_normals = np.concatenate([p.normals[r] for (p, _), r in zip(pairs, rows)])
         self.bounds = np.cumsum([0] + [len(r) for r in rows])
+        sizes = np.diff(self.bounds)
+        self.box_lo = np.repeat([g.box[0] for _, g in pairs], sizes, axis=0).reshape(-1, 3)
+        self.box_hi = np.repeat([g.box[1] for _, g in pairs], sizes, axis=0).reshape(-1, 3)
         self.dst = np.concatenate([g.points for _, g in pairs])
         self.dst_normals = np.concatenate([g.normals for _, g in pairs])
         self.dst_flatness = np.concatenate([g.flatness for _, g in pairs])
         self.offsets = np.cumsum([0] + [len(g.points) for _, g in pairs])[:-1]
 
-    def nearest(self, moved: np.ndarray, k: int, bound: float, repeat: int = 1):
-        """Indices into `dst` (n, k) and distances (n, k; inf beyond `bound`) of each moved
-        local point's k nearest partner points; with `repeat`, each local row comes `repeat`
+    def nearest(self, moved, k: int, bound: float, repeat: int = 1):
+        """Indices into `dst` (n, k) and distances (n, k; inf, index 0, beyond `bound`) of
+        each moved local point's k nearest partner points (as `ObjectCloud.nearest`, one
+        vectorised box test for all pairs); with `repeat`, each local row comes `repeat`
         times in a row."""
-        idx, dist = [], []
+        lo, hi = self.box_lo, self.box_hi
+        if repeat > 1:
+            lo, hi = np.repeat(lo, repeat, axis=0), np.repeat(hi, repeat, axis=0)
+        near = np.all((moved >= lo - bound) & (moved <= hi + bound), axis=1)
+        idx = np.zeros((len(moved), k), dtype=np.intp)
+        sq = np.full((len(moved), k), np.inf)
         for cloud, offset, a, b in zip(
             self.globals, self.offsets, self.bounds[:-1], self.bounds[1:]
         ):
-            i, d = cloud.nearest(moved[a * repeat : b * repeat], k, bound)
-            idx.append(i + offset)
-            dist.append(d)
-        return np.concatenate(idx), np.concatenate(dist)
+            rows = a * repeat + np.flatnonzero(near[a * repeat : b * repeat])
+            if len(rows):
+                found, d2 = cloud.tree.batch_knn_search(moved[rows], min(k, len(cloud.points)))
+                idx[rows, : found.shape[1]] = found + offset
+                sq[rows, : found.shape[1]] = d2
+        dist = np.sqrt(sq)
+        dist[dist > bound] = np.inf
+        return idx, dist
 
 
 def _apply(T: np.ndarray, points: np.ndarray) -> np.ndarray:
