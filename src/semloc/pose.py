@@ -30,6 +30,7 @@ Convention: `T_global_local`, i.e. `p_global = R @ p_local + t`.
 
 from __future__ import annotations
 
+import copy
 import weakref
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -451,22 +452,32 @@ class _Pairs:
     partners' points (with normals and flatness); `limit` thins the local points evenly."""
 
     def __init__(self, pairs: list[tuple[ObjectCloud, ObjectCloud]], limit: int | None = None):
+        self.pairs = pairs
         self.globals = [g for _, g in pairs]
-        rows = [np.arange(len(p.points)) for p, _ in pairs]
+        self.dst = np.concatenate([g.points for g in self.globals])
+        self.dst_normals = np.concatenate([g.normals for g in self.globals])
+        self.dst_flatness = np.concatenate([g.flatness for g in self.globals])
+        self.offsets = np.cumsum([0] + [len(g.points) for g in self.globals])[:-1]
+        self._select(limit)
+
+    def thinned(self, limit: int) -> _Pairs:
+        """The same pairs with the local points thinned to at most `limit` (targets shared)."""
+        view = copy.copy(self)
+        view._select(limit)
+        return view
+
+    def _select(self, limit: int | None) -> None:
+        rows = [np.arange(len(p.points)) for p, _ in self.pairs]
         total = sum(len(r) for r in rows)
         if limit is not None and total > limit:
             rows = [r[np.unique((np.arange(len(r) * limit / total) * total / limit).astype(int))]
                     for r in rows]  # fmt: skip
-        self.src = np.concatenate([p.points[r] for (p, _), r in zip(pairs, rows)])
-        self.src_normals = np.concatenate([p.normals[r] for (p, _), r in zip(pairs, rows)])
+        self.src = np.concatenate([p.points[r] for (p, _), r in zip(self.pairs, rows)])
+        self.src_normals = np.concatenate([p.normals[r] for (p, _), r in zip(self.pairs, rows)])
         self.bounds = np.cumsum([0] + [len(r) for r in rows])
         sizes = np.diff(self.bounds)
-        self.box_lo = np.repeat([g.box[0] for _, g in pairs], sizes, axis=0).reshape(-1, 3)
-        self.box_hi = np.repeat([g.box[1] for _, g in pairs], sizes, axis=0).reshape(-1, 3)
-        self.dst = np.concatenate([g.points for _, g in pairs])
-        self.dst_normals = np.concatenate([g.normals for _, g in pairs])
-        self.dst_flatness = np.concatenate([g.flatness for _, g in pairs])
-        self.offsets = np.cumsum([0] + [len(g.points) for _, g in pairs])[:-1]
+        self.box_lo = np.repeat([g.box[0] for g in self.globals], sizes, axis=0).reshape(-1, 3)
+        self.box_hi = np.repeat([g.box[1] for g in self.globals], sizes, axis=0).reshape(-1, 3)
 
     def nearest(self, moved, k: int, bound: float, repeat: int = 1):
         """Indices into `dst` (n, k) and distances (n, k; inf, index 0, beyond `bound`) of
@@ -480,13 +491,17 @@ class _Pairs:
         idx = np.zeros((len(moved), k), dtype=np.intp)
         sq = np.full((len(moved), k), np.inf)
         for cloud, offset, a, b in zip(
-            self.globals, self.offsets, self.bounds[:-1], self.bounds[1:]
+            self.globals, self.offsets, self.bounds[:-1] * repeat, self.bounds[1:] * repeat
         ):
-            rows = a * repeat + np.flatnonzero(near[a * repeat : b * repeat])
-            if len(rows):
-                found, d2 = cloud.tree.batch_knn_search(moved[rows], min(k, len(cloud.points)))
-                idx[rows, : found.shape[1]] = found + offset
-                sq[rows, : found.shape[1]] = d2
+            kk = min(k, len(cloud.points))
+            if near[a:b].all():  # the common case, on plain slices
+                found, d2 = cloud.tree.batch_knn_search(moved[a:b], kk)
+                idx[a:b, :kk], sq[a:b, :kk] = found, d2
+                idx[a:b, :kk] += offset
+            elif near[a:b].any():
+                rows = a + np.flatnonzero(near[a:b])
+                found, d2 = cloud.tree.batch_knn_search(moved[rows], kk)
+                idx[rows, :kk], sq[rows, :kk] = found + offset, d2
         dist = np.sqrt(sq)
         dist[dist > bound] = np.inf
         return idx, dist
@@ -552,9 +567,11 @@ def _gauss_newton_step(m, q, n, w, axis: np.ndarray | None) -> tuple[np.ndarray,
         J = np.zeros((N, 3, 6))
         J[:, 0, 1], J[:, 0, 2], J[:, 1, 2] = m[:, 2], -m[:, 1], m[:, 0]
         J[:, 1, 0], J[:, 2, 0], J[:, 2, 1] = -m[:, 2], m[:, 1], -m[:, 0]
-    else:
+    else:  # d(R(axis, theta) m) / d theta = axis x m
         J = np.zeros((N, 3, 4))
-        J[:, :, 0] = np.cross(axis, m)
+        J[:, 0, 0] = axis[1] * m[:, 2] - axis[2] * m[:, 1]
+        J[:, 1, 0] = axis[2] * m[:, 0] - axis[0] * m[:, 2]
+        J[:, 2, 0] = axis[0] * m[:, 1] - axis[1] * m[:, 0]
     J[:, 0, -3], J[:, 1, -2], J[:, 2, -1] = 1.0, 1.0, 1.0
     Jp = (n[:, :, None] * J).sum(axis=1)  # (N, P): the plane term's rows
     rp = (n * e).sum(axis=1)
@@ -764,7 +781,7 @@ def _best_refined(candidates, method, init, pairs, ups, cfg: PoseConfig, tag: st
         if warm.score > max(s.score for s in scored):
             scored = [warm]
     if cfg.refine and cfg.icp_iterations > 0:
-        coarse = _Pairs(pairs, min(_COARSE_POINTS, cfg.local_points))
+        coarse = full.thinned(min(_COARSE_POINTS, cfg.local_points))
         axis = None if ups is None else ups[1]
         scored = [_refined(s, full, coarse, axis, cfg) for s in scored]
     best = max(scored, key=lambda s: (s.fitness, -s.rmse))
