@@ -6,6 +6,12 @@ distinct pose hypotheses and decides (`decision.py`).  Only the chosen hypothese
 pose recovery (global search, robust ICP); `update(objects, answer=False)` only grows the
 association sets, for callers that read the answer later (a replay reads only its last one).
 
+Streaming: the poses of the last answer are kept per association set (keyed by its pairs and
+whether it was refined).  A set that is unchanged at the next answer reuses its estimate; a set
+that grew is recovered warm-started from the pose of its largest kept subset; a re-detected
+local object drops the kept poses that used it.  Object clouds for pose recovery are prepared
+once per object (`pose.cached_cloud`), so all Localizers of one map share them.
+
 `localize(global_map, local_map)` replays a local map by its `seen` keyframes.
 """
 

@@ -16,9 +16,17 @@ This module owns the last stage of the pipeline (paper, "Camera pose recovery"):
    once per object, see `ObjectCloud`); the update is solved here, by Gauss-Newton on
    point-to-plane plus a little point-to-point error with Tukey weights (kernel annealed from
    `icp_kernel_start` to `icp_kernel`) and correspondences restricted to compatible normals.
-   The 4-DoF update is a rotation about the global `up` (plus a translation), so
-   `R @ up_local == up_global` holds exactly; 6-DoF updates the full rotation.  A refinement
-   is kept only if it does not lower fitness.
+   The 4-DoF update is a rotation about the global `up` (plus a translation), and the result
+   is snapped to a yaw in the z-up frames, so `R @ up_local == up_global` holds exactly;
+   6-DoF updates the full rotation.  Coarse kernel levels move a thinned subset of the local
+   points.  A refinement is kept unless it lowers fitness by more than `_FITNESS_SLACK`
+   (object-level point sets are a few hundred points: one point is sampling noise).
+
+Why not a registration library's own ICP loop: small_gicp and Open3D solve 6-DoF only, with
+no normal-compatibility test; semloc needs the exact gravity-aligned 4-DoF mode and
+partner-restricted correspondences, so it takes small_gicp's KD-trees (3-5x faster queries
+than scipy's cKDTree, reusable across calls) and solves the small linear systems itself.
+`benchmarks/bench_pose.py` compares the three on the same problems.
 
 Per-object preparation (voxel downsampling, a cap of `icp_max_points`, normals, flatness,
 KD-tree) is `prepare_cloud`; `cached_cloud` keeps it per object while the object lives, so a
@@ -31,6 +39,7 @@ Convention: `T_global_local`, i.e. `p_global = R @ p_local + t`.
 from __future__ import annotations
 
 import copy
+import functools
 import weakref
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -447,16 +456,35 @@ def _prepared(points: object, name: str, cfg: PoseConfig) -> ObjectCloud | None:
     return None if points.size == 0 else prepare_cloud(_xyz(points, name), cfg)
 
 
+class _Targets:
+    """The partner clouds' points, normals and flatness concatenated, when first needed (ICP
+    needs them; fitness and the search do not)."""
+
+    def __init__(self, clouds: list[ObjectCloud]):
+        self.clouds = clouds
+
+    @functools.cached_property
+    def points(self) -> np.ndarray:
+        return np.concatenate([g.points for g in self.clouds])
+
+    @functools.cached_property
+    def normals(self) -> np.ndarray:
+        return np.concatenate([g.normals for g in self.clouds])
+
+    @functools.cached_property
+    def flatness(self) -> np.ndarray:
+        return np.concatenate([g.flatness for g in self.clouds])
+
+
 class _Pairs:
-    """The matched clouds of one problem, concatenated: local points (with normals) and their
-    partners' points (with normals and flatness); `limit` thins the local points evenly."""
+    """The matched clouds of one problem: the local points concatenated (with normals and
+    their partners' bounding boxes) and the partners (`targets`); `limit` thins the local
+    points evenly.  `nearest` indexes the concatenated targets."""
 
     def __init__(self, pairs: list[tuple[ObjectCloud, ObjectCloud]], limit: int | None = None):
         self.pairs = pairs
         self.globals = [g for _, g in pairs]
-        self.dst = np.concatenate([g.points for g in self.globals])
-        self.dst_normals = np.concatenate([g.normals for g in self.globals])
-        self.dst_flatness = np.concatenate([g.flatness for g in self.globals])
+        self.targets = _Targets(self.globals)  # shared by thinned views
         self.offsets = np.cumsum([0] + [len(g.points) for g in self.globals])[:-1]
         self._select(limit)
 
@@ -480,7 +508,7 @@ class _Pairs:
         self.box_hi = np.repeat([g.box[1] for g in self.globals], sizes, axis=0).reshape(-1, 3)
 
     def nearest(self, moved, k: int, bound: float, repeat: int = 1):
-        """Indices into `dst` (n, k) and distances (n, k; inf, index 0, beyond `bound`) of
+        """Indices into `targets` (n, k) and distances (n, k; inf, index 0, beyond `bound`) of
         each moved local point's k nearest partner points (as `ObjectCloud.nearest`, one
         vectorised box test for all pairs); with `repeat`, each local row comes `repeat`
         times in a row."""
@@ -539,8 +567,8 @@ def _correspondences(pairs: _Pairs, moved, normals, kernel: float, cos_max: floa
     idx, d = pairs.nearest(moved, k, kernel)
     ok = d < kernel
     if cos_max > 0:
-        cos = np.abs(np.einsum("nkj,nj->nk", pairs.dst_normals[idx], normals))
-        ok &= (cos >= cos_max) | (pairs.dst_flatness[idx] < 0.5)
+        cos = np.abs(np.einsum("nkj,nj->nk", pairs.targets.normals[idx], normals))
+        ok &= (cos >= cos_max) | (pairs.targets.flatness[idx] < 0.5)
     first = np.argmax(ok, axis=1)
     rows = np.arange(len(moved))
     found = ok[rows, first]
@@ -603,8 +631,9 @@ def _icp(T: np.ndarray, full: _Pairs, coarse: _Pairs, axis, cfg: PoseConfig) -> 
         ok, idx, d = _correspondences(view, moved, normals, kernel, cos_max, k)
         if len(d) < (2 if axis is not None else 3):
             break
-        m, q = moved[ok], view.dst[idx]
-        n = view.dst_normals[idx] * np.sqrt(view.dst_flatness[idx])[:, None]
+        targets = view.targets
+        m, q = moved[ok], targets.points[idx]
+        n = targets.normals[idx] * np.sqrt(targets.flatness[idx])[:, None]
         dR, dt = _gauss_newton_step(m, q, n, (1.0 - (d / kernel) ** 2) ** 2, axis)
         R, t = dR @ R, dR @ t + dt
         if np.mean(np.linalg.norm(m @ (dR - np.eye(3)).T + dt, axis=1)) < _CONVERGED * kernel:
