@@ -1,6 +1,8 @@
 """Speed of pose recovery: registration libraries compared, and localization by stage.
 
-Two parts (both on one core: run under `taskset -c 0`; times are wall-clock per call):
+Two parts (both on one core: run under `taskset -c 0`; times are CPU time of the process
+per call, `time.process_time`, which on an idle machine equals wall time and on a shared one
+leaves out the other processes' time slices):
 
 `registration`: the same partial-view problems (4 boxes of 0.5-1.2 m, full surfaces in the
 global map, the -y half seen locally, so the centres are biased by ~0.2 m; a random yaw +
@@ -80,14 +82,20 @@ def errors(T: np.ndarray, truth: np.ndarray) -> tuple[float, float]:
     return pose_error(T, truth)
 
 
+def clock() -> float:
+    """Seconds of CPU time of this process: on a shared machine, wall time also counts the
+    other processes' time slices; one core is used (the BLAS threads are limited above)."""
+    return time.process_time()
+
+
 def timed(fn, repeat: int = 5) -> tuple[float, object]:
-    """Milliseconds per call (the fastest of `repeat`: the machine may be shared) and a result."""
+    """Milliseconds per call (the fastest of `repeat`) and a result."""
     out = fn()
     best = np.inf
     for _ in range(repeat):
-        start = time.perf_counter()
+        start = clock()
         fn()
-        best = min(best, time.perf_counter() - start)
+        best = min(best, clock() - start)
     return best * 1e3, out
 
 
@@ -243,9 +251,9 @@ def localize_part(crops: int, target: int) -> None:
             right.append(result.pose is not None and _right(result.pose, truth))
             localizer = Localizer(full, local_up=local.up)
             for obj in local:  # streaming: one object per update, an answer each time
-                start = time.perf_counter()
+                start = clock()
                 localizer.update([obj])
-                stream.append((time.perf_counter() - start) * 1e3)
+                stream.append((clock() - start) * 1e3)
         st = np.median(np.array(stages), axis=0)
         print(f"{name:26s} {len(full):7d} {len(totals):4d} {np.median(first):9.1f} "
               f"{np.median(totals):8.1f} {np.percentile(totals, 90):6.1f} {np.max(totals):6.1f} "
@@ -254,9 +262,9 @@ def localize_part(crops: int, target: int) -> None:
 
 
 def _localize_ms(full: ObjectMap, local: ObjectMap):
-    start = time.perf_counter()
+    start = clock()
     result = semloc.localize(full, local)
-    return (time.perf_counter() - start) * 1e3, result
+    return (clock() - start) * 1e3, result
 
 
 def _right(pose: np.ndarray, truth: np.ndarray) -> bool:
