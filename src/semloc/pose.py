@@ -73,7 +73,7 @@ _MATCH_NEIGHBOURS = (16, 4)  # neighbours searched for a compatible normal: coar
 _COARSE_POINTS = 200  # local points used by ICP while the kernel is above icp_kernel
 _FLAT_VARIATION = 0.05  # surface variation at which a neighbourhood stops counting as flat
 _CONVERGED = 0.01  # an ICP step moving the points less than this x kernel has converged
-_FITNESS_SLACK = 0.01  # a refinement may lose this much fitness (sampling noise) and be kept
+_FITNESS_SLACK = 0.0  # a refinement may lose this much fitness (sampling noise) and be kept
 _POINT_TO_POINT = 0.1  # weight of the point-to-point error next to the point-to-plane error
 
 
