@@ -4,7 +4,8 @@
 fused local objects), feeds the objects that are new or updated at each keyframe to a
 `Localizer`, prints a live table (keyframe, local objects, association sets, top-2 scores,
 status, time) and finally the pose error against ground truth.  It writes `scores.png`,
-`map.png`, `world.png`, `result.json`, `ground_truth.json` and the global/local maps to `out`.
+`map.png`, `world.png`, `result.json`, `ground_truth.json` and the global/local maps to `out`,
+and with `rrd` a 3D Rerun recording of the updates (`semloc.viz3d`, the `viz` extra).
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import SimpleNamespace
+from typing import Any
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
@@ -50,6 +52,7 @@ class DemoConfig(BaseModel):
     gamma: float = Field(0.8, gt=0, lt=1, description="Merge threshold of the clustering.")
     drift: float = Field(0.0, ge=0, le=0.2, description="Odometry drift, metres per metre.")
     out: Path = Field(Path("demo_out"), description="Output folder.")
+    rrd: Path | None = Field(None, description="Rerun recording of the updates to write.")
 
 
 @dataclass
@@ -112,9 +115,11 @@ def _score(value: float | None) -> str:
 
 
 def localize_sequence(
-    seq: SimulatedSequence, kind: str, gamma: float, console: Console
+    seq: SimulatedSequence, kind: str, gamma: float, console: Console, recording: Any = None
 ) -> tuple[Result, list[int], list[str]]:
-    """Run the Localizer over the keyframes (live table); the last Result, keyframes, statuses."""
+    """Run the Localizer over the keyframes (live table); the last Result, keyframes, statuses.
+
+    `recording` (a `semloc.viz3d.DemoRecording`) gets the state after every update."""
     localizer = Localizer(seq.global_maps[kind], LocalizerConfig(gamma=gamma), local_up=(0, 0, 1))
     result = Result(status="failed", pose=None, hypotheses=[])
     keyframes, statuses = [], []
@@ -127,6 +132,8 @@ def localize_sequence(
             step = result.steps[-1]
             keyframes.append(kf.index)
             statuses.append(result.status)
+            if recording is not None:
+                recording.update(kf.index, localizer.local_map, result)
             top = [*step.top_scores[:2], None, None][:2]
             table.add_row(
                 str(kf.index), str(step.n_local), f"{len(kf.new)}/{len(kf.updated)}",
@@ -152,7 +159,19 @@ def run_demo(config: DemoConfig, console: Console | None = None) -> DemoResult:
         f"with {len(gmap)} objects; "
         f"{len(seq.keyframes)} keyframes ({config.path}), {len(seq.local_map)} local objects fused"
     )
-    result, keyframes, statuses = localize_sequence(seq, config.map_kind, config.gamma, console)
+    recording = None
+    if config.rrd is not None:
+        from semloc.viz3d import DemoRecording  # rerun
+
+        recording = DemoRecording(config.rrd, gmap, seq.T_global_local, seq.local_map.labels)
+    try:
+        result, keyframes, statuses = localize_sequence(
+            seq, config.map_kind, config.gamma, console, recording
+        )
+    except BaseException:
+        if recording is not None:
+            recording.discard()
+        raise
     t2 = time.perf_counter()
     rot = trans = None
     if result.pose is not None:
@@ -161,6 +180,8 @@ def run_demo(config: DemoConfig, console: Console | None = None) -> DemoResult:
     correct = sum(1 for p in (result.best.pairs if result.best else []) if p in truth)
     demo = DemoResult(result, seq, rot, trans, correct, {"simulate": t1 - t0, "localize": t2 - t1})
     demo.files = write_outputs(config, demo, keyframes, statuses)
+    if recording is not None:
+        demo.files.append(recording.close())
     demo.seconds["total"] = time.perf_counter() - t0
     _report(demo, config, console)
     return demo
