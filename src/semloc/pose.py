@@ -19,8 +19,7 @@ This module owns the last stage of the pipeline (paper, "Camera pose recovery"):
    The 4-DoF update is a rotation about the global `up` (plus a translation), and the result
    is snapped to a yaw in the z-up frames, so `R @ up_local == up_global` holds exactly;
    6-DoF updates the full rotation.  Coarse kernel levels move a thinned subset of the local
-   points.  A refinement is kept unless it lowers fitness by more than `_FITNESS_SLACK`
-   (object-level point sets are a few hundred points: one point is sampling noise).
+   points.  A refinement is kept only if it does not lower fitness.
 
 Why not a registration library's own ICP loop: small_gicp and Open3D solve 6-DoF only, with
 no normal-compatibility test; semloc needs the exact gravity-aligned 4-DoF mode and
@@ -73,7 +72,6 @@ _MATCH_NEIGHBOURS = (16, 4)  # neighbours searched for a compatible normal: coar
 _COARSE_POINTS = 200  # local points used by ICP while the kernel is above icp_kernel
 _FLAT_VARIATION = 0.05  # surface variation at which a neighbourhood stops counting as flat
 _CONVERGED = 0.01  # an ICP step moving the points less than this x kernel has converged
-_FITNESS_SLACK = 0.0  # a refinement may lose this much fitness (sampling noise) and be kept
 _POINT_TO_POINT = 0.1  # weight of the point-to-point error next to the point-to-plane error
 
 
@@ -802,7 +800,7 @@ def _scored(T: np.ndarray, method: str, pairs: _Pairs, cfg: PoseConfig) -> _Scor
 
 def _best_refined(candidates, method, init, pairs, ups, cfg: PoseConfig, tag: str):
     """Best candidate by (fitness, -rmse), each refined by ICP when that does not lower its
-    smooth score; a warm start `init` replaces the candidates when it scores higher."""
+    fitness; a warm start `init` replaces the candidates when its smooth score is higher."""
     full = _Pairs(pairs, cfg.local_points)
     scored = [_scored(T, method, full, cfg) for T in candidates]
     if init is not None:
@@ -819,10 +817,9 @@ def _best_refined(candidates, method, init, pairs, ups, cfg: PoseConfig, tag: st
 
 
 def _refined(start: _Scored, full: _Pairs, coarse: _Pairs, axis, cfg: PoseConfig) -> _Scored:
-    """ICP from a candidate, kept when it does not lower the smooth score (which, unlike the
-    inlier share, also rewards a tighter fit)."""
+    """ICP from a candidate, kept when it does not lower the fitness."""
     refined = _scored(_icp(start.T, full, coarse, axis, cfg), start.method + "+icp", full, cfg)
-    return refined if refined.fitness >= start.fitness - _FITNESS_SLACK else start
+    return refined if refined.fitness >= start.fitness else start
 
 
 def _upright(T: np.ndarray, up_l: np.ndarray, up_g: np.ndarray) -> np.ndarray:
