@@ -9,6 +9,12 @@ after which their evidence is measured, they are ranked by it, same-place duplic
 merged and a calibrated confidence is attached.  `update(objects, answer=False)` only grows
 the association sets, for callers that read the answer later (a replay reads only its last one).
 
+Streaming: the poses of the last answer are kept per association set (keyed by its pairs and
+whether it was refined).  A set that is unchanged at the next answer reuses its estimate; a set
+that grew is recovered warm-started from the pose of its largest kept subset; a re-detected
+local object drops the kept poses that used it.  Object clouds for pose recovery are prepared
+once per object (`pose.cached_cloud`), so all Localizers of one map share them.
+
 `localize(global_map, local_map)` replays a local map by its `seen` keyframes.
 """
 
@@ -26,8 +32,7 @@ from semloc.association import AssociationConfig, CandidateIndex, Describer
 from semloc.clustering import AssociationSet, ClusteringConfig, HierarchicalClustering
 from semloc.decision import DecisionConfig, RankBy, decide, distinct, rank_places, shipped_model
 from semloc.maps import MapError, ObjectMap, SemanticObject
-from semloc.pointsets import voxel_downsample
-from semloc.pose import PoseConfig, PoseEstimate, estimate_pose
+from semloc.pose import PoseConfig, PoseEstimate, cached_cloud, estimate_pose
 from semloc.results import Hypothesis, Result, Status, Step
 from semloc.transforms import centre_residual
 from semloc.verification import (
@@ -127,8 +132,7 @@ class Localizer:
         self.descriptor_gate = config.association.gate(self._describer)
         self._candidates = CandidateIndex(global_map, config.association, self.descriptor_gate)
         self._pose_unrefined = config.pose.model_copy(update={"refine": False})
-        self._global_clouds: dict[int, np.ndarray | None] = {}
-        self._local_clouds: dict[str, np.ndarray | None] = {}
+        self._poses: dict[_PoseKey, PoseEstimate | None] = {}  # of the last answer's sets
         self._clustering = HierarchicalClustering(
             global_map.positions, list(global_map.ids), config.clustering
         )
@@ -225,8 +229,11 @@ class Localizer:
             objects = self._describer.describe(objects)
         for obj in objects:
             index = self._local_index.setdefault(obj.id, len(self._local_index))
+            if obj.id in self._local:  # re-detected: poses that used the old version are stale
+                self._poses = {
+                    k: v for k, v in self._poses.items() if all(l != index for _, l in k[1])
+                }
             self._local[obj.id] = obj
-            self._local_clouds[obj.id] = _cloud(obj.points, self.config.pose)
             detections[index] = self._candidates.candidates(obj)
             self._candidates_of[index] = detections[index]
         return detections
@@ -250,8 +257,9 @@ class Localizer:
             screened.sort(key=lambda c: (-len(c.pairs), round(c.residual, 9), -c.aset.score))
         places = [(c.pairs, c.pose) for c in screened]
         chosen = [screened[i] for i in distinct(places, cfg.top_k, cfg.decision)]
+        previous, self._poses = self._poses, {}
         hypotheses = [
-            self._hypothesis(rank, c, local_xyz, support) for rank, c in enumerate(chosen, 1)
+            self._hypothesis(rank, c, local_xyz, previous) for rank, c in enumerate(chosen, 1)
         ]
         return rank_places(hypotheses, cfg.rank_by, cfg.decision, shipped_model())
 
@@ -284,7 +292,7 @@ class Localizer:
         return _Verified(aset, grown, rejected, pose, residual, added, conflicts)
 
     def _hypothesis(
-        self, rank: int, verified: _Verified, local_xyz: np.ndarray, support: MapSupport
+        self, rank: int, verified: _Verified, local_xyz: np.ndarray, previous: dict
     ) -> Hypothesis:
         """Full pose recovery of a verified set's inlier pairs, and its evidence."""
         local_objects = list(self._local.values())
@@ -292,25 +300,16 @@ class Localizer:
         locals_ = [local_objects[l] for _, l in verified.pairs]
         l_xyz = np.array([o.position for o in locals_])
         g_xyz = np.array([o.position for o in globals_])
-        clouds = (
-            [self._local_clouds[o.id] for o in locals_],
-            [self._global_cloud(self.global_map.index_of(o.id)) for o in globals_],
-        )
+        matched = (l_xyz, g_xyz, locals_, globals_)
         refine = rank <= self.config.refine_top
-        estimate: PoseEstimate | None = estimate_pose(
-            l_xyz, g_xyz, *clouds, self.local_up, self.global_map.up,
-            self.config.pose if refine else self._pose_unrefined,
-        )  # fmt: skip
+        estimate = self._recover(verified.pairs, refine, previous, matched)
         residual, features = verified.residual, None
         tolerance = self.config.verification.inlier_tolerance
         if estimate is not None:
             residual = centre_residual(estimate.T, l_xyz, g_xyz)
             if refine and residual > tolerance >= verified.residual:
                 # ICP on points that do not fit dragged the pose off the agreeing centres
-                estimate = estimate_pose(
-                    l_xyz, g_xyz, *clouds, self.local_up, self.global_map.up,
-                    self._pose_unrefined,
-                )  # fmt: skip
+                estimate = self._recover(verified.pairs, False, previous, matched)
                 assert estimate is not None  # the closed form was determined before
                 residual = centre_residual(estimate.T, l_xyz, g_xyz)
         pose = None if estimate is None else estimate.T
@@ -333,11 +332,30 @@ class Localizer:
             rejected=[(str(ids[g]), local_objects[l].id) for g, l in verified.rejected],
         )
 
-    def _global_cloud(self, index: int) -> np.ndarray | None:
-        """The global object's points, downsampled once for pose recovery."""
-        if index not in self._global_clouds:
-            self._global_clouds[index] = _cloud(self.global_map[index].points, self.config.pose)
-        return self._global_clouds[index]
+    def _recover(
+        self, pairs: list[tuple[int, int]], refine: bool, previous: dict, matched: tuple
+    ) -> PoseEstimate | None:
+        """The set's pose: reused when the previous answer recovered it for the same pairs
+        (same object versions), else recovered, warm-started from the pose of the largest
+        subset of its pairs that the previous answer recovered (refined ones first)."""
+        key: _PoseKey = (refine, frozenset(pairs))
+        if key in previous:
+            estimate = previous[key]
+        else:
+            l_xyz, g_xyz, locals_, globals_ = matched
+            pose_cfg = self.config.pose if refine else self._pose_unrefined
+            estimate = estimate_pose(
+                l_xyz,
+                g_xyz,
+                [cached_cloud(o, pose_cfg) for o in locals_],
+                [cached_cloud(o, pose_cfg) for o in globals_],
+                self.local_up,
+                self.global_map.up,
+                pose_cfg,
+                init=_warm_start(key[1], previous),
+            )
+        self._poses[key] = estimate
+        return estimate
 
 
 @dataclass
@@ -354,11 +372,17 @@ class _Verified:
     conflicts: int
 
 
-def _cloud(points: np.ndarray | None, pose: PoseConfig) -> np.ndarray | None:
-    """An object's points voxel-downsampled as pose recovery would (None when it has none)."""
-    if points is None or len(points) == 0:
-        return None
-    return voxel_downsample(points, pose.icp_voxel)
+_PoseKey = tuple[bool, frozenset[tuple[int, int]]]  # (refined, pairs)
+
+
+def _warm_start(pairs: frozenset, previous: dict[_PoseKey, PoseEstimate | None]):
+    """The pose of the largest recovered subset of `pairs` (refined first), or None."""
+    subsets = [
+        (len(k[1]), k[0], estimate.T)
+        for k, estimate in previous.items()
+        if estimate is not None and k[1] <= pairs
+    ]
+    return max(subsets, key=lambda s: s[:2])[2] if subsets else None
 
 
 def localize(

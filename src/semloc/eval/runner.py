@@ -8,7 +8,7 @@ progress bar.  Rows are sorted before writing, so the outputs do not depend on c
 order: for a fixed seed everything except the `ms` column is reproducible.
 
 Outputs (written atomically): results.csv, hypotheses.csv, ablation.csv, the PNG figures and
-report.md.
+report.md; with `real_walks` also those of `semloc.eval.realwalks`.
 """
 
 from __future__ import annotations
@@ -41,6 +41,7 @@ class BenchOutput:
     ablation: list[dict]
     files: list[Path]
     seconds: float
+    real_walks: list[dict] | None = None  # rows of real_walks.csv with --real-walks
 
 
 def _sequence_task(config: BenchConfig, index: int):
@@ -98,6 +99,10 @@ def run_benchmark(
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn
 
     begin = time.perf_counter()
+    if config.real_walks:
+        from semloc.eval import realwalks  # open3d: only for the real walks
+
+        realwalks.real_walk_data()  # missing scans: say so before the long run
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     for var in _ONE_THREAD:
@@ -142,6 +147,8 @@ def run_benchmark(
                     rows += chain_rows
                     hyps += chain_hyps
                 bar.advance(task)
+        if config.real_walks:
+            real = realwalks.run_real_walks(client, config, out, progress)
     finally:
         client.close()
         if cluster is not None:
@@ -151,4 +158,7 @@ def run_benchmark(
     ablation_rows.sort(key=lambda r: _order(r, config.methods))
     seconds = time.perf_counter() - begin
     files = write_outputs(out, config, rows, hyps, ablation_rows, seconds)
+    if config.real_walks:
+        files += real["files"]
+        return BenchOutput(rows, hyps, ablation_rows, files, seconds, real["rows"])
     return BenchOutput(rows, hyps, ablation_rows, files, seconds)
