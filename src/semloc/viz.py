@@ -2,7 +2,8 @@
 
 Every `plot_*` function draws into a given `Axes` and returns it; `save_figure` writes a PNG
 atomically (`semloc.io.write_atomic`).  Colours are fixed per label so
-the same class looks the same in every picture; axes are in metres with equal aspect.
+the same class looks the same in every picture; axes are in metres with equal aspect.  Labels,
+ids and titles are user text: shown shortened and with `$` escaped (`semloc.display`).
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ from matplotlib.figure import Figure  # noqa: E402
 from matplotlib.lines import Line2D  # noqa: E402
 from matplotlib.patches import Patch, Polygon  # noqa: E402
 
+from semloc.display import for_matplotlib  # noqa: E402
 from semloc.io import write_atomic  # noqa: E402
 from semloc.maps import ObjectMap  # noqa: E402
 
@@ -44,6 +46,10 @@ CLASS_COLORS = {
     "toilet": "#9edae5", "sink": "#637939", "whiteboard": "#843c39",
 }  # fmt: skip
 """Fixed colours of the simulator's classes, so a class looks the same in every picture."""
+LEGEND_LABELS = 30
+"""Most labels listed in a legend (the rest are counted)."""
+TITLE_LENGTH = 160
+"""Longest title shown (user text: shortened and escaped, `semloc.display`)."""
 
 
 def label_colors(labels: Sequence[str]) -> dict[str, str]:
@@ -137,15 +143,20 @@ def plot_objects(
         )
         if ids:
             ax.annotate(
-                obj.id, obj.position[:2], fontsize=6, xytext=(3, 3), textcoords="offset points"
-            )
+                for_matplotlib(obj.id, 16), obj.position[:2], fontsize=6, xytext=(3, 3),
+                textcoords="offset points",
+            )  # fmt: skip
     return ax
 
 
 def _finish_map_axes(
     ax: Axes, colors: dict[str, str], extra: list[Any] | None = None, title: str = ""
 ) -> None:
-    handles: list[Any] = [Patch(fc=c, ec=c, alpha=0.6, label=label) for label, c in colors.items()]
+    shown = list(colors.items())[:LEGEND_LABELS]
+    handles: list[Any] = [Patch(fc=c, ec=c, alpha=0.6, label=for_matplotlib(label))
+                          for label, c in shown]  # fmt: skip
+    if len(colors) > LEGEND_LABELS:
+        handles.append(Patch(fc="none", ec="none", label=f"… {len(colors) - LEGEND_LABELS} more"))
     handles += extra or []
     ax.legend(
         handles=handles, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False
@@ -155,7 +166,7 @@ def _finish_map_axes(
     ax.set_ylabel("y [m]")
     ax.grid(True, lw=0.3, alpha=0.5)
     if title:
-        ax.set_title(title, fontsize=11)
+        ax.set_title(for_matplotlib(title, TITLE_LENGTH), fontsize=11)
 
 
 def plot_localization(
@@ -260,7 +271,7 @@ def plot_scores(
     ax.grid(True, lw=0.3, alpha=0.5)
     ax.legend(fontsize=8, loc="upper left")
     if title:
-        ax.set_title(title, fontsize=11)
+        ax.set_title(for_matplotlib(title, TITLE_LENGTH), fontsize=11)
     return ax
 
 

@@ -1,7 +1,9 @@
-"""Reading the small JSON inputs of the commands: settings, poses, localization results."""
+"""The commands' files: reading settings, poses and localization results, and checking
+outputs and numeric options before any work is done."""
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
@@ -53,3 +55,20 @@ def read_result(path: Path) -> tuple[np.ndarray | None, list[tuple[str, str]], s
                 pairs.append((str(pair["global"]), str(pair["local"])))
     status = data.get("status") if isinstance(data.get("status"), str) else None
     return pose, pairs, status
+
+
+def check_output(path: Path, option: str = "--output") -> Path:
+    """`path` if a file can be written there: not a folder, in a folder that exists."""
+    if path.is_dir():
+        fail(f"{path}: is a folder; {option} takes a file name")
+    if not path.parent.is_dir():
+        fail(f"{path}: folder {path.parent} does not exist ({option})")
+    return path
+
+
+def check_finite(**options: float | tuple[float, ...] | None) -> None:
+    """Refuse a non-finite numeric option (`--voxel nan`, `--radius inf`) in one line."""
+    for name, value in options.items():
+        values = value if isinstance(value, tuple) else (value,)
+        if any(v is not None and not math.isfinite(v) for v in values):
+            fail(f"--{name.replace('_', '-')} must be a finite number, got {value}")

@@ -15,7 +15,7 @@ from rich.console import Console
 
 from semloc.association import DESCRIBERS
 from semloc.cli.app import app, choices, console, fail, first_error
-from semloc.cli.files import read_config
+from semloc.cli.files import check_finite, check_output, read_config
 from semloc.cli.render import print_result
 from semloc.io import load_map, write_atomic
 from semloc.localizer import LocalizerConfig
@@ -82,6 +82,9 @@ def localize(
     ] = None,
 ) -> None:
     """Localize LOCAL in GLOBAL: association sets, hypotheses and the pose T_global_local."""
+    check_finite(gamma=gamma, delta=delta, tolerance=tolerance, descriptor_delta=descriptor_delta)
+    if output is not None:
+        check_output(output)
     settings = read_config(config)
     given = dict(gamma=gamma, delta=delta, top_k=top_k, distance_tolerance=tolerance,
                  descriptor=None if descriptor is None else descriptor.value,
@@ -93,7 +96,7 @@ def localize(
         fail(f"invalid settings: {first_error(exc)}")
     result = run_localize(load_map(global_map), load_map(local_map), cfg)
     if output_format is OutputFormat.json:
-        text = json.dumps(result.to_dict(), indent=1) + "\n"
+        text = json.dumps(result.to_dict(), indent=1, allow_nan=False) + "\n"
         if output is None:
             sys.stdout.write(text)
         else:

@@ -10,7 +10,7 @@ from pydantic import ValidationError
 from rich.table import Table
 
 from semloc.cli.app import app, console, fail, first_error
-from semloc.cli.files import read_result
+from semloc.cli.files import check_finite, check_output, read_result
 from semloc.cli.options import (
     RESOLUTION_HELP,
     SIZE_HELP,
@@ -20,7 +20,9 @@ from semloc.cli.options import (
     parse_resolution,
 )
 from semloc.demo import DemoConfig, run_demo
+from semloc.display import for_rich
 from semloc.io import load_map
+from semloc.io.native import staged_folder
 from semloc.sim.export import write_sequence
 from semloc.sim.noise import DetectionNoise
 from semloc.sim.scenario import simulate_sequence
@@ -54,6 +56,7 @@ def demo(
 
     Prints a live table and the pose error against ground truth; writes scores.png and map.png.
     """
+    check_finite(gamma=gamma, drift=drift)
     try:
         config = DemoConfig(
             seed=seed, size=size, map_kind=map_kind.value, path=path.value, keyframes=keyframes,
@@ -96,7 +99,11 @@ def simulate(
     Files: world.json/.png, global_<kind>.json, local.json, keyframes/local_XXXX.json.
 
     ground_truth.json holds T_global_local, camera poses and correspondences per map kind.
+
+    All files are written, or none: they are built in a temporary folder beside OUT and moved
+    into it at the end (ground_truth.json last).
     """
+    check_finite(drift=drift, drift_yaw=drift_yaw)
     noise = DetectionNoise.perfect() if perfect else DetectionNoise()
     noise = noise.model_copy(update={"drift_translation": drift, "drift_yaw_deg": drift_yaw})
     try:
@@ -106,10 +113,16 @@ def simulate(
         )  # fmt: skip
     except ValueError as exc:
         fail(str(exc))
-    files = write_sequence(
-        seq, out, snapshots=snapshots, descriptor=None if descriptor is None else descriptor.value
+    with staged_folder(out, index="ground_truth.json") as stage:
+        files = write_sequence(
+            seq,
+            stage,
+            snapshots=snapshots,
+            descriptor=None if descriptor is None else descriptor.value,
+        )
+    table = Table(
+        title=f"simulated world seed {seed} -> {for_rich(out, None)}", title_justify="left"
     )
-    table = Table(title=f"simulated world seed {seed} -> {out}", title_justify="left")
     for column in ("map", "objects", "file"):
         table.add_column(column)
     for kind, gmap in seq.global_maps.items():
@@ -137,15 +150,16 @@ def view(
     """Draw MAP from above as a PNG, optionally with a localization result and a local map."""
     from semloc.viz import map_figure, plot_localization, save_figure  # matplotlib
 
+    target = check_output(output or map_file.with_suffix(".png"))
     objmap = load_map(map_file)
     pose, pairs, status = read_result(result) if result is not None else (None, [], None)
     local_map = load_map(local) if local is not None else None
     if local_map is not None and pose is None:
         fail("--local needs a --result with a pose to place the local objects")
     heading = title or f"{map_file.name}: {len(objmap)} objects" + (
-        f" ({status})" if status else ""
+        f" ({status[:20]})" if status else ""
     )
     fig, ax = map_figure(objmap.positions[:, :2])
     plot_localization(ax, objmap, local_map, pose, pairs, title=heading)
-    path = save_figure(fig, output or map_file.with_suffix(".png"))
-    console.print(f"wrote {path}")
+    path = save_figure(fig, target)
+    console.print(f"wrote {for_rich(path, None)}")

@@ -7,8 +7,8 @@ single-threaded worker process per core by default) or on an existing cluster
 progress bar.  Rows are sorted before writing, so the outputs do not depend on completion
 order: for a fixed seed everything except the `ms` column is reproducible.
 
-Outputs (written atomically): results.csv, hypotheses.csv, ablation.csv, the PNG figures and
-report.md.
+Outputs (all or none: built beside `out` and moved in at the end): results.csv, hypotheses.csv,
+ablation.csv, the PNG figures and report.md.
 """
 
 from __future__ import annotations
@@ -30,6 +30,7 @@ from semloc.eval.protocol import (
     start_keyframes,
 )  # fmt: skip
 from semloc.eval.report import write_outputs
+from semloc.io.native import staged_folder
 
 _ONE_THREAD = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
 
@@ -99,7 +100,8 @@ def run_benchmark(
 
     begin = time.perf_counter()
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+    if out.exists() and not out.is_dir():
+        raise ValueError(f"{out}: exists and is not a folder")
     for var in _ONE_THREAD:
         os.environ.setdefault(var, "1")
     cluster = None
@@ -150,5 +152,7 @@ def run_benchmark(
     hyps.sort(key=lambda r: _order(r, config.methods))
     ablation_rows.sort(key=lambda r: _order(r, config.methods))
     seconds = time.perf_counter() - begin
-    files = write_outputs(out, config, rows, hyps, ablation_rows, seconds)
+    with staged_folder(out, index="report.md") as stage:  # all files or none
+        staged = write_outputs(stage, config, rows, hyps, ablation_rows, seconds)
+    files = [out / f.relative_to(stage) for f in staged]
     return BenchOutput(rows, hyps, ablation_rows, files, seconds)
