@@ -20,6 +20,7 @@ import shutil
 import signal
 import stat
 import tempfile
+import tokenize
 import zipfile
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -224,8 +225,9 @@ def _read_points_file(name: Any, base_dir: Path | None, wanted: set[str]) -> dic
             members = {m.removesuffix(".npy"): m for m in archive.namelist() if m.endswith(".npy")}
             total = 0
             for object_id in sorted(wanted & set(members)):
-                with archive.open(members[object_id]) as handle:
-                    total += _npy_shape(handle, object_id)[0]
+                info = archive.getinfo(members[object_id])
+                with archive.open(info) as handle:
+                    total += _npy_shape(handle, object_id, info.file_size)[0]
                 if total > MAX_POINTS_PER_MAP:
                     raise MapError(f"more than {MAX_POINTS_PER_MAP:,} points in all")
                 with archive.open(members[object_id]) as handle:
@@ -258,15 +260,11 @@ def _points_path(name: Any, base_dir: Path) -> Path:
     return path
 
 
-def _npy_shape(handle: Any, object_id: str) -> tuple[int, ...]:
-    version = np.lib.format.read_magic(handle)
-    reader = {
-        (1, 0): np.lib.format.read_array_header_1_0,
-        (2, 0): np.lib.format.read_array_header_2_0,
-    }
-    if version not in reader:
-        raise MapError(f"member '{object_id[:60]}': unsupported .npy version {version}")
-    shape, _, dtype = reader[version](handle)
+def _npy_shape(handle: Any, object_id: str, available: int) -> tuple[int, ...]:
+    try:
+        shape, dtype = npy_header(handle, available)
+    except MapError as exc:
+        raise MapError(f"member '{object_id[:60]}': {exc}") from None
     if dtype.kind not in "fiu" or len(shape) != 2 or shape[1] != 3:
         raise MapError(f"member '{object_id[:60]}' must be an (N, 3) array of numbers")
     if shape[0] > MAX_POINTS_PER_OBJECT:
@@ -274,6 +272,46 @@ def _npy_shape(handle: Any, object_id: str) -> tuple[int, ...]:
             f"member '{object_id[:60]}' has {shape[0]:,} points, more than {MAX_POINTS_PER_OBJECT:,}"
         )
     return shape
+
+
+def npy_header(handle: Any, available: int | None = None) -> tuple[tuple[int, ...], np.dtype]:
+    """Shape and dtype from the header of the `.npy` stream `handle`, without reading the data;
+    `MapError` for a damaged header, object (pickled) data, or more data declared than the
+    `available` bytes."""
+    try:
+        version = np.lib.format.read_magic(handle)
+        if version == (1, 0):
+            shape, _, dtype = np.lib.format.read_array_header_1_0(handle)
+        elif version == (2, 0):
+            shape, _, dtype = np.lib.format.read_array_header_2_0(handle)
+        else:
+            raise MapError(f"unsupported .npy version {version}")
+    except MapError:
+        raise
+    except (ValueError, SyntaxError, TypeError, EOFError, OSError, tokenize.TokenError) as exc:
+        raise MapError(f"damaged .npy header ({str(exc)[:80]})") from None
+    if dtype.hasobject:
+        raise MapError("object arrays are not read (no pickles)")
+    declared = math.prod(shape) * dtype.itemsize
+    if available is not None and declared > available:
+        raise MapError(f"header declares {declared:,} bytes of data; the file holds fewer")
+    return shape, dtype
+
+
+def read_npy(path: str | os.PathLike[str]) -> np.ndarray:
+    """A `.npy` array (no pickles), its header checked against the file size before the data is
+    read; `MapError` naming the file on any problem."""
+    path = Path(path)
+    size = check_regular(path, MAX_FILE_BYTES)
+    try:
+        with open(path, "rb") as handle:
+            npy_header(handle, size)
+            handle.seek(0)
+            return np.lib.format.read_array(handle, allow_pickle=False)
+    except MapError as exc:
+        raise MapError(f"{path}: {exc}") from None
+    except (OSError, ValueError, EOFError) as exc:
+        raise MapError(f"{path}: not a readable .npy array ({str(exc)[:80]})") from None
 
 
 # Writing ---------------------------------------------------------------------------------------
