@@ -43,28 +43,39 @@ def _raise_interrupted(signum: int, frame: object) -> None:
 
 
 @contextmanager
-def _interrupts_raise() -> Iterator[None]:
-    """SIGINT and SIGTERM raise `Interrupted` during the block (main thread only)."""
+def _interrupts_raise(script: bool) -> Iterator[None]:
+    """SIGINT and SIGTERM raise `Interrupted` during the block (main thread only).
+
+    Afterwards the previous handlers come back, except for the `script` (the process ends with
+    the command): there a late signal is ignored, so that a finished command keeps its status."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-    previous = {s: signal.signal(s, _raise_interrupted) for s in (signal.SIGINT, signal.SIGTERM)}
+    signals = (signal.SIGINT, signal.SIGTERM)
+    previous = {s: signal.signal(s, _raise_interrupted) for s in signals}
     try:
         yield
     finally:
         for signum, handler in previous.items():
-            signal.signal(signum, handler)
+            signal.signal(signum, signal.SIG_IGN if script else handler)
 
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the `semloc` script: runs the app and maps errors to exit status 2.
+
+    Without `argv` (the script) the arguments come from `sys.argv` and the process is taken to
+    end with the command; with `argv` (called from Python) signal handlers are restored.
 
     SIGINT (Ctrl-C) and SIGTERM end the command with `semloc: interrupted` and status 128 +
     the signal number (130, 143); outputs are then complete or absent (`semloc.io.write_files`,
     `staged_folder`).  Numerical warnings are not printed: results are checked to be finite.
     """
     try:
-        with _interrupts_raise(), warnings.catch_warnings(), np.errstate(all="ignore"):
+        with (
+            _interrupts_raise(script=argv is None),
+            warnings.catch_warnings(),
+            np.errstate(all="ignore"),
+        ):
             warnings.simplefilter("ignore", RuntimeWarning)
             code = app(args=argv, standalone_mode=False)
     except (MapError, CliError) as exc:
@@ -83,10 +94,25 @@ def main(argv: list[str] | None = None) -> int:
         # click (vendored by typer) usage errors: one line, status 2 like click's own
         if hasattr(exc, "format_message") and hasattr(exc, "exit_code"):
             return _error(exc.format_message())
+        cause = _interrupt_behind(exc)
+        if cause is not None:  # e.g. an extension module's import turned it into ImportError
+            print("semloc: interrupted", file=sys.stderr)
+            return 128 + cause.signum
         raise
     if code == 130:  # typer turns a KeyboardInterrupt it sees into Exit(130)
         print("semloc: interrupted", file=sys.stderr)
     return code if isinstance(code, int) else 0
+
+
+def _interrupt_behind(exc: BaseException) -> Interrupted | None:
+    """The `Interrupted` that caused `exc` (through its cause / context chain), if any."""
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(exc, Interrupted):
+            return exc
+        seen.add(id(exc))
+        exc = exc.__cause__ or exc.__context__
+    return None
 
 
 def _error(message: str) -> int:
