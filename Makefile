@@ -3,14 +3,17 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: install demo test lint bench clean
+.PHONY: install demo test test-install lint bench clean
 
 install: $(STAMP)
 
-$(STAMP): pyproject.toml
+# Everything but training (`.[all,test]`) at the tested versions of constraints.txt.
+# open3d-cpu (older venvs) installs the same `open3d` package as open3d: it goes first.
+$(STAMP): pyproject.toml constraints.txt
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e ".[test]"
+	$(BIN)/python -m pip uninstall --quiet --yes open3d-cpu 2>/dev/null || true
+	$(BIN)/python -m pip install --quiet -c constraints.txt -e ".[all,test]"
 	touch $(STAMP)
 
 demo: install
@@ -19,9 +22,13 @@ demo: install
 test: install
 	MPLCONFIGDIR=$${TMPDIR:-/tmp}/semloc-mpl $(BIN)/python -m pytest
 
+# A plain `pip install .` in a fresh venv from PyPI (network): the core install stays light.
+test-install: install
+	MPLCONFIGDIR=$${TMPDIR:-/tmp}/semloc-mpl $(BIN)/python -m pytest -m install
+
 lint: install
-	$(BIN)/ruff check src tests benchmarks
-	$(BIN)/ruff format --check src tests benchmarks
+	$(BIN)/ruff check src tests benchmarks examples
+	$(BIN)/ruff format --check src tests benchmarks examples
 
 bench: install
 	$(BIN)/python benchmarks/bench_localize.py

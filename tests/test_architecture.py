@@ -52,9 +52,16 @@ def _module_files(*parts: str) -> list[Path]:
     return sorted(PACKAGE.joinpath(*parts).rglob("*.py"))
 
 
+# The one optional import of the core: `ObjectMap.to_open3d` imports open3d when called
+# (interop for users who have it); `_open3d_only_in_to_open3d` checks it is only there.
+CORE_EXCEPTIONS = {("maps.py", "open3d")}
+
+
 def _check_imports(path: Path, allowed: set[str]) -> None:
     for modules, _ in _imports(path):
         top = modules[0].split(".")[0]
+        if (path.name, top) in CORE_EXCEPTIONS:
+            continue
         if top == "semloc":
             part = _semloc_part(modules[0])
             assert part in allowed, f"{path.name} imports {modules[0]}"
@@ -67,6 +74,20 @@ def _check_imports(path: Path, allowed: set[str]) -> None:
 def test_core_imports_only_the_core():
     for name in CORE:
         _check_imports(PACKAGE / f"{name}.py", CORE)
+
+
+def test_open3d_is_imported_only_in_to_open3d():
+    tree = ast.parse((PACKAGE / "maps.py").read_text())
+    places = [
+        function.name
+        for function in ast.walk(tree)
+        if isinstance(function, ast.FunctionDef)
+        for node in ast.walk(function)
+        if isinstance(node, ast.Import) and any(a.name == "open3d" for a in node.names)
+    ]
+    every = [n for n in ast.walk(tree) if isinstance(n, (ast.Import, ast.ImportFrom))
+             and "open3d" in [a.name for a in n.names] + [getattr(n, "module", None)]]  # fmt: skip
+    assert places == ["to_open3d"] and len(every) == 1
 
 
 def test_runtime_descriptors_import_only_the_core_and_themselves():

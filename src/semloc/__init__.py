@@ -6,7 +6,10 @@ l = semloc.load_map("local.json")
 r = semloc.localize(g, l)        # r.status, r.pose (4x4 T_global_local), r.hypotheses
 """
 
-from semloc import descriptors  # registers the descriptor kinds (numpy only)
+from semloc import (
+    colors,  # label colours of pictures, exports, recordings (no plotting)
+    descriptors,  # registers the descriptor kinds (numpy only)
+)
 from semloc.io import load_map, save_map
 from semloc.localizer import Localizer, LocalizerConfig, localize
 from semloc.maps import MapError, ObjectMap, SemanticObject
@@ -23,6 +26,7 @@ __all__ = [
     "SemanticObject",
     "Step",
     "__version__",
+    "colors",
     "descriptors",
     "load_map",
     "localize",

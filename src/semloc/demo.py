@@ -5,7 +5,8 @@ fused local objects), feeds the objects that are new or updated at each keyframe
 `Localizer`, prints a live table (keyframe, local objects, association sets, top-2 scores,
 status, time) and finally the pose error against ground truth.  It writes `scores.png`,
 `map.png`, `world.png`, `result.json`, `ground_truth.json` and the global/local maps to `out`,
-all or none (`semloc.io.native.staged_folder`).
+and with `rrd` a 3D Rerun recording of the updates (`semloc.viz3d`, the `viz` extra);
+the files in `out` all or none (`semloc.io.native.staged_folder`).
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import SimpleNamespace
+from typing import Any
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
@@ -52,6 +54,7 @@ class DemoConfig(BaseModel):
     gamma: float = Field(0.8, gt=0, lt=1, description="Merge threshold of the clustering.")
     drift: float = Field(0.0, ge=0, le=0.2, description="Odometry drift, metres per metre.")
     out: Path = Field(Path("demo_out"), description="Output folder.")
+    rrd: Path | None = Field(None, description="Rerun recording of the updates to write.")
 
 
 @dataclass
@@ -114,9 +117,11 @@ def _score(value: float | None) -> str:
 
 
 def localize_sequence(
-    seq: SimulatedSequence, kind: str, gamma: float, console: Console
+    seq: SimulatedSequence, kind: str, gamma: float, console: Console, recording: Any = None
 ) -> tuple[Result, list[int], list[str]]:
-    """Run the Localizer over the keyframes (live table); the last Result, keyframes, statuses."""
+    """Run the Localizer over the keyframes (live table); the last Result, keyframes, statuses.
+
+    `recording` (a `semloc.viz3d.DemoRecording`) gets the state after every update."""
     localizer = Localizer(seq.global_maps[kind], LocalizerConfig(gamma=gamma), local_up=(0, 0, 1))
     result = Result(status="failed", pose=None, hypotheses=[])
     keyframes, statuses = [], []
@@ -129,6 +134,8 @@ def localize_sequence(
             step = result.steps[-1]
             keyframes.append(kf.index)
             statuses.append(result.status)
+            if recording is not None:
+                recording.update(kf.index, localizer.local_map, result)
             top = [*step.top_scores[:2], None, None][:2]
             table.add_row(
                 str(kf.index), str(step.n_local), f"{len(kf.new)}/{len(kf.updated)}",
@@ -154,7 +161,19 @@ def run_demo(config: DemoConfig, console: Console | None = None) -> DemoResult:
         f"with {len(gmap)} objects; "
         f"{len(seq.keyframes)} keyframes ({config.path}), {len(seq.local_map)} local objects fused"
     )
-    result, keyframes, statuses = localize_sequence(seq, config.map_kind, config.gamma, console)
+    recording = None
+    if config.rrd is not None:
+        from semloc.viz3d import DemoRecording  # rerun
+
+        recording = DemoRecording(config.rrd, gmap, seq.T_global_local, seq.local_map.labels)
+    try:
+        result, keyframes, statuses = localize_sequence(
+            seq, config.map_kind, config.gamma, console, recording
+        )
+    except BaseException:
+        if recording is not None:
+            recording.discard()
+        raise
     t2 = time.perf_counter()
     rot = trans = None
     if result.pose is not None:
@@ -165,6 +184,8 @@ def run_demo(config: DemoConfig, console: Console | None = None) -> DemoResult:
     with staged_folder(config.out, index="result.json") as stage:  # all files or none
         files = write_outputs(config.model_copy(update={"out": stage}), demo, keyframes, statuses)
     demo.files = [config.out / f.relative_to(stage) for f in files]
+    if recording is not None:
+        demo.files.append(recording.close())
     demo.seconds["total"] = time.perf_counter() - t0
     _report(demo, config, console)
     return demo

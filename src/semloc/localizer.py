@@ -12,7 +12,7 @@ association sets, for callers that read the answer later (a replay reads only it
 from __future__ import annotations
 
 import time
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from typing import Any
 
 import numpy as np
@@ -310,12 +310,14 @@ def localize(
     global_map: ObjectMap,
     local_map: ObjectMap,
     config: LocalizerConfig | None = None,
+    *,
+    progress: Callable[[int, int], None] | None = None,
     **overrides: Any,
 ) -> Result:
     """Replay `local_map` by its `seen` keyframes (one update per keyframe); the last Result.
 
     Only the last update builds hypotheses and recovers poses: the answers in between would
-    not be read.
+    not be read.  `progress(done, total)` is called after each update.
     """
     if not isinstance(local_map, ObjectMap):
         raise TypeError(f"localize needs an ObjectMap as local map, got {type(local_map).__name__}")
@@ -323,8 +325,12 @@ def localize(
     keyframes = sorted(set(local_map.seen.tolist()))
     if not keyframes:
         return Result(status="failed", pose=None, hypotheses=[])
-    for keyframe in keyframes[:-1]:
+    for done, keyframe in enumerate(keyframes[:-1], start=1):
         localizer.update([o for o in local_map if o.seen == keyframe], answer=False)
+        if progress is not None:
+            progress(done, len(keyframes))
     result = localizer.update([o for o in local_map if o.seen == keyframes[-1]])
     assert result is not None  # an update with an answer returns one
+    if progress is not None:
+        progress(len(keyframes), len(keyframes))
     return result

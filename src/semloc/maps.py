@@ -5,13 +5,17 @@ unknown top-level keys of the file it came from.  Column views (`ids`, `labels`,
 `sizes`, `rotations`, `seen`) are numpy arrays computed once.  Construction validates every
 object and raises `MapError` naming the object and the problem, so API users get the same
 guarantees as file readers.  This module does no I/O.
+
+Points may be any N x 3 array-like or anything with a `.points` attribute convertible to one
+(an `open3d.geometry.PointCloud`, duck-typed: open3d is not imported here).  The one use of an
+optional library is `ObjectMap.to_open3d`, which imports open3d when called.
 """
 
 from __future__ import annotations
 
 import math
 import reprlib
-from collections.abc import Iterable, Iterator, Sequence
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from functools import cached_property
 from typing import Any
@@ -88,6 +92,8 @@ def _as_vector(value: Any, length: int, what: str, limit: float = MAX_COORDINATE
 
 
 def _as_points(value: Any, what: str = "points") -> np.ndarray:
+    if not isinstance(value, (np.ndarray, list, tuple)) and hasattr(value, "points"):
+        value = value.points  # a point cloud object (open3d's PointCloud and the like)
     array = _numbers(value, what, "an N x 3 array of")
     if array.size == 0:
         return np.zeros((0, 3))
@@ -124,13 +130,15 @@ def _text(value: Any, what: str, limit: int, blank: bool = False) -> str:
 class SemanticObject:
     """One object: id, semantic label and centre, with optional box, points and descriptor.
 
+    `position` defaults to the centre (mean) of `points`; `points` may be an N x 3 array-like
+    or a point cloud object with a `.points` attribute (e.g. `open3d.geometry.PointCloud`).
     `seen` is the keyframe index of the first detection (drives incremental replay);
     `extra` keeps unknown keys of the file so that they survive a round trip.
     """
 
     id: str
     label: str
-    position: np.ndarray
+    position: np.ndarray = None  # type: ignore[assignment]  # None: the centre of the points
     size: np.ndarray | None = None
     rotation: np.ndarray | None = None
     points: np.ndarray | None = None
@@ -154,6 +162,12 @@ class SemanticObject:
     def _validate(self) -> None:
         set_ = object.__setattr__
         _text(self.label, "label", MAX_LABEL_LENGTH)
+        if self.points is not None:
+            set_(self, "points", _as_points(self.points))
+        if self.position is None:
+            if self.points is None or not len(self.points):
+                raise MapError("position is missing and there are no points to take the centre of")
+            set_(self, "position", self.points.mean(axis=0))
         set_(self, "position", _as_vector(self.position, 3, "position"))
         if self.size is not None:
             size = _as_vector(self.size, 3, "size")
@@ -162,8 +176,6 @@ class SemanticObject:
             set_(self, "size", size)
         if self.rotation is not None:
             set_(self, "rotation", _as_rotation(self.rotation))
-        if self.points is not None:
-            set_(self, "points", _as_points(self.points))
         if self.descriptor is not None:
             descriptor = _numbers(self.descriptor, "descriptor", "a vector of").ravel()
             if not 0 < descriptor.size <= MAX_DESCRIPTOR_LENGTH:
@@ -372,6 +384,48 @@ class ObjectMap(Sequence[SemanticObject]):
         return ObjectMap(
             (o.transformed(T) for o in self._objects), up=up, name=self.name, extra=self.extra
         )
+
+    # Interop -------------------------------------------------------------------------------
+    def cloud(
+        self, colors: Mapping[str, Any] | None = None
+    ) -> tuple[np.ndarray, np.ndarray | None]:
+        """All objects' points as one (N, 3) array (an object without points: its centre), and
+        with `colors` (label -> "#rrggbb" or RGB in 0..1) the (N, 3) RGB of each point."""
+        parts = [o.points if o.points is not None and len(o.points) else o.position[None]
+                 for o in self._objects]  # fmt: skip
+        points = np.concatenate(parts) if parts else np.zeros((0, 3))
+        if colors is None:
+            return points, None
+        missing = sorted({o.label for o in self._objects} - set(colors))
+        if missing:
+            raise MapError(f"colors has no colour for the labels {missing}")
+        rgb = [np.tile(_rgb(colors[o.label]), (len(p), 1))
+               for o, p in zip(self._objects, parts)]  # fmt: skip
+        return points, np.concatenate(rgb) if rgb else np.zeros((0, 3))
+
+    def to_open3d(self, colors: Mapping[str, Any] | None = None) -> Any:
+        """The map as an `open3d.geometry.PointCloud` (see `cloud`; needs `semloc[sim]`).
+
+        `semloc.colors.label_colors` gives every label its own colour, as in semloc's pictures.
+        """
+        import open3d  # the one optional import of the core: only when asked for
+
+        points, rgb = self.cloud(colors)
+        cloud = open3d.geometry.PointCloud(open3d.utility.Vector3dVector(points))
+        if rgb is not None:
+            cloud.colors = open3d.utility.Vector3dVector(rgb)
+        return cloud
+
+
+def _rgb(color: Any) -> np.ndarray:
+    """A colour as RGB in 0..1, from "#rrggbb" or three numbers in 0..1."""
+    if isinstance(color, str):
+        hex_digits = color.removeprefix("#")
+        try:
+            return np.array([int(hex_digits[i : i + 2], 16) for i in (0, 2, 4)]) / 255.0
+        except ValueError:
+            raise MapError(f"colour {color!r} is not #rrggbb") from None
+    return _as_vector(color, 3, "colour")
 
 
 def unit_vector(value: Any, what: str = "up") -> np.ndarray:

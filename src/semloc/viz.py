@@ -1,8 +1,8 @@
 """Plots (matplotlib, Agg backend): top-down maps, localization results, score curves, worlds.
 
 Every `plot_*` function draws into a given `Axes` and returns it; `save_figure` writes a PNG
-atomically (`semloc.io.write_atomic`).  Colours are fixed per label so
-the same class looks the same in every picture; axes are in metres with equal aspect.  Labels,
+atomically (`semloc.io.write_atomic`).  Colours come from `semloc.colors` (one per label,
+the same in every picture, export and recording); axes are in metres with equal aspect.  Labels,
 ids and titles are user text: shown shortened and with `$` escaped (`semloc.display`).
 """
 
@@ -24,6 +24,7 @@ from matplotlib.figure import Figure  # noqa: E402
 from matplotlib.lines import Line2D  # noqa: E402
 from matplotlib.patches import Patch, Polygon  # noqa: E402
 
+from semloc.colors import CLASS_COLORS, label_colors  # noqa: E402, F401 (re-exported)
 from semloc.display import for_matplotlib  # noqa: E402
 from semloc.io import write_atomic  # noqa: E402
 from semloc.maps import ObjectMap  # noqa: E402
@@ -31,37 +32,10 @@ from semloc.maps import ObjectMap  # noqa: E402
 if TYPE_CHECKING:
     from semloc.sim.world import World
 
-_PALETTE = [
-    "#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f",
-    "#bcbd22", "#17becf", "#393b79", "#637939", "#8c6d31", "#843c39", "#7b4173", "#3182bd",
-    "#e6550d", "#31a354", "#756bb1", "#636363",
-]  # fmt: skip
-
-
-CLASS_COLORS = {
-    "chair": "#2ca02c", "table": "#8c564b", "desk": "#d62728", "sofa": "#9467bd",
-    "armchair": "#c5b0d5", "coffee_table": "#c49c94", "bed": "#ff7f0e", "nightstand": "#ffbb78",
-    "cabinet": "#1f77b4", "low_cabinet": "#aec7e8", "bookshelf": "#17becf", "monitor": "#e377c2",
-    "tv": "#7f7f7f", "lamp": "#bcbd22", "plant": "#98df8a", "refrigerator": "#393b79",
-    "toilet": "#9edae5", "sink": "#637939", "whiteboard": "#843c39",
-}  # fmt: skip
-"""Fixed colours of the simulator's classes, so a class looks the same in every picture."""
 LEGEND_LABELS = 30
 """Most labels listed in a legend (the rest are counted)."""
 TITLE_LENGTH = 160
 """Longest title shown (user text: shortened and escaped, `semloc.display`)."""
-
-
-def label_colors(labels: Sequence[str]) -> dict[str, str]:
-    """A colour per label: fixed for known classes, palette colours in turn for the others."""
-    colors, i = {}, 0
-    for label in sorted(set(labels)):
-        if label in CLASS_COLORS:
-            colors[label] = CLASS_COLORS[label]
-        else:
-            colors[label] = _PALETTE[i % len(_PALETTE)]
-            i += 1
-    return colors
 
 
 def new_figure(width: float = 9.0, height: float = 7.0) -> tuple[Figure, Axes]:
@@ -178,16 +152,19 @@ def plot_localization(
     *,
     true_pose: np.ndarray | None = None,
     title: str = "",
+    map_role: str = "global",
 ) -> Axes:
     """Global map, local objects placed by `pose`, association lines (global centre to local).
 
-    With `true_pose`, the local objects' true places are drawn as small grey crosses.
+    With `true_pose`, the local objects' true places are drawn as small grey crosses and the
+    true local frame in grey.  `map_role` names the first map's objects in the legend
+    ("global object", or "local object" when a local map is drawn on its own).
     """
     labels = list(global_map.labels) + ([] if local_map is None else list(local_map.labels))
     colors = label_colors(labels)
     plot_objects(ax, global_map, colors)
     extra: list[Any] = [
-        Line2D([], [], ls="none", marker="o", mfc="#999", mec="#999", label="global object")
+        Line2D([], [], ls="none", marker="o", mfc="#999", mec="#999", label=f"{map_role} object")
     ]
     if local_map is not None and len(local_map) and pose is not None:
         placed = local_map.transformed(pose)
@@ -223,22 +200,29 @@ def plot_localization(
         extra.append(
             Line2D([], [], ls="none", marker="x", color="#555", label="local object (true pose)")
         )
+    if true_pose is not None:
+        _draw_frame(ax, true_pose, "local frame (true)", color="#555")
     if pose is not None:
         _draw_frame(ax, pose, "local frame (estimated)")
     _finish_map_axes(ax, colors, extra, title)
     return ax
 
 
-def _draw_frame(ax: Axes, T: np.ndarray, label: str) -> None:
+def _draw_frame(ax: Axes, T: np.ndarray, label: str, color: str = "crimson") -> None:
+    """The frame's origin and x axis, labelled on a white box above everything else."""
     o, x = T[:2, 3], T[:2, 0]
     n = np.linalg.norm(x)
     if n > 1e-9:
         x = x / n * 0.8
         ax.annotate(
-            "", xy=o + x, xytext=o, arrowprops={"arrowstyle": "->", "color": "crimson", "lw": 2}
-        )
-    ax.scatter(*o, color="crimson", s=25, zorder=7, label=None)
-    ax.annotate(label, o, fontsize=7, color="crimson", xytext=(4, -10), textcoords="offset points")
+            "", xy=o + x, xytext=o, arrowprops={"arrowstyle": "->", "color": color, "lw": 2},
+            zorder=9,
+        )  # fmt: skip
+    ax.scatter(*o, color=color, s=25, zorder=9, label=None)
+    ax.annotate(
+        label, o, fontsize=7, color=color, xytext=(4, -10), textcoords="offset points", zorder=10,
+        bbox={"fc": "white", "ec": "none", "alpha": 0.8, "pad": 1},
+    )  # fmt: skip
 
 
 def plot_scores(

@@ -167,3 +167,59 @@ def test_descriptor_gate_from_the_command_line(tmp_path, capsys):
     assert json.loads(capsys.readouterr().out)["status"] == "failed"
     assert main([*args, "--descriptor", "shape-context"]) == 2
     assert "shape-context" in capsys.readouterr().err
+
+
+def test_ground_truth_evaluation(maps, capsys, tmp_path):
+    folder, obs = maps
+    truth = tmp_path / "truth.gt.json"
+    truth.write_text(json.dumps({"T_global_local": obs.T_global_local.tolist()}))
+    args = ["localize", str(folder / "global.json"), str(folder / "local.json"), "--gt", str(truth)]
+    assert main([*args, "--format", "json"]) == 0
+    report = json.loads(capsys.readouterr().out)["ground_truth"]
+    assert set(report) == {"rotation_deg", "translation_m", "success", "rank_of_first_correct"}
+    assert report["success"] is True and report["rank_of_first_correct"] == 1
+    assert report["rotation_deg"] < 2 and report["translation_m"] < 0.1
+    assert main(args) == 0
+    assert "success at 15° / 0.5 m" in " ".join(capsys.readouterr().out.split())
+
+
+def test_ground_truth_of_a_wrong_place(maps, capsys, tmp_path):
+    folder, obs = maps
+    moved = obs.T_global_local.copy()
+    moved[:3, 3] += [3.0, 0.0, 0.0]
+    truth = tmp_path / "moved.json"
+    truth.write_text(json.dumps(moved.tolist()))
+    args = ["localize", str(folder / "global.json"), str(folder / "local.json"), "--gt", str(truth)]
+    assert main([*args, "--format", "json"]) == 0
+    report = json.loads(capsys.readouterr().out)["ground_truth"]
+    assert report["success"] is False
+    assert report["translation_m"] == pytest.approx(3.0, abs=0.1)
+    bad = tmp_path / "bad.json"
+    bad.write_text('{"T_global_local": [[1, 0], [0, 1]]}')
+    assert main([*args[:-1], str(bad)]) == 2
+    assert capsys.readouterr().err.startswith(f"semloc: error: {bad}:")
+
+
+def test_progress_only_for_long_replays_on_a_terminal():
+    import io
+
+    from rich.console import Console
+
+    from semloc.cli.render import LONG_REPLAY, replay_progress
+
+    g = layout(30, seed=1)
+    long = g.with_objects(o.replace(seen=i) for i, o in enumerate(g))
+    short = g.with_objects(o.replace(seen=i % (LONG_REPLAY - 1)) for i, o in enumerate(g))
+    terminal = Console(file=io.StringIO(), force_terminal=True)
+    pipe = Console(file=io.StringIO(), force_terminal=False)
+    with replay_progress(pipe, long) as callback:
+        assert callback is None
+    with replay_progress(terminal, short) as callback:
+        assert callback is None
+    calls = []
+    with replay_progress(terminal, long) as callback:
+        assert callback is not None
+        semloc.localize(g, long.subset(long.ids[:12]), progress=lambda d, t: calls.append((d, t)))
+        callback(5, 30)
+    assert calls == [(i, 12) for i in range(1, 13)]
+    assert "replaying updates" in terminal.file.getvalue()

@@ -109,7 +109,7 @@ def test_demo_localizes_a_tiny_world_and_writes_the_pictures(tmp_path, capsys):
         "--resolution",
         "120x90",
     ]
-    assert main(argv) == 0
+    assert main([*argv, "--rrd", str(out / "demo.rrd")]) == 0
     text = capsys.readouterr().out
     assert "pose error vs ground truth" in text
     for name in ("scores.png", "map.png", "world.png"):
@@ -122,3 +122,100 @@ def test_demo_localizes_a_tiny_world_and_writes_the_pictures(tmp_path, capsys):
     )
     assert rotation < 15 and translation < 0.5
     assert len(semloc.load_map(out / "global.json")) > 0
+    rows = recording_rows(out / "demo.rrd")
+    steps = [s for s in result["steps"]]
+    keyframes = [r["keyframe"] for r in rows["/status"]]
+    assert len(keyframes) == len(steps) and keyframes == sorted(keyframes)
+    statuses = [r["TextLog:text"][0].split(": ")[1].split(",")[0] for r in rows["/status"]]
+    assert statuses == [s["status"] for s in steps]
+    top1 = [r["Scalars:scalars"][0] for r in rows["/scores/top1"]]
+    assert top1 == pytest.approx([s["top_scores"][0] for s in steps if s["top_scores"]], rel=1e-6)
+    sizes = [len(r["Points3D:positions"]) for r in rows["/world/local_true/centres"]]
+    assert sizes == [s["n_local"] for s in steps]  # the local map growing
+    last = rows["/world/local_estimated/centres"][-1]["Points3D:positions"]
+    # the final fused map; the localizer holds the last published version of each object
+    placed = semloc.load_map(out / "local.json").transformed(np.asarray(result["pose"]))
+    np.testing.assert_allclose(np.sort(np.asarray(last), 0), np.sort(placed.positions, 0),
+                               atol=0.05)  # fmt: skip
+
+
+def recording_rows(path):
+    """Per entity path, the rows of a Rerun recording (read back with Rerun's own reader)."""
+    from rerun.chunk import RrdReader
+
+    rows: dict[str, list[dict]] = {}
+    for chunk in RrdReader(path).stream().collect().stream():
+        table = chunk.to_record_batch().to_pydict()
+        for i in range(chunk.num_rows):
+            rows.setdefault(chunk.entity_path, []).append({k: v[i] for k, v in table.items()})
+    for entity in rows:
+        if rows[entity] and "keyframe" in rows[entity][0]:
+            rows[entity].sort(key=lambda r: r["keyframe"])
+    return rows
+
+
+def test_view_with_ground_truth_and_a_3d_recording(simulated, tmp_path, capsys):
+    gmap = semloc.load_map(simulated / "global_reconstruction.json")
+    local = semloc.load_map(simulated / "local.json")
+    truth = np.asarray(json.loads((simulated / "ground_truth.json").read_text())["T_global_local"])
+    estimate = truth.copy()
+    estimate[:3, 3] += [0.5, 0.0, 0.0]
+    pairs = json.loads((simulated / "ground_truth.json").read_text())["correspondences"]
+    pairs = [{"global": p["global"], "local": p["local"]} for p in pairs["reconstruction"]]
+    result = tmp_path / "result.json"
+    result.write_text(json.dumps({"status": "localized", "pose": estimate.tolist(),
+                                  "hypotheses": [{"pairs": pairs}]}))  # fmt: skip
+    png, rrd = tmp_path / "v.png", tmp_path / "v.rrd"
+    argv = ["view", str(simulated / "global_reconstruction.json"), "--result", str(result),
+            "--local", str(simulated / "local.json"), "--gt", str(simulated / "ground_truth.json"),
+            "-o", str(png), "--rrd", str(rrd)]  # fmt: skip
+    assert main(argv) == 0
+    assert png.read_bytes()[:8] == PNG
+    rows = recording_rows(rrd)
+    centres = rows["/world/global/centres"][0]
+    assert len(centres["Points3D:positions"]) == len(gmap)
+    assert sorted(centres["Points3D:labels"]) == sorted(f"{o.label} {o.id}" for o in gmap)
+    boxes = rows["/world/global/boxes"][0]
+    assert sorted(boxes["Boxes3D:labels"]) == sorted(o.label for o in gmap if o.size is not None)
+    for entity, pose in (("local_estimated", estimate), ("local_true", truth)):
+        got = np.asarray(rows[f"/world/{entity}/centres"][0]["Points3D:positions"])
+        np.testing.assert_allclose(got, local.transformed(pose).positions, atol=1e-4)
+    lines = rows["/world/associations"][0]["LineStrips3D:strips"]
+    assert len(lines) == len(pairs)
+    first = gmap.get(pairs[0]["global"]).position
+    np.testing.assert_allclose(lines[0][0], first, atol=1e-4)
+    colors = {c for c in centres["Points3D:colors"]}
+    assert len(colors) == len(set(gmap.labels))  # one colour per label
+    capsys.readouterr()
+    only = tmp_path / "only.rrd"
+    assert main(["view", str(simulated / "local.json"), "--rrd", str(only)]) == 0
+    assert only.exists() and not (simulated / "local.png").exists()
+
+
+def test_every_label_has_its_own_colour():
+    from semloc.colors import CLASS_COLORS, label_colors
+
+    labels = [*CLASS_COLORS, "clock", "bench", "stool", *(f"thing{i}" for i in range(40))]
+    colors = label_colors(labels)
+    assert len(set(colors.values())) == len(colors) == len(set(labels))
+    assert colors["cabinet"] == CLASS_COLORS["cabinet"] and colors["clock"] != colors["cabinet"]
+    assert label_colors(["chair", "bench"])["bench"] != CLASS_COLORS["chair"]
+
+
+def test_a_local_map_alone_is_labelled_local(simulated, tmp_path):
+    from semloc.viz import map_figure, plot_localization
+
+    local = semloc.load_map(simulated / "local.json")
+    fig, ax = map_figure(local.positions[:, :2])
+    plot_localization(ax, local, map_role="local")
+    texts = [t.get_text() for t in ax.get_legend().get_texts()]
+    assert "local object" in texts and "global object" not in texts
+
+
+def test_labels_appearing_later_keep_the_colours_handed_out():
+    from semloc.colors import label_colors
+
+    first = label_colors(["chair", "clock"])
+    later = label_colors(["bench", "armchair"], first)
+    assert {k: later[k] for k in first} == first
+    assert len(set(later.values())) == len(later) == 4

@@ -9,10 +9,13 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 from enum import StrEnum
+from typing import Annotated
 
 import typer
 from pydantic import ValidationError
 from rich.console import Console
+
+import semloc
 
 app = typer.Typer(
     name="semloc",
@@ -39,6 +42,11 @@ def choices(name: str, values: Iterable[str]) -> type[StrEnum]:
     return StrEnum(name, {value: value for value in values})  # type: ignore[return-value]
 
 
+def with_default(text: str, value: object) -> str:
+    """Help text ending in `[default: value]`, for options whose None means "the config's"."""
+    return f"{text} \\[default: {value}]"  # escaped: typer reads help as rich markup
+
+
 def first_error(exc: ValidationError) -> str:
     """The first problem of a pydantic validation error, as `field: message`."""
     error = exc.errors()[0]
@@ -46,6 +54,19 @@ def first_error(exc: ValidationError) -> str:
     return f"{where}: {error['msg']}" if where else error["msg"]
 
 
+def _print_version(value: bool) -> None:
+    if value:
+        console.print(f"semloc {semloc.__version__}")
+        raise typer.Exit()
+
+
 @app.callback()
-def _root() -> None:
+def _root(
+    version: Annotated[
+        bool,
+        typer.Option(
+            "--version", callback=_print_version, is_eager=True, help="Print the version and exit."
+        ),
+    ] = False,
+) -> None:
     """semloc relocalizes a camera or robot against a prior map made of objects."""

@@ -9,6 +9,7 @@ import typer
 
 from semloc.baselines import DEFAULT_METHODS, VARIANTS
 from semloc.cli.app import app, console, fail
+from semloc.cli.extras import need
 from semloc.eval.protocol import BenchConfig
 from semloc.eval.report import summary_table
 from semloc.eval.runner import run_benchmark
@@ -58,6 +59,7 @@ def bench(
     are seen, then +15 and +30 keyframes) against reconstruction, CAD and
     dynamic global maps, plus ablations over gamma and the local objects.
     """
+    need("bench", "bench", "sim")
     chosen = [m.strip() for m in methods.split(",") if m.strip()]
     known = DEFAULT_METHODS + VARIANTS
     unknown = [m for m in chosen if m not in known]

@@ -9,10 +9,11 @@ import numpy as np
 import typer
 
 from semloc.association import DESCRIBERS
-from semloc.cli.app import app, choices, console, fail
+from semloc.cli.app import app, choices, console
+from semloc.cli.extras import need
 from semloc.descriptors.voxnet import WEIGHTS_FILE, load_weights
 from semloc.eval.descriptors.evaluate import EvalConfig, print_report, run_evaluation, write_report
-from semloc.eval.descriptors.train import TORCH_HINT, TrainConfig, save_weights, train
+from semloc.eval.descriptors.train import TrainConfig, save_weights, train
 
 DescriptorChoice = choices("DescriptorChoice", [*DESCRIBERS, "both"])
 
@@ -40,11 +41,7 @@ def train_descriptor(
 
     The defaults reproduce the shipped weights (src/semloc/descriptors/voxnet_weights.npz).
     """
-    import importlib.util
-
-    if importlib.util.find_spec("torch") is None:
-        fail(TORCH_HINT)
-
+    need("train-descriptor", "train", "sim")
     config = TrainConfig(
         seed=seed, epochs=epochs, views=views, full_views=full_views, batches_per_epoch=batches
     )
@@ -83,6 +80,9 @@ def descriptors_eval(
     ] = 6,
 ) -> None:
     """Retrieval (top-1/top-5) on held-out styles, the Scan2CAD check, δ and the gate's effect."""
+    need("descriptors-eval", "sim")
+    if out is not None:
+        need("descriptors-eval", "viz", modules=("matplotlib",))
     kinds = list(DESCRIBERS) if kind.value == "both" else [kind.value]
     config = EvalConfig(
         kinds=kinds, seed=seed, views=views, sequences=sequences, attempts=attempts, window=window

@@ -1,4 +1,4 @@
-"""The commands' files: reading settings, poses and localization results, and checking
+"""The commands' files: reading settings (JSON or YAML), poses and results, and checking
 outputs and numeric options before any work is done."""
 
 from __future__ import annotations
@@ -7,20 +7,39 @@ import math
 from pathlib import Path
 
 import numpy as np
+import yaml
 
 from semloc.cli.app import fail
 from semloc.io import read_json
 from semloc.transforms import as_pose
 
+YAML_SUFFIXES = (".yaml", ".yml")
+
 
 def read_config(path: Path | None) -> dict:
-    """The settings of a `--config` file (a JSON object), or {} without one."""
+    """The settings of a `--config` file (an object in JSON, or YAML for .yaml/.yml), or {}."""
     if path is None:
         return {}
-    data = read_json(path)
+    data = _read_yaml(path) if path.suffix.lower() in YAML_SUFFIXES else read_json(path)
     if not isinstance(data, dict):
-        fail(f"{path}: must hold a JSON object of settings")
+        fail(f"{path}: must hold an object (mapping) of settings")
     return data
+
+
+def _read_yaml(path: Path) -> object:
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        fail(f"{path}: file not found")
+    except (OSError, UnicodeDecodeError) as exc:
+        fail(f"{path}: cannot read ({exc.__class__.__name__}: {exc})")
+    try:
+        return yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" at line {mark.line + 1}" if mark is not None else ""
+        fail(f"{path}: not valid YAML ({getattr(exc, 'problem', None) or exc}{where})")
+        raise  # unreachable: fail() raises
 
 
 def pose_of(path: Path, value: object) -> np.ndarray:

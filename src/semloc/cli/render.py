@@ -1,16 +1,25 @@
-"""Rich rendering of what the commands print: a Result's status, pose and hypotheses.
+"""Rich rendering of what the commands print: a Result, its ground-truth check, progress.
 
 User text (ids, labels, file names) goes through `semloc.display.for_rich`: shortened and with
 rich markup escaped."""
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+
 import numpy as np
 from rich.console import Console
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
 from semloc.display import for_rich
+from semloc.eval.success import ROTATION_TOLERANCE_DEG, TRANSLATION_TOLERANCE_M
+from semloc.maps import ObjectMap
 from semloc.results import Result
+
+LONG_REPLAY = 10
+"""Replays of at least this many updates show a progress bar (on a terminal)."""
 
 STATUS_STYLE = {"localized": "green", "ambiguous": "yellow", "failed": "red"}
 """The colour of each status wherever one is printed (CLI, demo)."""
@@ -43,3 +52,35 @@ def print_result(result: Result, out: Console) -> None:
     steps = len(result.steps)
     total = result.timing_ms.get("total", 0.0)
     out.print(f"{steps} update(s), {total:.1f} ms in all")
+
+
+def print_ground_truth(report: dict, out: Console) -> None:
+    """Pose error against the truth, success at 15° / 0.5 m, rank of the first right one."""
+    rank = report["rank_of_first_correct"]
+    ranked = "no hypothesis is right" if rank is None else f"first right hypothesis: rank {rank}"
+    if report["rotation_deg"] is None:
+        out.print(f"ground truth: [red]no pose estimate[/] ({ranked})")
+        return
+    verdict = "[green]success[/]" if report["success"] else "[red]failure[/]"
+    out.print(
+        f"ground truth: rotation error {report['rotation_deg']:.2f}°, translation error "
+        f"{report['translation_m']:.3f} m: {verdict} at {ROTATION_TOLERANCE_DEG:g}° / "
+        f"{TRANSLATION_TOLERANCE_M:g} m ({ranked})"
+    )
+
+
+@contextmanager
+def replay_progress(
+    out: Console, local_map: ObjectMap
+) -> Iterator[Callable[[int, int], None] | None]:
+    """A `progress(done, total)` callback drawing a bar on `out` for long replays on a
+    terminal (None otherwise); the bar disappears when the replay ends."""
+    updates = len(set(local_map.seen.tolist()))
+    if not out.is_terminal or updates < LONG_REPLAY:
+        yield None
+        return
+    columns = (TextColumn("replaying updates"), BarColumn(), MofNCompleteColumn(),
+               TimeElapsedColumn())  # fmt: skip
+    with Progress(*columns, console=out, transient=True) as bar:
+        task = bar.add_task("replay", total=updates)
+        yield lambda done, total: bar.update(task, completed=done, total=total)

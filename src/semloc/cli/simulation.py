@@ -10,7 +10,8 @@ from pydantic import ValidationError
 from rich.table import Table
 
 from semloc.cli.app import app, console, fail, first_error
-from semloc.cli.files import check_finite, check_output, read_result
+from semloc.cli.extras import need
+from semloc.cli.files import check_finite, check_output, read_pose, read_result
 from semloc.cli.options import (
     RESOLUTION_HELP,
     SIZE_HELP,
@@ -49,6 +50,10 @@ def demo(
         float,
         typer.Option(min=0, max=0.2, help="Odometry drift, m per m travelled (heading: 25x in °)."),
     ] = 0.0,
+    rrd: Annotated[
+        Path | None,
+        typer.Option("--rrd", help="Also write a 3D Rerun recording of the updates (rerun FILE)."),
+    ] = None,
 ) -> None:
     """The main job: walk a camera through a generated world and relocalize incrementally.
 
@@ -57,10 +62,13 @@ def demo(
     Prints a live table and the pose error against ground truth; writes scores.png and map.png.
     """
     check_finite(gamma=gamma, drift=drift)
+    need("demo", "sim")
+    need("demo", "viz", modules=("matplotlib",) if rrd is None else ("matplotlib", "rerun"))
     try:
         config = DemoConfig(
             seed=seed, size=size, map_kind=map_kind.value, path=path.value, keyframes=keyframes,
             rooms=rooms, resolution=parse_resolution(resolution), gamma=gamma, drift=drift, out=out,
+            rrd=rrd,
         )  # fmt: skip
         run_demo(config, console)
     except ValidationError as exc:
@@ -104,6 +112,8 @@ def simulate(
     into it at the end (ground_truth.json last).
     """
     check_finite(drift=drift, drift_yaw=drift_yaw)
+    need("simulate", "sim")
+    need("simulate", "viz", modules=("matplotlib",))
     noise = DetectionNoise.perfect() if perfect else DetectionNoise()
     noise = noise.model_copy(update={"drift_translation": drift, "drift_yaw_deg": drift_yaw})
     try:
@@ -142,24 +152,62 @@ def view(
     local: Annotated[
         Path | None, typer.Option(help="Local map to place into MAP by the result's pose.")
     ] = None,
+    gt: Annotated[
+        Path | None,
+        typer.Option(
+            "--gt", help="Ground truth (T_global_local, as crop writes): also place --local by it."
+        ),
+    ] = None,
     output: Annotated[
-        Path | None, typer.Option("--output", "-o", help="PNG to write (default: MAP.png).")
+        Path | None,
+        typer.Option("--output", "-o", help="PNG to write (default: MAP.png, unless --rrd)."),
+    ] = None,
+    rrd: Annotated[
+        Path | None,
+        typer.Option("--rrd", help="Also (or, without -o, only) write a 3D Rerun recording."),
     ] = None,
     title: Annotated[str | None, typer.Option(help="Title of the picture.")] = None,
 ) -> None:
-    """Draw MAP from above as a PNG, optionally with a localization result and a local map."""
-    from semloc.viz import map_figure, plot_localization, save_figure  # matplotlib
+    """Draw MAP from above as a PNG (or in 3D with --rrd), with a result and a local map.
 
-    target = check_output(output or map_file.with_suffix(".png"))
+    With --result and --local the local objects are placed by the estimated pose; with --gt
+    also by the true pose (the legend says which is which).
+    """
+    png = output
+    if png is None and rrd is None:
+        png = map_file.with_suffix(".png")
+    if png is not None:
+        check_output(png)
+        need("view", "viz", modules=("matplotlib",))
+    if rrd is not None:
+        need("view --rrd", "viz", modules=("rerun",))
     objmap = load_map(map_file)
     pose, pairs, status = read_result(result) if result is not None else (None, [], None)
+    truth = read_pose(gt, "--gt takes a file with T_global_local") if gt is not None else None
     local_map = load_map(local) if local is not None else None
-    if local_map is not None and pose is None:
-        fail("--local needs a --result with a pose to place the local objects")
-    heading = title or f"{map_file.name}: {len(objmap)} objects" + (
-        f" ({status[:20]})" if status else ""
-    )
-    fig, ax = map_figure(objmap.positions[:, :2])
-    plot_localization(ax, objmap, local_map, pose, pairs, title=heading)
-    path = save_figure(fig, target)
-    console.print(f"wrote {for_rich(path, None)}")
+    if local_map is not None and pose is None and truth is None:
+        fail("--local needs a --result with a pose (or --gt) to place the local objects")
+    alone = local_map is None and pose is None
+    role = "local" if alone and _looks_local(map_file, objmap.name) else "global"
+    if png is not None:
+        from semloc.viz import map_figure, plot_localization, save_figure  # matplotlib
+
+        heading = title or f"{map_file.name}: {len(objmap)} objects" + (
+            f" ({status[:20]})" if status else ""
+        )
+        fig, ax = map_figure(objmap.positions[:, :2])
+        plot_localization(ax, objmap, local_map, pose, pairs, true_pose=truth, title=heading,
+                          map_role=role)  # fmt: skip
+        console.print(f"wrote {for_rich(save_figure(fig, png), None)}")
+    if rrd is not None:
+        from semloc.viz3d import write_localization  # rerun
+
+        written = write_localization(rrd, objmap, local_map, pose, pairs, truth)
+        shown = for_rich(written, None)
+        console.print(f"wrote {shown} (open with: rerun {shown})")
+
+
+def _looks_local(path: Path, name: str) -> bool:
+    """Whether a map drawn on its own is a local map (as simulate, crop and demo name them)."""
+    words = f"{path.stem} {name}".lower()
+    return "local" in words or "crop" in words

@@ -45,3 +45,19 @@ def first_correct_rank(
         if is_success(h.pose, truth, rotation_deg, translation_m):
             return h.rank
     return None
+
+
+def ground_truth_report(
+    pose: np.ndarray | None, hypotheses: Sequence[HasPose], truth: np.ndarray
+) -> dict[str, float | bool | int | None]:
+    """The errors of `pose` against `truth`, success at 15° / 0.5 m and the rank of the first
+    hypothesis within them (errors None without a pose; rank None when none is right)."""
+    rotation = translation = None
+    if pose is not None:
+        rotation, translation = (round(v, 6) for v in pose_error(pose, truth))
+    return {
+        "rotation_deg": rotation,
+        "translation_m": translation,
+        "success": is_success(pose, truth),
+        "rank_of_first_correct": first_correct_rank(hypotheses, truth),
+    }

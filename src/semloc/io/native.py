@@ -309,7 +309,7 @@ def read_npy(path: str | os.PathLike[str]) -> np.ndarray:
             handle.seek(0)
             return np.lib.format.read_array(handle, allow_pickle=False)
     except MapError as exc:
-        raise MapError(f"{path}: {exc}") from None
+        raise MapError(f"{path}: not a readable .npy array ({exc})") from None
     except (OSError, ValueError, EOFError) as exc:
         raise MapError(f"{path}: not a readable .npy array ({str(exc)[:80]})") from None
 
