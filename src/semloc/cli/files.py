@@ -10,7 +10,8 @@ import numpy as np
 import yaml
 
 from semloc.cli.app import fail
-from semloc.io import read_json
+from semloc.io import read_json, read_regular
+from semloc.io.native import MAX_JSON_BYTES
 from semloc.transforms import as_pose
 
 YAML_SUFFIXES = (".yaml", ".yml")
@@ -28,13 +29,13 @@ def read_config(path: Path | None) -> dict:
 
 def _read_yaml(path: Path) -> object:
     try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        fail(f"{path}: file not found")
-    except (OSError, UnicodeDecodeError) as exc:
-        fail(f"{path}: cannot read ({exc.__class__.__name__}: {exc})")
+        text = read_regular(path, MAX_JSON_BYTES).decode("utf-8")
+    except UnicodeDecodeError as exc:
+        fail(f"{path}: not UTF-8 text (byte {exc.start})")
     try:
         return yaml.safe_load(text)
+    except RecursionError:
+        fail(f"{path}: YAML nested too deeply")
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f" at line {mark.line + 1}" if mark is not None else ""
