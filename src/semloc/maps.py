@@ -53,18 +53,19 @@ def _brief(value: Any) -> str:
 def _numbers(value: Any, what: str, shape: str) -> np.ndarray:
     """`value` as a float array; `MapError` for anything but numbers (no strings, booleans, or
     integers beyond the float range)."""
+    kind = "" if shape.isdigit() else f"{shape} "
     if _small_with_non_numbers(value):
-        raise MapError(f"{what} must be numbers, got {_brief(value)}")
+        raise MapError(f"{what} must be {kind}numbers, got {_brief(value)}")
     try:
         array = np.asarray(value)
     except (TypeError, ValueError, OverflowError) as exc:
-        raise MapError(f"{what} must be numbers, got {_brief(value)}") from exc
+        raise MapError(f"{what} must be {kind}numbers, got {_brief(value)}") from exc
     if array.size and array.dtype.kind not in "iuf":
-        raise MapError(f"{what} must be numbers, got {_brief(value)}")
+        raise MapError(f"{what} must be {kind}numbers, got {_brief(value)}")
     try:
         return array.astype(float)
     except (TypeError, ValueError, OverflowError) as exc:
-        raise MapError(f"{what} must be numbers, got {_brief(value)}") from exc
+        raise MapError(f"{what} must be {kind}numbers, got {_brief(value)}") from exc
 
 
 def _small_with_non_numbers(value: Any, depth: int = 2) -> bool:
@@ -105,7 +106,7 @@ def _as_points(value: Any, what: str = "points") -> np.ndarray:
 
 
 def _as_rotation(value: Any) -> np.ndarray:
-    array = _numbers(value, "rotation", "3 x 3")
+    array = _numbers(value, "rotation", "a 3 x 3 array of")
     if array.shape != (3, 3):
         raise MapError(f"rotation must have shape (3, 3), got {array.shape}")
     _bounded(array, "rotation", 2.0)

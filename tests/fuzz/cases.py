@@ -440,4 +440,28 @@ CONVERT_CASES: list[Case] = [
 ]
 
 
+def _scan2cad_negative_bbox(folder: Path) -> tuple[list[str], list[str]]:
+    path = write_scan2cad(folder)
+    document = json.loads(path.read_text())
+    document[0]["aligned_models"][0]["bbox"] = [-1, 0.5, 0.5]
+    path.write_text(json.dumps(document))
+    return ["convert", "scan2cad", str(path), "-o", str(folder / "out.json")], [path.name]
+
+
+def _rscan_string_column(folder: Path) -> tuple[list[str], list[str]]:
+    path = write_rscan(folder / "rscan")
+    data = np.load(path)
+    dtype = [(n, "U8" if n == "x" else data.dtype[n]) for n in data.dtype.names]
+    text = np.zeros(len(data), dtype=dtype)
+    for name in data.dtype.names:
+        text[name] = data[name].astype(str) if name == "x" else data[name]
+    np.save(path, text)
+    return ["convert", "3rscan", str(path), "-o", str(folder / "out.json")], [path.name]
+
+
+CONVERT_CASES += [
+    Case("convert-scan2cad-negative-bbox", _scan2cad_negative_bbox),
+    Case("convert-3rscan-string-column", _rscan_string_column),
+]
+
 MUTATED_CASES: list[Case] = [mutated_scene(kind, seed) for kind in SCENES for seed in range(12)]

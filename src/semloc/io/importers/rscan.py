@@ -77,6 +77,9 @@ def read_points(path: Path, required: tuple[str, ...]) -> np.ndarray:
     missing = [name for name in required if name not in data.dtype.names]
     if missing:
         raise MapError(f"{path}: missing fields {missing} (has {list(data.dtype.names)})")
+    text = [name for name in required if data.dtype[name].kind not in "iuf"]
+    if text:
+        raise MapError(f"{path}: fields {text} must be numbers, not {data.dtype[text[0]]}")
     return data
 
 
