@@ -96,18 +96,29 @@ def canonical_label(label: str, label_map: dict[str, str]) -> str:
 
 
 class CandidateIndex:
-    """Global objects grouped by label, ready to answer "which global objects may this be?"."""
+    """Global objects grouped by label, ready to answer "which global objects may this be?".
+
+    Built in time linear in the map: labels are canonicalised once per distinct label, and the
+    descriptors of each label group are stacked per length, so a query is one vectorised
+    distance computation over the group.
+    """
 
     def __init__(
         self, global_map: ObjectMap, config: AssociationConfig, gate: float | None = None
     ) -> None:
         self.config = config
         self._label_map = {k.strip().lower(): v for k, v in config.label_map.items()}
-        self._by_label: dict[str, np.ndarray] = {}
-        labels = [canonical_label(label, self._label_map) for label in global_map.labels]
-        for label in sorted(set(labels)):
-            self._by_label[label] = np.flatnonzero(np.array(labels, dtype=object) == label)
+        raw, inverse = np.unique(np.asarray(global_map.labels, dtype=str), return_inverse=True)
+        canonical = np.array([canonical_label(str(x), self._label_map) for x in raw], dtype=str)
+        labels = canonical[inverse.ravel()] if len(raw) else np.zeros(0, dtype=str)
+        order = np.argsort(labels, kind="stable")
+        names, starts = np.unique(labels[order], return_index=True)
+        groups = np.split(order, starts[1:]) if len(order) else []
+        self._by_label: dict[str, np.ndarray] = {
+            str(name): np.sort(group) for name, group in zip(names, groups)
+        }
         self._descriptors = global_map.descriptors
+        self._stacks: dict[tuple[str, int], tuple[np.ndarray, np.ndarray]] = {}
         self._gate = config.delta if gate is None else gate
 
     @property
@@ -120,12 +131,25 @@ class CandidateIndex:
         indices = self._by_label.get(label, np.zeros(0, dtype=int))
         if not self.config.use_descriptors or obj.descriptor is None or len(indices) == 0:
             return indices
-        return np.array(
-            [i for i in indices if self._descriptor_ok(self._descriptors[i], obj.descriptor)],
-            dtype=int,
-        )
+        local = np.asarray(obj.descriptor, dtype=float)
+        with_same, stack = self._stack(label, local.shape)
+        ok = np.ones(len(indices), dtype=bool)  # without a comparable descriptor: allowed
+        if len(with_same):
+            distance = np.linalg.norm(stack - local.ravel(), axis=1)
+            ok[np.searchsorted(indices, with_same[distance >= self._gate])] = False
+        return indices[ok]
 
-    def _descriptor_ok(self, global_descriptor: np.ndarray | None, local: np.ndarray) -> bool:
-        if global_descriptor is None or global_descriptor.shape != local.shape:
-            return True
-        return float(np.linalg.norm(global_descriptor - local)) < self._gate
+    def _stack(self, label: str, shape: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray]:
+        """The group's objects whose descriptor has `shape`, and those descriptors stacked."""
+        key = (label, shape)
+        if key not in self._stacks:
+            indices = self._by_label[label]
+            rows = [
+                i
+                for i in indices
+                if self._descriptors[i] is not None and self._descriptors[i].shape == shape
+            ]
+            stack = np.array([np.ravel(self._descriptors[i]) for i in rows], dtype=float)
+            width = int(np.prod(shape))
+            self._stacks[key] = (np.array(rows, dtype=int), stack.reshape(len(rows), width))
+        return self._stacks[key]

@@ -16,14 +16,23 @@ The paper's rules, as implemented
     * Each update adds the singletons of new or re-detected local objects, then clusters again.
 
 Formulation (equivalent to the literal pairwise test, see tests/core/test_clustering.py)
-    A boolean compatibility matrix C over candidates holds h(a, b) > γ for one-to-one pairs
-    (C[a, a] = True).  Every set is a clique of C (singletons trivially; a merge only joins
+    Two candidates are *compatible* when they are one-to-one and pass the merge criterion.
+    Every set is a clique of compatible candidates (singletons trivially; a merge only joins
     sets whose new cross pairs are all compatible), so D1 ∪ D2 passes the literal test exactly
-    when D2 ⊆ M(D1) = ⋂_{a ∈ D1} C[a].  Sets are bitsets over candidates (rows of uint64
-    words), M(D) is kept per set, and the test is a vectorised `D2 & ~M(D1) == 0`, read
-    from D2's short member list.  The merges of an iteration are grouped by union through an
-    additive set hash (hash(A ∪ B) = hash(A) + Σ over B∖A), checked by a second hash and,
-    on disagreement, by the bitsets themselves.
+    when D2 ⊆ M(D1), the candidates compatible with (or in) every member of D1.  Nothing is
+    kept over all candidates of a map: compatibility is needed only among the *live*
+    candidates (members of the sets in the pool, at most K · n_local of them plus the
+    singletons of this update).  It is a sparse graph, found by a range query per pair of
+    local objects (a KD-tree ball of radius (d^B + ε)/γ, then the exact criterion) and kept
+    across updates for candidates that stay live.  With S the sparse (sets x live) membership
+    and N the compatibility (with its diagonal), one sparse product S_F·N counts, for each
+    frontier set A, how many of its members each candidate is compatible with (= |A| means
+    "in M(A)"); a second product with Sᵀ counts |B ∩ M(A)| and |A ∩ B| for every pool set B
+    at once, which decides the merge and gives |A∖B| and |B∖A|.  Merge scores are computed
+    from the object positions on the fly.  Memory grows with the live candidates times their
+    compatible neighbours, never with candidates².  Merges of an iteration are grouped by
+    union through additive 64-bit set keys (key(A ∪ B) = key(A) + Σ over B∖A), checked by a
+    second key and, on disagreement, by the member lists themselves.
 
 Where the paper is silent (see also DESIGN.md)
     * "Marking merged sets": every pair of sets is tried once.  A clustering round works on a
@@ -31,11 +40,16 @@ Where the paper is silent (see also DESIGN.md)
       iteration (or at this update) are tried; iterations run until no new set appears.
       Within an iteration all merges use the scores from its start, so the result does not
       depend on the order of objects.
-    * K is capped by `max_sets` (default 2000, None for the paper's 10·n): the merge search
-      costs about K² per iteration, so a 1000-object map would otherwise spend seconds per
-      update once 15+ local objects are in.
+    * K is capped by `max_sets` (default 2000, None for the paper's 10·n).  The paper's rule
+      makes sense for small maps, where 10·n sets cover the plausible hypotheses; in a
+      building the plausible hypotheses are the repetitions of the local layout, which do
+      not grow with the part of the map that is not like it, while 10·n would make every
+      iteration cost (10·n)².  Above 200 objects the pool is therefore bounded by a size that
+      does not depend on the map: work and memory per iteration stay bounded, and only the
+      singletons of a new local object (one per same-label global object) grow with the map.
     * Top-K pruning happens after every iteration (bounding work and memory), with ties broken
-      by size and then by an order-independent hash of the set's (global id, local id) pairs.
+      by size and then by an order-independent hash of the set's (global id, local id) pairs
+      (computed only for the sets that tie at a cut).
     * A set's age is reset when it merges (as either parent), when it is created, and when a
       re-detection re-adds it as a singleton.  Expiry spares the `protect_top` best sets, so
       an answer is not forgotten while new detections bring nothing consistent.
@@ -55,9 +69,13 @@ import hashlib
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.sparse as sp
 from pydantic import BaseModel, ConfigDict, Field
+from scipy.spatial import cKDTree
 
-_CHUNK_ELEMENTS = 1 << 22  # bound on the (frontier x pool x words) intermediate arrays
+_CHUNK_ELEMENTS = 1 << 21  # bound on the (merges x pairs) intermediate arrays
+_FRONTIER_CHUNK = 4096  # frontier sets per sparse product
+_BRUTE_FORCE_PAIRS = 20_000  # below this many pairs a range query is a dense distance block
 
 
 class ClusteringConfig(BaseModel):
@@ -81,7 +99,8 @@ class ClusteringConfig(BaseModel):
     max_sets: int | None = Field(
         2000,
         ge=1,
-        description="Upper bound on K (work grows with K²); None keeps the paper's 10·n.",
+        description="Upper bound on K, independent of the map size (work grows with K²); "
+        "None keeps the paper's 10·n.",
     )
     expiry_updates: int = Field(
         2, ge=0, description="Drop sets that have not merged for more than this many updates."
@@ -146,34 +165,24 @@ class AssociationSet:
         return len(self.pairs)
 
 
-def _pack_rows(matrix: np.ndarray, words: int) -> np.ndarray:
-    """Pack a boolean matrix (rows x columns) into rows of `words` little-endian uint64."""
-    rows = matrix.shape[0]
-    padded = np.zeros((rows, words * 64), dtype=bool)
-    padded[:, : matrix.shape[1]] = matrix
-    return np.packbits(padded, axis=1, bitorder="little").view(np.uint64).reshape(rows, words)
-
-
-def _unpack_rows(bits: np.ndarray, columns: int) -> np.ndarray:
-    flat = np.unpackbits(bits.view(np.uint8), axis=1, bitorder="little")
-    return flat[:, :columns].astype(bool)
-
-
-def _members(bits: np.ndarray, columns: int) -> np.ndarray:
-    """Member candidate indices per row, padded with -1 (rows x max size)."""
-    mask = _unpack_rows(bits, columns)
-    sizes = mask.sum(axis=1)
-    width = max(int(sizes.max(initial=0)), 1)
-    out = np.full((len(bits), width), -1, dtype=np.int64)
-    rows, cols = np.nonzero(mask)
-    slot = np.arange(len(rows)) - np.repeat(np.cumsum(sizes) - sizes, sizes)
-    out[rows, slot] = cols
-    return out
-
-
 def _pair_hash(global_id: str, local_id: str) -> np.uint64:
     digest = hashlib.blake2b(f"{global_id}\x00{local_id}".encode(), digest_size=8).digest()
     return np.frombuffer(digest, dtype=np.uint64)[0]
+
+
+def _mix(x: np.ndarray) -> np.ndarray:
+    """A bijective 64-bit mixer (splitmix64's finaliser)."""
+    x = np.asarray(x, dtype=np.uint64)
+    x = (x ^ (x >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+    x = (x ^ (x >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+    return x ^ (x >> np.uint64(31))
+
+
+def _candidate_keys(candidates: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Two independent 64-bit keys per candidate index (set keys are their wrapping sums)."""
+    base = np.asarray(candidates, dtype=np.uint64) * np.uint64(2)
+    with np.errstate(over="ignore"):
+        return _mix(base + np.uint64(1)), _mix(base + np.uint64(2))
 
 
 class HierarchicalClustering:
@@ -192,32 +201,36 @@ class HierarchicalClustering:
     ) -> None:
         self.config = config or ClusteringConfig()
         self.criterion = MergeCriterion.of(self.config)
-        self._global_positions = np.asarray(global_positions, dtype=float)
+        self._global_positions = np.asarray(global_positions, dtype=float).reshape(-1, 3)
         self._global_ids = list(global_ids)
         self.capacity = self.config.sets_per_object * max(len(self._global_ids), 1)
         if self.config.max_sets is not None:
             self.capacity = min(self.capacity, self.config.max_sets)
         self.step = 0
-        # candidates
+        # candidates: (global, local) pairs, numbered in order of registration
         self._cand_g = np.zeros(0, dtype=np.int64)
         self._cand_l = np.zeros(0, dtype=np.int64)
-        self._cand_hash = np.zeros(0, dtype=np.uint64)
         self._cand_alive = np.zeros(0, dtype=bool)
-        self._cand_index: dict[tuple[int, int], int] = {}
-        self._cands_of_local: dict[int, dict[int, int]] = {}
+        self._cand_key = np.zeros(0, dtype=np.uint64)
+        self._cand_key2 = np.zeros(0, dtype=np.uint64)
+        self._cand_hash = np.zeros(0, dtype=np.uint64)  # pair hash, filled when first needed
+        self._hashed = np.zeros(0, dtype=bool)
+        self._by_local: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # sorted globals, cands
         self._local_positions = np.zeros((0, 3))
         self._local_ids: list[str] = []
-        self._h = np.zeros((0, 0))
-        self._compat = np.zeros((0, 0), dtype=bool)
-        self._compat_bits = np.zeros((0, 1), dtype=np.uint64)
-        # sets
-        self._words = 1
-        self._bits = np.zeros((0, 1), dtype=np.uint64)
-        self._common = np.zeros((0, 1), dtype=np.uint64)
+        # compatibility among live candidates: edges known between all of `_covered`
+        self._covered = np.zeros(0, dtype=np.int64)
+        self._edges = np.zeros((2, 0), dtype=np.int64)
+        self._live = np.zeros(0, dtype=np.int64)
+        self._live_index = np.zeros(0, dtype=np.int64)  # candidate -> row of the graph
+        self._graph = sp.csr_matrix((0, 0), dtype=np.int64)
+        # sets: member candidates (ascending, -1 padded), score, age, keys
         self._members = np.full((0, 1), -1, dtype=np.int64)
+        self._size = np.zeros(0, dtype=np.int64)
         self._score = np.zeros(0)
         self._last_merge = np.zeros(0, dtype=np.int64)
-        self._row_of: dict[bytes, int] = {}
+        self._key = np.zeros(0, dtype=np.uint64)
+        self._key2 = np.zeros(0, dtype=np.uint64)
 
     # ------------------------------------------------------------------------------------
     # Public view
@@ -235,17 +248,17 @@ class HierarchicalClustering:
 
     def top(self, k: int, min_size: int = 1, largest_first: bool = False) -> list[AssociationSet]:
         """The k best sets with at least `min_size` pairs (by score, or by size then score)."""
-        ranking = self._ranking()
-        size = (self._members[ranking] >= 0).sum(axis=1)
-        if largest_first:
-            order = np.argsort(-size, kind="stable")
-            ranking, size = ranking[order], size[order]
-        return [self._set(row) for row in ranking[size >= min_size][:k]]
+        rows = np.flatnonzero(self._sizes() >= min_size)
+        ranking = rows[self._ranking(rows, limit=k, largest_first=largest_first)][:k]
+        return [self._set(row) for row in ranking]
 
     def _set(self, row: int) -> AssociationSet:
         members = self._members[row][self._members[row] >= 0]
         pairs = tuple(sorted((int(self._cand_g[c]), int(self._cand_l[c])) for c in members))
         return AssociationSet(pairs, float(self._score[row]), int(self._last_merge[row]))
+
+    def _sizes(self) -> np.ndarray:
+        return self._size
 
     # ------------------------------------------------------------------------------------
     # Update
@@ -262,13 +275,15 @@ class HierarchicalClustering:
         global indices it may be associated with.
         """
         self.step += 1
-        moved = self._moved_locals(np.asarray(local_positions, dtype=float), detections)
-        self._local_positions = np.asarray(local_positions, dtype=float).reshape(-1, 3)
+        positions = np.array(local_positions, dtype=float).reshape(-1, 3)  # a copy: see moves
+        moved = self._moved_locals(positions, detections)
+        self._local_positions = positions
         self._local_ids = list(local_ids)
         stale = self._register_candidates(detections)
-        self._refresh_compatibility(set(detections), stale)
+        self._forget_edges(moved, stale)
         fresh_rows = self._revalidate(stale, moved)
         fresh_rows += self._add_singletons(detections)
+        self._cover_live()
         self._cluster(np.unique(np.array(fresh_rows, dtype=np.int64)))
         self._expire()
 
@@ -281,175 +296,260 @@ class HierarchicalClustering:
             and np.linalg.norm(positions[local] - self._local_positions[local]) > 1e-6
         }
 
-    def _register_candidates(self, detections: dict[int, np.ndarray]) -> set[int]:
+    def _register_candidates(self, detections: dict[int, np.ndarray]) -> np.ndarray:
         """Add new candidate pairs; return candidates that a re-detection no longer allows."""
-        stale: set[int] = set()
-        new_g, new_l = [], []
+        stale, revived, new_g, new_l = [], [], [], []
+        start = len(self._cand_g)
         for local, globals_ in detections.items():
-            allowed = {int(g) for g in globals_}
-            known = self._cands_of_local.setdefault(local, {})
-            stale.update(c for g, c in known.items() if g not in allowed)
-            for g in sorted(allowed):
-                if g in known:
-                    self._cand_alive[known[g]] = True
-                else:
-                    known[g] = self._cand_index[(g, local)] = len(self._cand_g) + len(new_g)
-                    new_g.append(g)
-                    new_l.append(local)
-        if new_g:
-            hashes = [
-                _pair_hash(self._global_ids[g], self._local_ids[l]) for g, l in zip(new_g, new_l)
-            ]
-            self._cand_g = np.concatenate([self._cand_g, new_g]).astype(np.int64)
-            self._cand_l = np.concatenate([self._cand_l, new_l]).astype(np.int64)
-            self._cand_hash = np.concatenate([self._cand_hash, np.array(hashes, np.uint64)])
-            self._cand_alive = np.concatenate([self._cand_alive, np.ones(len(new_g), bool)])
-        self._cand_alive[list(stale)] = False
-        return stale
+            allowed = np.unique(np.asarray(globals_, dtype=np.int64))
+            known_g, known_c = self._by_local.get(local, (allowed[:0], allowed[:0]))
+            kept = np.isin(known_g, allowed)
+            stale.append(known_c[~kept])
+            revived.append(known_c[kept])
+            fresh = allowed[~np.isin(allowed, known_g)]
+            ids = start + sum(len(x) for x in new_g) + np.arange(len(fresh))
+            new_g.append(fresh)
+            new_l.append(np.full(len(fresh), local, dtype=np.int64))
+            globals_all = np.concatenate([known_g, fresh])
+            order = np.argsort(globals_all, kind="stable")
+            self._by_local[local] = (globals_all[order], np.concatenate([known_c, ids])[order])
+        count = sum(len(x) for x in new_g)
+        if count:
+            key, key2 = _candidate_keys(np.arange(start, start + count))
+            self._cand_g = np.concatenate([self._cand_g, *new_g])
+            self._cand_l = np.concatenate([self._cand_l, *new_l])
+            self._cand_alive = np.concatenate([self._cand_alive, np.ones(count, bool)])
+            self._cand_key = np.concatenate([self._cand_key, key])
+            self._cand_key2 = np.concatenate([self._cand_key2, key2])
+            self._cand_hash = np.concatenate([self._cand_hash, np.zeros(count, np.uint64)])
+            self._hashed = np.concatenate([self._hashed, np.zeros(count, bool)])
+        stale_c = np.concatenate([np.zeros(0, np.int64), *stale]).astype(np.int64)
+        self._cand_alive[np.concatenate([np.zeros(0, np.int64), *revived])] = True
+        self._cand_alive[stale_c] = False
+        return stale_c
 
-    def _refresh_compatibility(self, detected: set[int], stale: set[int]) -> None:
-        """Update h and compatibility for the candidates of detected objects and stale ones."""
-        n, known = len(self._cand_g), len(self._h)
-        rows = np.union1d(
-            np.arange(known, n),
-            np.flatnonzero(
-                np.isin(self._cand_l, list(detected)) | np.isin(np.arange(n), list(stale))
-            ),
-        ).astype(np.int64)
-        h = np.zeros((n, n))
-        h[:known, :known] = self._h
-        compat = np.zeros((n, n), dtype=bool)
-        compat[:known, :known] = self._compat
-        if len(rows):
-            h_rows, compat_rows = self._pair_rows(rows)
-            h[rows], h[:, rows] = h_rows, h_rows.T
-            compat[rows], compat[:, rows] = compat_rows, compat_rows.T
-        np.fill_diagonal(compat, True)
-        self._h, self._compat = h, compat
-        words = max(1, -(-n // 64))
-        self._compat_bits = np.vstack(
-            [_pack_rows(compat, words), np.full((1, words), ~np.uint64(0))]
-        )  # the last row (all ones) serves as padding for member lists
-        if words != self._words:
-            self._bits = np.hstack(
-                [self._bits, np.zeros((len(self._bits), words - self._words), np.uint64)]
-            )
-            self._words = words
-        self._common = self._common_of(self._members)
-        self._row_of = {self._bits[r].tobytes(): r for r in range(len(self._bits))}
+    def _pair_hashes(self, candidates: np.ndarray) -> np.ndarray:
+        """The order-independent pair hash of each candidate (computed once, when needed)."""
+        todo = np.unique(candidates[~self._hashed[candidates]])
+        if len(todo):
+            gids, lids = self._global_ids, self._local_ids
+            pairs = zip(self._cand_g[todo].tolist(), self._cand_l[todo].tolist())
+            self._cand_hash[todo] = [_pair_hash(gids[g], lids[l]) for g, l in pairs]
+            self._hashed[todo] = True
+        return self._cand_hash[candidates]
 
-    def _pair_rows(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """h and compatibility of the candidates `rows` against all candidates."""
-        g, l = self._cand_g, self._cand_l
-        d_global = np.linalg.norm(
-            self._global_positions[g[rows]][:, None] - self._global_positions[g][None], axis=2
-        )
-        d_local = np.linalg.norm(
-            self._local_positions[l[rows]][:, None] - self._local_positions[l][None], axis=2
-        )
-        one_to_one = (g[rows][:, None] != g[None]) & (l[rows][:, None] != l[None])
-        h = np.where(one_to_one, self.criterion.score(d_global, d_local), 0.0)
-        alive = self._cand_alive
+    # ------------------------------------------------------------------------------------
+    # Compatibility of live candidates
+    def _forget_edges(self, moved: set[int], stale: np.ndarray) -> None:
+        """Edges of stale candidates and of candidates of moved objects are recomputed."""
+        if not moved and not len(stale):
+            return
+        drop = np.isin(self._cand_l[self._covered], list(moved)) | np.isin(self._covered, stale)
+        self._covered = self._covered[~drop]
+
+    def _cover_live(self) -> None:
+        """Know the compatibility among all live candidates; build its sparse graph N.
+
+        Edges are kept in both directions, sorted by their first candidate, so that the
+        graph's rows need no sort: filtering keeps the order and new edges are merged in.
+        """
+        live = np.unique(self._members[self._members >= 0])
+        is_covered = np.zeros(len(self._cand_g), dtype=bool)
+        is_covered[self._covered] = True
+        is_live = np.zeros(len(self._cand_g), dtype=bool)
+        is_live[live] = True
+        is_covered &= is_live
+        edges = self._edges[:, is_covered[self._edges[0]] & is_covered[self._edges[1]]]
+        added = live[~is_covered[live]]
+        if len(added):
+            found = self._compatible_pairs(added, live[is_covered[live]])
+            found = np.hstack([found, found[::-1]])
+            edges = np.hstack([edges, found[:, np.argsort(found[0], kind="stable")]])
+            edges = edges[:, np.argsort(edges[0], kind="stable")]  # a merge of two sorted runs
+        self._edges, self._covered, self._live = edges, live, live
+        index = np.zeros(len(self._cand_g), dtype=np.int64)
+        index[live] = np.arange(len(live))
+        self._live_index = index
+        counts = np.bincount(index[edges[0]], minlength=len(live))
+        indptr = np.concatenate([[0], np.cumsum(counts)])
+        data = np.ones(edges.shape[1], dtype=np.int64)
+        self._graph = sp.csr_matrix((data, index[edges[1]], indptr), shape=(len(live),) * 2)
+
+    def _compatible_pairs(self, added: np.ndarray, covered: np.ndarray) -> np.ndarray:
+        """All compatible (a, b) with a in `added` and b in `added` ∪ `covered` (2 x E)."""
+        local_of = self._cand_l
+        groups_new = {int(l): added[local_of[added] == l] for l in np.unique(local_of[added])}
+        groups_old = {int(l): covered[local_of[covered] == l] for l in np.unique(local_of[covered])}
+        found = [np.zeros((2, 0), dtype=np.int64)]
+        for la, xs in groups_new.items():
+            tree = _LazyTree(self._global_positions[self._cand_g[xs]])
+            for lb in sorted(set(groups_old) | set(groups_new)):
+                if lb == la:
+                    continue
+                ys = groups_old.get(lb, xs[:0])
+                if lb > la and lb in groups_new:  # pairs within `added` are found once
+                    ys = np.concatenate([ys, groups_new[lb]])
+                if len(ys):
+                    found.append(self._compatible_block(la, xs, tree, lb, ys))
+        return np.hstack(found)
+
+    def _compatible_block(
+        self, la: int, xs: np.ndarray, tree: _LazyTree, lb: int, ys: np.ndarray
+    ) -> np.ndarray:
+        """Compatible pairs between candidates `xs` of local object `la` (their global
+        positions in `tree`) and `ys` of `lb`."""
+        cfg = self.config
+        d_local = float(np.linalg.norm(self._local_positions[la] - self._local_positions[lb]))
+        # the gate 1 - max(0, |d^A - d^B| - ε) / max(d^A, d^B) > γ needs d^A < (d^B + ε) / γ
+        reach = max((d_local + cfg.distance_tolerance) / cfg.gamma, cfg.min_distance)
+        reach = reach * (1 + 1e-9) + 1e-12  # the exact test below decides at the boundary
+        gx, gy = tree.points, self._global_positions[self._cand_g[ys]]
+        if len(xs) * len(ys) <= _BRUTE_FORCE_PAIRS:
+            i, j = np.nonzero(np.linalg.norm(gx[:, None] - gy[None], axis=2) <= reach)
+        else:
+            found = tree.get().sparse_distance_matrix(cKDTree(gy), reach, output_type="ndarray")
+            i, j = found["i"].astype(np.int64), found["j"].astype(np.int64)
+        d_global = np.linalg.norm(gx[i] - gy[j], axis=1)
+        ok = self.criterion.compatible(d_global, d_local)
+        ok &= self._cand_g[xs[i]] != self._cand_g[ys[j]]
+        return np.vstack([xs[i[ok]], ys[j[ok]]])
+
+    def _gate_of_sets(self, members: np.ndarray) -> np.ndarray:
+        """Whether every pair of members of each set (rows, -1 padded) passes the criterion."""
+        valid = members >= 0
+        m = np.maximum(members, 0)
+        g = self._global_positions[self._cand_g[m]]
+        l = self._local_positions[self._cand_l[m]]
+        d_global = np.linalg.norm(g[:, :, None] - g[:, None], axis=3)
+        d_local = np.linalg.norm(l[:, :, None] - l[:, None], axis=3)
         compatible = self.criterion.compatible(d_global, d_local)
-        compat = compatible & one_to_one & alive[rows][:, None] & alive[None]
-        return h, compat
+        pair = valid[:, :, None] & valid[:, None, :] & ~np.eye(members.shape[1], dtype=bool)
+        return np.all(compatible | ~pair, axis=(1, 2))
 
-    def _common_of(self, members: np.ndarray) -> np.ndarray:
-        padded = np.where(members >= 0, members, len(self._compat_bits) - 1)
-        return np.bitwise_and.reduce(self._compat_bits[padded], axis=1)
-
-    def _revalidate(self, stale: set[int], moved: set[int]) -> list[int]:
+    def _revalidate(self, stale: np.ndarray, moved: set[int]) -> list[int]:
         """Drop sets with stale candidates or broken cliques; sets with moved objects are fresh."""
         if not len(self._score):
             return []
         members = self._members
         valid = members >= 0
-        has_stale = np.isin(members, list(stale)) & valid
-        is_clique = np.all((self._bits & ~self._common) == 0, axis=1)
-        keep = ~has_stale.any(axis=1) & is_clique
-        touched = np.isin(self._cand_l[np.where(valid, members, 0)], list(moved)) & valid
+        keep = ~(np.isin(members, stale) & valid).any(axis=1)
+        touched = (np.isin(self._cand_l[np.where(valid, members, 0)], list(moved)) & valid).any(
+            axis=1
+        )
+        check = np.flatnonzero(touched & keep)
+        if len(check):
+            keep[check] = self._gate_of_sets(members[check])
         self._keep_rows(keep)
-        return list(np.flatnonzero(touched.any(axis=1)[keep]))
+        return list(np.flatnonzero(touched[keep]))
 
     def _add_singletons(self, detections: dict[int, np.ndarray]) -> list[int]:
         """Add (or refresh) the singleton of every candidate of the detected objects."""
-        candidates = sorted(
-            self._cand_index[(g, local)]
-            for local, globals_ in detections.items()
-            for g in {int(x) for x in globals_}
-        )
-        if not candidates:
+        parts = []
+        for local, globals_ in detections.items():
+            known_g, known_c = self._by_local[local]
+            allowed = np.unique(np.asarray(globals_, dtype=np.int64))
+            parts.append(known_c[np.searchsorted(known_g, allowed)])
+        candidates = np.sort(np.concatenate([np.zeros(0, np.int64), *parts]))
+        if not len(candidates):
             return []
-        bits = np.zeros((len(candidates), self._words), np.uint64)
-        index = np.array(candidates)
-        bits[np.arange(len(index)), index // 64] = np.uint64(1) << (index % 64).astype(np.uint64)
-        rows = [self._row_of.get(row.tobytes(), -1) for row in bits]
-        missing = [i for i, row in enumerate(rows) if row < 0]
-        if missing:
-            added = self._append(bits[missing], index[missing, None], np.zeros(len(missing)))
-            for i, row in zip(missing, added):
-                rows[i] = int(row)
+        members = candidates[:, None]
+        rows = self._lookup(self._cand_key[candidates], self._cand_key2[candidates], members)
+        missing = np.flatnonzero(rows < 0)
+        if len(missing):
+            rows[missing] = self._append(
+                members[missing],
+                np.zeros(len(missing)),
+                self._cand_key[candidates[missing]],
+                self._cand_key2[candidates[missing]],
+            )
         self._last_merge[rows] = self.step
-        return rows
+        return list(rows)
 
     # ------------------------------------------------------------------------------------
     # Clustering round
     def _cluster(self, frontier: np.ndarray) -> None:
         while len(frontier):
-            bits = _dense(self._bits)  # the pool is fixed until the insert below
-            parents_a, parents_b = self._find_merges(frontier, bits)
-            if not len(parents_a):
+            slots = self._slots()  # the pool is fixed until the insert below
+            rows_a, rows_b, shared = self._find_merges(frontier, slots)
+            if not len(rows_a):
                 break
-            self._last_merge[parents_a] = self.step
-            self._last_merge[parents_b] = self.step
-            unions, scores = self._best_merges(parents_a, parents_b, bits)
-            frontier = self._insert(unions, scores)
+            self._last_merge[rows_a] = self.step
+            self._last_merge[rows_b] = self.step
+            frontier = self._insert(*self._best_merges(rows_a, rows_b, shared, slots))
             frontier = self._prune(frontier)
         self._prune(np.zeros(0, dtype=np.int64))  # a round ends with at most K sets
 
-    def _find_merges(self, frontier: np.ndarray, bits: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """All (a, b) rows with a in the frontier whose union passes the merge criterion
-        (`bits`: the pool's sets as a dense boolean matrix)."""
-        n_pool = len(self._bits)
-        in_frontier = np.zeros(n_pool, dtype=bool)
+    def _membership(self) -> sp.csr_matrix:
+        """The pool's sets as a sparse (sets x live candidates) 0/1 matrix."""
+        valid = self._members >= 0
+        rows = np.repeat(np.arange(len(self._members)), valid.sum(axis=1))
+        cols = self._live_index[self._members[valid]]
+        return _csr(rows, cols, len(self._live), n_rows=len(self._members))
+
+    def _find_merges(
+        self, frontier: np.ndarray, slots: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """All (a, b) rows with a in the frontier whose union passes the merge criterion, and
+        |A ∩ B| for each.
+
+        B ⊆ M(A) and B ⊄ A means that B meets the extensions E(A) = M(A)∖A, so only the sets
+        meeting E(A) are looked at (a sparse product counts |B ∩ E(A)|); they qualify when
+        |B ∩ A| + |B ∩ E(A)| = |B|.
+        """
+        size = self._sizes()
+        membership = self._membership()
+        transposed = membership.T.tocsr()
+        in_frontier = np.zeros(len(size), dtype=bool)
         in_frontier[frontier] = True
-        chunk = max(1, _CHUNK_ELEMENTS // max(n_pool, 1))
-        size = (self._members >= 0).sum(axis=1)
         floor = self._survival_floor()
-        folded_bits = np.bitwise_or.reduce(self._bits, axis=1)
-        folded_common = np.bitwise_or.reduce(self._common, axis=1)
-        common = _dense(self._common)
-        found_a, found_b = [], []
-        for start in range(0, len(frontier), chunk):
-            rows = frontier[start : start + chunk]
-            # b ⊆ M(a) (the union is a clique); folding the words with OR keeps ⊆, so a
-            # one-word test screens the pairs before the exact test on every word
-            ia, ib = np.nonzero((folded_bits[None, :] & ~folded_common[rows][:, None]) == 0)
-            once = ~in_frontier[ib] | (ib > rows[ia])  # two frontier sets: tried from the lower
-            ia, ib = ia[once], ib[once]
+        found = [[], [], []]
+        for start in range(0, len(frontier), _FRONTIER_CHUNK):
+            rows = frontier[start : start + _FRONTIER_CHUNK]
+            tally = self._extensions(rows, size, membership)
+            tally = (tally @ transposed).tocoo()  # |B ∩ E(A)| for every B meeting E(A)
+            ia, ib, in_ext = rows[tally.row], tally.col.astype(np.int64), tally.data
+            once = ~in_frontier[ib] | (ib > ia)  # two frontier sets: tried from the lower
+            if floor > -np.inf:  # |A∖B| ≤ |A|: a first, cheap screen on the score bound
+                bound = self.criterion.UPPER_BOUND * size[ia] * in_ext
+                once &= self._score[ia] + self._score[ib] + bound >= floor
+            rest = size[ib] - in_ext  # B's members outside E(A): all must be in A
+            once &= rest < size[ia]  # (and A ⊄ B)
+            ia, ib, in_ext, rest = ia[once], ib[once], in_ext[once], rest[once]
+            shared = np.zeros(len(ia), dtype=np.int64)
+            check = np.flatnonzero(rest > 0)
+            b_members = self._members[ib[check]]
+            shared[check] = ((b_members >= 0) & ~self._not_in(slots, b_members, ia[check])).sum(
+                axis=1
+            )
+            a_adds = size[ia] - shared
+            keep = shared == rest  # B ⊆ M(A)
             if floor > -np.inf:  # merges that cannot reach the top K would be pruned at once
-                bound = self.criterion.UPPER_BOUND * size[rows[ia]] * size[ib]
-                fits = self._score[rows[ia]] + self._score[ib] + bound >= floor
-                ia, ib = ia[fits], ib[fits]
-            ia = rows[ia]
-            b_members = self._members[ib]
-            inside = _contains_rows(common, ia, b_members) | (b_members < 0)
-            exact = np.all(inside, axis=1)
-            ia, ib = ia[exact], ib[exact]
-            a_adds, b_adds = self._adds(bits, ia, ib, size)[:2]
-            keep = (a_adds > 0) & (b_adds > 0)  # neither contains the other
-            if floor > -np.inf:
-                bound = self.criterion.UPPER_BOUND * a_adds * b_adds
+                bound = self.criterion.UPPER_BOUND * a_adds * in_ext
                 keep &= self._score[ia] + self._score[ib] + bound >= floor
-            found_a.append(ia[keep])
-            found_b.append(ib[keep])
-        return np.concatenate(found_a), np.concatenate(found_b)
+            for out, values in zip(found, (ia, ib, shared)):
+                out.append(values[keep])
+        ia, ib, shared = (np.concatenate(x).astype(np.int64) for x in found)
+        return ia, ib, shared
+
+    def _extensions(self, rows, size, membership) -> sp.csr_matrix:
+        """E(A) = M(A)∖A for the sets `rows`, as a sparse (rows x live candidates) 0/1 matrix."""
+        own = membership[rows]
+        if np.all(size[rows] == 1):  # singletons: E({c}) is c's neighbourhood
+            return self._graph[own.indices]
+        # counts[A, c]: members of A that c is compatible with; a member of A itself is
+        # compatible with the |A| - 1 others only, so E(A) is where the count is |A|
+        counts = (own @ self._graph).tocoo()
+        inside = counts.data == size[rows][counts.row]
+        return sp.csr_matrix(
+            (np.ones(int(inside.sum()), np.int64), (counts.row[inside], counts.col[inside])),
+            shape=counts.shape,
+        )
 
     def _survival_floor(self) -> float:
         """The K-th best score in the pool (-inf while the pool is not full), less a hair.
 
-        A merge scores at most v_A + v_B + |A|·|B| (h ≤ UPPER_BOUND = 1).  One that cannot reach the K-th
-        best score is pruned at the end of the iteration, and so are both of its parents
+        A merge scores at most v_A + v_B + |A∖B|·|B∖A| (h ≤ UPPER_BOUND = 1).  One that cannot reach the
+        K-th best score is pruned at the end of the iteration, and so are both of its parents
         (their scores are lower still), so such merges are skipped without changing the result.
         """
         if len(self._score) < self.capacity:
@@ -457,9 +557,21 @@ class HierarchicalClustering:
         kth = np.partition(self._score, len(self._score) - self.capacity)
         return float(kth[len(self._score) - self.capacity]) - 1e-9
 
-    def _best_merges(
-        self, rows_a: np.ndarray, rows_b: np.ndarray, bits: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray]:
+    def _slots(self) -> np.ndarray:
+        """Per set and local object, the member candidate (-1: none); sets are one-to-one."""
+        slots = np.full((len(self._members), len(self._local_positions)), -1, dtype=np.int64)
+        rows, cols = np.nonzero(self._members >= 0)
+        members = self._members[rows, cols]
+        slots[rows, self._cand_l[members]] = members
+        return slots
+
+    def _not_in(self, slots: np.ndarray, members: np.ndarray, rows: np.ndarray) -> np.ndarray:
+        """Which of `members[i]` (-1 padded) are valid and not in set `rows[i]`."""
+        width = slots.shape[1]
+        where = rows[:, None] * width + self._cand_l[np.maximum(members, 0)]
+        return (members >= 0) & (np.take(slots.ravel(), where) != members)
+
+    def _best_merges(self, rows_a, rows_b, shared, slots: np.ndarray):
         """Distinct unions of the merges and, for each, the largest merge score.
 
         A merge scores v_A + v_B + Σh over |A∖B|·|B∖A| new pairs with h ≤ 1, which bounds it
@@ -467,120 +579,163 @@ class HierarchicalClustering:
         merges whose bound beats that score need their own exact score.  Same result as scoring
         every merge, at a fraction of the work.
         """
-        size = (self._members >= 0).sum(axis=1)
-        a_adds, b_adds, b_new = self._adds(bits, rows_a, rows_b, size)
-        first, group = self._group_unions(rows_a, rows_b, b_new)
-        unions = self._bits[rows_a[first]] | self._bits[rows_b[first]]
+        size = self._sizes()
+        a_adds, b_adds = size[rows_a] - shared, size[rows_b] - shared
+        b_members = self._members[rows_b]
+        b_new = np.where(self._not_in(slots, b_members, rows_a), b_members, -1)
+        keys = [
+            self._key[rows_a] + _key_sums(self._cand_key, b_new),
+            self._key2[rows_a] + _key_sums(self._cand_key2, b_new),
+        ]
+        first, group = self._group_unions(rows_a, keys, b_new)
+        unions = _sorted_members(np.hstack([self._members[rows_a[first]], b_new[first]]))
         base = self._score[rows_a] + self._score[rows_b]
         bound = base + self.criterion.UPPER_BOUND * a_adds * b_adds
         order = np.lexsort((-base, group))  # per group, the largest v_A + v_B first
-        first = order[np.r_[True, group[order][1:] != group[order][:-1]]]
-        best = np.full(len(unions), -np.inf)
-        best[group[first]] = base[first] + self._cross_sum(bits, rows_a[first], rows_b[first])
+        best_of = order[np.r_[True, group[order][1:] != group[order][:-1]]]
+        best = np.full(len(first), -np.inf)
+        best[group[best_of]] = base[best_of] + self._cross_sum(
+            slots, rows_a[best_of], rows_b[best_of]
+        )
         todo = np.flatnonzero(bound > best[group] + 1e-12)
         if len(todo):
-            exact = base[todo] + self._cross_sum(bits, rows_a[todo], rows_b[todo])
+            exact = base[todo] + self._cross_sum(slots, rows_a[todo], rows_b[todo])
             np.maximum.at(best, group[todo], exact)
-        return unions, best
+        return unions, best, keys[0][first], keys[1][first]
 
-    def _adds(self, bits: np.ndarray, rows_a: np.ndarray, rows_b: np.ndarray, size: np.ndarray):
-        """|A∖B|, |B∖A| and B's members not in A (-1 elsewhere), for each merge (A, B).
-
-        Read from B's short member list against A's bitset: (merges x members) lookups
-        instead of whole (merges x words) bitset operations.
-        """
-        b_members = self._members[rows_b]
-        b_new = (b_members >= 0) & ~_contains_rows(bits, rows_a, b_members)
-        b_adds = b_new.sum(axis=1)
-        return size[rows_a] - size[rows_b] + b_adds, b_adds, np.where(b_new, b_members, -1)
-
-    def _group_unions(self, rows_a, rows_b, b_new) -> tuple[np.ndarray, np.ndarray]:
+    def _group_unions(self, rows_a, keys, b_new) -> tuple[np.ndarray, np.ndarray]:
         """One representative merge per distinct union A ∪ B, and each merge's group.
 
-        A set's hash is the wrapping sum of its candidates' 64-bit hashes, so hash(A ∪ B) =
-        hash(A) + Σ over B∖A (`b_new`: those members, -1 padded); a second, independent sum
-        checks every group, and the bitsets themselves are compared if the two disagree.
+        The first key groups; the second (independent) key checks every group, and the member
+        lists themselves are compared if the two disagree.
         """
-        keys = []
-        for table in (self._cand_hash, _mix(self._cand_hash)):
-            keys.append(_hash_sums(table, self._members)[rows_a] + _hash_sums(table, b_new))
         key, check = keys
-        order = np.argsort(key)
+        order = np.argsort(key, kind="stable")
         starts = np.r_[True, key[order][1:] != key[order][:-1]]
         group = np.empty(len(key), dtype=np.int64)
         group[order] = np.cumsum(starts) - 1
         first = order[starts]
         if np.array_equal(check, check[first][group]):
             return first, group
-        unions = self._bits[rows_a] | self._bits[rows_b]  # a hash collision: exact path
+        unions = _sorted_members(np.hstack([self._members[rows_a], b_new]))  # a key collision
         _, first, group = np.unique(unions, axis=0, return_index=True, return_inverse=True)
         return first, group.ravel()
 
-    def _cross_sum(self, bits: np.ndarray, rows_a: np.ndarray, rows_b: np.ndarray) -> np.ndarray:
-        """Σ h over the new cross pairs (a ∈ A∖B, b ∈ B∖A) for each merge (A, B).
-
-        Each merge is oriented so that its smaller set is indexed by a short member list;
-        merges are grouped by that size, keeping the gathers at (merges x large x small).
-        """
-        size = (self._members >= 0).sum(axis=1)
-        swap = size[rows_a] < size[rows_b]
-        large = np.where(swap, rows_b, rows_a)
-        small = np.where(swap, rows_a, rows_b)
+    def _cross_sum(self, slots: np.ndarray, rows_a: np.ndarray, rows_b: np.ndarray) -> np.ndarray:
+        """Σ h over the new cross pairs (a ∈ A∖B, b ∈ B∖A) for each merge (A, B), from the
+        object positions; merges are grouped by (|A∖B|, |B∖A|) so no pair is wasted."""
+        a_members, b_members = self._members[rows_a], self._members[rows_b]
+        a_new = _compact(a_members, self._not_in(slots, a_members, rows_b))
+        b_new = _compact(b_members, self._not_in(slots, b_members, rows_a))
+        a_count, b_count = (a_new >= 0).sum(axis=1), (b_new >= 0).sum(axis=1)
         out = np.zeros(len(rows_a))
-        for k in np.unique(size[small]):
-            sel = np.flatnonzero(size[small] == k)
-            big, little = large[sel], small[sel]
-            ml = self._members[big, : size[big].max()]
-            ms = self._members[little, :k]
-            a_new = (ml >= 0) & ~_contains_rows(bits, little, ml)
-            b_new = ~_contains_rows(bits, big, ms)
-            h = self._h[np.maximum(ml, 0)[:, :, None], ms[:, None, :]]
-            out[sel] = np.sum(h * (a_new[:, :, None] & b_new[:, None, :]), axis=(1, 2))
+        width = max(a_new.shape[1], b_new.shape[1]) + 1
+        combo = a_count * width + b_count
+        for code in np.unique(combo):
+            p, q = divmod(int(code), width)
+            sel = np.flatnonzero(combo == code)
+            per = max(1, _CHUNK_ELEMENTS // max(p * q, 1))
+            for start in range(0, len(sel), per):
+                part = sel[start : start + per]
+                out[part] = self._h_sum(a_new[part, :p], b_new[part, :q])
         return out
 
-    def _insert(self, unique: np.ndarray, best: np.ndarray) -> np.ndarray:
-        """Add distinct merged sets (duplicates keep the larger score); return new rows."""
-        new_mask = np.ones(len(unique), dtype=bool)
-        for i, row_bits in enumerate(unique):
-            row = self._row_of.get(row_bits.tobytes())
-            if row is not None:
-                new_mask[i] = False
-                self._score[row] = max(self._score[row], best[i])
-        if not new_mask.any():
-            return np.zeros(0, dtype=np.int64)
-        added = unique[new_mask]
-        members = _members(added, len(self._cand_g))
-        return self._append(added, members, best[new_mask])
+    def _h_sum(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """Σ_{i, j} h(a[:, i], b[:, j]) per row (all members valid)."""
+        ga = self._global_positions[self._cand_g[a]]
+        gb = self._global_positions[self._cand_g[b]]
+        la = self._local_positions[self._cand_l[a]]
+        lb = self._local_positions[self._cand_l[b]]
+        d_global = np.linalg.norm(ga[:, :, None] - gb[:, None], axis=3)
+        d_local = np.linalg.norm(la[:, :, None] - lb[:, None], axis=3)
+        return self.criterion.score(d_global, d_local).sum(axis=(1, 2))
 
-    def _append(self, bits: np.ndarray, members: np.ndarray, scores: np.ndarray) -> np.ndarray:
-        start = len(self._bits)
+    def _insert(self, members: np.ndarray, best: np.ndarray, key: np.ndarray, key2: np.ndarray):
+        """Add distinct merged sets (duplicates keep the larger score); return new rows."""
+        rows = self._lookup(key, key2, members)
+        known = rows >= 0
+        np.maximum.at(self._score, rows[known], best[known])
+        if known.all():
+            return np.zeros(0, dtype=np.int64)
+        new = ~known
+        return self._append(members[new], best[new], key[new], key2[new])
+
+    def _lookup(self, key: np.ndarray, key2: np.ndarray, members: np.ndarray) -> np.ndarray:
+        """The pool row holding each given set (-1: not in the pool)."""
+        out = np.full(len(key), -1, dtype=np.int64)
+        if not len(self._key) or not len(key):
+            return out
+        order = np.argsort(self._key, kind="stable")
+        sorted_keys = self._key[order]
+        at = np.minimum(np.searchsorted(sorted_keys, key), len(order) - 1)
+        hit = sorted_keys[at] == key
+        unique_keys = not np.any(sorted_keys[1:] == sorted_keys[:-1])
+        rows = order[at[hit]]
+        width = max(members.shape[1], self._members.shape[1])
+        same = (self._key2[rows] == key2[hit]) & np.all(
+            _pad(self._members[rows], width) == _pad(members[hit], width), axis=1
+        )
+        if unique_keys and same.all():
+            out[np.flatnonzero(hit)] = rows
+            return out
+        # a key collision: look sets up by their member lists
+        index = {tuple(m[m >= 0]): r for r, m in enumerate(self._members)}
+        return np.array([index.get(tuple(m[m >= 0]), -1) for m in members], dtype=np.int64)
+
+    def _append(self, members, scores, key, key2) -> np.ndarray:
+        start = len(self._score)
         width = max(self._members.shape[1], members.shape[1])
         self._members = np.vstack([_pad(self._members, width), _pad(members, width)])
-        self._bits = np.vstack([self._bits, bits])
-        self._common = np.vstack([self._common, self._common_of(members)])
+        self._size = np.concatenate([self._size, (members >= 0).sum(axis=1)])
         self._score = np.concatenate([self._score, scores])
         self._last_merge = np.concatenate(
             [self._last_merge, np.full(len(scores), self.step, dtype=np.int64)]
         )
-        rows = np.arange(start, start + len(scores))
-        for r in rows:
-            self._row_of[self._bits[r].tobytes()] = int(r)
-        return rows
+        self._key = np.concatenate([self._key, key])
+        self._key2 = np.concatenate([self._key2, key2])
+        return np.arange(start, start + len(scores))
 
     # ------------------------------------------------------------------------------------
     # Pruning
-    def _ranking(self) -> np.ndarray:
-        """Rows best first: score (rounded), size, then an order-independent hash."""
-        size = (self._members >= 0).sum(axis=1)
-        set_hash = _hash_sums(self._cand_hash, self._members)
-        return np.lexsort((set_hash, -size, -np.round(self._score, 9)))
+    def _ranking(
+        self, rows: np.ndarray | None = None, limit: int | None = None, largest_first=False
+    ) -> np.ndarray:
+        """Positions in `rows` (default: all sets), best first: score (rounded), size, then an
+        order-independent hash of the pairs (size first with `largest_first`).  With `limit`,
+        only the first `limit` positions are exact; the hash is computed only where sets tie
+        among them."""
+        rows = np.arange(len(self._score)) if rows is None else rows
+        score = -np.round(self._score[rows], 9)
+        size = -self._sizes()[rows]
+        keys = (score, size) if largest_first else (size, score)
+        order = np.lexsort(keys)
+        head = order if limit is None else order[:limit]
+        if not len(head):
+            return order
+        last = (score[head[-1]], size[head[-1]])
+        same = (score[order][1:] == score[order][:-1]) & (size[order][1:] == size[order][:-1])
+        tied = np.zeros(len(order), dtype=bool)
+        tied[1:] |= same
+        tied[:-1] |= same
+        if limit is not None:  # ties past the cut only matter if they tie with its last set
+            beyond = np.arange(len(order)) >= len(head)
+            tied &= ~beyond | ((score[order] == last[0]) & (size[order] == last[1]))
+        set_hash = np.zeros(len(rows), dtype=np.uint64)
+        needs = order[tied]
+        if len(needs):
+            members = self._members[rows[needs]]
+            hashes = np.zeros(members.shape, dtype=np.uint64)
+            valid = members >= 0
+            hashes[valid] = self._pair_hashes(members[valid])
+            set_hash[needs] = hashes.sum(axis=1, dtype=np.uint64)
+        return np.lexsort((set_hash, *keys))
 
     def _prune(self, frontier: np.ndarray) -> np.ndarray:
         """Keep the top K sets; return the surviving part of the frontier (renumbered)."""
         if len(self._score) <= self.capacity:
             return frontier
         keep = np.zeros(len(self._score), dtype=bool)
-        keep[self._ranking()[: self.capacity]] = True
+        keep[self._ranking(limit=self.capacity)[: self.capacity]] = True
         is_frontier = np.zeros(len(self._score), dtype=bool)
         is_frontier[frontier] = True
         self._keep_rows(keep)
@@ -591,38 +746,59 @@ class HierarchicalClustering:
         if not old.any():
             return
         protected = np.zeros(len(old), dtype=bool)
-        protected[self._ranking()[: self.config.protect_top]] = True
+        protected[self._ranking(limit=self.config.protect_top)[: self.config.protect_top]] = True
         self._keep_rows(~old | protected)
 
     def _keep_rows(self, keep: np.ndarray) -> None:
-        self._bits = self._bits[keep]
-        self._common = self._common[keep]
         self._members = self._members[keep]
+        self._size = self._size[keep]
         self._score = self._score[keep]
         self._last_merge = self._last_merge[keep]
-        self._row_of = {self._bits[r].tobytes(): r for r in range(len(self._bits))}
+        self._key = self._key[keep]
+        self._key2 = self._key2[keep]
 
 
-def _mix(x: np.ndarray) -> np.ndarray:
-    """A bijective 64-bit mixer (splitmix64's finaliser): a second, independent hash."""
-    x = (x ^ (x >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
-    x = (x ^ (x >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
-    return x ^ (x >> np.uint64(31))
+class _LazyTree:
+    """A KD-tree over `points`, built on first use."""
+
+    def __init__(self, points: np.ndarray) -> None:
+        self.points = points
+        self._tree: cKDTree | None = None
+
+    def get(self) -> cKDTree:
+        if self._tree is None:
+            self._tree = cKDTree(self.points)
+        return self._tree
 
 
-def _hash_sums(table: np.ndarray, members: np.ndarray) -> np.ndarray:
-    """Per row of member indices (-1 padded), the wrapping sum of their hashes in `table`."""
+def _csr(rows: np.ndarray, cols: np.ndarray, n_cols: int, n_rows: int | None = None):
+    """A 0/1 CSR matrix from (row, column) entries without duplicates."""
+    n_rows = n_cols if n_rows is None else n_rows
+    order = np.argsort(rows, kind="stable")
+    indptr = np.concatenate([[0], np.cumsum(np.bincount(rows, minlength=n_rows))])
+    data = np.ones(len(rows), dtype=np.int64)
+    return sp.csr_matrix((data, cols[order], indptr), shape=(n_rows, n_cols))
+
+
+def _key_sums(table: np.ndarray, members: np.ndarray) -> np.ndarray:
+    """Per row of member indices (-1 padded), the wrapping sum of their keys in `table`."""
     return np.append(table, np.uint64(0))[members].sum(axis=1, dtype=np.uint64)  # -1 reads 0
 
 
-def _dense(bits: np.ndarray) -> np.ndarray:
-    """Bitset rows (uint64 words) as a boolean matrix over candidates."""
-    return np.unpackbits(bits.astype("<u8").view(np.uint8), axis=1, bitorder="little").view(bool)
+def _sorted_members(members: np.ndarray) -> np.ndarray:
+    """Rows of member indices sorted ascending with the -1 padding last, trimmed."""
+    big = np.iinfo(np.int64).max
+    out = np.sort(np.where(members >= 0, members, big), axis=1)
+    width = max(int((out != big).sum(axis=1).max(initial=0)), 1)
+    out = out[:, :width]
+    return np.where(out == big, -1, out)
 
 
-def _contains_rows(dense: np.ndarray, rows: np.ndarray, candidates: np.ndarray) -> np.ndarray:
-    """Whether set `rows[i]` (of a `_dense` matrix) holds `candidates[i, j]` (-1: False)."""
-    return dense[rows[:, None], np.maximum(candidates, 0)] & (candidates >= 0)
+def _compact(members: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """The members selected by `mask` moved to the front of each row, -1 padded."""
+    order = np.argsort(~mask, axis=1, kind="stable")
+    picked = np.take_along_axis(np.where(mask, members, -1), order, axis=1)
+    return picked
 
 
 def _pad(members: np.ndarray, width: int) -> np.ndarray:

@@ -25,7 +25,6 @@ from rich.live import Live
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
-from semloc.cli.render import STATUS_STYLE
 from semloc.display import for_rich
 from semloc.eval.success import is_success
 from semloc.io.native import save_map, staged_folder, write_atomic
@@ -37,6 +36,10 @@ from semloc.sim.scenario import SimulatedSequence, simulate_sequence
 from semloc.sim.sensor import check_resolution
 from semloc.sim.trajectory import PATHS
 from semloc.transforms import pose_error
+
+STATUS_STYLE = {"localized": "green", "ambiguous": "yellow", "failed": "red"}
+"""The colour of each status wherever one is printed (demo, CLI); here, not in cli/, so that
+the demo imports nothing of the command line (which imports the demo)."""
 
 
 class DemoConfig(BaseModel):

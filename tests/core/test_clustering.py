@@ -233,8 +233,9 @@ def test_bitset_clustering_equals_literal_rules(
             assert got[key] == pytest.approx(score, abs=1e-9)
 
 
-def test_union_hash_collisions_fall_back_to_exact_bitsets(monkeypatch):
-    """Merges are grouped by a sum of candidate hashes; when that collides, bitsets decide."""
+def test_union_key_collisions_fall_back_to_exact_member_lists(monkeypatch):
+    """Merges are grouped and sets looked up by a sum of candidate keys; when that collides,
+    the second key and the member lists decide."""
     import semloc.clustering as module
 
     g, local, detections = _scenario(7, 10, 6, 1)
@@ -248,13 +249,45 @@ def test_union_hash_collisions_fall_back_to_exact_bitsets(monkeypatch):
 
     expected = final_sets()
     assert max(len(pairs) for pairs in expected) >= 3
-    # every candidate hashes to 1, so the first key of a union is its size: unions of one
+    # every candidate's first key is 1, so the first key of a set is its size: sets of one
     # size collide, and only the second (independent) sum tells them apart
-    monkeypatch.setattr(module, "_pair_hash", lambda *_: 1)
-    monkeypatch.setattr(
-        module, "_mix", lambda x: np.random.default_rng(0).integers(0, 2**63, len(x), np.uint64)
-    )
+    original = module._candidate_keys
+
+    def colliding(candidates):
+        return np.ones(len(candidates), np.uint64), original(candidates)[1]
+
+    monkeypatch.setattr(module, "_candidate_keys", colliding)
     collided = final_sets()
     assert collided.keys() == expected.keys()
     for pairs, score in expected.items():
         assert collided[pairs] == pytest.approx(score, abs=1e-9)
+
+
+@pytest.mark.parametrize("kd_tree", [False, True])
+def test_large_sparse_map_equals_literal_rules(monkeypatch, kd_tree):
+    """A building-like map (many same-label objects far apart, compatibility sparse): the
+    sparse formulation gives the literal sets, through dense blocks or KD-tree queries."""
+    import semloc.clustering as module
+
+    if kd_tree:  # every range query through the KD-tree instead of a dense distance block
+        monkeypatch.setattr(module, "_BRUTE_FORCE_PAIRS", 0)
+    rng = np.random.default_rng(11)
+    g = np.column_stack([rng.uniform(0, 20, 40), rng.uniform(0, 20, 40), rng.uniform(0, 2, 40)])
+    labels = rng.integers(0, 2, len(g))
+    chosen = np.argsort(np.linalg.norm(g - g[0], axis=1))[:5]
+    local = g[chosen] + rng.normal(0, 0.1, (5, 3))
+    config = ClusteringConfig(max_sets=None, protect_top=3)
+    fast = clustering(g, config)
+    literal = LiteralClustering(g, [f"g{i}" for i in range(len(g))], config)
+    for step, c in enumerate(chosen):
+        ids = [f"l{i}" for i in range(step + 1)]
+        detections = {step: np.flatnonzero(labels == labels[c])}
+        fast.update(local[: step + 1], ids, detections)
+        literal.update(local[: step + 1], ids, detections)
+        expected = {tuple(sorted(k)): v[0] for k, v in literal.sets.items()}
+        got = pair_sets(fast)
+        assert got.keys() == expected.keys()
+        for key, score in expected.items():
+            assert got[key] == pytest.approx(score, abs=1e-9)
+    assert fast.n_candidates > 80 and max(len(p) for p in got) >= 4
+    assert fast._graph.nnz < 0.1 * fast.n_candidates**2  # compatibility stays sparse

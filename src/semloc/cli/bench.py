@@ -45,13 +45,23 @@ def bench(
         ),
     ] = ",".join(DEFAULT_METHODS),
     sequences: Annotated[
-        int | None, typer.Option(min=1, max=1000, help="Simulated sequences (default 6; quick 2).")
+        int | None,
+        typer.Option(
+            min=0, max=1000, help="Simulated sequences (default 6; quick 2; 0: only the real data)."
+        ),
     ] = None,
     starts: Annotated[
         int | None,
         typer.Option(min=1, max=1000, help="Random starts per sequence (default 8; quick 3)."),
     ] = None,
     progress: Annotated[bool, typer.Option(help="Show a progress bar.")] = True,
+    real_walks: Annotated[
+        bool,
+        typer.Option(
+            help="Also the protocol on camera walks through the real scans (ScanNet "
+            "scene0000_00, Scan2CAD scene0470_00): real_walks.csv, .png, .md."
+        ),
+    ] = False,
 ) -> None:
     """Reproduce the paper's comparison: semloc vs CLIPPER, random-walk, SegMatch, FPFH+RANSAC.
 
@@ -74,10 +84,14 @@ def bench(
         overrides["starts"] = starts
     if "semloc" not in chosen:
         overrides["ablation_starts"] = 0
+    overrides["real_walks"] = real_walks
     config = BenchConfig.quick(**overrides) if quick else BenchConfig(**overrides)
     try:
         output = run_benchmark(config, out, scheduler, workers, progress=progress)
     except ValueError as exc:
         fail(str(exc))
     console.print(summary_table(output.rows, config.methods), soft_wrap=True)
+    if output.real_walks is not None:
+        console.print("real walks (real_walks.md):")
+        console.print(summary_table(output.real_walks, config.methods), soft_wrap=True)
     console.print(f"{len(output.rows)} attempts in {output.seconds:.0f} s; wrote {out}/report.md")

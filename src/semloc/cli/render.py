@@ -13,6 +13,7 @@ from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
+from semloc.demo import STATUS_STYLE
 from semloc.display import for_rich
 from semloc.eval.success import ROTATION_TOLERANCE_DEG, TRANSLATION_TOLERANCE_M
 from semloc.maps import ObjectMap
@@ -20,9 +21,6 @@ from semloc.results import Result
 
 LONG_REPLAY = 10
 """Replays of at least this many updates show a progress bar (on a terminal)."""
-
-STATUS_STYLE = {"localized": "green", "ambiguous": "yellow", "failed": "red"}
-"""The colour of each status wherever one is printed (CLI, demo)."""
 
 
 def print_result(result: Result, out: Console) -> None:

@@ -1,4 +1,5 @@
-"""`semloc demo`, `semloc simulate`, `semloc view`: the simulator's commands and pictures."""
+"""`semloc demo` (also `--scan` of a real scan), `semloc simulate`, `semloc view`: the simulator's
+commands and pictures."""
 
 from __future__ import annotations
 
@@ -24,6 +25,7 @@ from semloc.demo import DemoConfig, run_demo
 from semloc.display import for_rich
 from semloc.io import load_map
 from semloc.io.native import staged_folder
+from semloc.scandemo import ScanDemoConfig, run_scan_demo
 from semloc.sim.export import write_sequence
 from semloc.sim.noise import DetectionNoise
 from semloc.sim.scenario import simulate_sequence
@@ -37,12 +39,18 @@ def demo(
     seed: Annotated[int, typer.Option(help="World and noise seed.")] = 0,
     size: Annotated[str, typer.Option(help=SIZE_HELP)] = "small",
     map_kind: Annotated[
-        MapKindChoice, typer.Option(help="Global map: scan reconstruction, CAD models, or moved.")
-    ] = MapKindChoice["reconstruction"],
+        MapKindChoice | None,
+        typer.Option(
+            help="Global map: scan reconstruction, CAD models, or moved (default: "
+            "reconstruction; with --scan of a Scan2CAD scene: cad)."
+        ),
+    ] = None,
     path: Annotated[
         PathChoice, typer.Option(help="Camera path: walk through rooms, or orbit in one room.")
     ] = PathChoice["walk"],
-    keyframes: Annotated[int, typer.Option(min=2, max=2000, help="Number of keyframes.")] = 40,
+    keyframes: Annotated[
+        int | None, typer.Option(min=2, max=2000, help="Number of keyframes (40; --scan: 60).")
+    ] = None,
     rooms: Annotated[int, typer.Option(min=1, help="Rooms the walk visits.")] = 2,
     resolution: Annotated[str, typer.Option(help=RESOLUTION_HELP)] = "240x180",
     gamma: Annotated[float, typer.Option(help="Merge threshold of the clustering.")] = 0.8,
@@ -50,6 +58,16 @@ def demo(
         float,
         typer.Option(min=0, max=0.2, help="Odometry drift, m per m travelled (heading: 25x in °)."),
     ] = 0.0,
+    scan: Annotated[
+        Path | None,
+        typer.Option(
+            help="A real scan instead of a generated world: a ScanNet or Scan2CAD scene folder "
+            "(also looked up under $SEMLOC_DATA or ../shared/data/real, e.g. scene0000_00)."
+        ),
+    ] = None,
+    shapenet: Annotated[
+        Path | None, typer.Option(help="ShapeNet root of a Scan2CAD --scan (default: beside it).")
+    ] = None,
     rrd: Annotated[
         Path | None,
         typer.Option("--rrd", help="Also write a 3D Rerun recording of the updates (rerun FILE)."),
@@ -58,19 +76,27 @@ def demo(
     """The main job: walk a camera through a generated world and relocalize incrementally.
 
     Simulated RGB-D frames -> detections -> local objects -> Localizer.update per keyframe.
+    With --scan the frames are ray-cast from a real scan's mesh and its instance labels.
 
     Prints a live table and the pose error against ground truth; writes scores.png and map.png.
     """
     check_finite(gamma=gamma, drift=drift)
     need("demo", "sim")
     need("demo", "viz", modules=("matplotlib",) if rrd is None else ("matplotlib", "rerun"))
+    if scan is not None and rrd is not None:
+        fail("--rrd is not available with --scan")
+    common = {"seed": seed, "resolution": parse_resolution(resolution), "gamma": gamma,
+              "drift": drift, "out": out}  # fmt: skip
+    if keyframes is not None:
+        common["keyframes"] = keyframes
+    kind = None if map_kind is None else map_kind.value
     try:
-        config = DemoConfig(
-            seed=seed, size=size, map_kind=map_kind.value, path=path.value, keyframes=keyframes,
-            rooms=rooms, resolution=parse_resolution(resolution), gamma=gamma, drift=drift, out=out,
-            rrd=rrd,
-        )  # fmt: skip
-        run_demo(config, console)
+        if scan is not None:
+            config = ScanDemoConfig(scan=scan, map_kind=kind, shapenet=shapenet, **common)
+            run_scan_demo(config, console)
+        else:
+            run_demo(DemoConfig(size=size, map_kind=kind or "reconstruction", path=path.value,
+                                rooms=rooms, rrd=rrd, **common), console)  # fmt: skip
     except ValidationError as exc:
         fail(f"invalid option: {first_error(exc)}")
     except ValueError as exc:

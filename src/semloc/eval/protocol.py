@@ -40,7 +40,9 @@ class BenchConfig(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
     seed: int = Field(0, description="Base seed: sequence worlds, start keyframes, methods.")
-    sequences: int = Field(6, ge=1, description="Simulated sequences (worlds).")
+    sequences: int = Field(
+        6, ge=0, description="Simulated sequences (worlds); 0: only the real-data parts."
+    )
     size: str = Field("small", description="World size of the simulated sequences.")
     keyframes: int = Field(80, ge=40, description="Keyframes per sequence.")
     starts: int = Field(8, ge=1, description="Random start keyframes per sequence.")
@@ -53,12 +55,18 @@ class BenchConfig(BaseModel):
     ablation_starts: int = Field(4, ge=0, description="Starts per sequence of the γ ablation.")
     ablation_top_k: int = Field(20, ge=1, description="Hypotheses kept in the γ ablation.")
     real: bool = Field(True, description="Add the real-layout pairs when their data is present.")
+    real_walks: bool = Field(
+        False, description="Also walk through the real scans (eval.realwalks)."
+    )
+    real_walk_count: int = Field(3, ge=1, description="Camera walks per real scan.")
+    real_walk_keyframes: int = Field(80, ge=40, description="Keyframes per real walk.")
+    real_walk_starts: int = Field(8, ge=1, description="Random start keyframes per real walk.")
 
     @classmethod
     def quick(cls, **overrides: Any) -> BenchConfig:
         """A small but meaningful subset: minutes on 2 cores."""
         base = dict(sequences=2, keyframes=60, starts=3, gammas=[0.5, 0.8, 0.95],
-                    ablation_starts=2)  # fmt: skip
+                    ablation_starts=2, real_walk_count=1, real_walk_starts=4)  # fmt: skip
         return cls(**{**base, **overrides})
 
 

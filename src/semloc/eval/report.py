@@ -30,7 +30,8 @@ from semloc.sim.mapkinds import MAP_KINDS
 
 TOLERANCES = np.round(np.arange(0.05, 1.501, 0.05), 3)
 KS = list(range(1, 21))
-_KIND_ORDER = {kind: i for i, kind in enumerate(MAP_KINDS)}
+_KIND_ORDER = {kind: i for i, kind in enumerate([*MAP_KINDS, *(f"real {k}" for k in MAP_KINDS)])}
+"""Simulated map kinds first, then those of the real walks (eval.realwalks) in the same order."""
 OBJECT_BINS = [(3, 4), (5, 6), (7, 9), (10, 14), (15, 19), (20, 29), (30, 1000)]
 
 
@@ -175,7 +176,7 @@ def write_outputs(out: Path, config, rows, hyps, ablation, seconds: float) -> li
     methods = [m for m in config.methods if any(r["method"] == m for r in rows)]
     kinds = [k for k in config.map_kinds if any(r["map_kind"] == k for r in rows)]
     figures = []
-    if rows:
+    if kinds:  # simulated rows (none with --sequences 0)
         figures.append(save_figure(comparison_figure(rows, hyps, methods, kinds),
                                    out / "comparison.png"))  # fmt: skip
         sim = [r for r in rows if r["map_kind"] != "real"]

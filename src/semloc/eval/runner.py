@@ -8,7 +8,8 @@ progress bar.  Rows are sorted before writing, so the outputs do not depend on c
 order: for a fixed seed everything except the `ms` column is reproducible.
 
 Outputs (all or none: built beside `out` and moved in at the end): results.csv, hypotheses.csv,
-ablation.csv, the PNG figures and report.md.
+ablation.csv, the PNG figures and report.md; with `real_walks` also those of
+`semloc.eval.realwalks` (written into `out` as they are computed).
 """
 
 from __future__ import annotations
@@ -42,6 +43,7 @@ class BenchOutput:
     ablation: list[dict]
     files: list[Path]
     seconds: float
+    real_walks: list[dict] | None = None  # rows of real_walks.csv with --real-walks
 
 
 def _sequence_task(config: BenchConfig, index: int):
@@ -99,6 +101,10 @@ def run_benchmark(
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn
 
     begin = time.perf_counter()
+    if config.real_walks:
+        from semloc.eval import realwalks  # open3d: only for the real walks
+
+        realwalks.real_walk_data()  # missing scans: say so before the long run
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise ValueError(f"{out}: exists and is not a folder")
@@ -144,6 +150,9 @@ def run_benchmark(
                     rows += chain_rows
                     hyps += chain_hyps
                 bar.advance(task)
+        if config.real_walks:
+            out.mkdir(parents=True, exist_ok=True)  # the real-walk files are written as they come
+            real = realwalks.run_real_walks(client, config, out, progress)
     finally:
         client.close()
         if cluster is not None:
@@ -155,4 +164,7 @@ def run_benchmark(
     with staged_folder(out, index="report.md") as stage:  # all files or none
         staged = write_outputs(stage, config, rows, hyps, ablation_rows, seconds)
     files = [out / f.relative_to(stage) for f in staged]
+    if config.real_walks:
+        files += real["files"]
+        return BenchOutput(rows, hyps, ablation_rows, files, seconds, real["rows"])
     return BenchOutput(rows, hyps, ablation_rows, files, seconds)

@@ -1,0 +1,362 @@
+"""Speed and memory of full localizations with point sets, from rooms to buildings (issue 11).
+
+    PYTHONPATH=src python benchmarks/bench_speed.py [--quick] [--sizes 300 1000 3000 10000 20000]
+        [--views 3 5 8] [--trials 5] [--markdown TABLE.md]
+
+Maps: the real samples (ScanNet scene0000_00 via `load_scannet`, Replica office4 via
+`load_replica`; found by `semloc.io.datasets.real_data_dir()`, rows skipped with a note when
+absent) and simulated buildings of about 300 / 1k / 3k / 10k / 20k objects
+(`semloc.sim.layouts.layout`: classrooms, meeting rooms, offices, ... full of repeated objects;
+320 box-surface points per object).  Local views: the 3 / 5 / 8 objects nearest to a viewpoint
+near a random object (`crop_with_truth`: visible-side points, ~160 per object, random
+heading).  A localization is `semloc.localize` (one update per object in the crop's `seen`
+order, the answer at the last one); streaming feeds the same objects one per
+`Localizer.update`, with an answer at every update (on the largest view size only, to keep
+the run short).
+
+Each map runs in its own process, pinned to one core (`--cpu`), and reports its peak resident
+memory (ru_maxrss: interpreter, map and points included).  Printed per map and view size:
+median / p90 / max ms of a full localization (`localize`, Localizer construction included),
+the same for one streaming update, time by stage (`Result.timing_ms` of the localization,
+summed over its updates), success (rotation < 15°, translation < 0.5 m), and
+a label-constrained RANSAC on centres on the same cases (2 same-label pairs per hypothesis,
+4-DoF closed form about gravity, inliers: local centres within 0.5 m of a same-label global
+centre; its per-map label trees built inside its timing), as the ratio semloc / RANSAC.  Last,
+how time and memory grow with the buildings' size: the slope of a log-log fit.
+
+Times are CPU seconds of the benchmark process (`time.process_time`; the stage times too, by
+reading the Localizer's clock as process time), so that other work on a shared machine does
+not inflate them; wall-clock medians of the localizations are printed beside.
+"""
+
+from __future__ import annotations
+
+import os
+
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")  # one core, as the targets are stated
+
+import argparse  # noqa: E402
+import json  # noqa: E402
+import resource  # noqa: E402
+import subprocess  # noqa: E402
+import sys  # noqa: E402
+import time  # noqa: E402
+from dataclasses import asdict, dataclass, field  # noqa: E402
+
+import numpy as np  # noqa: E402
+from scipy.spatial import cKDTree  # noqa: E402
+
+import semloc.localizer as localizer_module  # noqa: E402
+from semloc.eval.datasets import real_data_dir  # noqa: E402
+from semloc.eval.success import is_success  # noqa: E402
+from semloc.io.importers.replica import load_replica  # noqa: E402
+from semloc.io.importers.scannet import load_scannet  # noqa: E402
+from semloc.localizer import Localizer, localize  # noqa: E402
+from semloc.maps import ObjectMap  # noqa: E402
+from semloc.sim.crop import crop_with_truth  # noqa: E402
+from semloc.sim.layouts import layout  # noqa: E402
+
+POINTS_PER_OBJECT = 320  # about half of them face a viewpoint
+FULL = {"sizes": [300, 1000, 3000, 10000, 20000], "views": [3, 5, 8], "trials": 5}
+QUICK = {"sizes": [300, 3000], "views": [8], "trials": 3}
+INLIER_M = 0.5
+RANSAC_HYPOTHESES = 500
+
+
+@dataclass
+class Case:
+    """The measurements of one localization."""
+
+    ms: float
+    wall_ms: float
+    update_ms: list[float]
+    stages: dict[str, float]
+    success: bool
+    ransac_ms: float
+    ransac_success: bool
+
+
+@dataclass
+class Row:
+    """One map and view size: its cases and the process's peak memory."""
+
+    map: str
+    n_objects: int
+    view: int
+    cases: list[Case] = field(default_factory=list)
+    peak_mb: float = 0.0
+
+
+# ---------------------------------------------------------------------------------------------
+# Maps and views
+def load_map(name: str, points: int = POINTS_PER_OBJECT) -> ObjectMap | None:
+    """A map by name: 'scannet', 'replica' or 'building-N' (None: real data absent)."""
+    if name.startswith("building-"):
+        n = int(name.split("-")[1])
+        return layout(n, seed=n, points_per_object=points)
+    data = real_data_dir()
+    if data is None:
+        return None
+    if name == "scannet":
+        folder = data / "scannet" / "scene0000_00"
+        return load_scannet(folder) if folder.is_dir() else None
+    folder = data / "replica" / "office4"
+    return load_replica(folder) if folder.is_dir() else None
+
+
+def views(global_map: ObjectMap, size: int, trials: int, seed: int):
+    """`trials` local views of the `size` objects nearest to a viewpoint near an object."""
+    rng = np.random.default_rng(seed)
+    up = np.asarray(global_map.up if global_map.up is not None else [0.0, 0.0, 1.0])
+    for _ in range(trials):
+        anchor = global_map.positions[rng.integers(len(global_map))]
+        center = anchor + np.cross(up, rng.normal(size=3)) * 0.7  # beside the object
+        distances = np.sort(np.linalg.norm(global_map.positions - center, axis=1))
+        radius = float(distances[min(size, len(distances)) - 1]) + 1e-6
+        yield crop_with_truth(global_map, center, radius, "random", int(rng.integers(2**31)))
+
+
+# ---------------------------------------------------------------------------------------------
+# The RANSAC baseline
+def ransac(global_map: ObjectMap, local_map: ObjectMap, seed: int) -> np.ndarray | None:
+    """Label-constrained RANSAC on centres: 4-DoF pose from 2 same-label pairs, most inliers."""
+    rng = np.random.default_rng(seed)
+    labels = np.char.lower(np.asarray(global_map.labels, dtype=str))
+    local_labels = np.char.lower(np.asarray(local_map.labels, dtype=str))
+    groups = {label: np.flatnonzero(labels == label) for label in set(local_labels)}
+    groups = {label: g for label, g in groups.items() if len(g)}
+    trees = {label: cKDTree(global_map.positions[g]) for label, g in groups.items()}
+    usable = np.flatnonzero([label in groups for label in local_labels])
+    if len(usable) < 2:
+        return None
+    local_xyz = local_map.positions
+    i, j = _two_distinct(rng, usable, RANSAC_HYPOTHESES)
+    gi = np.array([rng.choice(groups[local_labels[k]]) for k in i])
+    gj = np.array([rng.choice(groups[local_labels[k]]) for k in j])
+    poses = _yaw_poses(
+        local_xyz[i], local_xyz[j], global_map.positions[gi], global_map.positions[gj]
+    )
+    aligned = local_xyz[None] @ np.swapaxes(poses[:, :3, :3], 1, 2) + poses[:, None, :3, 3]
+    inliers = np.zeros(len(poses), dtype=int)
+    for k in usable:
+        distance, _ = trees[local_labels[k]].query(aligned[:, k])
+        inliers += distance < INLIER_M
+    return poses[int(np.argmax(inliers))]
+
+
+def _two_distinct(rng, usable: np.ndarray, count: int) -> tuple[np.ndarray, np.ndarray]:
+    first = rng.integers(len(usable), size=count)
+    second = (first + rng.integers(1, len(usable), size=count)) % len(usable)
+    return usable[first], usable[second]
+
+
+def _yaw_poses(l1, l2, g1, g2) -> np.ndarray:
+    """Gravity-aligned (z up) poses mapping local pairs (l1, l2) onto global (g1, g2)."""
+    dl, dg = (l2 - l1)[:, :2], (g2 - g1)[:, :2]
+    yaw = np.arctan2(dg[:, 1], dg[:, 0]) - np.arctan2(dl[:, 1], dl[:, 0])
+    c, s = np.cos(yaw), np.sin(yaw)
+    poses = np.tile(np.eye(4), (len(yaw), 1, 1))
+    poses[:, 0, 0], poses[:, 0, 1], poses[:, 1, 0], poses[:, 1, 1] = c, -s, s, c
+    mid_l, mid_g = (l1 + l2) / 2, (g1 + g2) / 2
+    poses[:, :3, 3] = mid_g - np.einsum("nij,nj->ni", poses[:, :3, :3], mid_l)
+    return poses
+
+
+# ---------------------------------------------------------------------------------------------
+# One map (in its own process)
+def measure_map(name: str, view_sizes: list[int], trials: int, seed: int, points: int):
+    global_map = load_map(name, points)
+    if global_map is None:
+        return []
+    localizer_module.time = _ProcessClock  # Result.timing_ms in CPU ms, like the totals
+    rows = []
+    for view in view_sizes:
+        row = Row(name, len(global_map), view)
+        stream = view == max(view_sizes)
+        for case, (local, truth) in enumerate(views(global_map, view, trials, seed + view)):
+            row.cases.append(measure_case(global_map, local, truth.T_global_local, case, stream))
+        rows.append(row)
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024  # kB on Linux
+    for row in rows:
+        row.peak_mb = peak
+    return rows
+
+
+class _ProcessClock:
+    """Stands in for the `time` module of semloc.localizer: its stage times in CPU seconds."""
+
+    perf_counter = staticmethod(time.process_time)
+
+
+def measure_case(
+    global_map: ObjectMap, local: ObjectMap, truth: np.ndarray, seed: int, stream: bool
+) -> Case:
+    wall, cpu = time.perf_counter(), time.process_time()
+    result = localize(global_map, local)
+    cpu, wall = time.process_time() - cpu, time.perf_counter() - wall
+    update_ms = []
+    if stream:  # the same objects one per update, an answer at every update
+        localizer = Localizer(global_map, local_up=local.up)
+        for obj in sorted(local, key=lambda o: o.seen):
+            tick = time.process_time()
+            localizer.update([obj])
+            update_ms.append((time.process_time() - tick) * 1e3)
+    ransac_cpu = time.process_time()
+    pose = ransac(global_map, local, seed)
+    ransac_cpu = time.process_time() - ransac_cpu
+    return Case(
+        ms=cpu * 1e3,
+        wall_ms=wall * 1e3,
+        update_ms=update_ms,
+        stages={k: float(v) for k, v in result.timing_ms.items()},
+        success=result.pose is not None and bool(is_success(result.pose, truth)),
+        ransac_ms=ransac_cpu * 1e3,
+        ransac_success=pose is not None and bool(is_success(pose, truth)),
+    )
+
+
+def run_child(name: str, args: argparse.Namespace) -> list[Row]:
+    """Measure one map in a fresh process pinned to one core; its rows."""
+    command = [sys.executable, __file__, "--worker", name, "--trials", str(args.trials)]
+    command += ["--views", *map(str, args.views), "--seed", str(args.seed)]
+    command += ["--points", str(args.points)]
+    if args.cpu >= 0 and hasattr(os, "sched_setaffinity"):
+        command = ["taskset", "-c", str(args.cpu), *command]
+    done = subprocess.run(command, capture_output=True, text=True, check=False)
+    if done.returncode != 0:
+        print(f"{name}: failed\n{done.stderr[-2000:]}", file=sys.stderr)
+        return []
+    rows = []
+    for raw in json.loads(done.stdout.strip().splitlines()[-1]):
+        cases = [Case(**case) for case in raw.pop("cases")]
+        rows.append(Row(**raw, cases=cases))
+    return rows
+
+
+# ---------------------------------------------------------------------------------------------
+# Tables
+def _stats(values: list[float]) -> tuple[float, float, float]:
+    return float(np.median(values)), float(np.percentile(values, 90)), float(np.max(values))
+
+
+def _fmt(values: list[float]) -> str:
+    median, p90, most = _stats(values)
+    return f"{median:.1f} / {p90:.1f} / {most:.1f}"
+
+
+def speed_table(rows: list[Row]) -> str:
+    lines = [
+        "| map | objects | view | localization ms (median / p90 / max) | wall median | "
+        "update ms (median / p90 / max) | peak MB | success | RANSAC ms | time ÷ RANSAC | "
+        "RANSAC success |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+    ]
+    for row in rows:
+        ms = [c.ms for c in row.cases]
+        updates = [u for c in row.cases for u in c.update_ms]
+        ransac_ms = [c.ransac_ms for c in row.cases]
+        ratio = np.median(ms) / max(np.median(ransac_ms), 1e-9)
+        lines.append(
+            f"| {row.map} | {row.n_objects} | {row.view} | {_fmt(ms)} | "
+            f"{np.median([c.wall_ms for c in row.cases]):.1f} | "
+            f"{_fmt(updates) if updates else '-'} | "
+            f"{row.peak_mb:.0f} | {_rate([c.success for c in row.cases])} | "
+            f"{np.median(ransac_ms):.1f} | {ratio:.1f} | "
+            f"{_rate([c.ransac_success for c in row.cases])} |"
+        )
+    return "\n".join(lines)
+
+
+def stage_table(rows: list[Row]) -> str:
+    stages = sorted({k for row in rows for c in row.cases for k in c.stages})
+    ordered = [k for k in stages if k != "total"] + (["total"] if "total" in stages else [])
+    lines = [
+        "| map | objects | view | " + " | ".join(f"{k} ms" for k in ordered) + " |",
+        "|---|---:|---:|" + "---:|" * len(ordered),
+    ]
+    for row in rows:
+        cells = [f"{np.median([c.stages.get(k, 0.0) for c in row.cases]):.1f}" for k in ordered]
+        lines.append(f"| {row.map} | {row.n_objects} | {row.view} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def growth_table(rows: list[Row]) -> str:
+    """Log-log slopes of median time and of peak memory against the buildings' size."""
+    buildings = [row for row in rows if row.map.startswith("building-")]
+    lines = [
+        "| view | time slope | memory slope | sizes |",
+        "|---:|---:|---:|---|",
+    ]
+    for view in sorted({row.view for row in buildings}):
+        group = sorted((r for r in buildings if r.view == view), key=lambda r: r.n_objects)
+        if len(group) < 2:
+            continue
+        n = np.log([r.n_objects for r in group])
+        time_slope = np.polyfit(n, np.log([np.median([c.ms for c in r.cases]) for r in group]), 1)
+        memory_slope = np.polyfit(n, np.log([r.peak_mb for r in group]), 1)
+        sizes = ", ".join(str(r.n_objects) for r in group)
+        lines.append(f"| {view} | {time_slope[0]:.2f} | {memory_slope[0]:.2f} | {sizes} |")
+    return "\n".join(lines)
+
+
+def _rate(flags: list[bool]) -> str:
+    return f"{100 * np.mean(flags):.0f}%" if flags else "-"
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="sizes 300 and 3000, views of 8")
+    parser.add_argument("--sizes", type=int, nargs="+", help="building sizes (objects)")
+    parser.add_argument("--views", type=int, nargs="+", help="local view sizes (objects)")
+    parser.add_argument("--trials", type=int, help="localizations per map and view size")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--cpu", type=int, default=0, help="core to pin to (-1: no pinning)")
+    parser.add_argument("--markdown", help="also write the tables to this file")
+    parser.add_argument(
+        "--points", type=int, default=POINTS_PER_OBJECT, help="points per building object"
+    )
+    parser.add_argument("--no-real", action="store_true", help="buildings only")
+    parser.add_argument("--worker", help=argparse.SUPPRESS)
+    args = parser.parse_args(argv)
+    preset = QUICK if args.quick else FULL
+    args.sizes = args.sizes or preset["sizes"]
+    args.views = args.views or preset["views"]
+    args.trials = args.trials or preset["trials"]
+    if args.worker:
+        rows = measure_map(args.worker, args.views, args.trials, args.seed, args.points)
+        print(json.dumps([asdict(row) for row in rows]))
+        return 0
+    start = time.perf_counter()
+    rows, notes = [], []
+    real = [] if args.no_real else ["scannet", "replica"]
+    for name in [*real, *(f"building-{n}" for n in args.sizes)]:
+        found = run_child(name, args)
+        if not found and not name.startswith("building-"):
+            notes.append(f"{name}: real data not found (set SEMLOC_DATA), rows skipped")
+        rows += found
+        print(f"done {name}", file=sys.stderr)
+    command = "PYTHONPATH=src python benchmarks/bench_speed.py " + " ".join(
+        argv if argv is not None else sys.argv[1:]
+    )
+    report = "\n\n".join(
+        [
+            f"`{command.strip()}` (CPU ms, one core; peak MB: resident memory of the process)",
+            speed_table(rows),
+            "Time by stage (median over the cases, summed over the updates of a localization)",
+            stage_table(rows),
+            "Growth with the building's size (log-log slope; 1 = linear)",
+            growth_table(rows),
+            *notes,
+            f"run time {time.perf_counter() - start:.0f} s",
+        ]
+    )
+    print(report)
+    if args.markdown:
+        with open(args.markdown, "w", encoding="utf-8") as out:
+            out.write(report + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
