@@ -1,9 +1,9 @@
 """The folder tree is the architecture: the core imports nothing from the applications.
 
-Core modules (`CORE`) may import only each other (and numpy, scipy, pydantic, the standard
-library) — anywhere in the file, also inside functions.  The run-time descriptors import only
-the core.  Function-local imports of semloc's own modules stay few (heavy optional
-dependencies are the reason to import late).  `import semloc` loads no extra.
+Core modules (`CORE`) may import only each other (and numpy, scipy, pydantic, small_gicp,
+the standard library) — anywhere in the file, also inside functions.  The run-time
+descriptors import only the core.  Function-local imports of semloc's own modules stay few
+(heavy optional dependencies are the reason to import late).  `import semloc` loads no extra.
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ import semloc
 PACKAGE = Path(semloc.__file__).parent
 CORE = {"maps", "pointsets", "transforms", "association", "clustering", "pose", "results",
         "decision", "localizer"}  # fmt: skip
-THIRD_PARTY_CORE = {"numpy", "scipy", "pydantic"}
+THIRD_PARTY_CORE = {"numpy", "scipy", "pydantic", "small_gicp"}
 EXTRAS = ("open3d", "matplotlib", "dask", "distributed", "sklearn", "torch", "rerun")
 MAX_LOCAL_SEMLOC_IMPORTS = 10
 

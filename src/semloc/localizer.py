@@ -6,6 +6,12 @@ distinct pose hypotheses and decides (`decision.py`).  Only the chosen hypothese
 pose recovery (global search, robust ICP); `update(objects, answer=False)` only grows the
 association sets, for callers that read the answer later (a replay reads only its last one).
 
+Streaming: the poses of the last answer are kept per association set (keyed by its pairs and
+whether it was refined).  A set that is unchanged at the next answer reuses its estimate; a set
+that grew is recovered warm-started from the pose of its largest kept subset; a re-detected
+local object drops the kept poses that used it.  Object clouds for pose recovery are prepared
+once per object (`pose.cached_cloud`), so all Localizers of one map share them.
+
 `localize(global_map, local_map)` replays a local map by its `seen` keyframes.
 """
 
@@ -22,8 +28,13 @@ from semloc.association import AssociationConfig, CandidateIndex, Describer
 from semloc.clustering import AssociationSet, ClusteringConfig, HierarchicalClustering
 from semloc.decision import DecisionConfig, RankBy, decide, distinct, rank
 from semloc.maps import MapError, ObjectMap, SemanticObject, unit_vector
-from semloc.pointsets import voxel_downsample
-from semloc.pose import PoseConfig, PoseEstimate, align_positions_batch, estimate_pose
+from semloc.pose import (
+    PoseConfig,
+    PoseEstimate,
+    align_positions_batch,
+    cached_cloud,
+    estimate_pose,
+)
 from semloc.results import Hypothesis, Result, Status, Step
 from semloc.transforms import centre_residual, centre_residuals
 
@@ -123,8 +134,7 @@ class Localizer:
         self.descriptor_gate = config.association.gate(self._describer)
         self._candidates = CandidateIndex(global_map, config.association, self.descriptor_gate)
         self._pose_unrefined = config.pose.model_copy(update={"refine": False})
-        self._global_clouds: dict[int, np.ndarray | None] = {}
-        self._local_clouds: dict[str, np.ndarray | None] = {}
+        self._poses: dict[_PoseKey, PoseEstimate | None] = {}  # of the last answer's sets
         self._clustering = HierarchicalClustering(
             global_map.positions, list(global_map.ids), config.clustering
         )
@@ -212,8 +222,11 @@ class Localizer:
             objects = self._describer.describe(objects)
         for obj in objects:
             index = self._local_index.setdefault(obj.id, len(self._local_index))
+            if obj.id in self._local:  # re-detected: poses that used the old version are stale
+                self._poses = {
+                    k: v for k, v in self._poses.items() if all(l != index for _, l in k[1])
+                }
             self._local[obj.id] = obj
-            self._local_clouds[obj.id] = _cloud(obj.points, self.config.pose)
             detections[index] = self._candidates.candidates(obj)
         return detections
 
@@ -228,8 +241,10 @@ class Localizer:
             screened.sort(key=lambda item: (-len(item[0]), item[2], -item[0].score))
         places = [(s.pairs, pose) for s, pose, _ in screened]
         chosen = [screened[i] for i in distinct(places, cfg.top_k, cfg.decision)]
+        previous, self._poses = self._poses, {}
         hypotheses = [
-            self._hypothesis(rank, s, residual) for rank, (s, _, residual) in enumerate(chosen, 1)
+            self._hypothesis(rank, s, residual, previous)
+            for rank, (s, _, residual) in enumerate(chosen, 1)
         ]
         return rank(hypotheses, cfg.rank_by)
 
@@ -261,20 +276,15 @@ class Localizer:
                     poses[i], residuals[i] = pose, float(r)
         return poses, residuals
 
-    def _hypothesis(self, rank: int, aset: AssociationSet, residual: float) -> Hypothesis:
+    def _hypothesis(
+        self, rank: int, aset: AssociationSet, residual: float, previous: dict
+    ) -> Hypothesis:
         """Full pose recovery of one set; `residual` is its closed-form centre residual."""
         globals_, locals_ = self._matched(aset)
         l_xyz = np.array([o.position for o in locals_])
         g_xyz = np.array([o.position for o in globals_])
-        estimate: PoseEstimate | None = estimate_pose(
-            l_xyz,
-            g_xyz,
-            [self._local_clouds[o.id] for o in locals_],
-            [self._global_cloud(self.global_map.index_of(o.id)) for o in globals_],
-            self.local_up,
-            self.global_map.up,
-            self.config.pose if rank <= self.config.refine_top else self._pose_unrefined,
-        )
+        refine = rank <= self.config.refine_top
+        estimate = self._recover(aset, refine, previous, (l_xyz, g_xyz, locals_, globals_))
         pose = None if estimate is None else estimate.T
         if pose is not None and not np.isfinite(residual):  # pose found by the search
             residual = centre_residual(pose, l_xyz, g_xyz)
@@ -289,21 +299,44 @@ class Localizer:
             method="" if estimate is None else estimate.method,
         )
 
-    def _global_cloud(self, index: int) -> np.ndarray | None:
-        """The global object's points, downsampled once for pose recovery."""
-        if index not in self._global_clouds:
-            self._global_clouds[index] = _cloud(self.global_map[index].points, self.config.pose)
-        return self._global_clouds[index]
+    def _recover(
+        self, aset: AssociationSet, refine: bool, previous: dict, matched: tuple
+    ) -> PoseEstimate | None:
+        """The set's pose: reused when the previous answer recovered it for the same pairs
+        (same object versions), else recovered, warm-started from the pose of the largest
+        subset of its pairs that the previous answer recovered (refined ones first)."""
+        key: _PoseKey = (refine, frozenset(aset.pairs))
+        if key in previous:
+            estimate = previous[key]
+        else:
+            l_xyz, g_xyz, locals_, globals_ = matched
+            pose_cfg = self.config.pose if refine else self._pose_unrefined
+            estimate = estimate_pose(
+                l_xyz,
+                g_xyz,
+                [cached_cloud(o, pose_cfg) for o in locals_],
+                [cached_cloud(o, pose_cfg) for o in globals_],
+                self.local_up,
+                self.global_map.up,
+                pose_cfg,
+                init=_warm_start(key[1], previous),
+            )
+        self._poses[key] = estimate
+        return estimate
 
 
 _INF = float("inf")
+_PoseKey = tuple[bool, frozenset[tuple[int, int]]]  # (refined, pairs)
 
 
-def _cloud(points: np.ndarray | None, pose: PoseConfig) -> np.ndarray | None:
-    """An object's points voxel-downsampled as pose recovery would (None when it has none)."""
-    if points is None or len(points) == 0:
-        return None
-    return voxel_downsample(points, pose.icp_voxel)
+def _warm_start(pairs: frozenset, previous: dict[_PoseKey, PoseEstimate | None]):
+    """The pose of the largest recovered subset of `pairs` (refined first), or None."""
+    subsets = [
+        (len(k[1]), k[0], estimate.T)
+        for k, estimate in previous.items()
+        if estimate is not None and k[1] <= pairs
+    ]
+    return max(subsets, key=lambda s: s[:2])[2] if subsets else None
 
 
 def localize(

@@ -11,49 +11,68 @@ This module owns the last stage of the pipeline (paper, "Camera pose recovery"):
    (a 1-D sweep about the axis through the matched centres, or a coarse grid over SO(3) for a
    single 6-DoF pair) and scored by point-set fitness; the best few candidates are refined.
    This is the low-dimensional stand-in for the paper's Go-ICP.
-3. **Robust ICP** on the concatenated per-object point sets (local object points vs. the points
-   of their matched global objects): one numpy IRLS implementation for both modes
-   (scipy cKDTree nearest neighbours, Tukey biweight with a kernel annealed from
-   `icp_kernel_start` to `icp_kernel`, correspondences restricted to compatible normals,
-   weighted Kabsch in 6-DoF, weighted yaw + translation in 4-DoF; Open3D is not used).  A
-   refinement is kept only if it does not lower fitness.
+3. **Robust ICP** of each matched pair's points: a local object's points are matched only to
+   the points of its partner object.  Nearest neighbours come from small_gicp KD-trees (built
+   once per object, see `ObjectCloud`); the update is solved here, by Gauss-Newton on
+   point-to-plane plus a little point-to-point error with Tukey weights (kernel annealed from
+   `icp_kernel_start` to `icp_kernel`) and correspondences restricted to compatible normals.
+   The 4-DoF update is a rotation about the global `up` (plus a translation), and the result
+   is snapped to a yaw in the z-up frames, so `R @ up_local == up_global` holds exactly;
+   6-DoF updates the full rotation.  Coarse kernel levels move a thinned subset of the local
+   points.  A refinement is kept only if it does not lower fitness.
 
-4-DoF problems are solved in "canonical" frames: each side is rotated so that its `up` is +z,
-yaw + translation are solved there, and the result is rotated back, so `R @ up_local ==
-up_global` holds exactly.  Everything is pure computation on numpy arrays (no I/O, no plotting).
+Why not a registration library's own ICP loop: small_gicp and Open3D solve 6-DoF only, with
+no normal-compatibility test; semloc needs the exact gravity-aligned 4-DoF mode and
+partner-restricted correspondences, so it takes small_gicp's KD-trees (3-5x faster queries
+than scipy's cKDTree, reusable across calls) and solves the small linear systems itself.
+`benchmarks/bench_pose.py` compares the three on the same problems.
+
+Per-object preparation (voxel downsampling, a cap of `icp_max_points`, normals, flatness,
+KD-tree) is `prepare_cloud`; `cached_cloud` keeps it per object while the object lives, so a
+map's objects are prepared once however many localizations use them.  `estimate_pose` takes
+prepared `ObjectCloud`s or plain arrays (prepared on the fly) and an optional warm start.
+Everything is pure computation on numpy arrays (no I/O, no plotting).
 Convention: `T_global_local`, i.e. `p_global = R @ p_local + t`.
 """
 
 from __future__ import annotations
 
+import copy
+import functools
+import weakref
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Any, NamedTuple
 
 import numpy as np
+import small_gicp
 from pydantic import BaseModel, ConfigDict, Field
-from scipy.spatial import cKDTree
 
 from semloc.pointsets import voxel_downsample
 
 __all__ = [
+    "ObjectCloud",
     "PoseConfig",
     "PoseEstimate",
     "align_positions",
     "align_positions_batch",
+    "cached_cloud",
     "estimate_pose",
+    "prepare_cloud",
 ]
 
 _TOL = 1e-9  # spread (m) below which positions are mathematically degenerate
 _CENTRE_INLIER = 0.5  # m: centre-based fitness threshold (no points)
-_SEARCH_POINTS = 512  # local points used to score search candidates
+_SEARCH_POINTS = 256  # local points used to score search candidates
 _SEARCH_CANDIDATES = 3  # best local maxima refined after the coarse search
 _CANDIDATE_SHARE = 0.5  # ... if their score is at least this share of the best score
 _SO3_DIRECTIONS = 48  # Fibonacci directions of the 1-pair 6-DoF search (x yaw steps)
 _NORMAL_NEIGHBOURS = 8  # neighbours for normal estimation
-_COARSE_POINTS = 1000  # local points used by ICP while the kernel is above icp_kernel
-_SIGN_DIRECTION = np.array([1.0, 2.0, 3.0]) / np.sqrt(14.0)  # half-space for signed normals
-
-Solver = Callable[[np.ndarray, np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
+_MATCH_NEIGHBOURS = (16, 4)  # neighbours searched for a compatible normal: coarse, final
+_COARSE_POINTS = 200  # local points used by ICP while the kernel is above icp_kernel
+_FLAT_VARIATION = 0.05  # surface variation at which a neighbourhood stops counting as flat
+_CONVERGED = 0.01  # an ICP step moving the points less than this x kernel has converged
+_POINT_TO_POINT = 0.1  # weight of the point-to-point error next to the point-to-plane error
 
 
 class PoseConfig(BaseModel):
@@ -62,12 +81,18 @@ class PoseConfig(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
     refine: bool = Field(True, description="Run robust ICP when both sides have object points.")
-    icp_iterations: int = Field(30, ge=0, description="Maximum number of ICP (IRLS) iterations.")
+    icp_iterations: int = Field(30, ge=0, description="Maximum number of ICP iterations.")
     icp_voxel: float = Field(
         0.05, ge=0, description="Voxel size (m) for downsampling before ICP / fitness; 0 = off."
     )
     icp_max_points: int = Field(
-        4000, ge=3, description="Points per side after downsampling (seeded random subsample)."
+        2000, ge=3, description="Points kept per object after downsampling (seeded subsample)."
+    )
+    local_points: int = Field(
+        500,
+        ge=3,
+        description="Local points one pose recovery moves, matches and counts (ICP, fitness, "
+        "search): the matched local objects' points thinned evenly to at most this many.",
     )
     icp_kernel: float = Field(
         0.1, gt=0, description="Final Tukey kernel scale (m): residuals beyond it get no weight."
@@ -96,7 +121,7 @@ class PoseConfig(BaseModel):
         description="Centres spread less than this (m; horizontally in 4-DoF, off their best line "
         "in 6-DoF) are treated as degenerate and resolved by the search when points exist.",
     )
-    seed: int = Field(0, description="Seed of the random point subsampling.")
+    seed: int = Field(0, description="Seed of the per-object point subsampling.")
 
 
 @dataclass(frozen=True)
@@ -295,76 +320,88 @@ def _align(src, dst, w, up_local, up_global) -> tuple[np.ndarray, np.ndarray]:
     return T, ~_degenerate(src, dst, w, False, _TOL)
 
 
-# --------------------------------------------------------------------------- point sets
+# --------------------------------------------------------------------------- object clouds
 
 
-def _downsample(points: np.ndarray, voxel: float, max_points: int, rng) -> np.ndarray:
-    """Voxel-grid means, then a seeded random subsample of at most `max_points`."""
-    points = voxel_downsample(points, voxel)
-    if len(points) > max_points:
-        points = points[np.sort(rng.choice(len(points), max_points, replace=False))]
-    return points
+@dataclass(frozen=True, eq=False)
+class ObjectCloud:
+    """One object's points prepared for pose recovery: downsampled to at most `icp_max_points`
+    voxel means, with unoriented unit normals, how flat each neighbourhood is (the weight of
+    the point-to-plane error there), its bounding box and a small_gicp KD-tree."""
+
+    points: np.ndarray
+    normals: np.ndarray
+    flatness: np.ndarray  # (n,) in [0, 1]: 1 where the neighbourhood is a plane, 0 if not flat
+    box: np.ndarray  # (2, 3): lower and upper corner
+    tree: small_gicp.KdTree
+
+    def nearest(self, query: np.ndarray, k: int, bound: float) -> tuple[np.ndarray, np.ndarray]:
+        """Indices (n, k) and distances (n, k) of the k nearest cloud points of each query,
+        inf (index 0) where none is within `bound`.  Only queries within `bound` of the
+        bounding box are looked up: a KD-tree search from far away is slow, its answer unused."""
+        near = np.all((query >= self.box[0] - bound) & (query <= self.box[1] + bound), axis=1)
+        idx = np.zeros((len(query), k), dtype=np.intp)
+        sq = np.full((len(query), k), np.inf)
+        if near.any():
+            found, d2 = self.tree.batch_knn_search(query[near], min(k, len(self.points)))
+            idx[near, : found.shape[1]], sq[near, : found.shape[1]] = found, d2
+        dist = np.sqrt(sq)
+        dist[dist > bound] = np.inf
+        return idx, dist
 
 
-def _clouds(
-    local_points: Sequence[np.ndarray | None] | None,
-    global_points: Sequence[np.ndarray | None] | None,
-    n: int,
-    cfg: PoseConfig,
-) -> tuple[np.ndarray, np.ndarray] | None:
-    """Concatenated, downsampled point sets of the pairs that have points on both sides."""
-    if local_points is None or global_points is None:
+def prepare_cloud(points: object, config: PoseConfig | None = None) -> ObjectCloud | None:
+    """`points` (N, 3) as pose recovery uses them: voxel means (`icp_voxel`), a seeded
+    subsample of at most `icp_max_points`, normals and a KD-tree; None when there are none."""
+    cfg = config or PoseConfig()
+    points = np.asarray(points, dtype=float)
+    if points.size == 0:
         return None
-    if len(local_points) != n or len(global_points) != n:
-        raise ValueError(f"point sequences must have one entry per matched pair ({n})")
-    src, dst = [], []
-    for i, (p, q) in enumerate(zip(local_points, global_points, strict=True)):
-        if p is None or q is None:
-            continue
-        p, q = np.asarray(p, dtype=float), np.asarray(q, dtype=float)
-        if p.size == 0 or q.size == 0:
-            continue
-        src.append(_xyz(p, f"local points of pair {i}"))
-        dst.append(_xyz(q, f"global points of pair {i}"))
-    if not src:
-        return None
-    rng = np.random.default_rng(cfg.seed)
-    args = (cfg.icp_voxel, cfg.icp_max_points, rng)
-    return _downsample(np.concatenate(src), *args), _downsample(np.concatenate(dst), *args)
+    points = voxel_downsample(_xyz(points, "points"), cfg.icp_voxel)
+    if len(points) > cfg.icp_max_points:
+        keep = np.random.default_rng(cfg.seed).choice(len(points), cfg.icp_max_points, False)
+        points = points[np.sort(keep)]
+    points = np.ascontiguousarray(points)
+    tree = small_gicp.KdTree(points)
+    box = np.stack([points.min(axis=0), points.max(axis=0)])
+    return ObjectCloud(points, *_normals(points, tree), box, tree)
 
 
-def _apply(T: np.ndarray, points: np.ndarray) -> np.ndarray:
-    return points @ T[:3, :3].T + T[:3, 3]
+_CLOUDS: weakref.WeakKeyDictionary[Any, dict[tuple, ObjectCloud | None]] = (
+    weakref.WeakKeyDictionary()
+)
 
 
-def _point_fitness(T, src, tree: cKDTree, radius: float) -> tuple[float, float]:
-    d, _ = tree.query(_apply(T, src), distance_upper_bound=radius)
-    inliers = d[np.isfinite(d)]
-    rmse = float(np.sqrt(np.mean(inliers**2))) if len(inliers) else 0.0
-    return len(inliers) / len(src), rmse
+def cached_cloud(owner: Any, config: PoseConfig | None = None) -> ObjectCloud | None:
+    """`prepare_cloud(owner.points, config)`, computed once per owner and preparation settings
+    while the owner lives.  The owner is an immutable object with `.points` (a
+    `SemanticObject`: a re-detection is a new object), so a map's objects are prepared once
+    per map, whichever Localizer asks, and a local object once per version."""
+    cfg = config or PoseConfig()
+    key = (cfg.icp_voxel, cfg.icp_max_points, cfg.seed)
+    clouds = _CLOUDS.setdefault(owner, {})
+    if key not in clouds:
+        points = owner.points
+        clouds[key] = None if points is None else prepare_cloud(points, cfg)
+    return clouds[key]
 
 
-def _centre_fitness(T, src, dst) -> tuple[float, float]:
-    d = np.linalg.norm(_apply(T, src) - dst, axis=1)
-    inliers = d[d < _CENTRE_INLIER]
-    rmse = float(np.sqrt(np.mean(inliers**2))) if len(inliers) else 0.0
-    return len(inliers) / len(src), rmse
-
-
-# --------------------------------------------------------------------------- robust ICP
-
-
-def _normals(points: np.ndarray, tree: cKDTree | None = None) -> np.ndarray:
-    """Unoriented unit normals: smallest-eigenvalue direction of the k-neighbour covariance."""
+def _normals(points: np.ndarray, tree: small_gicp.KdTree) -> tuple[np.ndarray, np.ndarray]:
+    """Unoriented unit normals (smallest-eigenvalue direction of the k-neighbour covariance)
+    and flatness: 1 - surface variation (smallest eigenvalue / trace) / `_FLAT_VARIATION`."""
     k = min(_NORMAL_NEIGHBOURS, len(points))
-    _, idx = (tree or cKDTree(points)).query(points, k=k)
-    nb = points[idx.reshape(len(points), k)]
+    idx, _ = tree.batch_knn_search(points, k)
+    nb = points[idx.astype(np.intp)]
     nb = nb - nb.mean(axis=1, keepdims=True)
-    return _smallest_eigenvectors(np.swapaxes(nb, 1, 2) @ nb)
+    C = np.swapaxes(nb, 1, 2) @ nb
+    normals, smallest = _smallest_eigenvectors(C)
+    trace = np.trace(C, axis1=1, axis2=2)
+    variation = np.where(trace > 0, smallest / np.where(trace > 0, trace, 1.0), 1.0)
+    return normals, np.clip(1.0 - variation / _FLAT_VARIATION, 0.0, 1.0)
 
 
-def _smallest_eigenvectors(C: np.ndarray) -> np.ndarray:
-    """Unit eigenvectors of the smallest eigenvalues of symmetric (N,3,3) matrices.
+def _smallest_eigenvectors(C: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Unit eigenvectors and values of the smallest eigenvalues of symmetric (N,3,3) matrices.
 
     Closed form (trigonometric eigenvalues, then the widest cross product of two rows of
     C - lambda I); several times faster than a batched `eigh`.  Isotropic or line-like
@@ -386,95 +423,241 @@ def _smallest_eigenvectors(C: np.ndarray) -> np.ndarray:
     rows = np.arange(len(C))
     n, size = crosses[rows, best], norms[rows, best]
     ok = size > 1e-12 * np.maximum(q, 1e-300) ** 2
-    return np.where(ok[:, None], n / np.where(ok, size, 1.0)[:, None], [0.0, 0.0, 1.0])
+    unit = np.where(ok[:, None], n / np.where(ok, size, 1.0)[:, None], [0.0, 0.0, 1.0])
+    return unit, np.maximum(smallest, 0.0)
 
 
-def _signed(normals: np.ndarray) -> np.ndarray:
-    """Flip unoriented normals into one half-space so that similar normals get similar vectors."""
-    return normals * np.where(normals @ _SIGN_DIRECTION < 0, -1.0, 1.0)[:, None]
+def _cloud_pairs(
+    local_points: Sequence[object] | None,
+    global_points: Sequence[object] | None,
+    n: int,
+    cfg: PoseConfig,
+) -> list[tuple[ObjectCloud, ObjectCloud]]:
+    """The prepared (local, global) clouds of the pairs that have points on both sides."""
+    if local_points is None or global_points is None:
+        return []
+    if len(local_points) != n or len(global_points) != n:
+        raise ValueError(f"point sequences must have one entry per matched pair ({n})")
+    pairs = []
+    for i, (p, q) in enumerate(zip(local_points, global_points, strict=True)):
+        p = _prepared(p, f"local points of pair {i}", cfg)
+        q = _prepared(q, f"global points of pair {i}", cfg)
+        if p is not None and q is not None:
+            pairs.append((p, q))
+    return pairs
 
 
-class _Matcher:
-    """Nearest global point within the kernel, with a compatible normal when normals are used.
-
-    With normals, the search runs in 6-D on (point, kernel * signed normal), so that a point on
-    another face is not preferred just for being a little closer; the 3-D distance and the
-    normal angle are then checked.
-    """
-
-    def __init__(self, dst: np.ndarray, tree: cKDTree, src: np.ndarray, cfg: PoseConfig):
-        self.dst, self.tree, self.trees6 = dst, tree, {}
-        self.use_normals = cfg.icp_normal_angle < 90 and min(len(src), len(dst)) >= 3
-        self.cos_max = np.cos(np.radians(cfg.icp_normal_angle))
-        if self.use_normals:
-            self.src_n, self.dst_n = _normals(src), _signed(_normals(dst, tree))
-
-    def __call__(self, moved: np.ndarray, rows, R: np.ndarray, kernel: float):
-        if not self.use_normals:
-            d, idx = self.tree.query(moved, distance_upper_bound=kernel)
-            ok = np.isfinite(d)
-            return d[ok], idx[ok], ok
-        if kernel not in self.trees6:  # the 6-D tree depends on the kernel
-            self.trees6[kernel] = cKDTree(np.hstack([self.dst, kernel * self.dst_n]))
-        normals = _signed(self.src_n[rows] @ R.T)
-        bound = kernel * np.sqrt(1 + 2 * (1 - self.cos_max))  # 3-D and normal chord both in range
-        query = np.hstack([moved, kernel * normals])
-        _, idx = self.trees6[kernel].query(query, distance_upper_bound=bound)
-        found = idx < len(self.dst)
-        idx = np.where(found, idx, 0)
-        d = np.linalg.norm(self.dst[idx] - moved, axis=1)
-        cos = np.abs(np.einsum("ni,ni->n", normals, self.dst_n[idx]))
-        ok = found & (d < kernel) & (cos >= self.cos_max)
-        return d[ok], idx[ok], ok
+def _prepared(points: object, name: str, cfg: PoseConfig) -> ObjectCloud | None:
+    if points is None or isinstance(points, ObjectCloud):
+        return points
+    points = np.asarray(points, dtype=float)
+    return None if points.size == 0 else prepare_cloud(_xyz(points, name), cfg)
 
 
-def _icp(T: np.ndarray, src, dst, match: _Matcher, cfg: PoseConfig, solve: Solver) -> np.ndarray:
-    """IRLS point-to-point ICP with Tukey weights (correspondences beyond the kernel ignored).
+class _Targets:
+    """The partner clouds' points, normals and flatness concatenated, when first needed (ICP
+    needs them; fitness and the search do not)."""
 
-    Correspondences must have compatible (unoriented) normals, within `icp_normal_angle`: this
-    keeps a partial view from settling inside the full object.  Graduated: the kernel starts at
-    `icp_kernel_start` and halves whenever an iteration moves the points by less than 1 % of it
-    on average, so offsets beyond `icp_kernel` (centres biased by partial views) are still
-    pulled in; stops once that happens at `icp_kernel`.  Coarse levels use a subsample of
-    about `_COARSE_POINTS` local points.
+    def __init__(self, clouds: list[ObjectCloud]):
+        self.clouds = clouds
+
+    @functools.cached_property
+    def points(self) -> np.ndarray:
+        return np.concatenate([g.points for g in self.clouds])
+
+    @functools.cached_property
+    def normals(self) -> np.ndarray:
+        return np.concatenate([g.normals for g in self.clouds])
+
+    @functools.cached_property
+    def flatness(self) -> np.ndarray:
+        return np.concatenate([g.flatness for g in self.clouds])
+
+
+class _Pairs:
+    """The matched clouds of one problem: the local points concatenated (with normals and
+    their partners' bounding boxes) and the partners (`targets`); `limit` thins the local
+    points evenly.  `nearest` indexes the concatenated targets."""
+
+    def __init__(self, pairs: list[tuple[ObjectCloud, ObjectCloud]], limit: int | None = None):
+        self.pairs = pairs
+        self.globals = [g for _, g in pairs]
+        self.targets = _Targets(self.globals)  # shared by thinned views
+        self.offsets = np.cumsum([0] + [len(g.points) for g in self.globals])[:-1]
+        self._select(limit)
+
+    def thinned(self, limit: int) -> _Pairs:
+        """The same pairs with the local points thinned to at most `limit` (targets shared)."""
+        view = copy.copy(self)
+        view._select(limit)
+        return view
+
+    def _select(self, limit: int | None) -> None:
+        rows = [np.arange(len(p.points)) for p, _ in self.pairs]
+        total = sum(len(r) for r in rows)
+        if limit is not None and total > limit:
+            rows = [r[np.unique((np.arange(len(r) * limit / total) * total / limit).astype(int))]
+                    for r in rows]  # fmt: skip
+        self.src = np.concatenate([p.points[r] for (p, _), r in zip(self.pairs, rows)])
+        self.src_normals = np.concatenate([p.normals[r] for (p, _), r in zip(self.pairs, rows)])
+        self.bounds = np.cumsum([0] + [len(r) for r in rows])
+        sizes = np.diff(self.bounds)
+        self.box_lo = np.repeat([g.box[0] for g in self.globals], sizes, axis=0).reshape(-1, 3)
+        self.box_hi = np.repeat([g.box[1] for g in self.globals], sizes, axis=0).reshape(-1, 3)
+
+    def nearest(self, moved, k: int, bound: float, repeat: int = 1):
+        """Indices into `targets` (n, k) and distances (n, k; inf, index 0, beyond `bound`) of
+        each moved local point's k nearest partner points (as `ObjectCloud.nearest`, one
+        vectorised box test for all pairs); with `repeat`, each local row comes `repeat`
+        times in a row."""
+        lo, hi = self.box_lo, self.box_hi
+        if repeat > 1:
+            lo, hi = np.repeat(lo, repeat, axis=0), np.repeat(hi, repeat, axis=0)
+        near = np.all((moved >= lo - bound) & (moved <= hi + bound), axis=1)
+        idx = np.zeros((len(moved), k), dtype=np.intp)
+        sq = np.full((len(moved), k), np.inf)
+        for cloud, offset, a, b in zip(
+            self.globals, self.offsets, self.bounds[:-1] * repeat, self.bounds[1:] * repeat
+        ):
+            kk = min(k, len(cloud.points))
+            if near[a:b].all():  # the common case, on plain slices
+                found, d2 = cloud.tree.batch_knn_search(moved[a:b], kk)
+                idx[a:b, :kk], sq[a:b, :kk] = found, d2
+                idx[a:b, :kk] += offset
+            elif near[a:b].any():
+                rows = a + np.flatnonzero(near[a:b])
+                found, d2 = cloud.tree.batch_knn_search(moved[rows], kk)
+                idx[rows, :kk], sq[rows, :kk] = found + offset, d2
+        dist = np.sqrt(sq)
+        dist[dist > bound] = np.inf
+        return idx, dist
+
+
+def _apply(T: np.ndarray, points: np.ndarray) -> np.ndarray:
+    return points @ T[:3, :3].T + T[:3, 3]
+
+
+def _point_fitness(T: np.ndarray, pairs: _Pairs, radius: float) -> tuple[float, float, float]:
+    """Inlier share, inlier RMS distance and the smooth score (mean of 1 - (d/r)^2, truncated)
+    of the local points moved by T against their partners' points."""
+    d = pairs.nearest(_apply(T, pairs.src), 1, radius)[1][:, 0]
+    inliers = d[d < radius]
+    rmse = float(np.sqrt(np.mean(inliers**2))) if len(inliers) else 0.0
+    return len(inliers) / len(d), rmse, float(np.mean(np.maximum(0.0, 1 - (d / radius) ** 2)))
+
+
+def _centre_fitness(T, src, dst) -> tuple[float, float]:
+    d = np.linalg.norm(_apply(T, src) - dst, axis=1)
+    inliers = d[d < _CENTRE_INLIER]
+    rmse = float(np.sqrt(np.mean(inliers**2))) if len(inliers) else 0.0
+    return len(inliers) / len(src), rmse
+
+
+# --------------------------------------------------------------------------- robust ICP
+
+
+def _correspondences(pairs: _Pairs, moved, normals, kernel: float, cos_max: float, k: int):
+    """For each moved local point the nearest of its `k` nearest partner points within
+    `kernel` whose normal is compatible (unoriented, within the angle; any normal of a
+    non-flat point is); returns the rows that have one, the partner indices and the distances.
+    A large k lets a partial view find the face it sees behind closer faces it does not."""
+    k = 1 if cos_max <= 0 else k
+    idx, d = pairs.nearest(moved, k, kernel)
+    ok = d < kernel
+    if cos_max > 0:
+        cos = np.abs(np.einsum("nkj,nj->nk", pairs.targets.normals[idx], normals))
+        ok &= (cos >= cos_max) | (pairs.targets.flatness[idx] < 0.5)
+    first = np.argmax(ok, axis=1)
+    rows = np.arange(len(moved))
+    found = ok[rows, first]
+    return found, idx[rows, first][found], d[rows, first][found]
+
+
+def _rotation(axis_angle: np.ndarray) -> np.ndarray:
+    """Rodrigues' rotation of a rotation vector."""
+    angle = float(np.linalg.norm(axis_angle))
+    if angle < 1e-15:
+        return np.eye(3)
+    k = axis_angle / angle
+    K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    return np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * (K @ K)
+
+
+def _gauss_newton_step(m, q, n, w, axis: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    """Rotation and translation that best move points `m` onto `q`: point-to-plane error
+    (normals `n`, scaled by the plane term's weight) plus `_POINT_TO_POINT` x point-to-point,
+    Tukey weights `w`, linearised about the identity; with `axis`, a rotation about it only."""
+    e = m - q
+    N = len(m)
+    if axis is None:  # d(omega x m) / d omega = -[m]_x
+        J = np.zeros((N, 3, 6))
+        J[:, 0, 1], J[:, 0, 2], J[:, 1, 2] = m[:, 2], -m[:, 1], m[:, 0]
+        J[:, 1, 0], J[:, 2, 0], J[:, 2, 1] = -m[:, 2], m[:, 1], -m[:, 0]
+    else:  # d(R(axis, theta) m) / d theta = axis x m
+        J = np.zeros((N, 3, 4))
+        J[:, 0, 0] = axis[1] * m[:, 2] - axis[2] * m[:, 1]
+        J[:, 1, 0] = axis[2] * m[:, 0] - axis[0] * m[:, 2]
+        J[:, 2, 0] = axis[0] * m[:, 1] - axis[1] * m[:, 0]
+    J[:, 0, -3], J[:, 1, -2], J[:, 2, -1] = 1.0, 1.0, 1.0
+    Jp = (n[:, :, None] * J).sum(axis=1)  # (N, P): the plane term's rows
+    rp = (n * e).sum(axis=1)
+    Jw = (J * w[:, None, None]).reshape(3 * N, -1)
+    H = (Jp * w[:, None]).T @ Jp + _POINT_TO_POINT * (Jw.T @ J.reshape(3 * N, -1))
+    g = (Jp * w[:, None]).T @ rp + _POINT_TO_POINT * (Jw.T @ e.reshape(-1))
+    H[np.diag_indices_from(H)] += 1e-9 * max(np.trace(H), 1e-12)
+    delta = -np.linalg.solve(H, g)
+    return _rotation(delta[:3] if axis is None else delta[0] * axis), delta[-3:]
+
+
+def _icp(T: np.ndarray, full: _Pairs, coarse: _Pairs, axis, cfg: PoseConfig) -> np.ndarray:
+    """Robust ICP from T: Tukey-weighted Gauss-Newton on normal-compatible correspondences.
+
+    Graduated: the kernel starts at `icp_kernel_start` and halves whenever an iteration moves
+    the points by less than 1 % of it on average, so offsets beyond `icp_kernel` (centres
+    biased by partial views) are still pulled in; stops once that happens at `icp_kernel`.
+    Coarse levels use the lighter `coarse` view of the local points.
     """
     kernel = max(cfg.icp_kernel_start, cfg.icp_kernel)
-    coarse = np.arange(0, len(src), max(1, len(src) // _COARSE_POINTS))
+    cos_max = np.cos(np.radians(cfg.icp_normal_angle)) if cfg.icp_normal_angle < 90 else 0.0
+    R, t = T[:3, :3], T[:3, 3]
     for _ in range(cfg.icp_iterations):
-        rows = coarse if kernel > cfg.icp_kernel else slice(None)
-        moved = _apply(T, src[rows])
-        d, idx, ok = match(moved, rows, T[:3, :3], kernel)
-        if len(d) < 3:
+        final = kernel <= cfg.icp_kernel
+        view = full if final else coarse
+        moved = view.src @ R.T + t
+        normals = view.src_normals @ R.T
+        k = _MATCH_NEIGHBOURS[final]
+        ok, idx, d = _correspondences(view, moved, normals, kernel, cos_max, k)
+        if len(d) < (2 if axis is not None else 3):
             break
-        w = (1.0 - (d / kernel) ** 2) ** 2
-        p, q = moved[ok], dst[idx]
-        if _degenerate(p, q, w, solve is _yaw, _TOL):
-            break
-        R, t = solve(p, q, w)
-        T = _transform(R, t) @ T
-        if np.mean(np.linalg.norm(p @ (R - np.eye(3)).T + t, axis=1)) < 0.01 * kernel:
+        targets = view.targets
+        m, q = moved[ok], targets.points[idx]
+        n = targets.normals[idx] * np.sqrt(targets.flatness[idx])[:, None]
+        dR, dt = _gauss_newton_step(m, q, n, (1.0 - (d / kernel) ** 2) ** 2, axis)
+        R, t = dR @ R, dR @ t + dt
+        if np.mean(np.linalg.norm(m @ (dR - np.eye(3)).T + dt, axis=1)) < _CONVERGED * kernel:
             if kernel <= cfg.icp_kernel:
                 break
             kernel = max(cfg.icp_kernel, 0.5 * kernel)
-    return T
+    return _transform(R, t)
 
 
 # --------------------------------------------------------------------------- global search
 
 
-def _scores(rotations: np.ndarray, pivot_l, pivot_g, src, tree: cKDTree, radius: float):
+def _score(rotations: np.ndarray, pivots, sample: _Pairs, radius: float) -> np.ndarray:
     """Smooth fitness (mean of 1 - (d/r)^2, truncated) of rotations about the matched pivots."""
-    moved = np.einsum("kij,pj->kpi", rotations, src - pivot_l) + pivot_g
-    d, _ = tree.query(moved.reshape(-1, 3), distance_upper_bound=radius)
-    s = np.where(np.isfinite(d), 1.0 - (d / radius) ** 2, 0.0)
-    return s.reshape(len(rotations), len(src)).mean(axis=1)
+    pivot_l, pivot_g = pivots
+    moved = np.einsum("kij,pj->pki", rotations, sample.src - pivot_l) + pivot_g  # (P, K, 3)
+    d = sample.nearest(moved.reshape(-1, 3), 1, radius, repeat=len(rotations))[1][:, 0]
+    d = d.reshape(len(sample.src), len(rotations))
+    return np.where(d < radius, 1.0 - (d / radius) ** 2, 0.0).mean(axis=0)
 
 
-def _sweep(axis_rot: Callable[[np.ndarray], np.ndarray], pivots, src, tree, cfg) -> list:
+def _sweep(axis_rot: Callable[[np.ndarray], np.ndarray], pivots, sample, cfg) -> list:
     """1-D search over the angle about an axis: coarse grid, best local maxima, fine grid."""
     step = 2 * np.pi / cfg.search_steps
     angles = np.arange(cfg.search_steps) * step
-    s = _scores(axis_rot(angles), *pivots, src, tree, cfg.fitness_radius)
+    s = _score(axis_rot(angles), pivots, sample, cfg.fitness_radius)
     peaks = np.flatnonzero((s >= np.roll(s, 1)) & (s >= np.roll(s, -1)) & (s > 0))
     if len(peaks) == 0:
         peaks = np.array([int(np.argmax(s))])
@@ -483,7 +666,7 @@ def _sweep(axis_rot: Callable[[np.ndarray], np.ndarray], pivots, src, tree, cfg)
     fine = np.linspace(-step, step, 21)
     best = []
     for a in angles[peaks]:
-        sf = _scores(axis_rot(a + fine), *pivots, src, tree, cfg.fitness_radius)
+        sf = _score(axis_rot(a + fine), pivots, sample, cfg.fitness_radius)
         best.append(axis_rot(np.array([a + fine[np.argmax(sf)]]))[0])
     return best
 
@@ -499,10 +682,10 @@ def _fibonacci_rotations(n_dirs: int, n_yaw: int) -> np.ndarray:
     return np.einsum("aij,bjk->abik", tilts, yaws).reshape(-1, 3, 3)
 
 
-def _so3_search(pivots, src, tree, cfg) -> list:
+def _so3_search(pivots, sample, cfg) -> list:
     """Coarse SO(3) grid; the best rotations at least 30 deg apart."""
     rotations = _fibonacci_rotations(_SO3_DIRECTIONS, max(12, cfg.search_steps // 4))
-    s = _scores(rotations, *pivots, src, tree, cfg.fitness_radius)
+    s = _score(rotations, pivots, sample, cfg.fitness_radius)
     chosen: list[np.ndarray] = []
     for k in np.argsort(-s):
         if s[k] < _CANDIDATE_SHARE * s.max():
@@ -521,22 +704,22 @@ def _axis_rotations(axis_l: np.ndarray, axis_g: np.ndarray) -> Callable:
     return lambda angles: B_g.T @ _rot_z(angles) @ B_l
 
 
-def _search(src_c, dst_c, clouds, tree, yaw_only: bool, cfg: PoseConfig) -> list[np.ndarray]:
+def _search(src_c, dst_c, pairs: list, ups, cfg: PoseConfig) -> list[np.ndarray]:
     """Candidate transforms when the centres leave rotational freedom."""
     pivots = (src_c.mean(axis=0), dst_c.mean(axis=0))
-    sample = clouds[0]
-    if len(sample) > _SEARCH_POINTS:
-        sample = sample[np.linspace(0, len(sample) - 1, _SEARCH_POINTS).astype(int)]
-    if yaw_only:
-        rotations = _sweep(_rot_z, pivots, sample, tree, cfg)
+    sample = _Pairs(pairs, min(_SEARCH_POINTS, cfg.local_points))
+    if ups is not None:
+        rotations = _sweep(_axis_rotations(*ups), pivots, sample, cfg)
     else:
         _, s, Vt = np.linalg.svd(src_c - pivots[0])
         axis_g = ((src_c - pivots[0]) @ Vt[0]) @ (dst_c - pivots[1])  # matching global direction
         if s[0] <= cfg.min_spread or np.linalg.norm(axis_g) <= cfg.min_spread * s[0]:
-            rotations = _so3_search(pivots, sample[::2], tree, cfg)
+            rotations = _so3_search(
+                pivots, _Pairs(pairs, min(_SEARCH_POINTS, cfg.local_points) // 2), cfg
+            )
         else:
             axis_g /= np.linalg.norm(axis_g)
-            rotations = _sweep(_axis_rotations(Vt[0], axis_g), pivots, sample, tree, cfg)
+            rotations = _sweep(_axis_rotations(Vt[0], axis_g), pivots, sample, cfg)
     return [_transform(R, pivots[1] - R @ pivots[0]) for R in rotations]
 
 
@@ -546,18 +729,22 @@ def _search(src_c, dst_c, clouds, tree, yaw_only: bool, cfg: PoseConfig) -> list
 def estimate_pose(
     local_positions: np.ndarray,
     global_positions: np.ndarray,
-    local_points: Sequence[np.ndarray | None] | None,
-    global_points: Sequence[np.ndarray | None] | None,
+    local_points: Sequence[np.ndarray | ObjectCloud | None] | None,
+    global_points: Sequence[np.ndarray | ObjectCloud | None] | None,
     up_local: np.ndarray | None = None,
     up_global: np.ndarray | None = None,
     config: PoseConfig | None = None,
+    init: np.ndarray | None = None,
 ) -> PoseEstimate | None:
     """Pose of the local frame in the global frame from matched objects.
 
     local_positions/global_positions: (N,3) matched object centres (row i of each is a pair).
-    local_points/global_points: sequences of length N of (M_i,3) arrays or None (per-object point
-    sets; empty arrays count as None).  Point sets are used only for pairs with points on both
-    sides.  4-DoF (gravity-aligned) when both `up_local` and `up_global` are given, else 6-DoF.
+    local_points/global_points: sequences of length N of (M_i,3) arrays, `ObjectCloud`s
+    (from `prepare_cloud` with the same config) or None (empty arrays count as None).  Point
+    sets are used only for pairs with points on both sides.  4-DoF (gravity-aligned) when both
+    `up_local` and `up_global` are given, else 6-DoF.  `init`: a pose to warm-start from (e.g.
+    the pose of a subset of these pairs); it replaces the closed form or search when it has
+    the higher fitness (4-DoF: it must map up_local onto up_global).
 
     1) closed form when determined (see `align_positions`); 2) when the centres are too few or
     spread less than `min_spread` (horizontally in 4-DoF, off a line in 6-DoF) and points exist,
@@ -567,46 +754,78 @@ def estimate_pose(
     """
     cfg = config or PoseConfig()
     src_c, dst_c = _pairs(local_positions, global_positions)
-    clouds = _clouds(local_points, global_points, len(src_c), cfg)
-    yaw_only = up_local is not None and up_global is not None
-    A_l = A_g = np.eye(3)
-    if yaw_only:
-        A_l, A_g = _rot_to_z(_unit(up_local, "up_local")), _rot_to_z(_unit(up_global, "up_global"))
-        src_c, dst_c = src_c @ A_l.T, dst_c @ A_g.T
-        if clouds is not None:
-            clouds = (clouds[0] @ A_l.T, clouds[1] @ A_g.T)
-    tag = "4dof" if yaw_only else "6dof"
-    solve: Solver = _yaw if yaw_only else _kabsch
-    ones = np.ones(len(src_c))
-    tol = cfg.min_spread if clouds is not None else _TOL
-    tree = cKDTree(clouds[1]) if clouds is not None else None
-    if len(src_c) >= (2 if yaw_only else 3) and not _degenerate(src_c, dst_c, ones, yaw_only, tol):
-        candidates, method = [_transform(*solve(src_c, dst_c, ones))], f"closed-form-{tag}"
-    elif clouds is None:
-        return None
+    pairs = _cloud_pairs(local_points, global_points, len(src_c), cfg)
+    ups = None
+    if up_local is not None and up_global is not None:
+        ups = (_unit(up_local, "up_local"), _unit(up_global, "up_global"))
+    tag = "4dof" if ups else "6dof"
+    if _determined(src_c, dst_c, ups, cfg.min_spread if pairs else _TOL):
+        T, _ = _align(src_c[None], dst_c[None], np.ones((1, len(src_c))), *(ups or (None, None)))
+        candidates, method = [T[0]], f"closed-form-{tag}"
+    elif not pairs:
+        return None if init is None else _centre_estimate(init, src_c, dst_c, f"warm-{tag}")
     else:
-        candidates, method = _search(src_c, dst_c, clouds, tree, yaw_only, cfg), f"search-{tag}"
-    if clouds is None:
-        T, (fitness, rmse) = candidates[0], _centre_fitness(candidates[0], src_c, dst_c)
-    else:
-        T, fitness, rmse, method = _best_refined(candidates, method, clouds, tree, cfg, solve)
-    T = _transform(A_g.T, np.zeros(3)) @ T @ _transform(A_l, np.zeros(3))
-    return PoseEstimate(T, fitness, rmse, method)
+        candidates, method = _search(src_c, dst_c, pairs, ups, cfg), f"search-{tag}"
+    if not pairs:
+        return _centre_estimate(candidates[0], src_c, dst_c, method)
+    return _best_refined(candidates, method, init, pairs, ups, cfg, tag)
 
 
-def _best_refined(candidates, method, clouds, tree, cfg: PoseConfig, solve: Solver):
-    """Best candidate by (fitness, -rmse), each refined by ICP when that does not lower fitness."""
-    src, dst = clouds
-    match = _Matcher(dst, tree, src, cfg) if cfg.refine else None
-    best = None
-    for T0 in candidates:
-        result = (*_point_fitness(T0, src, tree, cfg.fitness_radius), T0, method)
-        if cfg.refine and cfg.icp_iterations > 0:
-            T1 = _icp(T0, src, dst, match, cfg, solve)
-            refined = (*_point_fitness(T1, src, tree, cfg.fitness_radius), T1, method + "+icp")
-            if refined[0] >= result[0]:
-                result = refined
-        if best is None or (result[0], -result[1]) > (best[0], -best[1]):
-            best = result
-    fitness, rmse, T, method = best
-    return T, fitness, rmse, method
+def _determined(src, dst, ups, tol: float) -> bool:
+    """Whether the centres fix the pose: enough of them, spread more than `tol`."""
+    if ups is not None:
+        src, dst = src @ _rot_to_z(ups[0]).T, dst @ _rot_to_z(ups[1]).T
+    if len(src) < (2 if ups is not None else 3):
+        return False
+    return not _degenerate(src, dst, np.ones(len(src)), ups is not None, tol)
+
+
+def _centre_estimate(T, src_c, dst_c, method: str) -> PoseEstimate:
+    return PoseEstimate(T, *_centre_fitness(T, src_c, dst_c), method)
+
+
+class _Scored(NamedTuple):
+    """A candidate pose with its fit: inlier share, inlier RMS and the smooth score."""
+
+    fitness: float
+    rmse: float
+    score: float
+    T: np.ndarray
+    method: str
+
+
+def _scored(T: np.ndarray, method: str, pairs: _Pairs, cfg: PoseConfig) -> _Scored:
+    return _Scored(*_point_fitness(T, pairs, cfg.fitness_radius), T, method)
+
+
+def _best_refined(candidates, method, init, pairs, ups, cfg: PoseConfig, tag: str):
+    """Best candidate by (fitness, -rmse), each refined by ICP when that does not lower its
+    fitness; a warm start `init` replaces the candidates when its smooth score is higher."""
+    full = _Pairs(pairs, cfg.local_points)
+    scored = [_scored(T, method, full, cfg) for T in candidates]
+    if init is not None:
+        warm = _scored(init, f"warm-{tag}", full, cfg)
+        if warm.score > max(s.score for s in scored):
+            scored = [warm]
+    if cfg.refine and cfg.icp_iterations > 0:
+        coarse = full.thinned(min(_COARSE_POINTS, cfg.local_points))
+        axis = None if ups is None else ups[1]
+        scored = [_refined(s, full, coarse, axis, cfg) for s in scored]
+    best = max(scored, key=lambda s: (s.fitness, -s.rmse))
+    T = best.T if ups is None else _upright(best.T, *ups)
+    return PoseEstimate(T, best.fitness, best.rmse, best.method)
+
+
+def _refined(start: _Scored, full: _Pairs, coarse: _Pairs, axis, cfg: PoseConfig) -> _Scored:
+    """ICP from a candidate, kept when it does not lower the fitness."""
+    refined = _scored(_icp(start.T, full, coarse, axis, cfg), start.method + "+icp", full, cfg)
+    return refined if refined.fitness >= start.fitness else start
+
+
+def _upright(T: np.ndarray, up_l: np.ndarray, up_g: np.ndarray) -> np.ndarray:
+    """T with its rotation snapped to the nearest one mapping up_l exactly onto up_g (a yaw
+    in the z-up canonical frames); removes the rounding drift of repeated updates."""
+    A_l, A_g = _rot_to_z(up_l), _rot_to_z(up_g)
+    Rc = A_g @ T[:3, :3] @ A_l.T
+    yaw = np.arctan2(Rc[1, 0] - Rc[0, 1], Rc[0, 0] + Rc[1, 1])
+    return _transform(A_g.T @ _rot_z(yaw) @ A_l, T[:3, 3])

@@ -239,3 +239,88 @@ def test_accuracy_target_on_repeated_objects():
     top1 = np.mean([r == 1 for r in ranks])
     top10 = np.mean([r is not None for r in ranks])
     assert top10 >= 0.9 and top1 >= 0.7, (top1, top10)
+
+
+# --------------------------------------------------------------------------- pose cache
+
+
+def _box_points(rng: np.random.Generator, obj: SemanticObject, n: int = 600) -> np.ndarray:
+    size = np.asarray(obj.size if obj.size is not None else [0.5, 0.5, 0.5], dtype=float)
+    p = rng.uniform(-0.5, 0.5, (n, 3)) * size
+    axis = rng.integers(0, 3, n)
+    p[np.arange(n), axis] = np.sign(rng.uniform(-1, 1, n)) * size[axis] / 2
+    return p + obj.position
+
+
+@pytest.fixture(scope="module")
+def room_with_points() -> ObjectMap:
+    rng = np.random.default_rng(3)
+    room = layout(30, seed=5)
+    return ObjectMap([o.replace(points=_box_points(rng, o)) for o in room], up=room.up)
+
+
+class _Spy:
+    """Counts `estimate_pose` calls of the Localizer and records their warm starts."""
+
+    def __init__(self, monkeypatch):
+        import semloc.localizer as module
+
+        self.inits: list[np.ndarray | None] = []
+        real = module.estimate_pose
+
+        def spy(*args, init=None, **kwargs):
+            self.inits.append(init)
+            return real(*args, init=init, **kwargs)
+
+        monkeypatch.setattr(module, "estimate_pose", spy)
+
+
+def test_unchanged_sets_reuse_their_pose(room_with_points, monkeypatch):
+    spy = _Spy(monkeypatch)
+    ids = [room_with_points[i].id for i in (2, 3, 4, 5, 6)]
+    view = local_view(room_with_points, ids, yaw_pose(0.6, [1.0, -1.0, 0.0]))
+    localizer = Localizer(room_with_points, local_up=view.up)
+    first = localizer.update(list(view))
+    computed = len(spy.inits)
+    assert computed == len(first.hypotheses) > 0
+    unmatched = SemanticObject("x", "no-such-label", [0.0, 0.0, 0.0])
+    second = localizer.update([unmatched])  # no candidates: every set is unchanged
+    assert len(spy.inits) == computed  # nothing recomputed
+    assert [h.pairs for h in second.hypotheses] == [h.pairs for h in first.hypotheses]
+    assert all(a.pose is b.pose for a, b in zip(first.hypotheses, second.hypotheses))
+
+
+def test_grown_set_warm_starts_from_its_cached_subset(room_with_points, monkeypatch):
+    spy = _Spy(monkeypatch)
+    ids = [room_with_points[i].id for i in (2, 3, 4, 5, 6, 7)]
+    T = yaw_pose(-1.1, [2.0, 0.5, 0.0])
+    view = local_view(room_with_points, ids, T)
+    localizer = Localizer(room_with_points, local_up=view.up)
+    for obj in list(view)[:-1]:
+        before = localizer.update([obj])
+    seen = len(spy.inits)
+    last = localizer.update([list(view)[-1]])
+    inits = spy.inits[seen:]
+    best_before, best = before.hypotheses[0], last.hypotheses[0]
+    assert set(best_before.pairs) < set(best.pairs)  # the best set grew by the new object
+    assert any(i is not None and np.array_equal(i, best_before.pose) for i in inits)
+    rotation, translation = pose_error(best.pose, T)
+    assert rotation < 0.5 and translation < 0.02
+    np.testing.assert_allclose(best.pose[:3, :3] @ view.up, room_with_points.up, atol=1e-12)
+    batch = semloc.localize(room_with_points, view)
+    assert batch.hypotheses[0].pairs == best.pairs
+    rotation, translation = pose_error(batch.pose, best.pose)
+    assert rotation < 0.2 and translation < 0.01
+
+
+def test_redetection_recomputes_the_sets_that_use_it(room_with_points, monkeypatch):
+    spy = _Spy(monkeypatch)
+    ids = [room_with_points[i].id for i in (2, 3, 4, 5, 6)]
+    view = local_view(room_with_points, ids, yaw_pose(0.3, [0.0, 1.0, 0.0]))
+    localizer = Localizer(room_with_points, local_up=view.up)
+    first = localizer.update(list(view))
+    computed = len(spy.inits)
+    redetected = view.get("l0")
+    localizer.update([redetected.replace(points=redetected.points + [0.0, 0.0, 0.01])])
+    uses_l0 = [h for h in first.hypotheses if any(l == "l0" for _, l in h.pairs)]
+    assert len(spy.inits) - computed >= len(uses_l0) > 0

@@ -8,12 +8,16 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
+from semloc.maps import SemanticObject
 from semloc.pose import (
+    ObjectCloud,
     PoseConfig,
     PoseEstimate,
     align_positions,
     align_positions_batch,
+    cached_cloud,
     estimate_pose,
+    prepare_cloud,
 )
 from semloc.transforms import rigid as make_T
 from semloc.transforms import yaw_rotation as rot_z
@@ -47,9 +51,10 @@ def random_T(rng: np.random.Generator, yaw_only: bool = False) -> np.ndarray:
 
 
 def l_shape(rng: np.random.Generator, n: int = 3000) -> np.ndarray:
-    """Points on an asymmetric L-shaped solid (1.0 x 0.6 x 0.8 m), origin at a corner."""
-    a = rng.uniform([0, 0, 0], [1.0, 0.2, 0.8], (n // 2, 3))
-    b = rng.uniform([0, 0, 0], [0.2, 0.6, 0.5], (n - n // 2, 3))
+    """Points on the surfaces of an asymmetric L-shaped object (1.0 x 0.6 x 0.8 m: two boxes),
+    origin at a corner; surfaces, as scans, meshes and the simulator give them."""
+    a = box_surface(rng, [1.0, 0.2, 0.8], n // 2) + [0.5, 0.1, 0.4]
+    b = box_surface(rng, [0.2, 0.6, 0.5], n - n // 2) + [0.1, 0.3, 0.25]
     return np.vstack([a, b])
 
 
@@ -349,16 +354,19 @@ def test_6dof_pairs_with_coincident_global_centres_stay_finite() -> None:
     assert np.all(np.isfinite(est.T)) and 0.0 <= est.fitness <= 1.0
 
 
-def test_downsample_voxel_means_and_huge_ranges() -> None:
-    from semloc.pose import _downsample
-
+def test_prepared_cloud_voxel_means_cap_and_huge_ranges() -> None:
     pts = np.array([[0.01, 0.01, 0.01], [0.03, 0.03, 0.03], [1.0, 1.0, 1.0]])
-    out = _downsample(pts, 0.05, 100, np.random.default_rng(0))
-    assert np.allclose(out, [[0.02, 0.02, 0.02], [1.0, 1.0, 1.0]])
+    cloud = prepare_cloud(pts, PoseConfig(icp_voxel=0.05))
+    assert np.allclose(cloud.points, [[0.02, 0.02, 0.02], [1.0, 1.0, 1.0]])
+    assert np.allclose(np.linalg.norm(cloud.normals, axis=1), 1.0)
     far = np.vstack([pts, [[1e9, -1e9, 1e9]]])  # voxel keys no longer fit one int64
-    out = _downsample(far, 1e-6, 100, np.random.default_rng(0))
-    assert len(out) == 4 and np.allclose(np.sort(out[:, 0]), np.sort(far[:, 0]))
-    assert len(_downsample(far, 0.0, 2, np.random.default_rng(0))) == 2
+    cloud = prepare_cloud(far, PoseConfig(icp_voxel=1e-6))
+    assert len(cloud.points) == 4 and np.allclose(np.sort(cloud.points[:, 0]), np.sort(far[:, 0]))
+    capped = prepare_cloud(
+        np.random.default_rng(0).uniform(size=(50, 3)), PoseConfig(icp_voxel=0.0, icp_max_points=7)
+    )
+    assert len(capped.points) == 7
+    assert prepare_cloud(np.zeros((0, 3))) is None
 
 
 @pytest.mark.parametrize(
@@ -430,3 +438,124 @@ def test_bad_point_input_raises() -> None:
 def test_config_forbids_unknown_fields() -> None:
     with pytest.raises(ValueError):
         PoseConfig(icp_itrations=3)
+
+
+# --------------------------------------------------------------------------- library path
+
+
+def _boxes_scene(rng: np.random.Generator, T_true: np.ndarray, up_tilt: np.ndarray):
+    """Three boxes with independent surface samples: local (in a frame tilted by `up_tilt`)
+    and global (moved by T_true after the tilt), as prepared clouds."""
+    sizes = [[0.8, 0.5, 0.9], [1.2, 0.7, 0.5], [0.4, 0.9, 1.1]]
+    offsets = [[0.0, 0.0, 0.45], [2.5, 1.0, 0.25], [0.5, 3.0, 0.55]]
+    local, glob = [], []
+    for size, offset in zip(sizes, offsets, strict=True):
+        local.append(box_surface(rng, size, 3000) @ up_tilt.T + np.asarray(offset) @ up_tilt.T)
+        glob.append(
+            apply(T_true, box_surface(rng, size, 3000) @ up_tilt.T + np.asarray(offset) @ up_tilt.T)
+        )
+    return local, glob
+
+
+@settings(max_examples=15, deadline=None)
+@given(
+    seed=seeds,
+    yaw=st.floats(-np.pi, np.pi),
+    tilt=st.tuples(st.floats(-0.3, 0.3), st.floats(-0.3, 0.3)),
+    bias=st.floats(0.0, 0.25),
+)
+def test_4dof_icp_on_prepared_clouds_keeps_up_exactly(seed, yaw, tilt, bias) -> None:
+    """Random yaw + translation, a tilted local up, centres biased by `bias` m: the ICP on the
+    small_gicp-backed clouds recovers the pose and maps up_local exactly onto up_global."""
+    rng = np.random.default_rng(seed)
+    R0 = Rotation.from_euler("xy", tilt).as_matrix()  # the local frame's up is R0 @ z
+    T_true = make_T(rot_z(yaw) @ R0.T, rng.uniform(-4, 4, 3))
+    local, glob = _boxes_scene(rng, T_true, R0)
+    centres_l = np.array([p.mean(0) for p in local]) + bias * rng.normal(size=(3, 3)) / np.sqrt(3)
+    centres_g = np.array([p.mean(0) for p in glob])
+    cfg = PoseConfig()
+    clouds_l, clouds_g = (
+        [prepare_cloud(p, cfg) for p in local],
+        [prepare_cloud(p, cfg) for p in glob],
+    )
+    assert all(isinstance(c, ObjectCloud) for c in clouds_l + clouds_g)
+    est = estimate_pose(centres_l, centres_g, clouds_l, clouds_g, R0 @ Z, Z, cfg)
+    assert est.method == "closed-form-4dof+icp"
+    np.testing.assert_allclose(est.T[:3, :3] @ (R0 @ Z), Z, atol=1e-12)
+    assert rot_err_deg(est.T, T_true) < 0.5
+    assert trans_err(est.T, T_true) < 0.02
+    assert est.fitness > 0.95
+
+
+@settings(max_examples=15, deadline=None)
+@given(seed=seeds, bias=st.floats(0.0, 0.2))
+def test_6dof_icp_recovers_random_rigid_transforms(seed, bias) -> None:
+    rng = np.random.default_rng(seed)
+    T_true = random_T(rng)
+    local, glob = _boxes_scene(rng, T_true, np.eye(3))
+    centres_l = np.array([p.mean(0) for p in local]) + bias * rng.normal(size=(3, 3)) / np.sqrt(3)
+    centres_g = np.array([p.mean(0) for p in glob])
+    est = estimate_pose(centres_l, centres_g, local, glob)
+    assert est.method == "closed-form-6dof+icp"
+    assert rot_err_deg(est.T, T_true) < 0.5
+    assert trans_err(est.T, T_true) < 0.02
+    np.testing.assert_allclose(est.T[:3, :3] @ est.T[:3, :3].T, np.eye(3), atol=1e-9)
+
+
+def test_prepared_clouds_and_arrays_give_the_same_pose() -> None:
+    rng = np.random.default_rng(21)
+    T_true = make_T(rot_z(0.7), [1.0, 2.0, 0.0])
+    local, glob = _boxes_scene(rng, T_true, np.eye(3))
+    centres_l = np.array([p.mean(0) for p in local])
+    centres_g = apply(T_true, centres_l)
+    cfg = PoseConfig()
+    from_arrays = estimate_pose(centres_l, centres_g, local, glob, Z, Z, cfg)
+    prepared = [prepare_cloud(p, cfg) for p in local], [prepare_cloud(p, cfg) for p in glob]
+    from_clouds = estimate_pose(centres_l, centres_g, *prepared, Z, Z, cfg)
+    np.testing.assert_array_equal(from_arrays.T, from_clouds.T)
+    assert from_arrays.fitness == from_clouds.fitness
+
+
+def test_warm_start_replaces_a_worse_start_and_is_refined() -> None:
+    """Two pairs stacked on the up axis (the closed form cannot fix the yaw): a warm start
+    near the truth wins over the search candidates when it fits better, and is refined."""
+    rng = np.random.default_rng(22)
+    T_true = make_T(rot_z(-1.3), [0.5, 1.0, 0.0])
+    objs = [l_shape(rng, 1500), l_shape(rng, 1500) + [0, 0, 1.2]]
+    glob = [apply(T_true, p) for p in objs]
+    centres_l = np.array([p.mean(0) for p in objs])
+    centres_g = apply(T_true, centres_l)
+    near = make_T(rot_z(-1.3 + 0.03), [0.52, 0.98, 0.0])
+    est = estimate_pose(centres_l, centres_g, objs, glob, Z, Z, init=near)
+    assert est.method in ("warm-4dof+icp", "search-4dof+icp")
+    assert rot_err_deg(est.T, T_true) < 0.5 and trans_err(est.T, T_true) < 0.02
+    only = estimate_pose(centres_l[:1], centres_g[:1], None, None, Z, Z, init=near)
+    assert only.method == "warm-4dof" and np.array_equal(only.T, near)
+
+
+def test_cached_cloud_is_prepared_once_per_object_and_setting() -> None:
+    rng = np.random.default_rng(23)
+    obj = SemanticObject("a", "chair", [0.0, 0, 0], points=box_surface(rng, [0.5, 0.5, 0.9], 2000))
+    first = cached_cloud(obj, PoseConfig())
+    assert cached_cloud(obj, PoseConfig()) is first
+    assert cached_cloud(obj, PoseConfig(refine=False)) is first  # ICP settings do not matter
+    coarser = cached_cloud(obj, PoseConfig(icp_voxel=0.1))
+    assert coarser is not first and len(coarser.points) < len(first.points)
+    assert cached_cloud(obj.replace(points=None), PoseConfig()) is None
+    moved = obj.replace(points=obj.points + 1.0)  # a new version: prepared anew
+    again = cached_cloud(moved, PoseConfig())
+    assert again is not first
+    np.testing.assert_allclose(again.points.mean(0), first.points.mean(0) + 1.0, atol=0.01)
+
+
+def test_far_queries_are_answered_without_neighbours() -> None:
+    rng = np.random.default_rng(24)
+    cloud = prepare_cloud(box_surface(rng, [1.0, 1.0, 1.0], 3000))
+    query = np.array([[0.5, 0.0, 0.0], [0.55, 0.0, 0.0], [0.0, 0.0, 0.0], [30.0, 0.0, 0.0]])
+    idx, dist = cloud.nearest(query, 1, 0.1)
+    assert np.isfinite(dist[:2, 0]).all() and np.all(dist[:2, 0] < 0.1)
+    assert np.isinf(dist[2:, 0]).all()  # the box centre is 0.5 m from its surface
+    exact = np.min(np.linalg.norm(cloud.points[None] - query[:2, None], axis=2), axis=1)
+    np.testing.assert_allclose(dist[:2, 0], exact)
+    _, wide = cloud.nearest(query, 1, 1.0)
+    assert np.isfinite(wide[2, 0]) and np.isinf(wide[3, 0])
