@@ -5,7 +5,8 @@ fused local objects), feeds the objects that are new or updated at each keyframe
 `Localizer`, prints a live table (keyframe, local objects, association sets, top-2 scores,
 status, time) and finally the pose error against ground truth.  It writes `scores.png`,
 `map.png`, `world.png`, `result.json`, `ground_truth.json` and the global/local maps to `out`,
-and with `rrd` a 3D Rerun recording of the updates (`semloc.viz3d`, the `viz` extra).
+and with `rrd` a 3D Rerun recording of the updates (`semloc.viz3d`, the `viz` extra);
+the files in `out` all or none (`semloc.io.native.staged_folder`).
 """
 
 from __future__ import annotations
@@ -24,8 +25,9 @@ from rich.live import Live
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
+from semloc.display import for_rich
 from semloc.eval.success import is_success
-from semloc.io.native import save_map, write_atomic
+from semloc.io.native import save_map, staged_folder, write_atomic
 from semloc.localizer import Localizer, LocalizerConfig
 from semloc.results import Result
 from semloc.sim.mapkinds import MAP_KINDS
@@ -182,7 +184,9 @@ def run_demo(config: DemoConfig, console: Console | None = None) -> DemoResult:
     truth = set(seq.correspondences(config.map_kind))
     correct = sum(1 for p in (result.best.pairs if result.best else []) if p in truth)
     demo = DemoResult(result, seq, rot, trans, correct, {"simulate": t1 - t0, "localize": t2 - t1})
-    demo.files = write_outputs(config, demo, keyframes, statuses)
+    with staged_folder(config.out, index="result.json") as stage:  # all files or none
+        files = write_outputs(config.model_copy(update={"out": stage}), demo, keyframes, statuses)
+    demo.files = [config.out / f.relative_to(stage) for f in files]
     if recording is not None:
         demo.files.append(recording.close())
     demo.seconds["total"] = time.perf_counter() - t0
@@ -266,4 +270,5 @@ def _report(demo: DemoResult, config: DemoConfig, console: Console) -> None:
         f"time: simulation {s['simulate']:.1f} s, localization {s['localize']:.1f} s, "
         f"total {s['total']:.1f} s"
     )
-    console.print(f"wrote {', '.join(p.name for p in demo.files)} to {config.out}/")
+    names = ", ".join(p.name for p in demo.files)
+    console.print(f"wrote {names} to {for_rich(config.out, None)}/")

@@ -31,7 +31,7 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 from semloc.association import AssociationConfig, CandidateIndex, Describer
 from semloc.clustering import AssociationSet, ClusteringConfig, HierarchicalClustering
 from semloc.decision import DecisionConfig, RankBy, decide, distinct, rank_places, shipped_model
-from semloc.maps import MapError, ObjectMap, SemanticObject
+from semloc.maps import MapError, ObjectMap, SemanticObject, unit_vector
 from semloc.pose import PoseConfig, PoseEstimate, cached_cloud, estimate_pose
 from semloc.results import Hypothesis, Result, Status, Step
 from semloc.transforms import centre_residual
@@ -119,6 +119,15 @@ class Localizer:
         describer: Describer | None = None,
         **overrides: Any,
     ) -> None:
+        if not isinstance(global_map, ObjectMap):
+            raise TypeError(
+                f"Localizer needs an ObjectMap as global map, got {type(global_map).__name__}"
+            )
+        if config is not None and not isinstance(config, LocalizerConfig):
+            raise TypeError(
+                f"config must be a LocalizerConfig, got {type(config).__name__}; give settings "
+                "as keywords (Localizer(global_map, gamma=0.7)) or LocalizerConfig(**settings)"
+            )
         if config is None:
             config = LocalizerConfig(**overrides)
         elif overrides:
@@ -128,7 +137,7 @@ class Localizer:
         if self._describer is not None:
             global_map = global_map.with_objects(self._describer.describe(global_map))
         self.global_map = global_map
-        self.local_up = None if local_up is None else np.asarray(local_up, dtype=float)
+        self.local_up = None if local_up is None else unit_vector(local_up, "local_up")
         self.descriptor_gate = config.association.gate(self._describer)
         self._candidates = CandidateIndex(global_map, config.association, self.descriptor_gate)
         self._pose_unrefined = config.pose.model_copy(update={"refine": False})
@@ -162,10 +171,16 @@ class Localizer:
         start = time.perf_counter()
         if isinstance(objects, ObjectMap) and objects.up is not None and self.local_up is None:
             self.local_up = objects.up
+        if isinstance(objects, (str, bytes)) or not isinstance(objects, Iterable):
+            raise TypeError(f"update() takes SemanticObjects, got {type(objects).__name__}")
         objects = list(objects)
+        ids: set[str] = set()
         for obj in objects:
             if not isinstance(obj, SemanticObject):
                 raise MapError(f"update() takes SemanticObject items, got {type(obj).__name__}")
+            if obj.id in ids:
+                raise MapError(f"update(): object '{obj.id}' occurs more than once")
+            ids.add(obj.id)
         detections = self._associate(objects)
         tick = time.perf_counter()
         if detections:
@@ -398,6 +413,8 @@ def localize(
     Only the last update builds hypotheses and recovers poses: the answers in between would
     not be read.  `progress(done, total)` is called after each update.
     """
+    if not isinstance(local_map, ObjectMap):
+        raise TypeError(f"localize needs an ObjectMap as local map, got {type(local_map).__name__}")
     localizer = Localizer(global_map, config, local_up=local_map.up, **overrides)
     keyframes = sorted(set(local_map.seen.tolist()))
     if not keyframes:

@@ -13,6 +13,8 @@ optional library is `ObjectMap.to_open3d`, which imports open3d when called.
 
 from __future__ import annotations
 
+import math
+import reprlib
 from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from functools import cached_property
@@ -25,46 +27,104 @@ class MapError(ValueError):
     """A map (file or in-memory) is invalid; the message names the source, object and problem."""
 
 
-def _as_vector(value: Any, length: int, what: str) -> np.ndarray:
+MAX_OBJECTS = 100_000
+"""Most objects in one map."""
+MAX_POINTS_PER_OBJECT = 1_000_000
+"""Most points of one object."""
+MAX_POINTS_PER_MAP = 10_000_000
+"""Most points of all objects of one map together."""
+MAX_ID_LENGTH = 200
+"""Longest object id (characters)."""
+MAX_LABEL_LENGTH = 200
+"""Longest semantic label (characters)."""
+MAX_COORDINATE = 1e6
+"""Largest magnitude (m) of a position, box size or point coordinate: keeps every product
+and sum of the pipeline finite and precise."""
+MAX_DESCRIPTOR_LENGTH = 4096
+"""Most entries of a shape descriptor."""
+MAX_SEEN = 2**31 - 1
+"""Largest keyframe index `seen`."""
+
+
+def _brief(value: Any) -> str:
+    return reprlib.repr(value)[:60]
+
+
+def _numbers(value: Any, what: str, shape: str) -> np.ndarray:
+    """`value` as a float array; `MapError` for anything but numbers (no strings, booleans, or
+    integers beyond the float range)."""
+    kind = "" if shape.isdigit() else f"{shape} "
+    if _small_with_non_numbers(value):
+        raise MapError(f"{what} must be {kind}numbers, got {_brief(value)}")
     try:
-        array = np.asarray(value, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise MapError(f"{what} must be numbers, got {value!r:.60}") from exc
-    if array.shape != (length,):
-        raise MapError(f"{what} must have shape ({length},), got {array.shape}")
+        array = np.asarray(value)
+    except (TypeError, ValueError, OverflowError) as exc:
+        raise MapError(f"{what} must be {kind}numbers, got {_brief(value)}") from exc
+    if array.size and array.dtype.kind not in "iuf":
+        raise MapError(f"{what} must be {kind}numbers, got {_brief(value)}")
+    try:
+        return array.astype(float)
+    except (TypeError, ValueError, OverflowError) as exc:
+        raise MapError(f"{what} must be {kind}numbers, got {_brief(value)}") from exc
+
+
+def _small_with_non_numbers(value: Any, depth: int = 2) -> bool:
+    """Whether a short (nested) list holds booleans or strings, which numpy would convert."""
+    if isinstance(value, (bool, str, bytes, np.bool_)):
+        return True
+    if depth == 0 or not isinstance(value, (list, tuple)) or len(value) > 16:
+        return False
+    return any(_small_with_non_numbers(v, depth - 1) for v in value)
+
+
+def _bounded(array: np.ndarray, what: str, limit: float = MAX_COORDINATE) -> np.ndarray:
     if not np.all(np.isfinite(array)):
         raise MapError(f"{what} has non-finite values")
+    if array.size and np.abs(array).max() > limit:
+        raise MapError(f"{what} has values beyond ±{limit:g} (the input limit)")
     return array
+
+
+def _as_vector(value: Any, length: int, what: str, limit: float = MAX_COORDINATE) -> np.ndarray:
+    array = _numbers(value, what, str(length))
+    if array.shape != (length,):
+        raise MapError(f"{what} must have shape ({length},), got {array.shape}")
+    return _bounded(array, what, limit)
 
 
 def _as_points(value: Any, what: str = "points") -> np.ndarray:
     if not isinstance(value, (np.ndarray, list, tuple)) and hasattr(value, "points"):
         value = value.points  # a point cloud object (open3d's PointCloud and the like)
-    try:
-        array = np.asarray(value, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise MapError(f"{what} must be an N x 3 array of numbers") from exc
+    array = _numbers(value, what, "an N x 3 array of")
     if array.size == 0:
         return np.zeros((0, 3))
     if array.ndim != 2 or array.shape[1] != 3:
         raise MapError(f"{what} must have shape (N, 3), got {array.shape}")
-    if not np.all(np.isfinite(array)):
-        raise MapError(f"{what} has non-finite values")
-    return array
+    if len(array) > MAX_POINTS_PER_OBJECT:
+        raise MapError(f"{what}: {len(array):,} points, more than {MAX_POINTS_PER_OBJECT:,}")
+    return _bounded(array, what)
 
 
 def _as_rotation(value: Any) -> np.ndarray:
-    try:
-        array = np.asarray(value, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise MapError("rotation must be a 3 x 3 array of numbers") from exc
+    array = _numbers(value, "rotation", "a 3 x 3 array of")
     if array.shape != (3, 3):
         raise MapError(f"rotation must have shape (3, 3), got {array.shape}")
-    if not np.all(np.isfinite(array)):
-        raise MapError("rotation has non-finite values")
+    _bounded(array, "rotation", 2.0)
     if not np.allclose(array @ array.T, np.eye(3), atol=1e-3) or np.linalg.det(array) < 0:
         raise MapError("rotation is not a proper rotation matrix")
     return array
+
+
+def _text(value: Any, what: str, limit: int, blank: bool = False) -> str:
+    if not isinstance(value, str) or not (value if blank else value.strip()):
+        raise MapError(f"{what} must be a non-empty string, got {_brief(value)}")
+    if len(value) > limit:
+        raise MapError(f"{what} has {len(value):,} characters, more than {limit}")
+    try:
+        value.encode("utf-8")
+    except UnicodeEncodeError:
+        raise MapError(f"{what} is not valid Unicode text (lone surrogate)") from None
+    return value
 
 
 @dataclass(frozen=True, eq=False)
@@ -93,7 +153,8 @@ class SemanticObject:
         if isinstance(self.id, (int, np.integer)) and not isinstance(self.id, bool):
             set_(self, "id", str(self.id))
         if not isinstance(self.id, str) or not self.id:
-            raise MapError(f"object id must be a non-empty string, got {self.id!r}")
+            raise MapError(f"object id must be a non-empty string, got {_brief(self.id)}")
+        _text(self.id, "object id", MAX_ID_LENGTH, blank=True)
         try:
             self._validate()
         except MapError as exc:
@@ -101,8 +162,7 @@ class SemanticObject:
 
     def _validate(self) -> None:
         set_ = object.__setattr__
-        if not isinstance(self.label, str) or not self.label.strip():
-            raise MapError(f"label must be a non-empty string, got {self.label!r}")
+        _text(self.label, "label", MAX_LABEL_LENGTH)
         if self.points is not None:
             set_(self, "points", _as_points(self.points))
         if self.position is None:
@@ -118,22 +178,31 @@ class SemanticObject:
         if self.rotation is not None:
             set_(self, "rotation", _as_rotation(self.rotation))
         if self.descriptor is not None:
-            try:
-                descriptor = np.asarray(self.descriptor, dtype=float).ravel()
-            except (TypeError, ValueError) as exc:
-                raise MapError("descriptor must be a vector of numbers") from exc
-            if descriptor.size == 0 or not np.all(np.isfinite(descriptor)):
-                raise MapError("descriptor must be a non-empty vector of finite numbers")
+            descriptor = _numbers(self.descriptor, "descriptor", "a vector of").ravel()
+            if not 0 < descriptor.size <= MAX_DESCRIPTOR_LENGTH:
+                raise MapError(
+                    f"descriptor must be a non-empty vector of at most {MAX_DESCRIPTOR_LENGTH} numbers"
+                )
+            if not np.all(np.isfinite(descriptor)):
+                raise MapError("descriptor must be a vector of finite numbers")
             set_(self, "descriptor", descriptor)
         if isinstance(self.seen, bool) or not isinstance(self.seen, (int, np.integer)):
-            raise MapError(f"seen must be an integer, got {self.seen!r}")
+            raise MapError(f"seen must be an integer, got {_brief(self.seen)}")
+        if not 0 <= self.seen <= MAX_SEEN:
+            raise MapError(f"seen must be a keyframe index from 0 to {MAX_SEEN}, got {self.seen}")
         set_(self, "seen", int(self.seen))
         if self.score is not None:
-            if isinstance(self.score, bool) or not isinstance(self.score, (int, float)):
-                raise MapError(f"score must be a number, got {self.score!r}")
-            if not np.isfinite(self.score):
+            if isinstance(self.score, bool) or not isinstance(
+                self.score, (int, float, np.integer, np.floating)
+            ):
+                raise MapError(f"score must be a number, got {_brief(self.score)}")
+            try:
+                score = float(self.score)
+            except OverflowError:
+                score = math.inf
+            if not math.isfinite(score):
                 raise MapError("score is not finite")
-            set_(self, "score", float(self.score))
+            set_(self, "score", score)
 
     def replace(self, **changes: Any) -> SemanticObject:
         """A copy with some fields changed (validated again)."""
@@ -163,10 +232,22 @@ class ObjectMap(Sequence[SemanticObject]):
         name: str = "",
         extra: dict[str, Any] | None = None,
     ) -> None:
+        if isinstance(objects, (str, bytes)) or not isinstance(objects, Iterable):
+            raise TypeError(f"ObjectMap takes an iterable of SemanticObject, got {_brief(objects)}")
         self._objects: tuple[SemanticObject, ...] = tuple(objects)
+        if len(self._objects) > MAX_OBJECTS:
+            raise MapError(
+                f"{len(self._objects):,} objects, more than the limit of {MAX_OBJECTS:,}"
+            )
+        total = 0
         for obj in self._objects:
             if not isinstance(obj, SemanticObject):
                 raise MapError(f"map entries must be SemanticObject, got {type(obj).__name__}")
+            total += 0 if obj.points is None else len(obj.points)
+        if total > MAX_POINTS_PER_MAP:
+            raise MapError(
+                f"{total:,} points in all, more than the limit of {MAX_POINTS_PER_MAP:,}"
+            )
         self.up: np.ndarray | None = None if up is None else _unit_up(up)
         self.name = str(name)
         self.extra: dict[str, Any] = dict(extra or {})
@@ -192,13 +273,20 @@ class ObjectMap(Sequence[SemanticObject]):
         name: str = "",
     ) -> ObjectMap:
         """Build a map from parallel arrays (one row per object); optional columns may be None."""
-        positions = np.asarray(positions, dtype=float)
+        positions = _numbers(positions, "positions", "an N x 3 array of")
+        columns = {"ids": ids, "labels": labels, "points": points, "descriptors": descriptors,
+                   "sizes": sizes, "rotations": rotations, "seen": seen}  # fmt: skip
+        for what, column in columns.items():
+            if column is not None and (
+                isinstance(column, (str, bytes)) or not hasattr(column, "__len__")
+            ):
+                raise TypeError(f"from_arrays: {what} must be a sequence, got {_brief(column)}")
         n = len(ids)
         if len(labels) != n or positions.shape != (n, 3):
             raise MapError(
                 f"ids ({n}), labels ({len(labels)}) and positions {positions.shape} do not match"
             )
-        for column, what in ((points, "points"), (descriptors, "descriptors"), (seen, "seen")):
+        for what, column in columns.items():
             if column is not None and len(column) != n:
                 raise MapError(f"{what} has {len(column)} entries for {n} objects")
         objects = [
@@ -210,7 +298,7 @@ class ObjectMap(Sequence[SemanticObject]):
                 rotation=None if rotations is None else rotations[i],
                 points=None if points is None else points[i],
                 descriptor=None if descriptors is None else descriptors[i],
-                seen=0 if seen is None else int(seen[i]),
+                seen=0 if seen is None else seen[i],
             )
             for i in range(n)
         ]
@@ -341,9 +429,15 @@ def _rgb(color: Any) -> np.ndarray:
     return _as_vector(color, 3, "colour")
 
 
+def unit_vector(value: Any, what: str = "up") -> np.ndarray:
+    """`value` (3 finite numbers, not all zero) scaled to length 1 without overflow."""
+    vector = _as_vector(value, 3, what, limit=np.finfo(float).max)
+    largest = np.abs(vector).max()
+    if largest < 1e-12:
+        raise MapError(f"{what} must be a non-zero vector")
+    vector = vector / largest  # now the norm cannot overflow or underflow
+    return vector / np.linalg.norm(vector)
+
+
 def _unit_up(up: Any) -> np.ndarray:
-    vector = _as_vector(up, 3, "up")
-    norm = np.linalg.norm(vector)
-    if norm < 1e-9:
-        raise MapError("up must be a non-zero vector")
-    return vector / norm
+    return unit_vector(up, "up")

@@ -2,7 +2,8 @@
 
 Every `plot_*` function draws into a given `Axes` and returns it; `save_figure` writes a PNG
 atomically (`semloc.io.write_atomic`).  Colours come from `semloc.colors` (one per label,
-the same in every picture, export and recording); axes are in metres with equal aspect.
+the same in every picture, export and recording); axes are in metres with equal aspect.  Labels,
+ids and titles are user text: shown shortened and with `$` escaped (`semloc.display`).
 """
 
 from __future__ import annotations
@@ -24,11 +25,17 @@ from matplotlib.lines import Line2D  # noqa: E402
 from matplotlib.patches import Patch, Polygon  # noqa: E402
 
 from semloc.colors import CLASS_COLORS, label_colors  # noqa: E402, F401 (re-exported)
+from semloc.display import for_matplotlib  # noqa: E402
 from semloc.io import write_atomic  # noqa: E402
 from semloc.maps import ObjectMap  # noqa: E402
 
 if TYPE_CHECKING:
     from semloc.sim.world import World
+
+LEGEND_LABELS = 30
+"""Most labels listed in a legend (the rest are counted)."""
+TITLE_LENGTH = 160
+"""Longest title shown (user text: shortened and escaped, `semloc.display`)."""
 
 
 def new_figure(width: float = 9.0, height: float = 7.0) -> tuple[Figure, Axes]:
@@ -110,15 +117,20 @@ def plot_objects(
         )
         if ids:
             ax.annotate(
-                obj.id, obj.position[:2], fontsize=6, xytext=(3, 3), textcoords="offset points"
-            )
+                for_matplotlib(obj.id, 16), obj.position[:2], fontsize=6, xytext=(3, 3),
+                textcoords="offset points",
+            )  # fmt: skip
     return ax
 
 
 def _finish_map_axes(
     ax: Axes, colors: dict[str, str], extra: list[Any] | None = None, title: str = ""
 ) -> None:
-    handles: list[Any] = [Patch(fc=c, ec=c, alpha=0.6, label=label) for label, c in colors.items()]
+    shown = list(colors.items())[:LEGEND_LABELS]
+    handles: list[Any] = [Patch(fc=c, ec=c, alpha=0.6, label=for_matplotlib(label))
+                          for label, c in shown]  # fmt: skip
+    if len(colors) > LEGEND_LABELS:
+        handles.append(Patch(fc="none", ec="none", label=f"… {len(colors) - LEGEND_LABELS} more"))
     handles += extra or []
     ax.legend(
         handles=handles, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False
@@ -128,7 +140,7 @@ def _finish_map_axes(
     ax.set_ylabel("y [m]")
     ax.grid(True, lw=0.3, alpha=0.5)
     if title:
-        ax.set_title(title, fontsize=11)
+        ax.set_title(for_matplotlib(title, TITLE_LENGTH), fontsize=11)
 
 
 def plot_localization(
@@ -243,7 +255,7 @@ def plot_scores(
     ax.grid(True, lw=0.3, alpha=0.5)
     ax.legend(fontsize=8, loc="upper left")
     if title:
-        ax.set_title(title, fontsize=11)
+        ax.set_title(for_matplotlib(title, TITLE_LENGTH), fontsize=11)
     return ax
 
 

@@ -91,7 +91,12 @@ _names = st.text("abcdefghij_", min_size=1, max_size=8)
 _element = st.tuples(
     _names,
     st.integers(0, 10**6),
-    st.lists(st.tuples(_names, st.sampled_from(sorted(_TYPES))), min_size=1, max_size=6),
+    st.lists(
+        st.tuples(_names, st.sampled_from(sorted(_TYPES))),
+        min_size=1,
+        max_size=6,
+        unique_by=lambda p: p[0],
+    ),  # property names are unique within an element
 )
 
 

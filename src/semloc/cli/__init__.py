@@ -9,8 +9,14 @@ stderr and exit status 2, so that bad input never ends in a traceback.
 
 from __future__ import annotations
 
+import signal
 import sys
+import threading
+import warnings
+from collections.abc import Iterator
+from contextlib import contextmanager
 
+import numpy as np
 import typer
 
 from semloc.cli.app import CliError, app
@@ -20,33 +26,102 @@ from semloc.cli.app import CliError, app
 from semloc.cli import simulation, localize, datasets, export, bench, descriptors, config  # noqa: F401, E402
 
 # isort: on
+from semloc.display import printable
 from semloc.maps import MapError
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Entry point of the `semloc` script: runs the app and maps errors to exit status 2."""
+class Interrupted(BaseException):
+    """SIGINT or SIGTERM arrived; raised in the main thread by the handlers `main` installs."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signum)
+        self.signum = signum
+
+
+def _raise_interrupted(signum: int, frame: object) -> None:
+    raise Interrupted(signum)
+
+
+@contextmanager
+def _interrupts_raise(script: bool) -> Iterator[None]:
+    """SIGINT and SIGTERM raise `Interrupted` during the block (main thread only).
+
+    Afterwards the previous handlers come back, except for the `script` (the process ends with
+    the command): there a late signal is ignored, so that a finished command keeps its status."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    signals = (signal.SIGINT, signal.SIGTERM)
+    previous = {s: signal.signal(s, _raise_interrupted) for s in signals}
     try:
-        app(args=argv, standalone_mode=False)
+        yield
+    finally:
+        for signum, handler in previous.items():
+            signal.signal(signum, signal.SIG_IGN if script else handler)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of the `semloc` script: runs the app and maps errors to exit status 2.
+
+    Without `argv` (the script) the arguments come from `sys.argv` and the process is taken to
+    end with the command; with `argv` (called from Python) signal handlers are restored.
+
+    SIGINT (Ctrl-C) and SIGTERM end the command with `semloc: interrupted` and status 128 +
+    the signal number (130, 143); outputs are then complete or absent (`semloc.io.write_files`,
+    `staged_folder`).  Numerical warnings are not printed: results are checked to be finite.
+    """
+    try:
+        with (
+            _interrupts_raise(script=argv is None),
+            warnings.catch_warnings(),
+            np.errstate(all="ignore"),
+        ):
+            warnings.simplefilter("ignore", RuntimeWarning)
+            code = app(args=argv, standalone_mode=False)
     except (MapError, CliError) as exc:
-        print(f"semloc: error: {exc}", file=sys.stderr)
-        return 2
+        return _error(str(exc))
     except OSError as exc:
-        print(f"semloc: error: {exc}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
+        return _error(str(exc))
+    except (Interrupted, KeyboardInterrupt) as exc:
         print("semloc: interrupted", file=sys.stderr)
-        return 130
+        return 128 + (exc.signum if isinstance(exc, Interrupted) else signal.SIGINT)
     except SystemExit as exc:  # --help and typer.Exit pass through unchanged
-        return int(exc.code or 0)
+        return exc.code if isinstance(exc.code, int) else 0 if exc.code is None else 1
     except typer.Abort:
+        print("semloc: interrupted", file=sys.stderr)
         return 130
     except Exception as exc:
         # click (vendored by typer) usage errors: one line, status 2 like click's own
         if hasattr(exc, "format_message") and hasattr(exc, "exit_code"):
-            print(f"semloc: error: {exc.format_message()}", file=sys.stderr)
-            return 2
+            return _error(exc.format_message())
+        cause = _interrupt_behind(exc)
+        if cause is not None:  # e.g. an extension module's import turned it into ImportError
+            print("semloc: interrupted", file=sys.stderr)
+            return 128 + cause.signum
         raise
-    return 0
+    if code == 130:  # typer turns a KeyboardInterrupt it sees into Exit(130)
+        print("semloc: interrupted", file=sys.stderr)
+    return code if isinstance(code, int) else 0
+
+
+def _interrupt_behind(exc: BaseException) -> Interrupted | None:
+    """The `Interrupted` that caused `exc` (through its cause / context chain), if any."""
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(exc, Interrupted):
+            return exc
+        seen.add(id(exc))
+        exc = exc.__cause__ or exc.__context__
+    return None
+
+
+def _error(message: str) -> int:
+    """Print one line `semloc: error: ...` (shortened, printable) and return status 2."""
+    line = " ".join(message.split())
+    if len(line) > 600:
+        line = line[:600] + "..."
+    sys.stderr.write(f"semloc: error: {printable(line)}\n")
+    return 2
 
 
 if __name__ == "__main__":

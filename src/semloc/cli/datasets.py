@@ -10,10 +10,12 @@ import numpy as np
 import typer
 
 from semloc.cli.app import app, choices, console, fail
-from semloc.cli.files import read_pose
+from semloc.cli.files import check_finite, check_output, read_pose
 from semloc.cli.options import DescribeOption, with_descriptors
-from semloc.io import importers, load_map, save_map, write_atomic
+from semloc.display import for_rich
+from semloc.io import importers, load_map
 from semloc.io.importers import IMPORTERS
+from semloc.io.native import map_files, write_files
 from semloc.maps import MapError
 from semloc.sim.crop import crop_truth_to_dict, crop_with_truth
 
@@ -71,7 +73,19 @@ def convert(
     seed: Annotated[int, typer.Option(help="Seed for sampled surface points.")] = 0,
     descriptor: DescribeOption = None,
 ) -> None:
-    """Convert a dataset scene into a semloc map (the formats: see KIND)."""
+    """Convert a dataset scene into a semloc map (the formats: see KIND).
+
+    With a second (scan-derived) map both files are written, or neither."""
+    check_finite(voxel=voxel)
+    check_output(output)
+    second = None
+    if kind.value == "scan2cad":
+        second = scan_output or output.with_name(output.name.removesuffix(".json") + ".scan.json")
+        check_output(second, "--scan-output")
+        if second.resolve() == output.resolve():
+            fail(f"{second}: --scan-output must differ from --output")
+    elif scan_output is not None:
+        fail(f"--scan-output does not apply to {kind.value}")
     options = dict(
         labels=labels,
         label_map=label_map,
@@ -89,12 +103,14 @@ def convert(
         if isinstance(exc, MapError):
             raise
         fail(str(exc))
-    save_map(with_descriptors(maps[0], descriptor), output)
-    console.print(f"wrote {output}: {len(maps[0])} objects")
-    if len(maps) > 1 and maps[1] is not None:
-        second = scan_output or output.with_name(output.name.removesuffix(".json") + ".scan.json")
-        save_map(with_descriptors(maps[1], descriptor), second)
-        console.print(f"wrote {second}: {len(maps[1])} objects (scan-derived)")
+    files = map_files(with_descriptors(maps[0], descriptor), output)
+    scan_map = maps[1] if len(maps) > 1 else None
+    if scan_map is not None and second is not None:
+        files += map_files(with_descriptors(scan_map, descriptor), second)
+    write_files(files)
+    console.print(f"wrote {for_rich(output, None)}: {len(maps[0])} objects")
+    if scan_map is not None and second is not None:
+        console.print(f"wrote {for_rich(second, None)}: {len(scan_map)} objects (scan-derived)")
 
 
 @app.command()
@@ -120,7 +136,11 @@ def crop(
     ] = False,
     descriptor: DescribeOption = None,
 ) -> None:
-    """Cut a local observation out of MAP (visible-side points, new frame, ground truth)."""
+    """Cut a local observation out of MAP (visible-side points, new frame, ground truth).
+
+    The local map and its ground truth are written both, or neither."""
+    check_finite(center=center, radius=radius)
+    check_output(output)
     objmap = load_map(map_file)
     pose: str | np.ndarray | None
     if transform == "random":
@@ -132,8 +152,9 @@ def crop(
     local, truth = crop_with_truth(objmap, center, radius, pose, seed, recentre=recentre)
     if len(local) == 0:
         fail(f"no object of {map_file} has its centre within {radius} m of {list(center)}")
-    save_map(with_descriptors(local, descriptor), output)
     truth_path = output.with_name(output.name.removesuffix(".json") + ".gt.json")
     document = crop_truth_to_dict(truth, objmap.name)
-    write_atomic(truth_path, json.dumps(document, indent=1) + "\n")
-    console.print(f"wrote {output}: {len(local)} objects; ground truth in {truth_path}")
+    truth_text = json.dumps(document, indent=1, allow_nan=False) + "\n"
+    write_files([*map_files(with_descriptors(local, descriptor), output), (truth_path, truth_text)])
+    shown = for_rich(output, None), for_rich(truth_path, None)
+    console.print(f"wrote {shown[0]}: {len(local)} objects; ground truth in {shown[1]}")

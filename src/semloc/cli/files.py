@@ -1,14 +1,17 @@
-"""Reading the small inputs of the commands: settings (JSON or YAML), poses, results."""
+"""The commands' files: reading settings (JSON or YAML), poses and results, and checking
+outputs and numeric options before any work is done."""
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
 import yaml
 
 from semloc.cli.app import fail
-from semloc.io import read_json
+from semloc.io import read_json, read_regular
+from semloc.io.native import MAX_JSON_BYTES
 from semloc.transforms import as_pose
 
 YAML_SUFFIXES = (".yaml", ".yml")
@@ -26,13 +29,13 @@ def read_config(path: Path | None) -> dict:
 
 def _read_yaml(path: Path) -> object:
     try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        fail(f"{path}: file not found")
-    except (OSError, UnicodeDecodeError) as exc:
-        fail(f"{path}: cannot read ({exc.__class__.__name__}: {exc})")
+        text = read_regular(path, MAX_JSON_BYTES).decode("utf-8")
+    except UnicodeDecodeError as exc:
+        fail(f"{path}: not UTF-8 text (byte {exc.start})")
     try:
         return yaml.safe_load(text)
+    except RecursionError:
+        fail(f"{path}: YAML nested too deeply")
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f" at line {mark.line + 1}" if mark is not None else ""
@@ -72,3 +75,20 @@ def read_result(path: Path) -> tuple[np.ndarray | None, list[tuple[str, str]], s
                 pairs.append((str(pair["global"]), str(pair["local"])))
     status = data.get("status") if isinstance(data.get("status"), str) else None
     return pose, pairs, status
+
+
+def check_output(path: Path, option: str = "--output") -> Path:
+    """`path` if a file can be written there: not a folder, in a folder that exists."""
+    if path.is_dir():
+        fail(f"{path}: is a folder; {option} takes a file name")
+    if not path.parent.is_dir():
+        fail(f"{path}: folder {path.parent} does not exist ({option})")
+    return path
+
+
+def check_finite(**options: float | tuple[float, ...] | None) -> None:
+    """Refuse a non-finite numeric option (`--voxel nan`, `--radius inf`) in one line."""
+    for name, value in options.items():
+        values = value if isinstance(value, tuple) else (value,)
+        if any(v is not None and not math.isfinite(v) for v in values):
+            fail(f"--{name.replace('_', '-')} must be a finite number, got {value}")

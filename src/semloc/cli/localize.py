@@ -20,7 +20,7 @@ from rich.console import Console
 
 from semloc.association import DESCRIBERS
 from semloc.cli.app import app, choices, console, err_console, fail, first_error, with_default
-from semloc.cli.files import read_config, read_pose
+from semloc.cli.files import check_finite, check_output, read_config, read_pose
 from semloc.cli.render import print_ground_truth, print_result, replay_progress
 from semloc.eval.success import ground_truth_report
 from semloc.io import load_map, write_atomic
@@ -101,6 +101,9 @@ def localize(
     ] = None,
 ) -> None:
     """Localize LOCAL in GLOBAL: association sets, hypotheses and the pose T_global_local."""
+    check_finite(gamma=gamma, delta=delta, tolerance=tolerance, descriptor_delta=descriptor_delta)
+    if output is not None:
+        check_output(output)
     settings = read_config(config)
     given = dict(gamma=gamma, delta=delta, top_k=top_k, distance_tolerance=tolerance,
                  descriptor=None if descriptor is None else descriptor.value,
@@ -119,7 +122,7 @@ def localize(
         document = result.to_dict()
         if report is not None:
             document["ground_truth"] = report
-        text = json.dumps(document, indent=1) + "\n"
+        text = json.dumps(document, indent=1, allow_nan=False) + "\n"
         if output is None:
             sys.stdout.write(text)
         else:

@@ -1,4 +1,7 @@
-"""Rich rendering of what the commands print: a Result, its ground-truth check, progress."""
+"""Rich rendering of what the commands print: a Result, its ground-truth check, progress.
+
+User text (ids, labels, file names) goes through `semloc.display.for_rich`: shortened and with
+rich markup escaped."""
 
 from __future__ import annotations
 
@@ -12,6 +15,7 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 from rich.table import Table
 
 from semloc.demo import STATUS_STYLE
+from semloc.display import for_rich
 from semloc.eval.success import ROTATION_TOLERANCE_DEG, TRANSLATION_TOLERANCE_M
 from semloc.maps import ObjectMap
 from semloc.results import Result
@@ -49,7 +53,8 @@ def print_result(result: Result, out: Console) -> None:
         if h.pose is not None:
             yaw = f"{np.degrees(np.arctan2(h.pose[1, 0], h.pose[0, 0])):.1f}"
             translation = " ".join(f"{v:.2f}" for v in h.pose[:3, 3])
-        shown = ", ".join(f"{l}→{g}" for g, l in h.pairs[:6]) + (" …" if len(h.pairs) > 6 else "")
+        shown = ", ".join(f"{for_rich(l, 24)}→{for_rich(g, 24)}" for g, l in h.pairs[:6])
+        shown += " …" if len(h.pairs) > 6 else ""
         fitness = "-" if h.fitness is None else f"{h.fitness:.2f}"
         confidence = "-" if h.confidence is None else f"{h.confidence:.2f}"
         table.add_row(str(h.rank), f"{h.score:.2f}", str(len(h.pairs)), fitness, confidence,

@@ -12,7 +12,7 @@ from rich.table import Table
 
 from semloc.cli.app import app, console, fail, first_error
 from semloc.cli.extras import need
-from semloc.cli.files import read_pose, read_result
+from semloc.cli.files import check_finite, check_output, read_pose, read_result
 from semloc.cli.options import (
     RESOLUTION_HELP,
     SIZE_HELP,
@@ -22,7 +22,9 @@ from semloc.cli.options import (
     parse_resolution,
 )
 from semloc.demo import DemoConfig, run_demo
+from semloc.display import for_rich
 from semloc.io import load_map
+from semloc.io.native import staged_folder
 from semloc.scandemo import ScanDemoConfig, run_scan_demo
 from semloc.sim.export import write_sequence
 from semloc.sim.noise import DetectionNoise
@@ -78,6 +80,7 @@ def demo(
 
     Prints a live table and the pose error against ground truth; writes scores.png and map.png.
     """
+    check_finite(gamma=gamma, drift=drift)
     need("demo", "sim")
     need("demo", "viz", modules=("matplotlib",) if rrd is None else ("matplotlib", "rerun"))
     if scan is not None and rrd is not None:
@@ -130,7 +133,11 @@ def simulate(
     Files: world.json/.png, global_<kind>.json, local.json, keyframes/local_XXXX.json.
 
     ground_truth.json holds T_global_local, camera poses and correspondences per map kind.
+
+    All files are written, or none: they are built in a temporary folder beside OUT and moved
+    into it at the end (ground_truth.json last).
     """
+    check_finite(drift=drift, drift_yaw=drift_yaw)
     need("simulate", "sim")
     need("simulate", "viz", modules=("matplotlib",))
     noise = DetectionNoise.perfect() if perfect else DetectionNoise()
@@ -142,10 +149,16 @@ def simulate(
         )  # fmt: skip
     except ValueError as exc:
         fail(str(exc))
-    files = write_sequence(
-        seq, out, snapshots=snapshots, descriptor=None if descriptor is None else descriptor.value
+    with staged_folder(out, index="ground_truth.json") as stage:
+        files = write_sequence(
+            seq,
+            stage,
+            snapshots=snapshots,
+            descriptor=None if descriptor is None else descriptor.value,
+        )
+    table = Table(
+        title=f"simulated world seed {seed} -> {for_rich(out, None)}", title_justify="left"
     )
-    table = Table(title=f"simulated world seed {seed} -> {out}", title_justify="left")
     for column in ("map", "objects", "file"):
         table.add_column(column)
     for kind, gmap in seq.global_maps.items():
@@ -190,6 +203,7 @@ def view(
     if png is None and rrd is None:
         png = map_file.with_suffix(".png")
     if png is not None:
+        check_output(png)
         need("view", "viz", modules=("matplotlib",))
     if rrd is not None:
         need("view --rrd", "viz", modules=("rerun",))
@@ -205,17 +219,18 @@ def view(
         from semloc.viz import map_figure, plot_localization, save_figure  # matplotlib
 
         heading = title or f"{map_file.name}: {len(objmap)} objects" + (
-            f" ({status})" if status else ""
+            f" ({status[:20]})" if status else ""
         )
         fig, ax = map_figure(objmap.positions[:, :2])
         plot_localization(ax, objmap, local_map, pose, pairs, true_pose=truth, title=heading,
                           map_role=role)  # fmt: skip
-        console.print(f"wrote {save_figure(fig, png)}")
+        console.print(f"wrote {for_rich(save_figure(fig, png), None)}")
     if rrd is not None:
         from semloc.viz3d import write_localization  # rerun
 
         written = write_localization(rrd, objmap, local_map, pose, pairs, truth)
-        console.print(f"wrote {written} (open with: rerun {written})")
+        shown = for_rich(written, None)
+        console.print(f"wrote {shown} (open with: rerun {shown})")
 
 
 def _looks_local(path: Path, name: str) -> bool:

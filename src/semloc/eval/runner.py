@@ -7,8 +7,9 @@ single-threaded worker process per core by default) or on an existing cluster
 progress bar.  Rows are sorted before writing, so the outputs do not depend on completion
 order: for a fixed seed everything except the `ms` column is reproducible.
 
-Outputs (written atomically): results.csv, hypotheses.csv, ablation.csv, the PNG figures and
-report.md; with `real_walks` also those of `semloc.eval.realwalks`.
+Outputs (all or none: built beside `out` and moved in at the end): results.csv, hypotheses.csv,
+ablation.csv, the PNG figures and report.md; with `real_walks` also those of
+`semloc.eval.realwalks` (written into `out` as they are computed).
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ from semloc.eval.protocol import (
     start_keyframes,
 )  # fmt: skip
 from semloc.eval.report import write_outputs
+from semloc.io.native import staged_folder
 
 _ONE_THREAD = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
 
@@ -104,7 +106,8 @@ def run_benchmark(
 
         realwalks.real_walk_data()  # missing scans: say so before the long run
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+    if out.exists() and not out.is_dir():
+        raise ValueError(f"{out}: exists and is not a folder")
     for var in _ONE_THREAD:
         os.environ.setdefault(var, "1")
     cluster = None
@@ -148,6 +151,7 @@ def run_benchmark(
                     hyps += chain_hyps
                 bar.advance(task)
         if config.real_walks:
+            out.mkdir(parents=True, exist_ok=True)  # the real-walk files are written as they come
             real = realwalks.run_real_walks(client, config, out, progress)
     finally:
         client.close()
@@ -157,7 +161,9 @@ def run_benchmark(
     hyps.sort(key=lambda r: _order(r, config.methods))
     ablation_rows.sort(key=lambda r: _order(r, config.methods))
     seconds = time.perf_counter() - begin
-    files = write_outputs(out, config, rows, hyps, ablation_rows, seconds)
+    with staged_folder(out, index="report.md") as stage:  # all files or none
+        staged = write_outputs(stage, config, rows, hyps, ablation_rows, seconds)
+    files = [out / f.relative_to(stage) for f in staged]
     if config.real_walks:
         files += real["files"]
         return BenchOutput(rows, hyps, ablation_rows, files, seconds, real["rows"])

@@ -9,11 +9,15 @@ from typing import Any
 
 from semloc.io.native import (
     load_map,
+    map_files,
     map_from_dict,
     map_to_dict,
     read_json,
+    read_regular,
     save_map,
+    staged_folder,
     write_atomic,
+    write_files,
 )
 
 _LOADERS = ("load_scannet", "load_scan2cad", "load_replica", "load_rscan")
@@ -25,6 +29,10 @@ __all__ = [
     "map_to_dict",
     "save_map",
     "write_atomic",
+    "write_files",
+    "map_files",
+    "read_regular",
+    "staged_folder",
     *_LOADERS,
 ]
 

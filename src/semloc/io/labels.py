@@ -5,10 +5,10 @@ user label maps (`--label-map`: a JSON object `{"raw": "mapped"}` or ScanNet's
 from __future__ import annotations
 
 import csv
-import json
 import os
 from pathlib import Path
 
+from semloc.io.native import MAX_JSON_BYTES, read_json, read_regular
 from semloc.maps import MapError
 
 NYU40 = (
@@ -127,21 +127,21 @@ def class_name(label_set: str, index: int, where: str) -> str:
 def read_label_map(path: str | os.PathLike[str]) -> dict[str, str]:
     """Read a label map: JSON `{"raw": "mapped"}` or a TSV with `raw_category`, `nyu40class`."""
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise MapError(f"{path}: cannot read label map ({exc.strerror or exc})") from None
     if path.suffix.lower() == ".json":
-        try:
-            mapping = json.loads(text)
-        except json.JSONDecodeError as exc:
-            raise MapError(f"{path}: not valid JSON ({exc.msg} at line {exc.lineno})") from None
+        mapping = read_json(path, "label map")
         if not isinstance(mapping, dict) or not all(
             isinstance(k, str) and isinstance(v, str) and v.strip() for k, v in mapping.items()
         ):
             raise MapError(f"{path}: label map must be an object of non-empty strings")
         return {k.strip().lower(): v for k, v in mapping.items()}
-    rows = list(csv.DictReader(text.splitlines(), delimiter="\t"))
+    try:
+        text = read_regular(path, MAX_JSON_BYTES, "label map").decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise MapError(f"{path}: label map is not UTF-8 text (byte {exc.start})") from None
+    try:
+        rows = list(csv.DictReader(text.splitlines(), delimiter="\t"))
+    except csv.Error as exc:
+        raise MapError(f"{path}: not a readable TSV label map ({exc})") from None
     columns = set(rows[0]) if rows else set()
     if not {"raw_category", "nyu40class"} <= columns:
         raise MapError(f"{path}: label map TSV needs columns 'raw_category' and 'nyu40class'")

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from semloc.io.native import write_atomic
+from semloc.io.native import read_regular, write_atomic
 from semloc.maps import MapError
 
 _TYPES = {
@@ -106,7 +106,12 @@ def _header_line(words: list[str], number: int, fmt: str | None, elements: list)
     if keyword == "property":
         if not elements:
             raise MapError(f"PLY header line {number}: property before any element")
-        elements[-1][2].append(_property(words, number))
+        prop = _property(words, number)
+        if any(p.name == prop.name for p in elements[-1][2]):
+            raise MapError(
+                f"PLY header line {number}: property {prop.name!r} occurs more than once"
+            )
+        elements[-1][2].append(prop)
         return fmt
     raise MapError(f"PLY header line {number}: unknown keyword {keyword!r}")
 
@@ -124,12 +129,7 @@ def _property(words: list[str], number: int) -> PlyProperty:
 def read_ply(path: str | os.PathLike[str]) -> PlyMesh:
     """Read the `vertex` and `face` elements of a PLY file; raise `MapError` naming the file."""
     path = Path(path)
-    try:
-        data = path.read_bytes()
-    except FileNotFoundError:
-        raise MapError(f"{path}: file not found") from None
-    except OSError as exc:
-        raise MapError(f"{path}: cannot read ({exc})") from None
+    data = read_regular(path)
     try:
         return _read(data)
     except MapError as exc:
@@ -155,6 +155,8 @@ def _read(data: bytes) -> PlyMesh:
     assert vertices is not None
     if faces.size and faces.max() >= len(vertices):
         raise MapError(f"face refers to vertex {faces.max()} but there are {len(vertices)}")
+    if faces.size and faces.min() < 0:
+        raise MapError(f"face refers to vertex {faces.min()} (negative index)")
     return PlyMesh(vertices, faces)
 
 
@@ -230,6 +232,8 @@ def _read_ascii(body: bytes, header: PlyHeader) -> PlyMesh:
     assert vertices is not None
     if faces.size and faces.max() >= len(vertices):
         raise MapError(f"face refers to vertex {faces.max()} but there are {len(vertices)}")
+    if faces.size and faces.min() < 0:
+        raise MapError(f"face refers to vertex {faces.min()} (negative index)")
     return PlyMesh(vertices, faces)
 
 

@@ -46,6 +46,7 @@ def write_sequence(
         files.append(save(gmap, out / f"global_{kind}.json"))
     files.append(save(seq.local_map, out / "local.json"))
     if snapshots:
+        (out / "keyframes").mkdir(exist_ok=True)
         for kf in seq.keyframes:
             path = out / "keyframes" / f"local_{kf.index:04d}.json"
             files.append(save(seq.local_map_at(kf.index), path))

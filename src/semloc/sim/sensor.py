@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from semloc.frontend.segments import backproject as backproject_matrix
+from semloc.io.native import signals_held
 from semloc.sim.shapes import Mesh
 from semloc.sim.world import World
 
@@ -119,7 +120,8 @@ class DepthSensor:
         self.noise = noise
         objects = [o.mesh for o in world.objects] if world is not None else list(meshes or [])
         bg = list(world.background) if world is not None else list(background or [])
-        import open3d as o3d  # heavy optional dependency (the `sim` extra)
+        with signals_held():  # an interrupt inside its initialisation would break open3d
+            import open3d as o3d  # heavy optional dependency (the `sim` extra)
 
         self._o3d = o3d
         self._scene = o3d.t.geometry.RaycastingScene()

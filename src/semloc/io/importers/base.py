@@ -10,7 +10,7 @@ import os
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-from semloc.maps import ObjectMap
+from semloc.maps import MapError, ObjectMap
 
 Maps = tuple[ObjectMap, ObjectMap | None]  # the map, and a second one (Scan2CAD: scan-derived)
 
@@ -33,4 +33,10 @@ class Importer:
     options: frozenset[str] = field(default_factory=frozenset)
 
     def __call__(self, source: str | os.PathLike[str], **options) -> Maps:
-        return self.convert(source, **options)
+        """The maps of `source`; a `MapError` that names no file gets the source's name."""
+        try:
+            return self.convert(source, **options)
+        except MapError as exc:
+            if os.sep in str(exc).split(":")[0] or str(source) in str(exc):
+                raise
+            raise MapError(f"{source}: {exc}") from None

@@ -10,7 +10,6 @@ The frame is the scan frame, `up` = +z.  Points of `objectId` 0 are unannotated.
 from __future__ import annotations
 
 import os
-import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -18,6 +17,7 @@ import numpy as np
 from semloc.io.geometry import upright_box
 from semloc.io.importers.base import Importer, Maps
 from semloc.io.labels import LABEL_SETS, class_name, is_structural, is_unlabeled
+from semloc.io.native import read_npy
 from semloc.maps import MapError, ObjectMap, SemanticObject
 from semloc.pointsets import voxel_downsample
 
@@ -71,17 +71,15 @@ def _majority(values: np.ndarray) -> int:
 
 def read_points(path: Path, required: tuple[str, ...]) -> np.ndarray:
     """Load a structured `.npy` (no pickles) and check it has the `required` fields."""
-    try:
-        data = np.load(path, allow_pickle=False)
-    except FileNotFoundError:
-        raise MapError(f"{path}: file not found") from None
-    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:
-        raise MapError(f"{path}: not a readable .npy array ({exc})") from None
+    data = read_npy(path)
     if not isinstance(data, np.ndarray) or data.dtype.names is None or data.ndim != 1:
         raise MapError(f"{path}: expected a 1-D structured array of points")
     missing = [name for name in required if name not in data.dtype.names]
     if missing:
         raise MapError(f"{path}: missing fields {missing} (has {list(data.dtype.names)})")
+    text = [name for name in required if data.dtype[name].kind not in "iuf"]
+    if text:
+        raise MapError(f"{path}: fields {text} must be numbers, not {data.dtype[text[0]]}")
     return data
 
 

@@ -133,13 +133,17 @@ def read_segments(path: Path) -> np.ndarray:
     document = read_json(path)
     if not isinstance(document, dict) or "segIndices" not in document:
         raise MapError(f"{path}: missing key 'segIndices'")
-    try:
-        segments = np.asarray(document["segIndices"], dtype=np.int64)
-    except (TypeError, ValueError):
+    try:  # no dtype: floats, booleans and strings must not be converted silently
+        segments = np.asarray(document["segIndices"])
+    except (TypeError, ValueError, OverflowError):
         raise MapError(f"{path}: 'segIndices' must be a list of integers") from None
     if segments.ndim != 1:
         raise MapError(f"{path}: 'segIndices' must be a flat list of integers")
-    return segments
+    raw = document["segIndices"]
+    booleans = isinstance(raw, list) and any(isinstance(v, bool) for v in raw)
+    if booleans or (segments.size and segments.dtype.kind not in "iu"):
+        raise MapError(f"{path}: 'segIndices' must be a list of integers")
+    return segments.astype(np.int64)
 
 
 def _xyz(vertices: np.ndarray, path: Path) -> np.ndarray:

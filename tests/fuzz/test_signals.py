@@ -1,0 +1,134 @@
+"""SIGINT and SIGTERM at random moments of `simulate` and `convert`: the command exits with
+`semloc: interrupted` and status 130 / 143 (or finished first, status 0), and its output is
+complete or absent -- never half-written, no staging folder or temporary file left behind.
+
+The child signals readiness once semloc is imported; the signal comes at a random moment of
+the command after that (a signal during interpreter start-up is Python's default behaviour)."""
+
+from __future__ import annotations
+
+import os
+import random
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from format_fixtures import write_scan2cad
+
+from semloc.io import load_map
+
+CHILD = (
+    "import sys, semloc.cli; print('ready', flush=True); sys.exit(semloc.cli.main(sys.argv[1:]))"
+)
+
+
+def start(argv: list[str], cwd: Path) -> subprocess.Popen:
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(sys.path), "OMP_NUM_THREADS": "1",
+           "OPENBLAS_NUM_THREADS": "1", "MPLCONFIGDIR": str(cwd / ".mpl")}  # fmt: skip
+    proc = subprocess.Popen(
+        [sys.executable, "-c", CHILD, *argv], cwd=cwd, env=env, text=True,
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+    )  # fmt: skip
+    assert proc.stdout.readline().strip() == "ready"
+    return proc
+
+
+def interrupt(procs: list[tuple[subprocess.Popen, float, int]]) -> list[tuple[int, str]]:
+    """Send each process its signal after its delay (all running at once); (status, stderr)."""
+    begin = time.monotonic()
+    for proc, delay, signum in sorted(procs, key=lambda p: p[1]):
+        time.sleep(max(0.0, begin + delay - time.monotonic()))
+        if proc.poll() is None:
+            proc.send_signal(signum)
+    results = []
+    for proc, _, _ in procs:
+        _, err = proc.communicate(timeout=120)
+        results.append((proc.returncode, err))
+    return results
+
+
+def check_status(code: int, err: str, signum: int) -> bool:
+    """True when the run was interrupted (then with the message), False when it finished.
+
+    Killed by the signal itself (status -signum) only counts as finished: Python restores the
+    default handlers while it shuts down, after the command; the caller checks the output is
+    complete."""
+    assert "Traceback" not in err, err
+    if code in (0, -signum):
+        return False
+    assert code == 128 + signum, (code, err)
+    assert err.strip().splitlines()[-1] == "semloc: interrupted", err
+    return True
+
+
+def no_leftovers(folder: Path) -> None:
+    left = [p.name for p in folder.rglob("*") if p.name.endswith((".partial", ".tmp"))]
+    assert not left, left
+
+
+SIMULATE = ["simulate", "--keyframes", "6", "--resolution", "80x60", "--seed", "3"]
+
+
+def simulate_complete(out: Path) -> bool:
+    """Whether `out` holds the whole simulated sequence (False: absent); fails if partial."""
+    if not out.exists():
+        return False
+    names = {p.name for p in out.iterdir()}
+    expected = {"world.json", "world.png", "local.json", "ground_truth.json", "keyframes",
+                *(f"global_{k}.json" for k in ("reconstruction", "cad", "dynamic"))}  # fmt: skip
+    assert expected <= names, expected - names
+    for path in [*out.glob("*.json"), *(out / "keyframes").glob("*.json")]:
+        if path.name.startswith(("global", "local")):
+            load_map(path)  # its points file is there too
+    return True
+
+
+def test_simulate_interrupted_at_random_moments(tmp_path):
+    rng = random.Random(13)
+    runs = []
+    for i, signum in enumerate((signal.SIGINT, signal.SIGTERM, signal.SIGTERM, signal.SIGINT)):
+        runs.append((start([*SIMULATE, f"out{i}"], tmp_path), rng.uniform(0.2, 6.0), signum))
+    results = interrupt(runs)
+    for i, ((code, err), (_, _, signum)) in enumerate(zip(results, runs, strict=True)):
+        interrupted = check_status(code, err, signum)
+        complete = simulate_complete(tmp_path / f"out{i}")
+        assert complete or interrupted, err
+    no_leftovers(tmp_path)
+
+
+def test_simulate_into_an_existing_folder_keeps_it_whole(tmp_path):
+    """Into an existing folder the files move in with signals held: old set or new set."""
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "notes.txt").write_text("mine")
+    proc = start([*SIMULATE, str(out)], tmp_path)
+    [(code, err)] = interrupt([(proc, 1.0, signal.SIGTERM)])
+    interrupted = check_status(code, err, signal.SIGTERM)
+    assert (out / "notes.txt").read_text() == "mine"
+    if interrupted and not (out / "ground_truth.json").exists():
+        assert sorted(p.name for p in out.iterdir()) == ["notes.txt"]
+    else:
+        assert simulate_complete(out)
+    no_leftovers(tmp_path)
+
+
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
+def test_convert_interrupted_writes_both_maps_or_neither(tmp_path, signum):
+    annotation = write_scan2cad(tmp_path / "scene")
+    rng = random.Random(int(signum))
+    runs = []
+    for i in range(3):
+        argv = ["convert", "scan2cad", str(annotation), "-o", str(tmp_path / f"cad{i}.json")]
+        runs.append((start(argv, tmp_path), rng.uniform(0.05, 1.5), signum))
+    for i, (code, err) in enumerate(interrupt(runs)):
+        interrupted = check_status(code, err, signum)
+        cad, scan = tmp_path / f"cad{i}.json", tmp_path / f"cad{i}.scan.json"
+        assert cad.exists() == scan.exists(), (cad.exists(), scan.exists())
+        if cad.exists():
+            load_map(cad), load_map(scan)
+        else:
+            assert interrupted
+    no_leftovers(tmp_path)
