@@ -133,24 +133,39 @@ class DecisionConfig(BaseModel):
     )
 
 
-def same_place(candidate: Place, other: Place, config: DecisionConfig) -> bool:
-    """Whether `candidate` repeats `other`: a subset of its pairs, or a pose close to its pose."""
+def same_place(
+    candidate: Place, other: Place, config: DecisionConfig, anchor: np.ndarray | None = None
+) -> bool:
+    """Whether `candidate` repeats `other`: a subset of its pairs, or a pose close to its pose.
+
+    Translations are compared where the local objects are: at `anchor` (a point of the local
+    frame, their centroid), so that the answer does not depend on where the local frame's
+    origin lies (far from the objects, a small rotation moves the origin a lot)."""
     pairs, pose = candidate
     if pairs and set(pairs) <= set(other[0]):
         return True
     if pose is None or other[1] is None:
         return False
     rotation, translation = pose_error(pose, other[1])
+    if anchor is not None:
+        point = np.append(np.asarray(anchor, dtype=float), 1.0)
+        translation = float(np.linalg.norm((pose - other[1]) @ point))
     return rotation < config.distinct_rotation_deg and translation < config.distinct_translation
 
 
-def distinct(places: Iterable[Place], top_k: int, config: DecisionConfig) -> list[int]:
-    """Indices of the first `top_k` places (in the given order) that repeat no earlier pick.
+def distinct(
+    places: Iterable[Place],
+    top_k: int,
+    config: DecisionConfig,
+    anchor: np.ndarray | None = None,
+) -> list[int]:
+    """Indices of the first `top_k` places (in the given order) that repeat no earlier pick
+    (`anchor`: see `same_place`).
 
     `places` is consumed lazily, so a generator computes poses only as far as needed."""
     chosen: list[tuple[int, Place]] = []
     for i, place in enumerate(places):
-        if not any(same_place(place, other, config) for _, other in chosen):
+        if not any(same_place(place, other, config, anchor) for _, other in chosen):
             chosen.append((i, place))
             if len(chosen) == top_k:
                 break
@@ -181,7 +196,11 @@ def rank(hypotheses: list[Hypothesis], rank_by: RankBy) -> list[Hypothesis]:
 
 
 def rank_places(
-    hypotheses: list[Hypothesis], rank_by: RankBy, config: DecisionConfig, model: ConfidenceModel
+    hypotheses: list[Hypothesis],
+    rank_by: RankBy,
+    config: DecisionConfig,
+    model: ConfidenceModel,
+    anchor: np.ndarray | None = None,
 ) -> list[Hypothesis]:
     """Evidence of every hypothesis with features, the order of `rank_by`, same-place
     duplicates merged into the better-ranked one (poses after refinement), ranks 1, 2, ...
@@ -191,7 +210,7 @@ def rank_places(
             h.evidence = model.evidence(h.features)
     ordered = rank(hypotheses, rank_by)
     places = ((h.pairs, h.pose) for h in ordered)
-    kept = [ordered[i] for i in distinct(places, len(ordered), config)]
+    kept = [ordered[i] for i in distinct(places, len(ordered), config, anchor)]
     for position, h in enumerate(kept, 1):
         h.rank = position
     score_confidence(kept, model)

@@ -271,12 +271,13 @@ class Localizer:
         if by_size:  # pairs include the guided matches
             screened.sort(key=lambda c: (-len(c.pairs), round(c.residual, 9), -c.aset.score))
         places = [(c.pairs, c.pose) for c in screened]
-        chosen = [screened[i] for i in distinct(places, cfg.top_k, cfg.decision)]
+        anchor = local_xyz.mean(axis=0) if len(local_xyz) else None
+        chosen = [screened[i] for i in distinct(places, cfg.top_k, cfg.decision, anchor)]
         previous, self._poses = self._poses, {}
         hypotheses = [
             self._hypothesis(rank, c, local_xyz, previous) for rank, c in enumerate(chosen, 1)
         ]
-        return rank_places(hypotheses, cfg.rank_by, cfg.decision, shipped_model())
+        return rank_places(hypotheses, cfg.rank_by, cfg.decision, shipped_model(), anchor)
 
     def _verified(
         self, aset: AssociationSet, local_xyz: np.ndarray, support: MapSupport

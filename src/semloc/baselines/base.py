@@ -155,7 +155,8 @@ class ObjectBaseline:
 
     def _hypotheses(self, groups: list[Group], local: list[SemanticObject]) -> list[Hypothesis]:
         places = ((pairs, self._closed_form(pairs, local)) for _, pairs in groups)
-        chosen = distinct(places, self.config.top_k, self.config.decision)
+        anchor = np.mean([o.position for o in local], axis=0) if local else None
+        chosen = distinct(places, self.config.top_k, self.config.decision, anchor)
         return [
             self.make_hypothesis(rank, groups[i][0], groups[i][1], local)
             for rank, i in enumerate(chosen, 1)

@@ -190,7 +190,8 @@ class FpfhRansacBaseline(ObjectBaseline):
             scored.append(hypothesis)
         scored.sort(key=lambda h: -h.score)
         places = [((), h.pose) for h in scored]  # distinct by pose only
-        chosen = [scored[i] for i in distinct(places, cfg.top_k, cfg.decision)]
+        anchor = np.mean([o.position for o in local], axis=0) if local else None
+        chosen = [scored[i] for i in distinct(places, cfg.top_k, cfg.decision, anchor)]
         for rank, h in enumerate(chosen, 1):
             h.rank = rank
         return chosen
