@@ -43,7 +43,9 @@ def main() -> None:
     parser.add_argument("--sizes", type=int, nargs="+", default=[3, 4, 5, 6, 8, 10])
     parser.add_argument("--gamma", type=float, default=0.8)
     parser.add_argument("--tolerance", type=float, default=0.4)
-    parser.add_argument("--rank-by", default="residual", choices=["residual", "score", "fitness"])
+    parser.add_argument(
+        "--rank-by", default="evidence", choices=["evidence", "residual", "score", "fitness"]
+    )
     args = parser.parse_args()
     rows = run(
         args.trials,

@@ -268,7 +268,17 @@ def decide(hypotheses: Sequence[Hypothesis], config: DecisionConfig, rank_by: Ra
 def _by_confidence(best: Hypothesis, others: Sequence[Hypothesis], d: DecisionConfig) -> Decision:
     assert best.confidence is not None
     if best.confidence >= d.min_confidence:
-        return Decision("localized", "")
+        # the confidence model is fitted on few attempts; a rival place whose centres fit
+        # nearly as well (same pairs, residual within the margin) still makes it ambiguous
+        rivals = [h for h in others if _is_rival(best, h, d.rival_overlap)]
+        close = [h for h in rivals if not _dominates(best, h, "residual", d)]
+        if not close:
+            return Decision("localized", "")
+        return Decision(
+            "ambiguous",
+            f"a rival place within the margin: rank {close[0].rank} fits the centres nearly "
+            f"as well ({len(close[0].pairs)} pairs, residual {close[0].residual or 0:.2f} m)",
+        )
     rivals = [h for h in others if h.evidence is not None and best.evidence is not None]
     close = [h for h in rivals if h.evidence >= best.evidence - RIVAL_LOGIT_GAP]
     if close:
