@@ -304,7 +304,8 @@ class Localizer:
                 grown = [(int(g), int(l)) for g, l in both[again.inliers]]
                 rejected += [(int(g), int(l)) for g, l in both[~again.inliers]]
                 pose, residual = again.pose, again.residual
-                added = sum(p not in set(inliers) for p in grown)
+                kept = set(inliers)
+                added = sum(p not in kept for p in grown)
         return _Verified(aset, grown, rejected, pose, residual, added, conflicts)
 
     def _hypothesis(
@@ -420,11 +421,14 @@ def localize(
     keyframes = sorted(set(local_map.seen.tolist()))
     if not keyframes:
         return Result(status="failed", pose=None, hypotheses=[])
+    by_keyframe: dict[int, list[SemanticObject]] = {k: [] for k in keyframes}
+    for obj in local_map:  # grouped once: a long replay must not rescan the map per keyframe
+        by_keyframe[obj.seen].append(obj)
     for done, keyframe in enumerate(keyframes[:-1], start=1):
-        localizer.update([o for o in local_map if o.seen == keyframe], answer=False)
+        localizer.update(by_keyframe[keyframe], answer=False)
         if progress is not None:
             progress(done, len(keyframes))
-    result = localizer.update([o for o in local_map if o.seen == keyframes[-1]])
+    result = localizer.update(by_keyframe[keyframes[-1]])
     assert result is not None  # an update with an answer returns one
     if progress is not None:
         progress(len(keyframes), len(keyframes))
