@@ -8,19 +8,20 @@ simulated sequences of `--seed` (not the benchmark's seed 0, and never the real 
 stay held out), fits the evidence and confidence logistic models and the operating point for
 `--precision` of the claims, prints the model and a reliability table (predicted confidence vs
 observed share right) on the fitting attempts and on held-out simulated attempts (seed 0), and
-with `--write` replaces `src/semloc/confidence.json`.
+with `--write` replaces `src/semloc/confidence_model.py`.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import pprint
 import sys
 from pathlib import Path
 
 import numpy as np
 
-from semloc.decision import MODEL_FILE
+from semloc.decision import MODEL_MODULE
 from semloc.eval.calibration import best_of_answers, collect, confidences, fit, reliability
 from semloc.eval.protocol import BenchConfig
 from semloc.io import write_atomic
@@ -73,7 +74,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--holdout-sequences", type=int, default=2)
     parser.add_argument("--precision", type=float, default=0.995)
-    parser.add_argument("--write", action="store_true", help=f"replace {MODEL_FILE}")
+    parser.add_argument("--write", action="store_true", help=f"replace {MODEL_MODULE}")
     parser.add_argument("--figure", type=Path, help="also draw the reliability diagram (PNG)")
     args = parser.parse_args(argv)
     config = BenchConfig(sequences=args.sequences, starts=args.starts, seed=args.seed, real=False)
@@ -92,8 +93,16 @@ def main(argv: list[str] | None = None) -> int:
         figure(args.figure, [(f"fitting (seed {args.seed})", samples, model),
                              ("held out (seed 0)", holdout, model)])  # fmt: skip
     if args.write:
-        write_atomic(MODEL_FILE, json.dumps(model.model_dump(), indent=2) + "\n")
-        print(f"wrote {MODEL_FILE}")
+        doc = '"""The shipped confidence model\'s coefficients (see `semloc.decision.ConfidenceModel`).\n\n'
+        doc += 'Written by `benchmarks/calibrate_confidence.py --write`; data, not I/O: the core reads no files.\n"""\n\n'
+        write_atomic(
+            MODEL_MODULE,
+            doc
+            + "SHIPPED = "
+            + pprint.pformat(model.model_dump(), width=96, sort_dicts=False)
+            + "\n",
+        )
+        print(f"wrote {MODEL_MODULE}")
     return 0
 
 

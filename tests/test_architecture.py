@@ -17,7 +17,7 @@ import semloc
 
 PACKAGE = Path(semloc.__file__).parent
 CORE = {"maps", "pointsets", "transforms", "association", "clustering", "pose", "verification", "results",
-        "decision", "localizer"}  # fmt: skip
+        "decision", "localizer", "confidence_model"}  # fmt: skip
 THIRD_PARTY_CORE = {"numpy", "scipy", "pydantic", "small_gicp"}
 EXTRAS = ("open3d", "matplotlib", "dask", "distributed", "sklearn", "torch", "rerun")
 MAX_LOCAL_SEMLOC_IMPORTS = 10

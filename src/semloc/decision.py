@@ -5,7 +5,7 @@ Shared by the Localizer and the baselines (only their association step differs).
 Confidence.  A hypothesis verified by the Localizer carries `features` (`FEATURES`: inlier
 pairs, share of rejected pairs, centre residual, point fitness, supporting and conflicting
 local objects outside the set; see `semloc.verification.Evidence`).  The shipped
-`ConfidenceModel` (`confidence.json` beside this module, fitted on simulated benchmark
+`ConfidenceModel` (`confidence_model.py` beside this module, fitted on simulated benchmark
 attempts by `benchmarks/calibrate_confidence.py`) turns them into an `evidence` logit, which
 ranks the hypotheses (`rank_by="evidence"`), and a calibrated `confidence`: the probability
 that the pose is right (15 deg / 0.5 m), from the evidence and the best rival's evidence.
@@ -27,7 +27,6 @@ a subset of one) is skipped (`distinct`), so the top-k are k different answers.
 
 from __future__ import annotations
 
-import json
 import math
 from collections.abc import Callable, Collection, Iterable, Sequence
 from functools import cache
@@ -37,6 +36,7 @@ from typing import Literal, NamedTuple
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
+from semloc.confidence_model import SHIPPED
 from semloc.results import Hypothesis, Status
 from semloc.transforms import pose_error
 
@@ -49,7 +49,8 @@ SIGNS = {"pairs": 1, "rejected_share": -1, "residual": -1, "fitness": 1, "suppor
          "conflict_share": -1}  # fmt: skip
 """The direction in which each feature may move the evidence (the fit is constrained to it; 0:
 free — `support` counts pairs that are also in `pairs`, found by the pose, not the clustering)."""
-MODEL_FILE = Path(__file__).with_name("confidence.json")
+MODEL_MODULE = Path(__file__).with_name("confidence_model.py")
+"""Where `benchmarks/calibrate_confidence.py --write` puts a refitted model."""
 
 
 class ConfidenceModel(BaseModel):
@@ -85,8 +86,8 @@ def _sigmoid(x: float) -> float:
 
 @cache
 def shipped_model() -> ConfidenceModel:
-    """The confidence model shipped with the package (`confidence.json`)."""
-    return ConfidenceModel(**json.loads(MODEL_FILE.read_text()))
+    """The confidence model shipped with the package (`confidence_model.SHIPPED`)."""
+    return ConfidenceModel(**SHIPPED)
 
 
 class DecisionConfig(BaseModel):
