@@ -70,11 +70,10 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
+from numba import njit
 from pydantic import BaseModel, ConfigDict, Field
 from scipy.spatial import cKDTree
 
-_CHUNK_ELEMENTS = 1 << 21  # bound on the (merges x pairs) intermediate arrays
-_FRONTIER_CHUNK = 4096  # frontier sets per sparse product
 _BRUTE_FORCE_PAIRS = 20_000  # below this many pairs a range query is a dense distance block
 
 
@@ -224,6 +223,10 @@ class HierarchicalClustering:
         self._live = np.zeros(0, dtype=np.int64)
         self._live_index = np.zeros(0, dtype=np.int64)  # candidate -> row of the graph
         self._graph = sp.csr_matrix((0, 0), dtype=np.int64)
+        self._live_global = np.zeros((0, 3))  # per live candidate: global, local position
+        self._live_local = np.zeros((0, 3))
+        self._live_key = np.zeros(0, dtype=np.uint64)  # and its two keys
+        self._live_key2 = np.zeros(0, dtype=np.uint64)
         # sets: member candidates (ascending, -1 padded), score, age, keys
         self._members = np.full((0, 1), -1, dtype=np.int64)
         self._size = np.zeros(0, dtype=np.int64)
@@ -374,6 +377,9 @@ class HierarchicalClustering:
         indptr = np.concatenate([[0], np.cumsum(counts)])
         data = np.ones(edges.shape[1], dtype=np.int64)
         self._graph = sp.csr_matrix((data, index[edges[1]], indptr), shape=(len(live),) * 2)
+        self._live_global = self._global_positions[self._cand_g[live]]
+        self._live_local = self._local_positions[self._cand_l[live]]
+        self._live_key, self._live_key2 = self._cand_key[live], self._cand_key2[live]
 
     def _compatible_pairs(self, added: np.ndarray, covered: np.ndarray) -> np.ndarray:
         """All compatible (a, b) with a in `added` and b in `added` ∪ `covered` (2 x E)."""
@@ -469,186 +475,66 @@ class HierarchicalClustering:
     # Clustering round
     def _cluster(self, frontier: np.ndarray) -> None:
         while len(frontier):
-            slots = self._slots()  # the pool is fixed until the insert below
-            rows_a, rows_b, shared = self._find_merges(frontier, slots)
-            if not len(rows_a):
+            merges = self._find_merges(frontier)
+            if merges is None:
                 break
-            self._last_merge[rows_a] = self.step
-            self._last_merge[rows_b] = self.step
-            frontier = self._insert(*self._best_merges(rows_a, rows_b, shared, slots))
+            frontier = self._insert(*merges)
             frontier = self._prune(frontier)
         self._prune(np.zeros(0, dtype=np.int64))  # a round ends with at most K sets
 
-    def _membership(self) -> sp.csr_matrix:
-        """The pool's sets as a sparse (sets x live candidates) 0/1 matrix."""
-        valid = self._members >= 0
-        rows = np.repeat(np.arange(len(self._members)), valid.sum(axis=1))
-        cols = self._live_index[self._members[valid]]
-        return _csr(rows, cols, len(self._live), n_rows=len(self._members))
-
-    def _find_merges(
-        self, frontier: np.ndarray, slots: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """All (a, b) rows with a in the frontier whose union passes the merge criterion, and
-        |A ∩ B| for each.
-
-        B ⊆ M(A) and B ⊄ A means that B meets the extensions E(A) = M(A)∖A, so only the sets
-        meeting E(A) are looked at (a sparse product counts |B ∩ E(A)|); they qualify when
-        |B ∩ A| + |B ∩ E(A)| = |B|.
-        """
-        size = self._sizes()
-        membership = self._membership()
-        transposed = membership.T.tocsr()
-        in_frontier = np.zeros(len(size), dtype=bool)
-        in_frontier[frontier] = True
-        floor = self._survival_floor()
-        found = [[], [], []]
-        for start in range(0, len(frontier), _FRONTIER_CHUNK):
-            rows = frontier[start : start + _FRONTIER_CHUNK]
-            tally = self._extensions(rows, size, membership)
-            tally = (tally @ transposed).tocoo()  # |B ∩ E(A)| for every B meeting E(A)
-            ia, ib, in_ext = rows[tally.row], tally.col.astype(np.int64), tally.data
-            once = ~in_frontier[ib] | (ib > ia)  # two frontier sets: tried from the lower
-            if floor > -np.inf:  # |A∖B| ≤ |A|: a first, cheap screen on the score bound
-                bound = self.criterion.UPPER_BOUND * size[ia] * in_ext
-                once &= self._score[ia] + self._score[ib] + bound >= floor
-            rest = size[ib] - in_ext  # B's members outside E(A): all must be in A
-            once &= rest < size[ia]  # (and A ⊄ B)
-            ia, ib, in_ext, rest = ia[once], ib[once], in_ext[once], rest[once]
-            shared = np.zeros(len(ia), dtype=np.int64)
-            check = np.flatnonzero(rest > 0)
-            b_members = self._members[ib[check]]
-            shared[check] = ((b_members >= 0) & ~self._not_in(slots, b_members, ia[check])).sum(
-                axis=1
-            )
-            a_adds = size[ia] - shared
-            keep = shared == rest  # B ⊆ M(A)
-            if floor > -np.inf:  # merges that cannot reach the top K would be pruned at once
-                bound = self.criterion.UPPER_BOUND * a_adds * in_ext
-                keep &= self._score[ia] + self._score[ib] + bound >= floor
-            for out, values in zip(found, (ia, ib, shared)):
-                out.append(values[keep])
-        ia, ib, shared = (np.concatenate(x).astype(np.int64) for x in found)
-        return ia, ib, shared
-
-    def _extensions(self, rows, size, membership) -> sp.csr_matrix:
-        """E(A) = M(A)∖A for the sets `rows`, as a sparse (rows x live candidates) 0/1 matrix."""
-        own = membership[rows]
-        if np.all(size[rows] == 1):  # singletons: E({c}) is c's neighbourhood
-            return self._graph[own.indices]
-        # counts[A, c]: members of A that c is compatible with; a member of A itself is
-        # compatible with the |A| - 1 others only, so E(A) is where the count is |A|
-        counts = (own @ self._graph).tocoo()
-        inside = counts.data == size[rows][counts.row]
-        return sp.csr_matrix(
-            (np.ones(int(inside.sum()), np.int64), (counts.row[inside], counts.col[inside])),
-            shape=counts.shape,
+    def _find_merges(self, frontier: np.ndarray):
+        """The merges of one iteration (A in the frontier, B in the pool), grouped by union:
+        each distinct union's members, its largest merge score and its keys (None: no merge).
+        The parents of every merge are marked as merged at this step."""
+        live_members = np.where(
+            self._members >= 0, self._live_index[np.maximum(self._members, 0)], -1
         )
+        in_frontier = np.zeros(len(self._score), dtype=np.bool_)
+        in_frontier[frontier] = True
+        rows_a, rows_b, scores, key, key2 = _merges_of_frontier(
+            frontier.astype(np.int64),
+            in_frontier,
+            live_members,
+            self._size,
+            self._score,
+            self._graph.indptr.astype(np.int64),
+            self._graph.indices.astype(np.int64),
+            self._live_global,
+            self._live_local,
+            self._live_key,
+            self._live_key2,
+            self._key,
+            self._key2,
+            self._survival_floor(),
+            self.criterion.min_distance,
+            self.criterion.UPPER_BOUND,
+        )
+        if not len(rows_a):
+            return None
+        self._last_merge[rows_a] = self.step
+        self._last_merge[rows_b] = self.step
+        first, group, best, collided = _group_by_keys(key, key2, scores)
+        if collided:  # a key collision: group the unions by their member lists
+            unions = _union_rows(self._members, self._size, rows_a, rows_b)
+            _, first, group = np.unique(unions, axis=0, return_index=True, return_inverse=True)
+            best = np.full(len(first), -np.inf)
+            np.maximum.at(best, group.ravel(), scores)
+            return unions[first], best, key[first], key2[first]
+        unions = _union_rows(self._members, self._size, rows_a[first], rows_b[first])
+        return unions, best, key[first], key2[first]
 
     def _survival_floor(self) -> float:
         """The K-th best score in the pool (-inf while the pool is not full), less a hair.
 
-        A merge scores at most v_A + v_B + |A∖B|·|B∖A| (h ≤ UPPER_BOUND = 1).  One that cannot reach the
-        K-th best score is pruned at the end of the iteration, and so are both of its parents
-        (their scores are lower still), so such merges are skipped without changing the result.
+        A merge scores at most v_A + v_B + |A∖B|·|B∖A| (h ≤ UPPER_BOUND = 1).  One that cannot
+        reach the K-th best score is pruned at the end of the iteration, and so are both of its
+        parents (their scores are lower still), so such merges are skipped without changing the
+        result.
         """
         if len(self._score) < self.capacity:
             return -np.inf
         kth = np.partition(self._score, len(self._score) - self.capacity)
         return float(kth[len(self._score) - self.capacity]) - 1e-9
-
-    def _slots(self) -> np.ndarray:
-        """Per set and local object, the member candidate (-1: none); sets are one-to-one."""
-        slots = np.full((len(self._members), len(self._local_positions)), -1, dtype=np.int64)
-        rows, cols = np.nonzero(self._members >= 0)
-        members = self._members[rows, cols]
-        slots[rows, self._cand_l[members]] = members
-        return slots
-
-    def _not_in(self, slots: np.ndarray, members: np.ndarray, rows: np.ndarray) -> np.ndarray:
-        """Which of `members[i]` (-1 padded) are valid and not in set `rows[i]`."""
-        width = slots.shape[1]
-        where = rows[:, None] * width + self._cand_l[np.maximum(members, 0)]
-        return (members >= 0) & (np.take(slots.ravel(), where) != members)
-
-    def _best_merges(self, rows_a, rows_b, shared, slots: np.ndarray):
-        """Distinct unions of the merges and, for each, the largest merge score.
-
-        A merge scores v_A + v_B + Σh over |A∖B|·|B∖A| new pairs with h ≤ 1, which bounds it
-        from above.  Per union, one merge (the largest v_A + v_B) is scored exactly; only the
-        merges whose bound beats that score need their own exact score.  Same result as scoring
-        every merge, at a fraction of the work.
-        """
-        size = self._sizes()
-        a_adds, b_adds = size[rows_a] - shared, size[rows_b] - shared
-        b_members = self._members[rows_b]
-        b_new = np.where(self._not_in(slots, b_members, rows_a), b_members, -1)
-        keys = [
-            self._key[rows_a] + _key_sums(self._cand_key, b_new),
-            self._key2[rows_a] + _key_sums(self._cand_key2, b_new),
-        ]
-        first, group = self._group_unions(rows_a, keys, b_new)
-        unions = _sorted_members(np.hstack([self._members[rows_a[first]], b_new[first]]))
-        base = self._score[rows_a] + self._score[rows_b]
-        bound = base + self.criterion.UPPER_BOUND * a_adds * b_adds
-        order = np.lexsort((-base, group))  # per group, the largest v_A + v_B first
-        best_of = order[np.r_[True, group[order][1:] != group[order][:-1]]]
-        best = np.full(len(first), -np.inf)
-        best[group[best_of]] = base[best_of] + self._cross_sum(
-            slots, rows_a[best_of], rows_b[best_of]
-        )
-        todo = np.flatnonzero(bound > best[group] + 1e-12)
-        if len(todo):
-            exact = base[todo] + self._cross_sum(slots, rows_a[todo], rows_b[todo])
-            np.maximum.at(best, group[todo], exact)
-        return unions, best, keys[0][first], keys[1][first]
-
-    def _group_unions(self, rows_a, keys, b_new) -> tuple[np.ndarray, np.ndarray]:
-        """One representative merge per distinct union A ∪ B, and each merge's group.
-
-        The first key groups; the second (independent) key checks every group, and the member
-        lists themselves are compared if the two disagree.
-        """
-        key, check = keys
-        order = np.argsort(key, kind="stable")
-        starts = np.r_[True, key[order][1:] != key[order][:-1]]
-        group = np.empty(len(key), dtype=np.int64)
-        group[order] = np.cumsum(starts) - 1
-        first = order[starts]
-        if np.array_equal(check, check[first][group]):
-            return first, group
-        unions = _sorted_members(np.hstack([self._members[rows_a], b_new]))  # a key collision
-        _, first, group = np.unique(unions, axis=0, return_index=True, return_inverse=True)
-        return first, group.ravel()
-
-    def _cross_sum(self, slots: np.ndarray, rows_a: np.ndarray, rows_b: np.ndarray) -> np.ndarray:
-        """Σ h over the new cross pairs (a ∈ A∖B, b ∈ B∖A) for each merge (A, B), from the
-        object positions; merges are grouped by (|A∖B|, |B∖A|) so no pair is wasted."""
-        a_members, b_members = self._members[rows_a], self._members[rows_b]
-        a_new = _compact(a_members, self._not_in(slots, a_members, rows_b))
-        b_new = _compact(b_members, self._not_in(slots, b_members, rows_a))
-        a_count, b_count = (a_new >= 0).sum(axis=1), (b_new >= 0).sum(axis=1)
-        out = np.zeros(len(rows_a))
-        width = max(a_new.shape[1], b_new.shape[1]) + 1
-        combo = a_count * width + b_count
-        for code in np.unique(combo):
-            p, q = divmod(int(code), width)
-            sel = np.flatnonzero(combo == code)
-            per = max(1, _CHUNK_ELEMENTS // max(p * q, 1))
-            for start in range(0, len(sel), per):
-                part = sel[start : start + per]
-                out[part] = self._h_sum(a_new[part, :p], b_new[part, :q])
-        return out
-
-    def _h_sum(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-        """Σ_{i, j} h(a[:, i], b[:, j]) per row (all members valid)."""
-        ga = self._global_positions[self._cand_g[a]]
-        gb = self._global_positions[self._cand_g[b]]
-        la = self._local_positions[self._cand_l[a]]
-        lb = self._local_positions[self._cand_l[b]]
-        d_global = np.linalg.norm(ga[:, :, None] - gb[:, None], axis=3)
-        d_local = np.linalg.norm(la[:, :, None] - lb[:, None], axis=3)
-        return self.criterion.score(d_global, d_local).sum(axis=(1, 2))
 
     def _insert(self, members: np.ndarray, best: np.ndarray, key: np.ndarray, key2: np.ndarray):
         """Add distinct merged sets (duplicates keep the larger score); return new rows."""
@@ -771,39 +657,244 @@ class _LazyTree:
         return self._tree
 
 
-def _csr(rows: np.ndarray, cols: np.ndarray, n_cols: int, n_rows: int | None = None):
-    """A 0/1 CSR matrix from (row, column) entries without duplicates."""
-    n_rows = n_cols if n_rows is None else n_rows
-    order = np.argsort(rows, kind="stable")
-    indptr = np.concatenate([[0], np.cumsum(np.bincount(rows, minlength=n_rows))])
-    data = np.ones(len(rows), dtype=np.int64)
-    return sp.csr_matrix((data, cols[order], indptr), shape=(n_rows, n_cols))
-
-
-def _key_sums(table: np.ndarray, members: np.ndarray) -> np.ndarray:
-    """Per row of member indices (-1 padded), the wrapping sum of their keys in `table`."""
-    return np.append(table, np.uint64(0))[members].sum(axis=1, dtype=np.uint64)  # -1 reads 0
-
-
-def _sorted_members(members: np.ndarray) -> np.ndarray:
-    """Rows of member indices sorted ascending with the -1 padding last, trimmed."""
-    big = np.iinfo(np.int64).max
-    out = np.sort(np.where(members >= 0, members, big), axis=1)
-    width = max(int((out != big).sum(axis=1).max(initial=0)), 1)
-    out = out[:, :width]
-    return np.where(out == big, -1, out)
-
-
-def _compact(members: np.ndarray, mask: np.ndarray) -> np.ndarray:
-    """The members selected by `mask` moved to the front of each row, -1 padded."""
-    order = np.argsort(~mask, axis=1, kind="stable")
-    picked = np.take_along_axis(np.where(mask, members, -1), order, axis=1)
-    return picked
-
-
 def _pad(members: np.ndarray, width: int) -> np.ndarray:
     if members.shape[1] == width:
         return members
     out = np.full((len(members), width), -1, dtype=np.int64)
     out[:, : members.shape[1]] = members
     return out
+
+
+# ---------------------------------------------------------------------------------------------
+# Compiled inner loops of the clustering round (numba; compiled once, cached on disk)
+@njit(cache=True)
+def _merges_of_frontier(
+    frontier,
+    in_frontier,
+    members,
+    size,
+    score,
+    indptr,
+    indices,
+    global_xyz,
+    local_xyz,
+    cand_key,
+    cand_key2,
+    set_key,
+    set_key2,
+    floor,
+    min_distance,
+    upper_bound,
+):
+    """Every merge (A, B) of one iteration with A in the frontier: rows, exact merge score
+    v_A + v_B + Σ h over the new cross pairs, and the two keys of A ∪ B.
+
+    `members` are the pool's sets in live-candidate indices (-1 padded), `indptr`/`indices`
+    the compatibility graph over the live candidates.  E(A), the candidates compatible with
+    every member of A, is found by counting over the members' neighbourhoods; B qualifies
+    when B∖A ⊆ E(A) and B∖A ≠ ∅ ≠ A∖B (then all new cross pairs are compatible), and only
+    sets meeting E(A) are looked at (an inverted index candidate -> sets).  Two frontier
+    sets are tried from the lower row only; merges whose score bound cannot reach `floor`
+    are skipped.
+    """
+    n_sets, width = members.shape
+    n_live = len(indptr) - 1
+    # inverted index: the sets holding each live candidate
+    count = np.zeros(n_live + 1, dtype=np.int64)
+    for r in range(n_sets):
+        for k in range(size[r]):
+            count[members[r, k] + 1] += 1
+    starts = np.cumsum(count)
+    fill = starts[:-1].copy()
+    holders = np.empty(starts[-1], dtype=np.int64)
+    for r in range(n_sets):
+        for k in range(size[r]):
+            c = members[r, k]
+            holders[fill[c]] = r
+            fill[c] += 1
+    hits = np.zeros(n_live, dtype=np.int64)
+    touched = np.empty(n_live, dtype=np.int64)
+    ext = np.empty(n_live, dtype=np.int64)
+    ext_stamp = np.full(n_live, -1, dtype=np.int64)
+    ext_at = np.zeros(n_live, dtype=np.int64)
+    own_stamp = np.full(n_live, -1, dtype=np.int64)
+    own_at = np.zeros(n_live, dtype=np.int64)
+    seen = np.full(n_sets, -1, dtype=np.int64)
+    new_at = np.empty(width, dtype=np.int64)
+    kept = np.zeros(width, dtype=np.bool_)
+    capacity = 1024
+    out_a = np.empty(capacity, dtype=np.int64)
+    out_b = np.empty(capacity, dtype=np.int64)
+    out_score = np.empty(capacity)
+    out_key = np.empty(capacity, dtype=np.uint64)
+    out_key2 = np.empty(capacity, dtype=np.uint64)
+    n_out = 0
+    for a in frontier:
+        n_a = size[a]
+        n_touched = 0
+        for k in range(n_a):
+            m = members[a, k]
+            for p in range(indptr[m], indptr[m + 1]):
+                c = indices[p]
+                if hits[c] == 0:
+                    touched[n_touched] = c
+                    n_touched += 1
+                hits[c] += 1
+        n_ext = 0
+        for t in range(n_touched):
+            c = touched[t]
+            if hits[c] == n_a:  # members of A are compatible with the |A| - 1 others only
+                ext_stamp[c] = a
+                ext_at[c] = n_ext
+                ext[n_ext] = c
+                n_ext += 1
+            hits[c] = 0
+        if n_ext == 0:
+            continue
+        for k in range(n_a):
+            own_stamp[members[a, k]] = a
+            own_at[members[a, k]] = k
+        h = np.empty((n_a, n_ext))  # h(a_k, e_j), the paper's ratio
+        for k in range(n_a):
+            m = members[a, k]
+            for j in range(n_ext):
+                h[k, j] = _ratio(global_xyz, local_xyz, m, ext[j], min_distance)
+        for j in range(n_ext):
+            e = ext[j]
+            for p in range(starts[e], starts[e + 1]):
+                b = holders[p]
+                if seen[b] == a:
+                    continue
+                seen[b] = a
+                if in_frontier[b] and b < a:
+                    continue
+                n_new, shared, ok = 0, 0, True
+                key = set_key[a]
+                key2 = set_key2[a]
+                for k in range(n_a):
+                    kept[k] = False
+                for k in range(size[b]):
+                    m = members[b, k]
+                    if ext_stamp[m] == a:
+                        new_at[n_new] = ext_at[m]
+                        n_new += 1
+                        key += cand_key[m]
+                        key2 += cand_key2[m]
+                    elif own_stamp[m] == a:
+                        kept[own_at[m]] = True
+                        shared += 1
+                    else:
+                        ok = False
+                        break
+                if not ok or shared >= n_a:
+                    continue
+                base = score[a] + score[b]
+                if base + upper_bound * (n_a - shared) * n_new < floor:
+                    continue
+                cross = 0.0
+                for k in range(n_a):
+                    if not kept[k]:
+                        for q in range(n_new):
+                            cross += h[k, new_at[q]]
+                if n_out == capacity:
+                    capacity *= 2
+                    out_a = _grown(out_a, capacity)
+                    out_b = _grown(out_b, capacity)
+                    out_score = _grown(out_score, capacity)
+                    out_key = _grown(out_key, capacity)
+                    out_key2 = _grown(out_key2, capacity)
+                out_a[n_out] = a
+                out_b[n_out] = b
+                out_score[n_out] = base + cross
+                out_key[n_out] = key
+                out_key2[n_out] = key2
+                n_out += 1
+    return out_a[:n_out], out_b[:n_out], out_score[:n_out], out_key[:n_out], out_key2[:n_out]
+
+
+@njit(cache=True)
+def _ratio(global_xyz, local_xyz, i, j, min_distance):
+    """The paper's h of live candidates i and j (as `merge_metric` with no tolerance)."""
+    d_global = np.sqrt(
+        (global_xyz[i, 0] - global_xyz[j, 0]) ** 2
+        + (global_xyz[i, 1] - global_xyz[j, 1]) ** 2
+        + (global_xyz[i, 2] - global_xyz[j, 2]) ** 2
+    )
+    d_local = np.sqrt(
+        (local_xyz[i, 0] - local_xyz[j, 0]) ** 2
+        + (local_xyz[i, 1] - local_xyz[j, 1]) ** 2
+        + (local_xyz[i, 2] - local_xyz[j, 2]) ** 2
+    )
+    d_max = max(d_global, d_local)
+    if d_max < min_distance or d_max <= 0:
+        return 1.0
+    return 1.0 - abs(d_global - d_local) / d_max
+
+
+@njit(cache=True)
+def _grown(values, capacity):
+    out = np.empty(capacity, dtype=values.dtype)
+    out[: len(values)] = values
+    return out
+
+
+@njit(cache=True)
+def _group_by_keys(key, key2, scores):
+    """Merges grouped by the first key of their union (open addressing): the first merge of
+    each group, each merge's group, the largest score per group, and whether the second key
+    disagreed within a group (a collision of the first key)."""
+    n = len(key)
+    slots = 1
+    while slots < 2 * n:
+        slots *= 2
+    mask = np.uint64(slots - 1)
+    table = np.full(slots, -1, dtype=np.int64)
+    first = np.empty(n, dtype=np.int64)
+    group = np.empty(n, dtype=np.int64)
+    best = np.empty(n)
+    n_groups = 0
+    for i in range(n):
+        at = np.int64(key[i] & mask)
+        while table[at] >= 0 and key[first[table[at]]] != key[i]:
+            at = (at + 1) & (slots - 1)
+        g = table[at]
+        if g < 0:
+            g = n_groups
+            n_groups += 1
+            table[at] = g
+            first[g] = i
+            best[g] = scores[i]
+        elif key2[first[g]] != key2[i]:
+            return first[:0], group[:0], best[:0], True
+        elif scores[i] > best[g]:
+            best[g] = scores[i]
+        group[i] = g
+    return first[:n_groups], group, best[:n_groups], False
+
+
+@njit(cache=True)
+def _union_rows(members, size, rows_a, rows_b):
+    """The members of A ∪ B for each merge, ascending and -1 padded (rows are ascending)."""
+    n = len(rows_a)
+    width = 1
+    for i in range(n):
+        width = max(width, size[rows_a[i]] + size[rows_b[i]])
+    out = np.full((n, width), -1, dtype=np.int64)
+    longest = 1
+    for i in range(n):
+        a, b = rows_a[i], rows_b[i]
+        p, q, k = 0, 0, 0
+        while p < size[a] or q < size[b]:
+            x = members[a, p] if p < size[a] else np.iinfo(np.int64).max
+            y = members[b, q] if q < size[b] else np.iinfo(np.int64).max
+            if x <= y:
+                out[i, k] = x
+                p += 1
+                if x == y:
+                    q += 1
+            else:
+                out[i, k] = y
+                q += 1
+            k += 1
+        longest = max(longest, k)
+    return out[:, :longest]
