@@ -72,7 +72,6 @@ import numpy as np
 import scipy.sparse as sp
 from numba import njit
 from pydantic import BaseModel, ConfigDict, Field
-from scipy.spatial import cKDTree
 
 _BRUTE_FORCE_PAIRS = 20_000  # below this many pairs a range query is a dense distance block
 
@@ -382,43 +381,49 @@ class HierarchicalClustering:
         self._live_key, self._live_key2 = self._cand_key[live], self._cand_key2[live]
 
     def _compatible_pairs(self, added: np.ndarray, covered: np.ndarray) -> np.ndarray:
-        """All compatible (a, b) with a in `added` and b in `added` ∪ `covered` (2 x E)."""
-        local_of = self._cand_l
-        groups_new = {int(l): added[local_of[added] == l] for l in np.unique(local_of[added])}
-        groups_old = {int(l): covered[local_of[covered] == l] for l in np.unique(local_of[covered])}
-        found = [np.zeros((2, 0), dtype=np.int64)]
-        for la, xs in groups_new.items():
-            tree = _LazyTree(self._global_positions[self._cand_g[xs]])
-            for lb in sorted(set(groups_old) | set(groups_new)):
-                if lb == la:
-                    continue
-                ys = groups_old.get(lb, xs[:0])
-                if lb > la and lb in groups_new:  # pairs within `added` are found once
-                    ys = np.concatenate([ys, groups_new[lb]])
-                if len(ys):
-                    found.append(self._compatible_block(la, xs, tree, lb, ys))
-        return np.hstack(found)
+        """All compatible (a, b) with a in `added` and b in `added` ∪ `covered` (2 x E).
 
-    def _compatible_block(
-        self, la: int, xs: np.ndarray, tree: _LazyTree, lb: int, ys: np.ndarray
-    ) -> np.ndarray:
-        """Compatible pairs between candidates `xs` of local object `la` (their global
-        positions in `tree`) and `ys` of `lb`."""
+        Few pairs: all of them, tested in one compiled pass; many: a sweep along the map's
+        longest axis per pair of local objects (only global pairs within the gate's reach)."""
+        if len(added) * (len(added) + len(covered)) <= 10 * _BRUTE_FORCE_PAIRS:
+            cfg = self.config
+            return _compatible_among(
+                added,
+                covered,
+                self._cand_g,
+                self._cand_l,
+                self._global_positions,
+                self._local_distances(),
+                cfg.distance_tolerance,
+                cfg.gamma,
+                cfg.min_distance,
+            )
         cfg = self.config
-        d_local = float(np.linalg.norm(self._local_positions[la] - self._local_positions[lb]))
+        distances = self._local_distances()
         # the gate 1 - max(0, |d^A - d^B| - ε) / max(d^A, d^B) > γ needs d^A < (d^B + ε) / γ
-        reach = max((d_local + cfg.distance_tolerance) / cfg.gamma, cfg.min_distance)
-        reach = reach * (1 + 1e-9) + 1e-12  # the exact test below decides at the boundary
-        gx, gy = tree.points, self._global_positions[self._cand_g[ys]]
-        if len(xs) * len(ys) <= _BRUTE_FORCE_PAIRS:
-            i, j = np.nonzero(np.linalg.norm(gx[:, None] - gy[None], axis=2) <= reach)
-        else:
-            found = tree.get().sparse_distance_matrix(cKDTree(gy), reach, output_type="ndarray")
-            i, j = found["i"].astype(np.int64), found["j"].astype(np.int64)
-        d_global = np.linalg.norm(gx[i] - gy[j], axis=1)
-        ok = self.criterion.compatible(d_global, d_local)
-        ok &= self._cand_g[xs[i]] != self._cand_g[ys[j]]
-        return np.vstack([xs[i[ok]], ys[j[ok]]])
+        reach = np.maximum((distances + cfg.distance_tolerance) / cfg.gamma, cfg.min_distance)
+        reach = reach * (1 + 1e-9) + 1e-12  # the exact test decides at the boundary
+        return _compatible_sweep(
+            added,
+            covered,
+            self._cand_g,
+            self._cand_l,
+            self._global_positions,
+            distances,
+            reach,
+            cfg.distance_tolerance,
+            cfg.gamma,
+            cfg.min_distance,
+        )
+
+    def _local_distances(self) -> np.ndarray:
+        """Distances between the local objects (one `np.linalg.norm` per pair)."""
+        xyz = self._local_positions
+        out = np.zeros((len(xyz), len(xyz)))
+        for i in range(len(xyz)):
+            for j in range(i + 1, len(xyz)):
+                out[i, j] = out[j, i] = float(np.linalg.norm(xyz[i] - xyz[j]))
+        return out
 
     def _gate_of_sets(self, members: np.ndarray) -> np.ndarray:
         """Whether every pair of members of each set (rows, -1 padded) passes the criterion."""
@@ -548,22 +553,11 @@ class HierarchicalClustering:
 
     def _lookup(self, key: np.ndarray, key2: np.ndarray, members: np.ndarray) -> np.ndarray:
         """The pool row holding each given set (-1: not in the pool)."""
-        out = np.full(len(key), -1, dtype=np.int64)
         if not len(self._key) or not len(key):
-            return out
-        order = np.argsort(self._key, kind="stable")
-        sorted_keys = self._key[order]
-        at = np.minimum(np.searchsorted(sorted_keys, key), len(order) - 1)
-        hit = sorted_keys[at] == key
-        unique_keys = not np.any(sorted_keys[1:] == sorted_keys[:-1])
-        rows = order[at[hit]]
-        width = max(members.shape[1], self._members.shape[1])
-        same = (self._key2[rows] == key2[hit]) & np.all(
-            _pad(self._members[rows], width) == _pad(members[hit], width), axis=1
-        )
-        if unique_keys and same.all():
-            out[np.flatnonzero(hit)] = rows
-            return out
+            return np.full(len(key), -1, dtype=np.int64)
+        rows, exact = _find_by_keys(self._key, self._key2, self._members, key, key2, members)
+        if exact:
+            return rows
         # a key collision: look sets up by their member lists
         index = {tuple(m[m >= 0]): r for r, m in enumerate(self._members)}
         return np.array([index.get(tuple(m[m >= 0]), -1) for m in members], dtype=np.int64)
@@ -616,12 +610,23 @@ class HierarchicalClustering:
             set_hash[needs] = hashes.sum(axis=1, dtype=np.uint64)
         return np.lexsort((set_hash, *keys))
 
+    def _best_rows(self, k: int) -> np.ndarray:
+        """Which sets are among the k best of `_ranking` (the same k, without sorting all):
+        the sets above the k-th score for sure, and the k-th score's sets ranked exactly."""
+        score = np.round(self._score, 9)
+        kth = np.partition(score, len(score) - k)[len(score) - k]
+        keep = score > kth
+        at_cut = np.flatnonzero(score == kth)
+        if k - int(keep.sum()) < len(at_cut):
+            at_cut = at_cut[self._ranking(at_cut, limit=k - int(keep.sum()))]
+        keep[at_cut[: k - int(keep.sum())]] = True
+        return keep
+
     def _prune(self, frontier: np.ndarray) -> np.ndarray:
         """Keep the top K sets; return the surviving part of the frontier (renumbered)."""
         if len(self._score) <= self.capacity:
             return frontier
-        keep = np.zeros(len(self._score), dtype=bool)
-        keep[self._ranking(limit=self.capacity)[: self.capacity]] = True
+        keep = self._best_rows(self.capacity)
         is_frontier = np.zeros(len(self._score), dtype=bool)
         is_frontier[frontier] = True
         self._keep_rows(keep)
@@ -631,8 +636,8 @@ class HierarchicalClustering:
         old = self.step - self._last_merge > self.config.expiry_updates
         if not old.any():
             return
-        protected = np.zeros(len(old), dtype=bool)
-        protected[self._ranking(limit=self.config.protect_top)[: self.config.protect_top]] = True
+        top = self.config.protect_top
+        protected = self._best_rows(top) if 0 < top < len(old) else np.full(len(old), top > 0)
         self._keep_rows(~old | protected)
 
     def _keep_rows(self, keep: np.ndarray) -> None:
@@ -642,19 +647,6 @@ class HierarchicalClustering:
         self._last_merge = self._last_merge[keep]
         self._key = self._key[keep]
         self._key2 = self._key2[keep]
-
-
-class _LazyTree:
-    """A KD-tree over `points`, built on first use."""
-
-    def __init__(self, points: np.ndarray) -> None:
-        self.points = points
-        self._tree: cKDTree | None = None
-
-    def get(self) -> cKDTree:
-        if self._tree is None:
-            self._tree = cKDTree(self.points)
-        return self._tree
 
 
 def _pad(members: np.ndarray, width: int) -> np.ndarray:
@@ -699,19 +691,37 @@ def _merges_of_frontier(
     """
     n_sets, width = members.shape
     n_live = len(indptr) - 1
-    # inverted index: the sets holding each live candidate
+    # every set is filed under one pivot, its member held by the fewest sets: a set inside
+    # M(A) has its pivot in M(A), so only the lists of M(A)'s candidates are looked at
+    held = np.zeros(n_live, dtype=np.int64)
+    for r in range(n_sets):
+        for k in range(size[r]):
+            held[members[r, k]] += 1
+    pivot = np.empty(n_sets, dtype=np.int64)
     count = np.zeros(n_live + 1, dtype=np.int64)
     for r in range(n_sets):
-        for k in range(size[r]):
-            count[members[r, k] + 1] += 1
+        best = members[r, 0]
+        for k in range(1, size[r]):
+            m = members[r, k]
+            if held[m] < held[best]:
+                best = m
+        pivot[r] = best
+        count[best + 1] += 1
     starts = np.cumsum(count)
     fill = starts[:-1].copy()
-    holders = np.empty(starts[-1], dtype=np.int64)
+    filed = np.empty(n_sets, dtype=np.int64)
+    for r in range(n_sets):
+        filed[fill[pivot[r]]] = r
+        fill[pivot[r]] += 1
+    # a 64-bit signature per set (one bit per member, from its key): B ⊆ M(A) needs
+    # sig(B) ⊆ sig(M(A)), a cheap first screen
+    bit = np.empty(n_live, dtype=np.uint64)
+    for c in range(n_live):
+        bit[c] = np.uint64(1) << (cand_key[c] >> np.uint64(58))
+    sig = np.zeros(n_sets, dtype=np.uint64)
     for r in range(n_sets):
         for k in range(size[r]):
-            c = members[r, k]
-            holders[fill[c]] = r
-            fill[c] += 1
+            sig[r] |= bit[members[r, k]]
     hits = np.zeros(n_live, dtype=np.int64)
     touched = np.empty(n_live, dtype=np.int64)
     ext = np.empty(n_live, dtype=np.int64)
@@ -719,7 +729,8 @@ def _merges_of_frontier(
     ext_at = np.zeros(n_live, dtype=np.int64)
     own_stamp = np.full(n_live, -1, dtype=np.int64)
     own_at = np.zeros(n_live, dtype=np.int64)
-    seen = np.full(n_sets, -1, dtype=np.int64)
+    h = np.empty(1024)
+    h_known = np.zeros(n_live, dtype=np.bool_)
     new_at = np.empty(width, dtype=np.int64)
     kept = np.zeros(width, dtype=np.bool_)
     capacity = 1024
@@ -751,22 +762,22 @@ def _merges_of_frontier(
             hits[c] = 0
         if n_ext == 0:
             continue
+        outside = sig[a]
+        for j in range(n_ext):
+            outside |= bit[ext[j]]
+        outside = ~outside
         for k in range(n_a):
             own_stamp[members[a, k]] = a
             own_at[members[a, k]] = k
-        h = np.empty((n_a, n_ext))  # h(a_k, e_j), the paper's ratio
-        for k in range(n_a):
-            m = members[a, k]
-            for j in range(n_ext):
-                h[k, j] = _ratio(global_xyz, local_xyz, m, ext[j], min_distance)
+        if n_a * n_ext > len(h):
+            h = np.empty(2 * n_a * n_ext)
         for j in range(n_ext):
-            e = ext[j]
-            for p in range(starts[e], starts[e + 1]):
-                b = holders[p]
-                if seen[b] == a:
-                    continue
-                seen[b] = a
-                if in_frontier[b] and b < a:
+            h_known[j] = False
+        for j in range(n_a + n_ext):
+            x = members[a, j] if j < n_a else ext[j - n_a]
+            for p in range(starts[x], starts[x + 1]):
+                b = filed[p]
+                if b == a or (in_frontier[b] and b < a) or sig[b] & outside:
                     continue
                 n_new, shared, ok = 0, 0, True
                 key = set_key[a]
@@ -786,16 +797,24 @@ def _merges_of_frontier(
                     else:
                         ok = False
                         break
-                if not ok or shared >= n_a:
+                if not ok or shared >= n_a or n_new == 0:
                     continue
                 base = score[a] + score[b]
                 if base + upper_bound * (n_a - shared) * n_new < floor:
                     continue
                 cross = 0.0
+                for q in range(n_new):
+                    j = new_at[q]
+                    if not h_known[j]:  # h(a_k, e_j), the paper's ratio, when first needed
+                        for k in range(n_a):
+                            h[k * n_ext + j] = _ratio(
+                                global_xyz, local_xyz, members[a, k], ext[j], min_distance
+                            )
+                        h_known[j] = True
                 for k in range(n_a):
                     if not kept[k]:
                         for q in range(n_new):
-                            cross += h[k, new_at[q]]
+                            cross += h[k * n_ext + new_at[q]]
                 if n_out == capacity:
                     capacity *= 2
                     out_a = _grown(out_a, capacity)
@@ -898,3 +917,164 @@ def _union_rows(members, size, rows_a, rows_b):
             k += 1
         longest = max(longest, k)
     return out[:, :longest]
+
+
+@njit(cache=True)
+def _compatible_among(
+    added, covered, cand_g, cand_l, global_xyz, local_distance, tolerance, gamma, min_distance
+):
+    """The compatible pairs (a, b), a in `added`, b in `covered` or later in `added` (2 x E):
+    other local and global objects, and the gate of `MergeCriterion.compatible`."""
+    capacity = 1024
+    out = np.empty((2, capacity), dtype=np.int64)
+    n = 0
+    for i in range(len(added)):
+        x = added[i]
+        for k in range(len(covered) + len(added) - i - 1):
+            y = covered[k] if k < len(covered) else added[i + 1 + k - len(covered)]
+            if cand_l[x] == cand_l[y] or cand_g[x] == cand_g[y]:
+                continue
+            gx, gy = cand_g[x], cand_g[y]
+            d_global = np.sqrt(
+                (global_xyz[gx, 0] - global_xyz[gy, 0]) ** 2
+                + (global_xyz[gx, 1] - global_xyz[gy, 1]) ** 2
+                + (global_xyz[gx, 2] - global_xyz[gy, 2]) ** 2
+            )
+            d_local = local_distance[cand_l[x], cand_l[y]]
+            if not _gate(d_global, d_local, tolerance, gamma, min_distance):
+                continue
+            if n == capacity:
+                capacity *= 2
+                grown = np.empty((2, capacity), dtype=np.int64)
+                grown[:, :n] = out[:, :n]
+                out = grown
+            out[0, n] = x
+            out[1, n] = y
+            n += 1
+    return out[:, :n]
+
+
+@njit(cache=True)
+def _gate(d_global, d_local, tolerance, gamma, min_distance):
+    """`MergeCriterion.compatible` for one pair of distances."""
+    d_max = max(d_global, d_local)
+    if d_max < min_distance or d_max <= 0:
+        return gamma < 1.0
+    excess = max(abs(d_global - d_local) - tolerance, 0.0)
+    return 1.0 - excess / d_max > gamma
+
+
+@njit(cache=True)
+def _compatible_sweep(
+    added,
+    covered,
+    cand_g,
+    cand_l,
+    global_xyz,
+    local_distance,
+    reach,
+    tolerance,
+    gamma,
+    min_distance,
+):
+    """`_compatible_among` for many candidates: per local object, its candidates sorted along
+    the map's longest axis; a candidate of `la` is tested only against those of `lb` within
+    `reach[la, lb]` along it (a necessary condition of the gate)."""
+    n_local = len(local_distance)
+    everyone = np.concatenate((covered, added))
+    spread = np.zeros(3)
+    for axis in range(3):
+        spread[axis] = np.ptp(global_xyz[:, axis]) if len(global_xyz) else 0.0
+    axis = np.argmax(spread)
+    order = np.argsort(global_xyz[cand_g[everyone], axis], kind="mergesort")
+    count = np.zeros(n_local + 1, dtype=np.int64)
+    for c in everyone:
+        count[cand_l[c] + 1] += 1
+    starts = np.cumsum(count)
+    fill = starts[:-1].copy()
+    by_local = np.empty(len(everyone), dtype=np.int64)
+    for k in order:
+        c = everyone[k]
+        by_local[fill[cand_l[c]]] = c
+        fill[cand_l[c]] += 1
+    sorted_x = global_xyz[cand_g[by_local], axis]
+    added_at = np.full(len(cand_g), -1, dtype=np.int64)
+    for i in range(len(added)):
+        added_at[added[i]] = i
+    capacity = 1024
+    out = np.empty((2, capacity), dtype=np.int64)
+    n = 0
+    for i in range(len(added)):
+        x = added[i]
+        la, gx = cand_l[x], cand_g[x]
+        for lb in range(n_local):
+            if lb == la or starts[lb] == starts[lb + 1]:
+                continue
+            r = reach[la, lb]
+            lo, hi = starts[lb], starts[lb + 1]
+            p = lo + np.searchsorted(sorted_x[lo:hi], global_xyz[gx, axis] - r)
+            while p < hi and sorted_x[p] <= global_xyz[gx, axis] + r:
+                y = by_local[p]
+                p += 1
+                if added_at[y] >= 0 and added_at[y] <= i:  # pairs within `added` once
+                    continue
+                gy = cand_g[y]
+                if gx == gy:
+                    continue
+                d_global = np.sqrt(
+                    (global_xyz[gx, 0] - global_xyz[gy, 0]) ** 2
+                    + (global_xyz[gx, 1] - global_xyz[gy, 1]) ** 2
+                    + (global_xyz[gx, 2] - global_xyz[gy, 2]) ** 2
+                )
+                if not _gate(d_global, local_distance[la, lb], tolerance, gamma, min_distance):
+                    continue
+                if n == capacity:
+                    capacity *= 2
+                    grown = np.empty((2, capacity), dtype=np.int64)
+                    grown[:, :n] = out[:, :n]
+                    out = grown
+                out[0, n] = x
+                out[1, n] = y
+                n += 1
+    return out[:, :n]
+
+
+@njit(cache=True)
+def _find_by_keys(pool_key, pool_key2, pool_members, key, key2, members):
+    """The pool row with each given first key (-1: none), and whether that is exact: the
+    pool's first keys are distinct and every hit has the same second key and members."""
+    n = len(pool_key)
+    slots = 1
+    while slots < 2 * n:
+        slots *= 2
+    mask = np.uint64(slots - 1)
+    table = np.full(slots, -1, dtype=np.int64)
+    rows = np.full(len(key), -1, dtype=np.int64)
+    for r in range(n):
+        at = np.int64(pool_key[r] & mask)
+        while table[at] >= 0:
+            if pool_key[table[at]] == pool_key[r]:
+                return rows, False
+            at = (at + 1) & (slots - 1)
+        table[at] = r
+    width = min(members.shape[1], pool_members.shape[1])
+    for i in range(len(key)):
+        at = np.int64(key[i] & mask)
+        while table[at] >= 0 and pool_key[table[at]] != key[i]:
+            at = (at + 1) & (slots - 1)
+        r = table[at]
+        if r < 0:
+            continue
+        if pool_key2[r] != key2[i]:
+            return rows, False
+        for k in range(width):
+            if pool_members[r, k] != members[i, k]:
+                return rows, False
+        for k in range(width, members.shape[1]):
+            if members[i, k] >= 0:
+                return rows, False
+        for k in range(width, pool_members.shape[1]):
+            if pool_members[r, k] >= 0:
+                return rows, False
+        rows[i] = r
+    return rows, True
