@@ -222,6 +222,8 @@ class HierarchicalClustering:
         self._live = np.zeros(0, dtype=np.int64)
         self._live_index = np.zeros(0, dtype=np.int64)  # candidate -> row of the graph
         self._graph = sp.csr_matrix((0, 0), dtype=np.int64)
+        self._graph_indptr = np.zeros(1, dtype=np.int64)
+        self._graph_indices = np.zeros(0, dtype=np.int64)
         self._live_global = np.zeros((0, 3))  # per live candidate: global, local position
         self._live_local = np.zeros((0, 3))
         self._live_key = np.zeros(0, dtype=np.uint64)  # and its two keys
@@ -352,30 +354,26 @@ class HierarchicalClustering:
     def _cover_live(self) -> None:
         """Know the compatibility among all live candidates; build its sparse graph N.
 
-        Edges are kept in both directions, sorted by their first candidate, so that the
-        graph's rows need no sort: filtering keeps the order and new edges are merged in.
+        Edges are kept once per pair; the graph has both directions (rows by counting sort).
         """
-        live = np.unique(self._members[self._members >= 0])
+        is_live = np.zeros(len(self._cand_g), dtype=bool)
+        is_live[self._members[self._members >= 0]] = True
+        live = np.flatnonzero(is_live)
         is_covered = np.zeros(len(self._cand_g), dtype=bool)
         is_covered[self._covered] = True
-        is_live = np.zeros(len(self._cand_g), dtype=bool)
-        is_live[live] = True
         is_covered &= is_live
         edges = self._edges[:, is_covered[self._edges[0]] & is_covered[self._edges[1]]]
         added = live[~is_covered[live]]
         if len(added):
-            found = self._compatible_pairs(added, live[is_covered[live]])
-            found = np.hstack([found, found[::-1]])
-            edges = np.hstack([edges, found[:, np.argsort(found[0], kind="stable")]])
-            edges = edges[:, np.argsort(edges[0], kind="stable")]  # a merge of two sorted runs
+            edges = np.hstack([edges, self._compatible_pairs(added, live[is_covered[live]])])
         self._edges, self._covered, self._live = edges, live, live
         index = np.zeros(len(self._cand_g), dtype=np.int64)
         index[live] = np.arange(len(live))
         self._live_index = index
-        counts = np.bincount(index[edges[0]], minlength=len(live))
-        indptr = np.concatenate([[0], np.cumsum(counts)])
-        data = np.ones(edges.shape[1], dtype=np.int64)
-        self._graph = sp.csr_matrix((data, index[edges[1]], indptr), shape=(len(live),) * 2)
+        indptr, indices = _symmetric_csr(index[edges[0]], index[edges[1]], len(live))
+        data = np.ones(len(indices), dtype=np.int64)
+        self._graph = sp.csr_matrix((data, indices, indptr), shape=(len(live),) * 2)
+        self._graph_indptr, self._graph_indices = indptr, indices  # int64 (scipy may narrow)
         self._live_global = self._global_positions[self._cand_g[live]]
         self._live_local = self._local_positions[self._cand_l[live]]
         self._live_key, self._live_key2 = self._cand_key[live], self._cand_key2[live]
@@ -502,8 +500,8 @@ class HierarchicalClustering:
             live_members,
             self._size,
             self._score,
-            self._graph.indptr.astype(np.int64),
-            self._graph.indices.astype(np.int64),
+            self._graph_indptr,
+            self._graph_indices,
             self._live_global,
             self._live_local,
             self._live_key,
@@ -1078,3 +1076,22 @@ def _find_by_keys(pool_key, pool_key2, pool_members, key, key2, members):
                 return rows, False
         rows[i] = r
     return rows, True
+
+
+@njit(cache=True)
+def _symmetric_csr(first, second, n):
+    """CSR rows (indptr, indices) of the graph with edges first[i] - second[i], both ways."""
+    count = np.zeros(n + 1, dtype=np.int64)
+    for i in range(len(first)):
+        count[first[i] + 1] += 1
+        count[second[i] + 1] += 1
+    indptr = np.cumsum(count)
+    fill = indptr[:-1].copy()
+    indices = np.empty(2 * len(first), dtype=np.int64)
+    for i in range(len(first)):
+        u, v = first[i], second[i]
+        indices[fill[u]] = v
+        fill[u] += 1
+        indices[fill[v]] = u
+        fill[v] += 1
+    return indptr, indices
