@@ -494,7 +494,7 @@ class HierarchicalClustering:
         )
         in_frontier = np.zeros(len(self._score), dtype=np.bool_)
         in_frontier[frontier] = True
-        rows_a, rows_b, scores, key, key2 = _merges_of_frontier(
+        arguments = (
             frontier.astype(np.int64),
             in_frontier,
             live_members,
@@ -512,19 +512,18 @@ class HierarchicalClustering:
             self.criterion.min_distance,
             self.criterion.UPPER_BOUND,
         )
-        if not len(rows_a):
-            return None
-        self._last_merge[rows_a] = self.step
-        self._last_merge[rows_b] = self.step
-        first, group, best, collided = _group_by_keys(key, key2, scores)
-        if collided:  # a key collision: group the unions by their member lists
+        merged, rows_a, rows_b, best, key, key2, collided = _merges_of_frontier(*arguments, True)
+        if collided:  # a key collision: every merge, grouped by the union's member lists
+            merged, rows_a, rows_b, scores, key, key2, _ = _merges_of_frontier(*arguments, False)
             unions = _union_rows(self._members, self._size, rows_a, rows_b)
             _, first, group = np.unique(unions, axis=0, return_index=True, return_inverse=True)
             best = np.full(len(first), -np.inf)
             np.maximum.at(best, group.ravel(), scores)
-            return unions[first], best, key[first], key2[first]
-        unions = _union_rows(self._members, self._size, rows_a[first], rows_b[first])
-        return unions, best, key[first], key2[first]
+            rows_a, rows_b, key, key2 = rows_a[first], rows_b[first], key[first], key2[first]
+        if not len(rows_a):
+            return None
+        self._last_merge[merged] = self.step
+        return _union_rows(self._members, self._size, rows_a, rows_b), best, key, key2
 
     def _survival_floor(self) -> float:
         """The K-th best score in the pool (-inf while the pool is not full), less a hair.
@@ -675,9 +674,13 @@ def _merges_of_frontier(
     floor,
     min_distance,
     upper_bound,
+    grouped,
 ):
-    """Every merge (A, B) of one iteration with A in the frontier: rows, exact merge score
-    v_A + v_B + Σ h over the new cross pairs, and the two keys of A ∪ B.
+    """The merges (A, B) of one iteration with A in the frontier: which sets merged, and per
+    distinct union (by its first key; with `grouped`, else per merge) one merge's rows, the
+    largest merge score v_A + v_B + Σ h over the new cross pairs, and the two keys; last,
+    whether two unions shared a first key but not the second (then call again ungrouped).
+    A merge whose score bound cannot beat its union's best so far is not scored.
 
     `members` are the pool's sets in live-candidate indices (-1 padded), `indptr`/`indices`
     the compatibility graph over the live candidates.  E(A), the candidates compatible with
@@ -731,6 +734,7 @@ def _merges_of_frontier(
     h_known = np.zeros(n_live, dtype=np.bool_)
     new_at = np.empty(width, dtype=np.int64)
     kept = np.zeros(width, dtype=np.bool_)
+    merged = np.zeros(n_sets, dtype=np.bool_)
     capacity = 1024
     out_a = np.empty(capacity, dtype=np.int64)
     out_b = np.empty(capacity, dtype=np.int64)
@@ -738,6 +742,7 @@ def _merges_of_frontier(
     out_key = np.empty(capacity, dtype=np.uint64)
     out_key2 = np.empty(capacity, dtype=np.uint64)
     n_out = 0
+    table = np.full(2 * capacity, -1, dtype=np.int64)  # first key -> union (open addressing)
     for a in frontier:
         n_a = size[a]
         n_touched = 0
@@ -798,7 +803,50 @@ def _merges_of_frontier(
                 if not ok or shared >= n_a or n_new == 0:
                     continue
                 base = score[a] + score[b]
-                if base + upper_bound * (n_a - shared) * n_new < floor:
+                bound = base + upper_bound * (n_a - shared) * n_new
+                if bound < floor:
+                    continue
+                merged[a] = True
+                merged[b] = True
+                g = n_out
+                if grouped:
+                    at = np.int64(key & np.uint64(len(table) - 1))
+                    while table[at] >= 0 and out_key[table[at]] != key:
+                        at = (at + 1) & (len(table) - 1)
+                    if table[at] >= 0:
+                        g = table[at]
+                        if out_key2[g] != key2:
+                            return (
+                                merged,
+                                out_a[:0],
+                                out_b[:0],
+                                out_score[:0],
+                                out_key[:0],
+                                out_key2[:0],
+                                True,
+                            )
+                if g == n_out:  # a new union (or, ungrouped, a new merge)
+                    if n_out == capacity:
+                        capacity *= 2
+                        out_a = _grown(out_a, capacity)
+                        out_b = _grown(out_b, capacity)
+                        out_score = _grown(out_score, capacity)
+                        out_key = _grown(out_key, capacity)
+                        out_key2 = _grown(out_key2, capacity)
+                        if grouped:
+                            table = _rehashed(out_key, n_out, 2 * capacity)
+                            at = np.int64(key & np.uint64(len(table) - 1))
+                            while table[at] >= 0:
+                                at = (at + 1) & (len(table) - 1)
+                    if grouped:
+                        table[at] = g
+                    out_a[g] = a
+                    out_b[g] = b
+                    out_score[g] = -np.inf
+                    out_key[g] = key
+                    out_key2[g] = key2
+                    n_out += 1
+                elif bound <= out_score[g]:
                     continue
                 cross = 0.0
                 for q in range(n_new):
@@ -813,20 +861,16 @@ def _merges_of_frontier(
                     if not kept[k]:
                         for q in range(n_new):
                             cross += h[k * n_ext + new_at[q]]
-                if n_out == capacity:
-                    capacity *= 2
-                    out_a = _grown(out_a, capacity)
-                    out_b = _grown(out_b, capacity)
-                    out_score = _grown(out_score, capacity)
-                    out_key = _grown(out_key, capacity)
-                    out_key2 = _grown(out_key2, capacity)
-                out_a[n_out] = a
-                out_b[n_out] = b
-                out_score[n_out] = base + cross
-                out_key[n_out] = key
-                out_key2[n_out] = key2
-                n_out += 1
-    return out_a[:n_out], out_b[:n_out], out_score[:n_out], out_key[:n_out], out_key2[:n_out]
+                out_score[g] = max(out_score[g], base + cross)
+    return (
+        merged,
+        out_a[:n_out],
+        out_b[:n_out],
+        out_score[:n_out],
+        out_key[:n_out],
+        out_key2[:n_out],
+        False,
+    )
 
 
 @njit(cache=True)
@@ -856,37 +900,15 @@ def _grown(values, capacity):
 
 
 @njit(cache=True)
-def _group_by_keys(key, key2, scores):
-    """Merges grouped by the first key of their union (open addressing): the first merge of
-    each group, each merge's group, the largest score per group, and whether the second key
-    disagreed within a group (a collision of the first key)."""
-    n = len(key)
-    slots = 1
-    while slots < 2 * n:
-        slots *= 2
-    mask = np.uint64(slots - 1)
+def _rehashed(keys, n, slots):
+    """An open-addressing table (`slots`, a power of 2) of the first n keys (distinct)."""
     table = np.full(slots, -1, dtype=np.int64)
-    first = np.empty(n, dtype=np.int64)
-    group = np.empty(n, dtype=np.int64)
-    best = np.empty(n)
-    n_groups = 0
     for i in range(n):
-        at = np.int64(key[i] & mask)
-        while table[at] >= 0 and key[first[table[at]]] != key[i]:
+        at = np.int64(keys[i] & np.uint64(slots - 1))
+        while table[at] >= 0:
             at = (at + 1) & (slots - 1)
-        g = table[at]
-        if g < 0:
-            g = n_groups
-            n_groups += 1
-            table[at] = g
-            first[g] = i
-            best[g] = scores[i]
-        elif key2[first[g]] != key2[i]:
-            return first[:0], group[:0], best[:0], True
-        elif scores[i] > best[g]:
-            best[g] = scores[i]
-        group[i] = g
-    return first[:n_groups], group, best[:n_groups], False
+        table[at] = i
+    return table
 
 
 @njit(cache=True)
