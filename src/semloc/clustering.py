@@ -22,17 +22,20 @@ Formulation (equivalent to the literal pairwise test, see tests/core/test_cluste
     when D2 ⊆ M(D1), the candidates compatible with (or in) every member of D1.  Nothing is
     kept over all candidates of a map: compatibility is needed only among the *live*
     candidates (members of the sets in the pool, at most K · n_local of them plus the
-    singletons of this update).  It is a sparse graph, found by a range query per pair of
-    local objects (a KD-tree ball of radius (d^B + ε)/γ, then the exact criterion) and kept
-    across updates for candidates that stay live.  With S the sparse (sets x live) membership
-    and N the compatibility (with its diagonal), one sparse product S_F·N counts, for each
-    frontier set A, how many of its members each candidate is compatible with (= |A| means
-    "in M(A)"); a second product with Sᵀ counts |B ∩ M(A)| and |A ∩ B| for every pool set B
-    at once, which decides the merge and gives |A∖B| and |B∖A|.  Merge scores are computed
-    from the object positions on the fly.  Memory grows with the live candidates times their
-    compatible neighbours, never with candidates².  Merges of an iteration are grouped by
-    union through additive 64-bit set keys (key(A ∪ B) = key(A) + Σ over B∖A), checked by a
-    second key and, on disagreement, by the member lists themselves.
+    singletons of this update).  It is a sparse graph, found per new live candidate by a
+    sweep along the map's longest axis (only global objects within the gate's reach
+    (d^B + ε)/γ of it are tested exactly) and kept across updates for candidates that stay
+    live.  Memory grows with the live candidates times their compatible neighbours, never
+    with candidates².
+    One iteration is one compiled pass (numba, `_merges_of_frontier`): for each frontier set
+    A, E(A) = M(A)∖A is counted from its members' neighbourhoods; every pool set is filed
+    under one pivot member (the one held by the fewest sets), so the sets inside M(A) are
+    among those filed under M(A)'s candidates, and a 64-bit member signature screens them
+    before the exact test B∖A ⊆ E(A).  Merges are grouped by union on the fly through
+    additive 64-bit set keys (key(A ∪ B) = key(A) + Σ over B∖A), checked by a second key and,
+    on disagreement, by the member lists themselves; a merge is scored (Σ h over the new
+    cross pairs, from the object positions) only when its bound v_A + v_B + |A∖B|·|B∖A| can
+    beat the best score of its union so far, which leaves every union's score unchanged.
 
 Where the paper is silent (see also DESIGN.md)
     * "Marking merged sets": every pair of sets is tried once.  A clustering round works on a
