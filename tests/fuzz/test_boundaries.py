@@ -8,6 +8,7 @@ import json
 import os
 import stat
 import threading
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -16,7 +17,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import semloc
-from semloc.io import load_map, save_map, write_atomic
+from semloc.io import load_map, save_map, write_atomic, write_files
 from semloc.io.importers.scannet import read_segments
 from semloc.io.native import parse_json
 from semloc.io.ply import read_ply
@@ -212,6 +213,16 @@ def test_device_output_is_written_as_a_stream():
     with pytest.raises(MapError, match="/dev/full: cannot write"):
         write_atomic("/dev/full", b"x" * 10)
     assert stat.S_ISCHR(os.stat("/dev/full").st_mode)
+
+
+@pytest.mark.skipif(not os.path.exists("/dev/full"), reason="no /dev/full")
+def test_failing_stream_leaves_the_other_files_as_they_were(tmp_path):
+    """`convert scan2cad -o cad.json --scan-output /dev/full`: the CAD map is not replaced."""
+    (tmp_path / "cad.json").write_text("old")
+    with pytest.raises(MapError, match="/dev/full: cannot write"):
+        write_files([(tmp_path / "cad.json", "new"), (Path("/dev/full"), b"x" * 10)])
+    assert (tmp_path / "cad.json").read_text() == "old"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cad.json"]
 
 
 def test_huge_but_finite_numbers_round_trip(tmp_path):
