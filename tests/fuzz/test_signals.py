@@ -8,6 +8,7 @@ the command after that (a signal during interpreter start-up is Python's default
 
 from __future__ import annotations
 
+import json
 import os
 import random
 import signal
@@ -17,11 +18,13 @@ import threading
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 from format_fixtures import write_scan2cad
 
 from semloc.eval.recall import read_rows
-from semloc.io import load_map
+from semloc.io import load_map, save_map
+from semloc.maps import ObjectMap, SemanticObject
 
 CHILD = (
     "import sys, semloc.cli; print('ready', flush=True); sys.exit(semloc.cli.main(sys.argv[1:]))"
@@ -134,6 +137,40 @@ def test_convert_interrupted_writes_both_maps_or_neither(tmp_path, signum):
             load_map(cad), load_map(scan)
         else:
             assert interrupted
+    no_leftovers(tmp_path)
+
+
+def write_large_maps(folder: Path, n: int = 1000) -> tuple[Path, Path]:
+    """A global map of `n` objects of 8 labels in 60 m x 60 m and 25 of them as the local map:
+    tens of seconds of localization."""
+    rng = np.random.default_rng(13)
+    positions = np.column_stack([rng.uniform(0, 60, (n, 2)), rng.uniform(0, 2, n)])
+    labels = [f"class{k}" for k in rng.integers(0, 8, n)]
+    objects = [SemanticObject(f"g{i}", labels[i], positions[i]) for i in range(n)]
+    near = np.argsort(np.linalg.norm(positions[:, :2] - 30, axis=1))[:25]
+    local = [SemanticObject(f"l{j}", labels[i], positions[i] - [30, 30, 0])
+             for j, i in enumerate(near)]  # fmt: skip
+    return (save_map(ObjectMap(objects), folder / "global.json"),
+            save_map(ObjectMap(local), folder / "local.json"))  # fmt: skip
+
+
+def test_localize_on_a_large_map_interrupted_promptly(tmp_path):
+    """Ctrl-C or SIGTERM while a large map is localized: the command ends at once (not when
+    the search is done) with the message, and its result file is absent (or complete)."""
+    global_map, local_map = write_large_maps(tmp_path)
+    rng = random.Random(130)
+    runs = []
+    for i, signum in enumerate((signal.SIGINT, signal.SIGTERM)):
+        argv = ["localize", str(global_map), str(local_map), "--format", "json", "-o", f"r{i}.json"]
+        runs.append((start(argv, tmp_path), rng.uniform(0.5, 4.0), signum))
+    begin = time.monotonic()
+    results = interrupt(runs)
+    assert time.monotonic() - begin < 30, "the localization ran on after the signal"
+    for i, ((code, err), (_, _, signum)) in enumerate(zip(results, runs, strict=True)):
+        if not check_status(code, err, signum):
+            assert json.loads((tmp_path / f"r{i}.json").read_text())["status"]
+        else:
+            assert not (tmp_path / f"r{i}.json").exists()
     no_leftovers(tmp_path)
 
 
