@@ -282,6 +282,51 @@ OPTION_CASES: list[Case] = [
         [],
     ),
     _option_case(
+        "localize-config-deep-nesting",
+        lambda f, g: [
+            "localize",
+            str(g),
+            str(g),
+            "--config",
+            str(_write(f / "s.json", "[" * 10**5)),
+        ],
+        ["s.json"],
+    ),
+    _option_case(
+        "view-result-deep-nesting",
+        lambda f, g: [
+            "view",
+            str(g),
+            "--result",
+            str(_write(f / "r.json", "[" * 10**5)),
+            "-o",
+            str(f / "v.png"),
+        ],
+        ["r.json"],
+    ),
+    _option_case(
+        "view-out-dev-full", lambda f, g: ["view", str(g), "-o", "/dev/full"], ["/dev/full"]
+    ),
+    _option_case(
+        "export-out-dev-full", lambda f, g: ["export", str(g), "-o", "/dev/full"], ["/dev/full"]
+    ),
+    _option_case(
+        "crop-out-dev-full",
+        lambda f, g: [
+            "crop",
+            str(g),
+            "--center",
+            "0",
+            "0",
+            "0",
+            "--radius",
+            "5",
+            "-o",
+            "/dev/full",
+        ],
+        ["/dev/full"],
+    ),
+    _option_case(
         "simulate-drift-nan", lambda f, g: ["simulate", str(f / "s"), "--drift", "nan"], ["--drift"]
     ),
     _option_case(
@@ -459,9 +504,27 @@ def _rscan_string_column(folder: Path) -> tuple[list[str], list[str]]:
     return ["convert", "3rscan", str(path), "-o", str(folder / "out.json")], [path.name]
 
 
+def _scannet_deep_aggregation(folder: Path) -> tuple[list[str], list[str]]:
+    write_scannet(folder / "scene")
+    _write(folder / "scene" / "scene0001_00.aggregation.json", "[" * 100_000)
+    argv = ["convert", "scannet", str(folder / "scene"), "-o", str(folder / "out.json")]
+    return argv, ["scene0001_00.aggregation.json"]
+
+
 CONVERT_CASES += [
     Case("convert-scan2cad-negative-bbox", _scan2cad_negative_bbox),
     Case("convert-3rscan-string-column", _rscan_string_column),
+    Case("convert-scannet-deep-aggregation", _scannet_deep_aggregation),
+    Case(
+        "convert-out-dev-full",
+        lambda f: (["convert", "scannet", str(_scannet(f)[0]), "-o", "/dev/full"], ["/dev/full"]),
+    ),
+    _convert_case(
+        "convert-scan-output-dev-full",
+        "scan2cad",
+        lambda f: ["--scan-output", "/dev/full"],
+        ["/dev/full"],
+    ),
 ]
 
 MUTATED_CASES: list[Case] = [mutated_scene(kind, seed) for kind in SCENES for seed in range(12)]
