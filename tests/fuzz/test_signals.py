@@ -264,3 +264,19 @@ def test_bench_quick_interrupted_at_random_moments(tmp_path):
         assert complete or interrupted, err
         no_processes_left(proc.pid)
     no_leftovers(tmp_path)
+
+
+def test_an_interrupt_swallowed_by_a_finaliser_is_delivered_again():
+    """A signal that arrives while a finaliser or weakref callback runs raises there, where
+    Python prints "Exception ignored" and goes on; it must still stop the command."""
+    from semloc.cli import Interrupted, _interrupts_raise
+
+    class RaisesWhenCollected:
+        def __del__(self):
+            raise Interrupted(signal.SIGTERM)  # what the handler does inside a finaliser
+
+    with pytest.raises(Interrupted) as caught, _interrupts_raise(script=False):
+        RaisesWhenCollected()  # collected at once: its exception cannot propagate
+        for _ in range(200):
+            time.sleep(0.005)
+    assert caught.value.signum == signal.SIGTERM

@@ -9,6 +9,7 @@ stderr and exit status 2, so that bad input never ends in a traceback.
 
 from __future__ import annotations
 
+import os
 import signal
 import sys
 import threading
@@ -53,11 +54,31 @@ def _interrupts_raise(script: bool) -> Iterator[None]:
         return
     signals = (signal.SIGINT, signal.SIGTERM)
     previous = {s: signal.signal(s, _raise_interrupted) for s in signals}
+    previous_hook = sys.unraisablehook
+    sys.unraisablehook = _redeliver(previous_hook)
     try:
         yield
     finally:
         for signum, handler in previous.items():
             signal.signal(signum, signal.SIG_IGN if script else handler)
+        sys.unraisablehook = previous_hook
+
+
+def _redeliver(previous_hook):
+    """An unraisable-exception hook that sends an `Interrupted` swallowed where exceptions
+    cannot propagate (a weakref callback, `__del__`: Python would print "Exception ignored" and
+    go on) to the process again, so the handler raises it where the command can stop.  It is
+    sent a moment later from a thread: raised at once, it would land in the hook itself."""
+
+    def hook(unraisable) -> None:
+        if isinstance(unraisable.exc_value, Interrupted):
+            again = threading.Timer(0.01, os.kill, (os.getpid(), unraisable.exc_value.signum))
+            again.daemon = True
+            again.start()
+        else:
+            previous_hook(unraisable)
+
+    return hook
 
 
 def main(argv: list[str] | None = None) -> int:
