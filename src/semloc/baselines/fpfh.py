@@ -16,7 +16,8 @@ whole global cloud.
 
 Simplifications: sub-maps are retrieved by the vocabulary instead of registering against every
 sub-map (hundreds per room; too slow for a benchmark); Open3D runs single-threaded in workers; what depends only on the global map
-is cached per process (the last 8 maps).
+is cached per process (the last 8 maps), and so are the features of the last local clouds (the
+same local map is registered against every map kind).
 The sub-map radius is the paper's 1.5 m while local maps usually span more: RANSAC matches the
 local cloud to a sub-map, the pose is then checked against the whole map.
 """
@@ -24,6 +25,7 @@ local cloud to a sub-map, the pose is then checked against the whole map.
 from __future__ import annotations
 
 import hashlib
+from collections import OrderedDict
 
 import numpy as np
 from pydantic import Field
@@ -61,6 +63,26 @@ def _cloud(points: np.ndarray, cfg: FpfhConfig):
         pcd, o3d.geometry.KDTreeSearchParamHybrid(cfg.feature_radius, 100)
     )
     return pcd, np.asarray(feature.data).T.copy()
+
+
+_LOCAL_CACHE: OrderedDict[str, tuple] = OrderedDict()
+_LOCAL_CACHE_SIZE = 16
+
+
+def _local_cloud(points: np.ndarray, cfg: FpfhConfig):
+    """`_cloud(points, cfg)`, remembered for the last few local clouds of the process: the
+    same local map is registered against every map kind (features are deterministic, and
+    registration only reads the cloud)."""
+    digest = hashlib.sha1(f"{cfg.voxel}/{cfg.normal_radius}/{cfg.feature_radius}".encode())
+    points = np.ascontiguousarray(points, dtype=float)
+    digest.update(str(points.shape).encode())
+    digest.update(points.tobytes())
+    key = digest.hexdigest()
+    cloud = _LOCAL_CACHE.pop(key, None) or _cloud(points, cfg)
+    _LOCAL_CACHE[key] = cloud  # most recently used last
+    while len(_LOCAL_CACHE) > _LOCAL_CACHE_SIZE:
+        _LOCAL_CACHE.popitem(last=False)
+    return cloud
 
 
 def _features(array: np.ndarray):
@@ -156,7 +178,7 @@ class FpfhRansacBaseline(ObjectBaseline):
         points = [o.points for o in local if o.points is not None and len(o.points)]
         if not points or len(self._centres) == 0:
             return []
-        pcd, fpfh = _cloud(np.vstack(points), cfg)
+        pcd, fpfh = _local_cloud(np.vstack(points), cfg)
         if len(fpfh) < 10:
             return []
         query = self._normalise(np.bincount(self._kmeans.predict(fpfh), minlength=len(self._idf)))
