@@ -137,9 +137,44 @@ class _GlobalIndex:
         self.idf = np.log((len(keep) + 1) / (1 + (hist > 0).sum(axis=0)))
         self.hist = _normalise(hist, self.idf)
 
+    def __getstate__(self) -> dict:
+        """Picklable (to share one index between worker processes): the Open3D cloud as
+        arrays."""
+        state = dict(self.__dict__)
+        pcd = state.pop("pcd")
+        state["normals"] = np.asarray(pcd.normals).copy()
+        return state
+
+    def __setstate__(self, state: dict) -> None:
+        import open3d as o3d
+
+        normals = state.pop("normals")
+        self.__dict__.update(state)
+        self.pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(self.xyz))
+        self.pcd.normals = o3d.utility.Vector3dVector(normals)
+
 
 _GLOBAL_CACHE: dict[str, _GlobalIndex] = {}
 _CACHE_SIZE = 8
+
+
+def global_index(global_map, config: FpfhConfig | None = None) -> _GlobalIndex:
+    """What the baseline computes from `global_map` alone (cached per process; picklable)."""
+    cfg = config or FpfhConfig()
+    key = _fingerprint(global_map, cfg)
+    index = _GLOBAL_CACHE.pop(key, None) or _GlobalIndex(global_map, cfg)
+    _GLOBAL_CACHE[key] = index  # most recently used last
+    while len(_GLOBAL_CACHE) > _CACHE_SIZE:
+        _GLOBAL_CACHE.pop(next(iter(_GLOBAL_CACHE)))
+    return index
+
+
+def share_index(global_map, index: _GlobalIndex, config: FpfhConfig | None = None) -> None:
+    """Use `index` (from `global_index(global_map, config)`, maybe in another process) for
+    `global_map` in this process."""
+    _GLOBAL_CACHE[_fingerprint(global_map, config or FpfhConfig())] = index
+    while len(_GLOBAL_CACHE) > _CACHE_SIZE:
+        _GLOBAL_CACHE.pop(next(iter(_GLOBAL_CACHE)))
 
 
 class FpfhRansacBaseline(ObjectBaseline):
@@ -156,11 +191,7 @@ class FpfhRansacBaseline(ObjectBaseline):
         o3d.utility.random.seed(self.config.seed)
         o3d.utility.set_verbosity_level(o3d.utility.VerbosityLevel.Error)
         self._labels = np.array([canonical_label(lb, {}) for lb in global_map.labels], dtype=object)
-        key = _fingerprint(global_map, self.config)
-        index = _GLOBAL_CACHE.pop(key, None) or _GlobalIndex(global_map, self.config)
-        _GLOBAL_CACHE[key] = index  # most recently used last
-        while len(_GLOBAL_CACHE) > _CACHE_SIZE:
-            _GLOBAL_CACHE.pop(next(iter(_GLOBAL_CACHE)))
+        index = global_index(global_map, self.config)
         self._pcd, self._fpfh, self._xyz, self._tree = index.pcd, index.fpfh, index.xyz, index.tree
         self._kmeans, self._centres, self._members = index.kmeans, index.centres, index.members
         self._idf, self._hist = index.idf, index.hist

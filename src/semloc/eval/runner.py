@@ -62,6 +62,20 @@ def _sequence_task(config: BenchConfig, index: int):
     return simulate(config, index)
 
 
+def _fpfh_index_task(seq, kind: str):
+    """The FPFH baseline's index of one global map, built once for all workers."""
+    from semloc.baselines.fpfh import global_index
+
+    return global_index(seq.global_maps[kind])
+
+
+def _fpfh_chain_task(seq, job: Attempt, index):
+    from semloc.baselines.fpfh import FpfhConfig, share_index
+
+    share_index(seq.global_maps[job.map_kind], index, FpfhConfig(**job.settings))
+    return run_attempts(seq, job)
+
+
 def _real_data() -> str | None:
     """The real samples' folder when the importers' data is present (all pairs' files)."""
     folder = real_data_dir()
@@ -137,10 +151,20 @@ def run_benchmark(
         first = 1000.0  # the simulations run before any chain
         sequences = [client.submit(_sequence_task, config, i, pure=False, priority=first)
                      for i in range(config.sequences)]  # fmt: skip
+        indices = {}  # (sequence, map kind) -> FPFH index: one per map, not one per worker
+        if "fpfh-ransac" in config.methods:
+            indices = {(i, kind): client.submit(_fpfh_index_task, seq, kind, pure=False,
+                                                priority=first / 2)
+                       for i, seq in enumerate(sequences) for kind in config.map_kinds}  # fmt: skip
         futures = {}
         for job in sorted(plan(config, config.keyframes), key=lambda j: -_cost(j.method)):
-            future = client.submit(run_attempts, sequences[job.sequence], job, pure=False,
-                                   priority=_cost(job.method))  # fmt: skip
+            seq, cost = sequences[job.sequence], _cost(job.method)
+            if job.method == "fpfh-ransac" and not job.settings:
+                index = indices[job.sequence, job.map_kind]
+                future = client.submit(_fpfh_chain_task, seq, job, index, pure=False,
+                                       priority=cost)  # fmt: skip
+            else:
+                future = client.submit(run_attempts, seq, job, pure=False, priority=cost)
             futures[future] = job.ablation
         data = _real_data() if config.real else None
         for pair in REAL_PAIRS if data else []:
