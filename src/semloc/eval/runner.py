@@ -4,8 +4,11 @@
 (sequence, start, map kind, method) chain of attempts as a task on a `LocalCluster` (one
 single-threaded worker process per core by default) or on an existing cluster
 (`scheduler="tcp://host:8786"`, whose workers must be able to import semloc), with a rich
-progress bar.  Rows are sorted before writing, so the outputs do not depend on completion
-order: for a fixed seed everything except the `ms` column is reproducible.
+progress bar.  Chains start longest first (FPFH + RANSAC, then the other baselines, then
+semloc), so that the workers finish together; the FPFH index of each global map is built once
+(a task of its own) and shared by all workers.  Rows are sorted before writing, so the outputs
+do not depend on completion order: for a fixed seed everything except the `ms` column is
+reproducible.
 
 Outputs (all or none: built beside `out` and moved in at the end, report.md last): results.csv,
 hypotheses.csv, ablation.csv, the PNG figures, config.json and report.md; with `real_walks` also
