@@ -210,6 +210,11 @@ MAP_CASES: list[Case] = [
 ]
 
 
+def _crop(map_file: Path, center: str, radius: str, out: Path | str) -> list[str]:
+    """`semloc crop` arguments with a centre given as "x y z"."""
+    return ["crop", str(map_file), "--center", *center.split(), "--radius", radius, "-o", str(out)]
+
+
 def _option_case(name: str, argv: Callable[[Path, Path], list[str]], blame: list[str]) -> Case:
     def setup(folder: Path) -> tuple[list[str], list[str]]:
         good = _write(folder / "good.json", valid_map())
@@ -236,34 +241,12 @@ OPTION_CASES: list[Case] = [
     ),
     _option_case(
         "crop-radius-nan",
-        lambda f, g: [
-            "crop",
-            str(g),
-            "--center",
-            "0",
-            "0",
-            "0",
-            "--radius",
-            "nan",
-            "-o",
-            str(f / "c.json"),
-        ],
+        lambda f, g: _crop(g, "0 0 0", "nan", f / "c.json"),
         ["--radius"],
     ),
     _option_case(
         "crop-center-inf",
-        lambda f, g: [
-            "crop",
-            str(g),
-            "--center",
-            "inf",
-            "0",
-            "0",
-            "--radius",
-            "3",
-            "-o",
-            str(f / "c.json"),
-        ],
+        lambda f, g: _crop(g, "inf 0 0", "3", f / "c.json"),
         ["--center"],
     ),
     _option_case(
@@ -312,18 +295,7 @@ OPTION_CASES: list[Case] = [
     ),
     _option_case(
         "crop-out-dev-full",
-        lambda f, g: [
-            "crop",
-            str(g),
-            "--center",
-            "0",
-            "0",
-            "0",
-            "--radius",
-            "5",
-            "-o",
-            "/dev/full",
-        ],
+        lambda f, g: _crop(g, "0 0 0", "5", "/dev/full"),
         ["/dev/full"],
     ),
     _option_case(
