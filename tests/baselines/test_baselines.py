@@ -72,3 +72,38 @@ def test_consistency_groups_are_one_to_one_and_consistent():
     candidates = [(0, 0, 1.0), (1, 1, 1.0), (2, 2, 1.0), (3, 2, 0.5), (1, 0, 0.2)]
     groups = consistency_groups(candidates, local, glob, 0.1)
     assert sorted(groups[0][1]) == [(0, 0), (1, 1), (2, 2)]
+
+
+def _answers(result: Result) -> list[tuple]:
+    return [(h.rank, h.score, tuple(h.pairs), h.pose.round(9).tobytes()) for h in result.hypotheses]
+
+
+def test_fpfh_index_shared_through_pickle_gives_the_same_answer(easy):
+    import pickle
+
+    from semloc.baselines import fpfh
+
+    gmap, local, _ = easy
+    fpfh._GLOBAL_CACHE.clear()
+    fresh = _answers(FpfhRansacBaseline(gmap, local_up=local.up).update(local))
+    index = pickle.loads(pickle.dumps(fpfh.global_index(gmap)))  # as from another worker
+    fpfh._GLOBAL_CACHE.clear()
+    fpfh._LOCAL_CACHE.clear()
+    fpfh.share_index(gmap, index)
+    method = FpfhRansacBaseline(gmap, local_up=local.up)
+    assert method._hist is index.hist
+    assert _answers(method.update(local)) == fresh
+    again = FpfhRansacBaseline(gmap, local_up=local.up)  # local features from the cache
+    assert _answers(again.update(local)) == fresh
+
+
+def test_segmatch_training_is_shared_per_map_and_settings(easy):
+    gmap, local, _ = easy
+    first, second = (
+        SegMatchBaseline(gmap, local_up=local.up),
+        SegMatchBaseline(gmap, local_up=local.up),
+    )
+    assert second._forest is first._forest
+    other = SegMatchBaseline(gmap, SegMatchBaseline.config_class(trees=5), local_up=local.up)
+    assert other._forest is not first._forest and len(other._forest.estimators_) == 5
+    assert _answers(first.update(local)) == _answers(second.update(local))

@@ -216,3 +216,21 @@ def test_plan_gives_ablation_chains_their_gamma_and_top_k():
         ("semloc", "semloc gamma=0.5", {"gamma": 0.5, "top_k": 20}, True),
         ("semloc", "semloc gamma=0.9", {"gamma": 0.9, "top_k": 20}, True),
     ]
+
+
+def test_replays_are_shared_per_sequence_object_start_and_stop():
+    from semloc.eval.protocol import replayed
+
+    class Sequence:
+        def __init__(self):
+            self.calls = []
+
+        def replay(self, start, stop):
+            self.calls.append((start, stop))
+            return object()
+
+    a, b = Sequence(), Sequence()
+    first = replayed(a, 3, 40)
+    assert replayed(a, 3, 40) is first and a.calls == [(3, 40)]
+    assert replayed(a, 4, 40) is not first and replayed(b, 3, 40) is not first
+    assert a.calls == [(3, 40), (4, 40)] and b.calls == [(3, 40)]

@@ -21,7 +21,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from semloc.decision import DecisionConfig, decide, distinct
 from semloc.maps import MapError, ObjectMap, SemanticObject
-from semloc.pose import PoseConfig, align_positions, estimate_pose
+from semloc.pose import PoseConfig, align_positions, cached_cloud, estimate_pose
 from semloc.results import Hypothesis, Result, Step
 from semloc.transforms import centre_residual
 
@@ -178,7 +178,8 @@ class ObjectBaseline:
         estimate = None
         if pairs:
             estimate = estimate_pose(
-                l_xyz, g_xyz, [o.points for o in locals_], [o.points for o in globals_],
+                l_xyz, g_xyz, [cached_cloud(o, self.config.pose) for o in locals_],
+                [cached_cloud(o, self.config.pose) for o in globals_],
                 self.local_up, self.global_map.up, self.config.pose,
             )  # fmt: skip
         pose = fallback if estimate is None else estimate.T

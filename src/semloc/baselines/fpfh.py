@@ -16,7 +16,8 @@ whole global cloud.
 
 Simplifications: sub-maps are retrieved by the vocabulary instead of registering against every
 sub-map (hundreds per room; too slow for a benchmark); Open3D runs single-threaded in workers; what depends only on the global map
-is cached per process (the last 8 maps).
+is cached per process (the last 8 maps), and so are the features of the last local clouds (the
+same local map is registered against every map kind).
 The sub-map radius is the paper's 1.5 m while local maps usually span more: RANSAC matches the
 local cloud to a sub-map, the pose is then checked against the whole map.
 """
@@ -24,6 +25,7 @@ local cloud to a sub-map, the pose is then checked against the whole map.
 from __future__ import annotations
 
 import hashlib
+from collections import OrderedDict
 
 import numpy as np
 from pydantic import Field
@@ -61,6 +63,26 @@ def _cloud(points: np.ndarray, cfg: FpfhConfig):
         pcd, o3d.geometry.KDTreeSearchParamHybrid(cfg.feature_radius, 100)
     )
     return pcd, np.asarray(feature.data).T.copy()
+
+
+_LOCAL_CACHE: OrderedDict[str, tuple] = OrderedDict()
+_LOCAL_CACHE_SIZE = 16
+
+
+def _local_cloud(points: np.ndarray, cfg: FpfhConfig):
+    """`_cloud(points, cfg)`, remembered for the last few local clouds of the process: the
+    same local map is registered against every map kind (features are deterministic, and
+    registration only reads the cloud)."""
+    digest = hashlib.sha1(f"{cfg.voxel}/{cfg.normal_radius}/{cfg.feature_radius}".encode())
+    points = np.ascontiguousarray(points, dtype=float)
+    digest.update(str(points.shape).encode())
+    digest.update(points.tobytes())
+    key = digest.hexdigest()
+    cloud = _LOCAL_CACHE.pop(key, None) or _cloud(points, cfg)
+    _LOCAL_CACHE[key] = cloud  # most recently used last
+    while len(_LOCAL_CACHE) > _LOCAL_CACHE_SIZE:
+        _LOCAL_CACHE.popitem(last=False)
+    return cloud
 
 
 def _features(array: np.ndarray):
@@ -115,9 +137,44 @@ class _GlobalIndex:
         self.idf = np.log((len(keep) + 1) / (1 + (hist > 0).sum(axis=0)))
         self.hist = _normalise(hist, self.idf)
 
+    def __getstate__(self) -> dict:
+        """Picklable (to share one index between worker processes): the Open3D cloud as
+        arrays."""
+        state = dict(self.__dict__)
+        pcd = state.pop("pcd")
+        state["normals"] = np.asarray(pcd.normals).copy()
+        return state
+
+    def __setstate__(self, state: dict) -> None:
+        import open3d as o3d
+
+        normals = state.pop("normals")
+        self.__dict__.update(state)
+        self.pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(self.xyz))
+        self.pcd.normals = o3d.utility.Vector3dVector(normals)
+
 
 _GLOBAL_CACHE: dict[str, _GlobalIndex] = {}
 _CACHE_SIZE = 8
+
+
+def global_index(global_map, config: FpfhConfig | None = None) -> _GlobalIndex:
+    """What the baseline computes from `global_map` alone (cached per process; picklable)."""
+    cfg = config or FpfhConfig()
+    key = _fingerprint(global_map, cfg)
+    index = _GLOBAL_CACHE.pop(key, None) or _GlobalIndex(global_map, cfg)
+    _GLOBAL_CACHE[key] = index  # most recently used last
+    while len(_GLOBAL_CACHE) > _CACHE_SIZE:
+        _GLOBAL_CACHE.pop(next(iter(_GLOBAL_CACHE)))
+    return index
+
+
+def share_index(global_map, index: _GlobalIndex, config: FpfhConfig | None = None) -> None:
+    """Use `index` (from `global_index(global_map, config)`, maybe in another process) for
+    `global_map` in this process."""
+    _GLOBAL_CACHE[_fingerprint(global_map, config or FpfhConfig())] = index
+    while len(_GLOBAL_CACHE) > _CACHE_SIZE:
+        _GLOBAL_CACHE.pop(next(iter(_GLOBAL_CACHE)))
 
 
 class FpfhRansacBaseline(ObjectBaseline):
@@ -134,11 +191,7 @@ class FpfhRansacBaseline(ObjectBaseline):
         o3d.utility.random.seed(self.config.seed)
         o3d.utility.set_verbosity_level(o3d.utility.VerbosityLevel.Error)
         self._labels = np.array([canonical_label(lb, {}) for lb in global_map.labels], dtype=object)
-        key = _fingerprint(global_map, self.config)
-        index = _GLOBAL_CACHE.pop(key, None) or _GlobalIndex(global_map, self.config)
-        _GLOBAL_CACHE[key] = index  # most recently used last
-        while len(_GLOBAL_CACHE) > _CACHE_SIZE:
-            _GLOBAL_CACHE.pop(next(iter(_GLOBAL_CACHE)))
+        index = global_index(global_map, self.config)
         self._pcd, self._fpfh, self._xyz, self._tree = index.pcd, index.fpfh, index.xyz, index.tree
         self._kmeans, self._centres, self._members = index.kmeans, index.centres, index.members
         self._idf, self._hist = index.idf, index.hist
@@ -156,7 +209,7 @@ class FpfhRansacBaseline(ObjectBaseline):
         points = [o.points for o in local if o.points is not None and len(o.points)]
         if not points or len(self._centres) == 0:
             return []
-        pcd, fpfh = _cloud(np.vstack(points), cfg)
+        pcd, fpfh = _local_cloud(np.vstack(points), cfg)
         if len(fpfh) < 10:
             return []
         query = self._normalise(np.bincount(self._kmeans.predict(fpfh), minlength=len(self._idf)))

@@ -15,17 +15,20 @@ candidates (pairwise distances agree within `consistency`) gives association gro
 group a pose through the shared pose recovery.
 
 Simplifications: the classifier is trained per global map on synthetic views instead of on
-labelled real segment pairs; objects without points fall back to label-only candidates.
+labelled real segment pairs (once per map object and settings in a process: training is
+seeded); objects without points fall back to label-only candidates.
 """
 
 from __future__ import annotations
+
+import weakref
 
 import numpy as np
 from pydantic import Field
 
 from semloc.association import canonical_label
 from semloc.baselines.base import BaselineConfig, Group, ObjectBaseline, consistency_groups
-from semloc.maps import SemanticObject
+from semloc.maps import ObjectMap, SemanticObject
 
 N_FEATURES = 11
 
@@ -87,6 +90,9 @@ def pair_features(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.concatenate([np.abs(a - b), a, b], axis=-1)
 
 
+_TRAINED: weakref.WeakKeyDictionary[ObjectMap, dict[str, tuple]] = weakref.WeakKeyDictionary()
+
+
 class SegMatchBaseline(ObjectBaseline):
     """Eigenvalue + size features, kNN + random forest candidates, consistency grouping."""
 
@@ -97,9 +103,13 @@ class SegMatchBaseline(ObjectBaseline):
     def __init__(self, global_map, config: SegMatchConfig | None = None, local_up=None) -> None:
         super().__init__(global_map, config, local_up)
         self._labels = np.array([canonical_label(lb, {}) for lb in global_map.labels], dtype=object)
-        self._features = np.array([shape_features(o.points) for o in global_map])
+        trained = _TRAINED.setdefault(global_map, {})
+        key = self.config.model_dump_json()
+        if key not in trained:  # once per map and settings: seeded, so the same every time
+            self._features = np.array([shape_features(o.points) for o in global_map])
+            trained[key] = (self._features, self._train())
+        self._features, self._forest = trained[key]
         self._scale = self._features.std(axis=0) + 1e-6
-        self._forest = self._train()
 
     def _train(self):
         from sklearn.ensemble import RandomForestClassifier

@@ -15,6 +15,7 @@ update at the evaluation keyframe.
 from __future__ import annotations
 
 import time
+from collections import OrderedDict
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -133,12 +134,30 @@ def attempt_rows(
     return row, hyps
 
 
+_REPLAYS: OrderedDict[tuple[int, int, int], tuple[Any, Any]] = OrderedDict()
+_REPLAY_CACHE_SIZE = 12
+
+
+def replayed(seq, start: int, stop: int):
+    """`seq.replay(start, stop)`, remembered per process for the last few (sequence, start,
+    stop): every method and map kind of one start replays the same keyframes, and the
+    replay is deterministic, so the chains of a worker share one."""
+    key = (id(seq), start, stop)
+    hit = _REPLAYS.pop(key, None)
+    if hit is None or hit[0] is not seq:  # an id can be reused by a new object
+        hit = (seq, seq.replay(start, stop))
+    _REPLAYS[key] = hit  # most recently used last
+    while len(_REPLAYS) > _REPLAY_CACHE_SIZE:
+        _REPLAYS.popitem(last=False)
+    return hit[1]
+
+
 def run_attempts(seq, attempt: Attempt) -> tuple[list[dict], list[dict]]:
     """One start, one map kind, one method: rows of results.csv and hypotheses.csv.
 
     Every keyframe's new or re-detected objects go to the method; only the evaluation
     keyframes ask for an answer."""
-    replay = seq.replay(attempt.start, min(len(seq.recording.detections), attempt.start + 70))
+    replay = replayed(seq, attempt.start, min(len(seq.recording.detections), attempt.start + 70))
     truth = replay.T_global_local
     method = make_method(
         attempt.method, replay.global_maps[attempt.map_kind], replay.local_map.up,
