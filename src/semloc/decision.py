@@ -154,6 +154,25 @@ def same_place(
     return rotation < config.distinct_rotation_deg and translation < config.distinct_translation
 
 
+def local_anchor(local_xyz: np.ndarray) -> np.ndarray | None:
+    """Where `same_place` compares translations: the centroid of the local objects (None for
+    no objects)."""
+    local_xyz = np.asarray(local_xyz, dtype=float).reshape(-1, 3)
+    return local_xyz.mean(axis=0) if len(local_xyz) else None
+
+
+def duplicates(
+    hypotheses: Sequence[Hypothesis], config: DecisionConfig, anchor: np.ndarray | None
+) -> int:
+    """How many of `hypotheses` (ranked) have a pose at the same place (`same_place`, by pose
+    alone) as a better-ranked one; the Localizer's answers have none."""
+    posed = [h for h in hypotheses if h.pose is not None]
+    return sum(
+        any(same_place(((), h.pose), ((), other.pose), config, anchor) for other in posed[:i])
+        for i, h in enumerate(posed)
+    )
+
+
 def distinct(
     places: Iterable[Place],
     top_k: int,

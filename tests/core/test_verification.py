@@ -19,6 +19,8 @@ from semloc.decision import (
     SIGNS,
     DecisionConfig,
     decide,
+    duplicates,
+    local_anchor,
     rank_places,
     shipped_model,
 )
@@ -138,12 +140,27 @@ def test_no_same_place_duplicates_in_the_localizers_top_k():
          for k, i in enumerate(seen)], up=UP,
     )  # fmt: skip
     result = semloc.localize(gmap, local)
+    assert duplicates(result.hypotheses, DecisionConfig(), local_anchor(local.positions)) == 0
     poses = [h.pose for h in result.hypotheses if h.pose is not None]
     for i in range(len(poses)):
         for j in range(i):
             rotation, translation = pose_error(poses[i], poses[j])
             assert rotation >= 10.0 or translation >= 0.3
     assert pose_error(result.pose, truth)[1] < 1e-6
+
+
+def test_duplicates_are_counted_where_the_local_objects_are():
+    # two poses 1 deg apart about the local origin: the same place there, but objects 30 m
+    # away land 0.52 m apart, so where the local objects are they are two places
+    config = DecisionConfig(distinct_translation=0.3)
+    a = Hypothesis(1, 1.0, [("g0", "l0")], yaw_pose(0.0))
+    b = Hypothesis(2, 1.0, [("g1", "l1")], yaw_pose(np.radians(1.0)))
+    near, far = np.zeros(3), np.array([30.0, 0.0, 0.0])
+    assert local_anchor(np.array([[29.0, 0, 0], [31.0, 0, 0]])) == pytest.approx(far)
+    assert local_anchor(np.zeros((0, 3))) is None
+    assert duplicates([a, b], config, near) == 1
+    assert duplicates([a, b], config, far) == 0
+    assert duplicates([a, Hypothesis(2, 1.0, [], None), b], config, near) == 1
 
 
 # 3. better fitness, equal pairs ------------------------------------------------------------
