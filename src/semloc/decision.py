@@ -53,9 +53,19 @@ MODEL_MODULE = Path(__file__).with_name("confidence_model.py")
 """Where `benchmarks/calibrate_confidence.py --write` puts a refitted model."""
 
 
+GAP_CAP = 4.0
+"""The evidence gap to the best rival place counts up to this many logits."""
+NO_RIVAL = -4.0
+"""The evidence of a missing rival place; a weaker rival counts as this (a lone weak
+hypothesis is not made sure by having no rival)."""
+
+
 class ConfidenceModel(BaseModel):
     """Two logistic models: evidence = b + w . features; confidence = sigmoid(c0 + c1 *
-    evidence + c2 * rival), where rival = sigmoid(evidence of the best other place), 0 if none."""
+    evidence + c2 * rival + c3 * gap), where r = max(evidence of the best other place,
+    `NO_RIVAL`) (`NO_RIVAL` if none), rival = sigmoid(r) and gap = min(evidence - r, `GAP_CAP`).
+    c1, c3 >= 0 and c2 <= 0: more evidence never lowers the confidence, a stronger rival never
+    raises it."""
 
     model_config = ConfigDict(extra="forbid")
 
@@ -64,6 +74,14 @@ class ConfidenceModel(BaseModel):
     confidence_bias: float
     confidence_evidence: float = Field(ge=0)
     confidence_rival: float = Field(le=0)
+    confidence_gap: float = Field(0.0, ge=0)
+    ranking_bias: float | None = None
+    ranking_weights: dict[str, float] | None = Field(
+        None,
+        description="The logit that orders the hypotheses (`rank_by='evidence'`); None: the "
+        "evidence.  Ranking asks which place of one answer is right, the confidence how often "
+        "the best is: fitted apart (`benchmarks/calibrate_confidence.py`).",
+    )
     min_confidence: float = Field(ge=0, le=1, description="Operating point for >= 99 % precision.")
     fitted_by: str = ""
     data: str = ""
@@ -71,12 +89,21 @@ class ConfidenceModel(BaseModel):
     def evidence(self, features: dict[str, float]) -> float:
         return self.evidence_bias + sum(self.evidence_weights[k] * features[k] for k in FEATURES)
 
+    def ranking(self, features: dict[str, float]) -> float:
+        """The logit by which hypotheses are ranked (the evidence when none is fitted)."""
+        if self.ranking_weights is None:
+            return self.evidence(features)
+        bias = self.ranking_bias or 0.0
+        return bias + sum(self.ranking_weights[k] * features[k] for k in FEATURES)
+
     def confidence(self, evidence: float, rival: float | None) -> float:
-        rival_share = 0.0 if rival is None else _sigmoid(rival)
+        rival = NO_RIVAL if rival is None else max(rival, NO_RIVAL)
+        rival_share, gap = _sigmoid(rival), min(evidence - rival, GAP_CAP)
         return _sigmoid(
             self.confidence_bias
             + self.confidence_evidence * evidence
             + self.confidence_rival * rival_share
+            + self.confidence_gap * gap
         )
 
 
@@ -194,10 +221,10 @@ def distinct(
 
 _INF = float("inf")
 RESIDUAL_RANK = 4.0
-"""Logit per metre of centre residual subtracted from the evidence when ranking (not in the
+"""Logit per metre of centre residual subtracted from the ranking logit (not in the
 confidence): repeated objects give near-equal fitness, their centres still tell them apart."""
 RANKINGS: dict[str, Callable[[Hypothesis], tuple | float]] = {
-    "evidence": lambda h: (
+    "evidence": lambda h: (  # the ranking logit when `rank_places` set it, else the evidence
         _INF if h.evidence is None else -round(h.evidence - RESIDUAL_RANK * (h.residual or 0), 6),
         -h.score,
     ),
@@ -225,9 +252,9 @@ def rank_places(
     """Evidence of every hypothesis with features, the order of `rank_by`, same-place
     duplicates merged into the better-ranked one (poses after refinement), ranks 1, 2, ...
     and confidences against the remaining rivals."""
-    for h in hypotheses:
+    for h in hypotheses:  # ranked by the ranking logit; `score_confidence` sets the evidence
         if h.features is not None:
-            h.evidence = model.evidence(h.features)
+            h.evidence = model.ranking(h.features)
     ordered = rank(hypotheses, rank_by)
     places = ((h.pairs, h.pose) for h in ordered)
     kept = [ordered[i] for i in distinct(places, len(ordered), config, anchor)]

@@ -16,6 +16,7 @@ from hypothesis import strategies as st
 import semloc
 from semloc.decision import (
     FEATURES,
+    NO_RIVAL,
     SIGNS,
     DecisionConfig,
     decide,
@@ -197,6 +198,27 @@ def test_confidence_is_monotone_in_the_evidence(values, feature, step, rival):
     assert (after - before) * SIGNS[feature] >= -1e-12
     if rival is not None:  # a stronger rival never raises the confidence
         assert model.confidence(model.evidence(features), rival + 1.0) <= before + 1e-12
+
+
+def test_a_lone_weak_hypothesis_is_not_made_sure_by_having_no_rival():
+    model = shipped_model()
+    weak = {"pairs": 3.0, "rejected_share": 0.0, "residual": 0.04, "fitness": 0.42,
+            "support": 0.0, "conflict_share": 0.0}  # fmt: skip
+    evidence = model.evidence(weak)
+    assert model.confidence(evidence, None) < model.min_confidence
+    assert model.confidence(evidence, NO_RIVAL - 5.0) == model.confidence(evidence, None)
+
+
+def test_hypotheses_are_ranked_by_the_ranking_logit_and_scored_by_the_evidence():
+    by_fitness = dict.fromkeys(FEATURES, 0.0) | {"fitness": 10.0}
+    model = shipped_model().model_copy(update={"ranking_bias": 0.0, "ranking_weights": by_fitness})
+    many = _hyp([("g0", "l0"), ("g1", "l1"), ("g2", "l2"), ("g3", "l3"), ("g4", "l4")],
+                yaw_pose(0.0), pairs=5.0, fitness=0.6)  # fmt: skip
+    fitting = _hyp([("g5", "l0"), ("g6", "l1"), ("g7", "l2")], yaw_pose(2.0, [3, 0, 0]),
+                   pairs=3.0, fitness=0.95)  # fmt: skip
+    assert rank_places([many, fitting], "evidence", DecisionConfig(), model)[0] is fitting
+    assert fitting.evidence == pytest.approx(model.evidence(fitting.features))
+    assert rank_places([many, fitting], "evidence", DecisionConfig(), shipped_model())[0] is many
 
 
 def test_evidence_features_are_bounded():
