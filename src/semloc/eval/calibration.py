@@ -265,7 +265,7 @@ def _threshold(samples: list[Sample], model: ConfidenceModel, precision: float) 
     for n, (c, ok) in enumerate(claims, 1):
         right += ok
         if right / n >= precision:
-            threshold = c
+            threshold = c if n < len(claims) else 0.0  # all claims hold: no bound from here
     return float(min(max(threshold, 0.5), 0.999))
 
 
