@@ -6,13 +6,14 @@ Confidence.  A hypothesis verified by the Localizer carries `features` (`FEATURE
 pairs, share of rejected pairs, centre residual, point fitness, supporting and conflicting
 local objects outside the set; see `semloc.verification.Evidence`).  The shipped
 `ConfidenceModel` (`confidence_model.py` beside this module, fitted on simulated benchmark
-attempts by `benchmarks/calibrate_confidence.py`) turns them into an `evidence` logit, which
-ranks the hypotheses (`rank_by="evidence"`), and a calibrated `confidence`: the probability
-that the pose is right (15 deg / 0.5 m), from the evidence and the best rival's evidence.
+attempts by `benchmarks/calibrate_confidence.py`) turns them into a ranking logit, which
+orders the hypotheses (`rank_by="evidence"`: which place of this answer is right), an
+`evidence` logit and a calibrated `confidence`: the probability that the pose is right
+(15 deg / 0.5 m), from the evidence and its gap to the best rival place's evidence.
 
     localized   the best hypothesis has >= `min_pairs` pairs, a fitness of at least
                 `min_fitness`, and a confidence of at least `min_confidence` (chosen for >= 99 %
-                precision on the calibration attempts).  Hypotheses without a confidence (the
+                precision on every kind of calibration attempt).  Hypotheses without a confidence (the
                 baselines') must instead dominate every *rival* in the terms of the ranking
                 (more pairs or a clearly smaller residual; or a score / fitness larger by the
                 factor 1 + margin); a rival has a different pose that shares less than
