@@ -47,7 +47,7 @@ from semloc.verification import (
     Evidence,
     MapSupport,
     VerificationConfig,
-    consensus,
+    consensus_many,
 )
 
 _COMPONENTS: dict[str, type[BaseModel]] = {
@@ -274,8 +274,7 @@ class Localizer:
             self.global_map.positions,
             cfg.verification,
         )
-        screened = [self._verified(s, local_xyz, support) for s in sets]
-        screened = [c for c in screened if len(c.pairs) >= 2]
+        screened = [c for c in self._verified_all(sets, local_xyz, support) if len(c.pairs) >= 2]
         if by_size:  # pairs include the guided matches
             screened.sort(key=lambda c: (-len(c.pairs), round(c.residual, 9), -c.aset.score))
         places = [(c.pairs, c.pose) for c in screened]
@@ -287,34 +286,39 @@ class Localizer:
         ]
         return rank_places(hypotheses, cfg.rank_by, cfg.decision, shipped_model(), anchor)
 
-    def _verified(
-        self, aset: AssociationSet, local_xyz: np.ndarray, support: MapSupport
-    ) -> _Verified:
-        """The set's pairs split by the consensus pose, and that pose's evidence on the map."""
-        pairs = np.array(aset.pairs).reshape(-1, 2)  # global index, local index
-        found = consensus(
-            local_xyz[pairs[:, 1]], self.global_map.positions[pairs[:, 0]], self.local_up,
-            self.global_map.up, self.config.verification,
-        )  # fmt: skip
-        inliers = [(int(g), int(l)) for g, l in pairs[found.inliers]]
-        rejected = [(int(g), int(l)) for g, l in pairs[~found.inliers]]
-        if found.pose is None:
-            return _Verified(aset, inliers, rejected, None, found.residual, 0, 0)
-        grown, added, conflicts = support.extend(found.pose, local_xyz, inliers)
-        pose, residual = found.pose, found.residual
-        if added:  # the guided matches are verified with the set's pairs
-            both = np.array(grown)
-            again = consensus(
-                local_xyz[both[:, 1]], self.global_map.positions[both[:, 0]], self.local_up,
-                self.global_map.up, self.config.verification,
+    def _verified_all(
+        self, sets: list[AssociationSet], local_xyz: np.ndarray, support: MapSupport
+    ) -> list[_Verified]:
+        """Each set's pairs split by its consensus pose, grown by guided matching (the grown
+        pairs verified once more together), and that pose's evidence on the map."""
+        up = (self.local_up, self.global_map.up, self.config.verification)
+        global_xyz = self.global_map.positions
+        pairs = [np.array(s.pairs).reshape(-1, 2) for s in sets]  # global index, local index
+        found = consensus_many([(local_xyz[p[:, 1]], global_xyz[p[:, 0]]) for p in pairs], *up)
+        verified, regrown = [], []
+        for aset, p, f in zip(sets, pairs, found):
+            inliers = [(int(g), int(l)) for g, l in p[f.inliers]]
+            rejected = [(int(g), int(l)) for g, l in p[~f.inliers]]
+            if f.pose is None:
+                verified.append(_Verified(aset, inliers, rejected, None, f.residual, 0, 0))
+                continue
+            grown, added, conflicts = support.extend(f.pose, local_xyz, inliers)
+            verified.append(_Verified(aset, grown, rejected, f.pose, f.residual, added, conflicts))
+            if added:
+                regrown.append((len(verified) - 1, inliers))
+        both = [np.array(verified[i].pairs) for i, _ in regrown]
+        again = consensus_many([(local_xyz[b[:, 1]], global_xyz[b[:, 0]]) for b in both], *up)
+        for (i, inliers), b, a in zip(regrown, both, again):
+            if a.pose is None:
+                continue
+            kept = set(inliers)
+            grown = [(int(g), int(l)) for g, l in b[a.inliers]]
+            verified[i] = _Verified(
+                verified[i].aset, grown,
+                verified[i].rejected + [(int(g), int(l)) for g, l in b[~a.inliers]],
+                a.pose, a.residual, sum(p not in kept for p in grown), verified[i].conflicts,
             )  # fmt: skip
-            if again.pose is not None:
-                grown = [(int(g), int(l)) for g, l in both[again.inliers]]
-                rejected += [(int(g), int(l)) for g, l in both[~again.inliers]]
-                pose, residual = again.pose, again.residual
-                kept = set(inliers)
-                added = sum(p not in kept for p in grown)
-        return _Verified(aset, grown, rejected, pose, residual, added, conflicts)
+        return verified
 
     def _hypothesis(
         self, rank: int, verified: _Verified, local_xyz: np.ndarray, previous: dict

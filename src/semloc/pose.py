@@ -296,15 +296,27 @@ def align_positions_batch(
     global_xyz: np.ndarray,
     up_local: np.ndarray | None = None,
     up_global: np.ndarray | None = None,
+    weights: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """`align_positions` of S sets of m pairs at once: (S, m, 3) arrays in, (S, 4, 4) poses out,
-    with a boolean (S,) saying which are determined (the others are not meaningful)."""
+    with a boolean (S,) saying which are determined (the others are not meaningful).
+
+    `weights` (S, m), non-negative, each row with a positive sum: sets of different sizes are
+    aligned together by padding them and giving the padding weight 0."""
     src, dst = np.asarray(local_xyz, dtype=float), np.asarray(global_xyz, dtype=float)
     if src.ndim != 3 or src.shape[2] != 3 or src.shape != dst.shape:
         raise ValueError(f"expected two (S, m, 3) arrays, got {src.shape} and {dst.shape}")
     if not (np.all(np.isfinite(src)) and np.all(np.isfinite(dst))):
         raise ValueError("positions have non-finite values")
-    return _align(src, dst, np.ones(src.shape[:2]), up_local, up_global)
+    if weights is None:
+        w = np.ones(src.shape[:2])
+    else:
+        w = np.asarray(weights, dtype=float)
+        if w.shape != src.shape[:2] or not np.all(np.isfinite(w)) or np.any(w < 0):
+            raise ValueError(f"weights must be {src.shape[:2]} finite non-negative numbers")
+        if np.any(w.sum(axis=1) <= 0):
+            raise ValueError("every set needs a positive weight")
+    return _align(src, dst, w, up_local, up_global)
 
 
 def _align(src, dst, w, up_local, up_global) -> tuple[np.ndarray, np.ndarray]:

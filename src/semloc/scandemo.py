@@ -5,8 +5,9 @@ renders a walk through its free space into depth and instance images, detects (t
 noise model) and fuses them into a local map in the odometry frame, then relocalizes
 incrementally against the scene's reconstruction or CAD map with the same live table, report,
 pictures (`scores.png`, `map.png`, `scan.png`), `result.json`, `ground_truth.json` and maps as
-`semloc demo`.  A relative `scan` folder is also looked up in the real-data folder
-(`$SEMLOC_DATA`, else `../shared/data/real`).
+`semloc demo`, all files or none (`semloc.io.native.staged_folder`, `result.json` moved in
+last).  A relative `scan` folder is also looked up in the real-data folder (`$SEMLOC_DATA`, else
+`../shared/data/real`).
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
 from semloc.demo import DemoResult, _report, localize_sequence
 from semloc.eval.datasets import real_data_dir
-from semloc.io.native import save_map, write_atomic
+from semloc.io.native import save_map, staged_folder, write_atomic
 from semloc.maps import MapError
 from semloc.sim.noise import DetectionNoise
 from semloc.sim.realscan import RealScan, load_real_scan, simulate_walk
@@ -95,6 +96,8 @@ def run_scan_demo(config: ScanDemoConfig, console: Console | None = None) -> Dem
     """Load, walk, localize incrementally, report and write the pictures (module docstring)."""
     console = console or Console()
     check_resolution(*config.resolution)
+    if config.out.exists() and not config.out.is_dir():  # said before the walk, not after
+        raise MapError(f"{config.out}: exists and is not a folder")
     t0 = time.perf_counter()
     scan = load_real_scan(resolve_scan(config.scan), shapenet=config.shapenet)
     kind = map_kind_of(config, scan)
@@ -113,7 +116,9 @@ def run_scan_demo(config: ScanDemoConfig, console: Console | None = None) -> Dem
     truth = set(seq.correspondences(kind))
     correct = sum(1 for p in (result.best.pairs if result.best else []) if p in truth)
     demo = DemoResult(result, seq, rot, trans, correct, {"simulate": t1 - t0, "localize": t2 - t1})
-    demo.files = write_outputs(config.out, kind, scan, demo, keyframes, statuses)
+    with staged_folder(config.out, index="result.json") as stage:  # all files or none
+        files = write_outputs(stage, kind, scan, demo, keyframes, statuses)
+    demo.files = [config.out / f.relative_to(stage) for f in files]
     demo.seconds["total"] = time.perf_counter() - t0
     _report(demo, config, console)  # type: ignore[arg-type]  # reads config.out only
     return demo

@@ -5,7 +5,10 @@ mislabelled object admitted by the distance tolerance); its least-squares pose i
 far off while the residual stays small.  `consensus` tests every minimal sample of the set's
 pairs (2 pairs in 4-DoF, 3 in 6-DoF; at most `max_samples` of them, seeded), keeps the pose
 that the most pairs agree with (ties: the smallest truncated squared error, MSAC), refits on
-those inliers and reports which pairs they are.
+those inliers and reports which pairs they are.  A set whose least-squares pose already puts
+every pair well within tolerance (half of it) is accepted whole without sampling: the sampled
+search finds that pose again there, while near the tolerance it may rightly drop a pair; `consensus_many` does all of this for many sets in a few
+batched arrays.
 
 `MapSupport` asks what the pose says about the local objects outside the set: those that land
 near a map object they could be join the hypothesis (guided matching: `support`), those with
@@ -64,70 +67,149 @@ def consensus(
     """The largest subset of the pairs (rows) that one rigid pose explains within tolerance.
 
     With no more pairs than a minimal sample, nothing can be tested: all pairs are inliers."""
-    local_xyz, global_xyz = np.asarray(local_xyz, float), np.asarray(global_xyz, float)
-    m = len(local_xyz)
-    minimal = 2 if up_local is not None and up_global is not None else 3
-    everything = np.ones(m, dtype=bool)
-    if m <= minimal:
-        pose = _fit(local_xyz, global_xyz, everything, up_local, up_global)
-        return Consensus(everything, pose, _rms(pose, local_xyz, global_xyz, everything))
-    samples = _samples(m, minimal, config.max_samples, seed)
-    poses, determined = align_positions_batch(
-        local_xyz[samples], global_xyz[samples], up_local, up_global
-    )
-    if not determined.any():
-        return Consensus(everything, None, float("inf"))
-    poses = poses[determined]
-    tol = config.inlier_tolerance
-    errors = _errors(poses, local_xyz, global_xyz)  # (S, m)
-    order = np.lexsort((_cost(errors, tol), -(errors < tol).sum(axis=1)))
-    best: tuple[int, float, np.ndarray, np.ndarray] | None = None
-    for start in order[:LOCAL_OPTIMISATIONS]:
-        inliers, pose = _settle(errors[start] < tol, poses[start], local_xyz, global_xyz,
-                                up_local, up_global, tol)  # fmt: skip
-        error = _errors(pose[None], local_xyz, global_xyz)
-        key = (int(inliers.sum()), -float(_cost(error, tol)[0]))
-        if best is None or key > best[:2]:
-            best = (*key, inliers, pose)
-    assert best is not None
-    _, _, inliers, pose = best
-    if inliers.sum() < 2:  # no two pairs agree: the set is not one place
-        return Consensus(inliers, None, float("inf"))
-    return Consensus(inliers, pose, _rms(pose, local_xyz, global_xyz, inliers))
+    problem = (np.asarray(local_xyz, float), np.asarray(global_xyz, float))
+    return consensus_many([problem], up_local, up_global, config, seed)[0]
 
 
 LOCAL_OPTIMISATIONS = 5
 """The best minimal samples whose inliers are refit until they settle (the best result wins)."""
 
+_SETTLE_ROUNDS = 3
+_WHOLE = 0.5
+"""A set whose least-squares pose puts every pair within this share of the tolerance is kept
+whole without sampling; near the tolerance the sampled search may rightly drop a pair."""
+
+
+def consensus_many(
+    problems: list[tuple[np.ndarray, np.ndarray]],
+    up_local: np.ndarray | None,
+    up_global: np.ndarray | None,
+    config: VerificationConfig,
+    seed: int = 0,
+) -> list[Consensus]:
+    """`consensus` of many sets at once, (local_xyz, global_xyz) each: the same answers, with
+    the minimal samples, their errors and the refits of all sets in a few batched arrays.
+
+    Sets of different sizes are padded: padded pairs weigh 0 in every fit and never count as
+    inliers.  Each set's samples are drawn as `consensus` draws them (same seed)."""
+    if not problems:
+        return []
+    minimal = 2 if up_local is not None and up_global is not None else 3
+    src, dst, valid = _padded(problems)
+    sizes = valid.sum(axis=1)
+    out: list[Consensus | None] = [None] * len(problems)
+    small = np.flatnonzero(sizes <= minimal)
+    if len(small):
+        poses, ok = align_positions_batch(
+            src[small], dst[small], up_local, up_global, valid[small].astype(float)
+        )
+        for k, i in enumerate(small):
+            everything = valid[i][: sizes[i]]
+            pose = poses[k] if ok[k] else None
+            out[i] = Consensus(everything, pose, _rms(pose, src[i], dst[i], valid[i]))
+    tested = np.flatnonzero(sizes > minimal)
+    if len(tested):  # a set that one least-squares pose explains whole needs no sampling
+        poses, ok = align_positions_batch(
+            src[tested], dst[tested], up_local, up_global, valid[tested].astype(float)
+        )
+        errors = _errors_of(poses, src[tested], dst[tested], valid[tested])
+        whole = ok & np.all((errors < _WHOLE * config.inlier_tolerance) | ~valid[tested], axis=1)
+        for k in np.flatnonzero(whole):
+            i = tested[k]
+            rms = float(np.sqrt(np.mean(errors[k][valid[i]] ** 2)))
+            out[i] = Consensus(valid[i][: sizes[i]].copy(), poses[k], rms)
+        tested = tested[~whole]
+    if len(tested):
+        for i, found in zip(tested, _tested(src[tested], dst[tested], valid[tested], sizes[tested],
+                                             minimal, up_local, up_global, config, seed)):  # fmt: skip
+            out[i] = found
+    return out  # type: ignore[return-value]
+
+
+def _padded(problems) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(P, M, 3) local and global positions, zero-padded, and which rows are real pairs."""
+    width = max(len(l) for l, _ in problems)
+    src, dst = np.zeros((len(problems), width, 3)), np.zeros((len(problems), width, 3))
+    valid = np.zeros((len(problems), width), dtype=bool)
+    for i, (l_xyz, g_xyz) in enumerate(problems):
+        src[i, : len(l_xyz)], dst[i, : len(g_xyz)], valid[i, : len(l_xyz)] = l_xyz, g_xyz, True
+    return src, dst, valid
+
+
+def _tested(src, dst, valid, sizes, minimal, up_local, up_global, config, seed) -> list[Consensus]:
+    """The consensus of sets with more pairs than a minimal sample (see `consensus`)."""
+    tol = config.inlier_tolerance
+    drawn = [_samples(int(m), minimal, config.max_samples, seed) for m in sizes]
+    owner = np.repeat(np.arange(len(sizes)), [len(d) for d in drawn])
+    picks = np.concatenate(drawn)
+    poses, determined = align_positions_batch(
+        src[owner[:, None], picks], dst[owner[:, None], picks], up_local, up_global
+    )
+    errors = _errors_of(poses, src[owner], dst[owner], valid[owner])  # (S, M)
+    counts = (errors < tol).sum(axis=1)
+    # per set, its determined samples best first: most inliers, then the smallest MSAC cost
+    order = np.lexsort((_cost(errors, tol), -counts, owner))
+    order = order[determined[order]]
+    first = np.searchsorted(owner[order], np.arange(len(sizes)))
+    rank = np.arange(len(order)) - first[owner[order]]
+    starts = order[rank < LOCAL_OPTIMISATIONS]  # grouped by set, in the order they are tried
+    of = owner[starts]
+    inliers, pose = _settle_many(
+        errors[starts] < tol, poses[starts], src[of], dst[of], valid[of], up_local, up_global, tol
+    )
+    final = _errors_of(pose, src[of], dst[of], valid[of])
+    count, cost = inliers.sum(axis=1), _cost(final, tol)
+    results: list[Consensus] = []
+    for i in range(len(sizes)):
+        mine = np.flatnonzero(of == i)
+        if not len(mine):  # no minimal sample determines a pose
+            results.append(Consensus(valid[i][: sizes[i]].copy(), None, float("inf")))
+            continue
+        # the most inliers, then the smallest cost; the first tried wins a tie
+        best = mine[np.lexsort((np.arange(len(mine)), cost[mine], -count[mine]))[0]]
+        kept = inliers[best][: sizes[i]]
+        if count[best] < 2:  # no two pairs agree: the set is not one place
+            results.append(Consensus(kept, None, float("inf")))
+        else:
+            rms = _rms(pose[best], src[i], dst[i], inliers[best])
+            results.append(Consensus(kept, pose[best], rms))
+    return results
+
+
+def _settle_many(inliers, poses, src, dst, valid, up_local, up_global, tol):
+    """Refit each start on its inliers and recompute them, until they no longer change
+    (`_SETTLE_ROUNDS` rounds); a start stops where its refit is undetermined or keeps fewer
+    than 2 inliers (it keeps its last pose and inliers)."""
+    inliers, poses = inliers.copy(), poses.copy()
+    active = np.ones(len(inliers), dtype=bool)
+    for _ in range(_SETTLE_ROUNDS):
+        active &= inliers.sum(axis=1) >= 2  # fewer cannot determine a pose
+        rows = np.flatnonzero(active)
+        if not len(rows):
+            break
+        refit, determined = align_positions_batch(
+            src[rows], dst[rows], up_local, up_global, inliers[rows].astype(float)
+        )
+        again = _errors_of(refit, src[rows], dst[rows], valid[rows]) < tol
+        moves = determined & (again.sum(axis=1) >= 2)
+        settled = np.all(again == inliers[rows], axis=1)
+        take = rows[moves]
+        poses[take], inliers[take] = refit[moves], again[moves]
+        active[rows[~moves | settled]] = False
+    return inliers, poses
+
+
+def _errors_of(poses, src, dst, valid) -> np.ndarray:
+    """Distance of every aligned local centre to its partner, pose k on set k: (S, M); padded
+    pairs are infinitely far."""
+    aligned = src @ np.swapaxes(poses[:, :3, :3], 1, 2) + poses[:, None, :3, 3]
+    return np.where(valid, np.linalg.norm(aligned - dst, axis=2), np.inf)
+
 
 def _cost(errors: np.ndarray, tol: float) -> np.ndarray:
-    """MSAC cost per pose: squared errors truncated at the tolerance, summed over pairs."""
-    return np.sum(np.minimum(errors, tol) ** 2, axis=-1)
-
-
-def _settle(inliers, pose, local_xyz, global_xyz, up_local, up_global, tol):
-    """Refit on the inliers and recompute them, until they no longer change (3 rounds)."""
-    for _ in range(3):
-        refit = _fit(local_xyz, global_xyz, inliers, up_local, up_global)
-        if refit is None:
-            break
-        again = _errors(refit[None], local_xyz, global_xyz)[0] < tol
-        if again.sum() < 2:
-            break
-        settled = np.array_equal(again, inliers)
-        pose, inliers = refit, again
-        if settled:
-            break
-    return inliers, pose
-
-
-def least_squares(
-    local_xyz: np.ndarray, global_xyz: np.ndarray, up_local, up_global
-) -> tuple[np.ndarray | None, float]:
-    """The closed-form pose of all pairs and their RMS residual (None, inf if undetermined)."""
-    everything = np.ones(len(local_xyz), dtype=bool)
-    pose = _fit(local_xyz, global_xyz, everything, up_local, up_global)
-    return pose, _rms(pose, local_xyz, global_xyz, everything)
+    """MSAC cost per pose: squared errors truncated at the tolerance, summed over the real
+    pairs (padded pairs, at infinity, add nothing)."""
+    return np.sum(np.where(np.isfinite(errors), np.minimum(errors, tol) ** 2, 0.0), axis=-1)
 
 
 def _samples(m: int, size: int, limit: int, seed: int) -> np.ndarray:
@@ -143,13 +225,6 @@ def _errors(poses: np.ndarray, local_xyz: np.ndarray, global_xyz: np.ndarray) ->
     """Distance of every aligned local centre to its partner under each pose: (S, m)."""
     aligned = local_xyz @ np.swapaxes(poses[:, :3, :3], 1, 2) + poses[:, None, :3, 3]
     return np.linalg.norm(aligned - global_xyz, axis=2)
-
-
-def _fit(local_xyz, global_xyz, mask, up_local, up_global) -> np.ndarray | None:
-    poses, determined = align_positions_batch(
-        local_xyz[mask][None], global_xyz[mask][None], up_local, up_global
-    )
-    return poses[0] if determined[0] else None
 
 
 def _rms(pose, local_xyz, global_xyz, mask) -> float:

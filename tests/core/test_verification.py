@@ -28,7 +28,13 @@ from semloc.decision import (
 from semloc.maps import ObjectMap, SemanticObject
 from semloc.results import Hypothesis
 from semloc.transforms import pose_error, yaw_pose
-from semloc.verification import Evidence, MapSupport, VerificationConfig, consensus
+from semloc.verification import (
+    Evidence,
+    MapSupport,
+    VerificationConfig,
+    consensus,
+    consensus_many,
+)
 
 UP = np.array([0.0, 0.0, 1.0])
 ROOM = np.array([[0, 0, 0.5], [3, 0, 0.4], [3, 2.5, 0.8], [0, 2, 0.3], [1.5, 4, 1.0], [4, 4, 0.6]])
@@ -76,6 +82,31 @@ def test_one_wrong_pair_of_six_is_always_found(yaw, shift, wrong, offset, direct
     assert np.flatnonzero(~found.inliers).tolist() == [wrong]
     rotation, translation = pose_error(found.pose, truth)
     assert rotation < 1e-4 and translation < 1e-6
+
+
+@pytest.mark.parametrize("up", [UP, None], ids=["4dof", "6dof"])
+def test_many_sets_at_once_give_each_set_its_own_answer(up):
+    """Batched sets of mixed sizes (padded together) answer as each set alone would; a set
+    whose least-squares pose fits every pair is kept whole."""
+    rng = np.random.default_rng(3)
+    problems = []
+    for size in (2, 3, 6, 4, 5, 6, 3):
+        truth = yaw_pose(rng.uniform(-3, 3), rng.normal(size=3))
+        local_xyz = rng.uniform(-3, 3, size=(size, 3))
+        global_xyz = _apply(truth, local_xyz) + rng.normal(scale=0.05, size=(size, 3))
+        if size >= 4:
+            global_xyz[rng.integers(size)] += [2.0, -1.5, 0.0]  # one wrong pair
+        problems.append((local_xyz, global_xyz))
+    together = consensus_many(problems, up, up, VerificationConfig())
+    for (local_xyz, global_xyz), found in zip(problems, together):
+        alone = consensus(local_xyz, global_xyz, up, up, VerificationConfig())
+        assert found.inliers.tolist() == alone.inliers.tolist()
+        assert (found.pose is None) == (alone.pose is None)
+        if found.pose is not None:
+            np.testing.assert_allclose(found.pose, alone.pose, atol=1e-9)
+            assert found.residual == pytest.approx(alone.residual, abs=1e-9)
+    assert together[1].inliers.all() and together[3].inliers.sum() == 3
+    assert consensus_many([], up, up, VerificationConfig()) == []
 
 
 def test_the_localizer_drops_a_wrong_pair_from_its_hypothesis():

@@ -37,12 +37,13 @@ def test_real_walks_run_writes_rows_like_the_serial_protocol(tmp_path):
         pytest.skip(str(exc))
     from dask.distributed import Client
 
-    from semloc.eval.realwalks import run_real_walks
+    from semloc.eval.realwalks import run_real_walks, write_outputs
 
     config = BenchConfig(real_walks=True, real_walk_count=1, real_walk_starts=1,
                          real_walk_keyframes=40, methods=["semloc"], seed=2)  # fmt: skip
     with Client(processes=False, n_workers=1, threads_per_worker=1, dashboard_address=None) as c:
-        output = run_real_walks(c, config, tmp_path, progress=False)
+        output = run_real_walks(c, config, progress=False)
+    write_outputs(tmp_path, config, output["rows"], output["hypotheses"], output["traces"])
     rows = read_rows(tmp_path / "real_walks.csv", RESULT_COLUMNS)
     assert {r["map_kind"] for r in rows} == {"real reconstruction", "real cad"}
     for name in ("real_walks.png", "real_walks_scores.png", "real_walks.md"):

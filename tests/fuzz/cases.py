@@ -210,6 +210,11 @@ MAP_CASES: list[Case] = [
 ]
 
 
+def _crop(map_file: Path, center: str, radius: str, out: Path | str) -> list[str]:
+    """`semloc crop` arguments with a centre given as "x y z"."""
+    return ["crop", str(map_file), "--center", *center.split(), "--radius", radius, "-o", str(out)]
+
+
 def _option_case(name: str, argv: Callable[[Path, Path], list[str]], blame: list[str]) -> Case:
     def setup(folder: Path) -> tuple[list[str], list[str]]:
         good = _write(folder / "good.json", valid_map())
@@ -236,34 +241,12 @@ OPTION_CASES: list[Case] = [
     ),
     _option_case(
         "crop-radius-nan",
-        lambda f, g: [
-            "crop",
-            str(g),
-            "--center",
-            "0",
-            "0",
-            "0",
-            "--radius",
-            "nan",
-            "-o",
-            str(f / "c.json"),
-        ],
+        lambda f, g: _crop(g, "0 0 0", "nan", f / "c.json"),
         ["--radius"],
     ),
     _option_case(
         "crop-center-inf",
-        lambda f, g: [
-            "crop",
-            str(g),
-            "--center",
-            "inf",
-            "0",
-            "0",
-            "--radius",
-            "3",
-            "-o",
-            str(f / "c.json"),
-        ],
+        lambda f, g: _crop(g, "inf 0 0", "3", f / "c.json"),
         ["--center"],
     ),
     _option_case(
@@ -280,6 +263,40 @@ OPTION_CASES: list[Case] = [
         "view-surrogate-title",
         lambda f, g: ["view", str(g), "--title", "a\udcff[/x]", "-o", str(f / "v[/x].png")],
         [],
+    ),
+    _option_case(
+        "localize-config-deep-nesting",
+        lambda f, g: [
+            "localize",
+            str(g),
+            str(g),
+            "--config",
+            str(_write(f / "s.json", "[" * 10**5)),
+        ],
+        ["s.json"],
+    ),
+    _option_case(
+        "view-result-deep-nesting",
+        lambda f, g: [
+            "view",
+            str(g),
+            "--result",
+            str(_write(f / "r.json", "[" * 10**5)),
+            "-o",
+            str(f / "v.png"),
+        ],
+        ["r.json"],
+    ),
+    _option_case(
+        "view-out-dev-full", lambda f, g: ["view", str(g), "-o", "/dev/full"], ["/dev/full"]
+    ),
+    _option_case(
+        "export-out-dev-full", lambda f, g: ["export", str(g), "-o", "/dev/full"], ["/dev/full"]
+    ),
+    _option_case(
+        "crop-out-dev-full",
+        lambda f, g: _crop(g, "0 0 0", "5", "/dev/full"),
+        ["/dev/full"],
     ),
     _option_case(
         "simulate-drift-nan", lambda f, g: ["simulate", str(f / "s"), "--drift", "nan"], ["--drift"]
@@ -459,9 +476,27 @@ def _rscan_string_column(folder: Path) -> tuple[list[str], list[str]]:
     return ["convert", "3rscan", str(path), "-o", str(folder / "out.json")], [path.name]
 
 
+def _scannet_deep_aggregation(folder: Path) -> tuple[list[str], list[str]]:
+    write_scannet(folder / "scene")
+    _write(folder / "scene" / "scene0001_00.aggregation.json", "[" * 100_000)
+    argv = ["convert", "scannet", str(folder / "scene"), "-o", str(folder / "out.json")]
+    return argv, ["scene0001_00.aggregation.json"]
+
+
 CONVERT_CASES += [
     Case("convert-scan2cad-negative-bbox", _scan2cad_negative_bbox),
     Case("convert-3rscan-string-column", _rscan_string_column),
+    Case("convert-scannet-deep-aggregation", _scannet_deep_aggregation),
+    Case(
+        "convert-out-dev-full",
+        lambda f: (["convert", "scannet", str(_scannet(f)[0]), "-o", "/dev/full"], ["/dev/full"]),
+    ),
+    _convert_case(
+        "convert-scan-output-dev-full",
+        "scan2cad",
+        lambda f: ["--scan-output", "/dev/full"],
+        ["/dev/full"],
+    ),
 ]
 
 MUTATED_CASES: list[Case] = [mutated_scene(kind, seed) for kind in SCENES for seed in range(12)]

@@ -8,20 +8,23 @@ import json
 import os
 import stat
 import threading
+from pathlib import Path
 
 import numpy as np
 import pytest
 from cases import valid_map
+from format_fixtures import write_replica
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import semloc
-from semloc.io import load_map, save_map, write_atomic
+from semloc.display import DISPLAY_LENGTH, for_matplotlib, for_rich, printable, shorten
+from semloc.io import load_map, save_map, write_atomic, write_files
 from semloc.io.importers.scannet import read_segments
-from semloc.io.native import parse_json
+from semloc.io.native import MAX_FILE_BYTES, MAX_JSON_BYTES, parse_json
 from semloc.io.ply import read_ply
 from semloc.localizer import Localizer, localize
-from semloc.maps import MapError, ObjectMap, SemanticObject
+from semloc.maps import MAX_LABEL_LENGTH, MapError, ObjectMap, SemanticObject
 
 HOSTILE = st.one_of(
     st.none(), st.booleans(), st.text(max_size=4), st.integers(-(10**30), 10**30),
@@ -178,6 +181,35 @@ def test_up_is_normalised_without_overflow():
     assert np.allclose(up, [2**-0.5, 2**-0.5, 0])
 
 
+def test_files_over_the_size_limits_are_refused_before_reading(tmp_path):
+    """Sparse files a byte over the limits (256 MiB JSON, 1 GiB other): refused from their size."""
+    for name, limit, read in (("m.json", MAX_JSON_BYTES, load_map),
+                              ("m.ply", MAX_FILE_BYTES, read_ply)):  # fmt: skip
+        path = tmp_path / name
+        with open(path, "wb") as handle:
+            handle.truncate(limit + 1)
+        with pytest.raises(MapError, match=f"{path}: {limit + 1:,} bytes, more than the limit"):
+            read(path)
+
+
+def test_user_text_is_shortened_printable_and_escaped():
+    long = "x" * MAX_LABEL_LENGTH
+    assert shorten(long) == "x" * (DISPLAY_LENGTH - 1) + "…"
+    assert for_rich("[/x0]" + long).startswith(r"\[/x0]") and len(shorten(long)) == DISPLAY_LENGTH
+    assert for_matplotlib("$\\undefinedcommand{$") == "\\$\\undefinedcommand{\\$"
+    shown = printable("a\ud800b\x1b[31m")
+    assert shown.encode("utf-8") and shown.isprintable() and "\x1b" not in shown
+
+
+def test_huge_gravity_converts_to_a_unit_up(tmp_path):
+    """Replica `gravity_dir` [1e308, 1e308, 0] is normalised without overflow (not [-0,-0,-0])."""
+    from semloc.cli import main
+
+    scene = write_replica(tmp_path / "replica", gravity=(1e308, 1e308, 0.0))
+    assert main(["convert", "replica", str(scene), "-o", str(tmp_path / "m.json")]) == 0
+    assert np.allclose(load_map(tmp_path / "m.json").up, [-(0.5**0.5), -(0.5**0.5), 0], atol=1e-6)
+
+
 def test_object_count_limit():
     objects = [SemanticObject(str(i), "c", [0, 0, 0]) for i in range(semloc.maps.MAX_OBJECTS + 1)]
     with pytest.raises(MapError, match="more than the limit"):
@@ -212,6 +244,16 @@ def test_device_output_is_written_as_a_stream():
     with pytest.raises(MapError, match="/dev/full: cannot write"):
         write_atomic("/dev/full", b"x" * 10)
     assert stat.S_ISCHR(os.stat("/dev/full").st_mode)
+
+
+@pytest.mark.skipif(not os.path.exists("/dev/full"), reason="no /dev/full")
+def test_failing_stream_leaves_the_other_files_as_they_were(tmp_path):
+    """`convert scan2cad -o cad.json --scan-output /dev/full`: the CAD map is not replaced."""
+    (tmp_path / "cad.json").write_text("old")
+    with pytest.raises(MapError, match="/dev/full: cannot write"):
+        write_files([(tmp_path / "cad.json", "new"), (Path("/dev/full"), b"x" * 10)])
+    assert (tmp_path / "cad.json").read_text() == "old"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cad.json"]
 
 
 def test_huge_but_finite_numbers_round_trip(tmp_path):

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import os
 import resource
+import stat
 import subprocess
 import sys
 import time
@@ -21,8 +22,11 @@ MEMORY_LIMIT = 3 * 2**30  # address space of a subprocess run
 ALL_CASES = MAP_CASES + OPTION_CASES + CONVERT_CASES + MUTATED_CASES
 
 
-def check_outcome(code: int, err: str, blame: list[str], folder: Path) -> None:
-    """Exit 0 (nothing on stderr) or 2 (one line naming one of `blame`); no leftovers."""
+def check_outcome(
+    code: int, err: str, blame: list[str], folder: Path, before: set[Path] | None = None
+) -> None:
+    """Exit 0 (nothing on stderr) or 2 (one line naming one of `blame`, and nothing written
+    or created among the files `before` the run); no leftovers; devices stay devices."""
     assert "Traceback" not in err, err
     assert code in (0, 2), (code, err)
     if code == 0:
@@ -30,8 +34,12 @@ def check_outcome(code: int, err: str, blame: list[str], folder: Path) -> None:
     else:
         assert err.count("\n") == 1 and err.startswith("semloc: error: "), err
         assert not blame or any(fragment in err for fragment in blame), (blame, err)
+        if before is not None:
+            assert set(folder.rglob("*")) == before, set(folder.rglob("*")) ^ before
     leftovers = [p.name for p in folder.rglob("*") if p.name.endswith((".tmp", ".partial"))]
     assert not leftovers, leftovers
+    if os.path.exists("/dev/full"):
+        assert stat.S_ISCHR(os.stat("/dev/full").st_mode), "/dev/full was replaced"
 
 
 ACCEPTED = (
@@ -60,11 +68,12 @@ def run_case(case: Case, folder: Path) -> tuple[list[str], list[str]]:
 @pytest.mark.parametrize("case", ALL_CASES, ids=lambda c: c.name)
 def test_case_in_process(case, tmp_path, capsys):
     argv, blame = run_case(case, tmp_path)
+    before = set(tmp_path.rglob("*"))
     begin = time.perf_counter()
     code = main(argv)
     seconds = time.perf_counter() - begin
     out, err = capsys.readouterr()
-    check_outcome(code, err, blame, tmp_path)
+    check_outcome(code, err, blame, tmp_path, before)
     if must_be_refused(case):
         assert code == 2, (case.name, out)
     assert seconds < SECONDS_PER_CASE, f"{case.name} took {seconds:.1f} s"

@@ -1,36 +1,42 @@
-"""SIGINT and SIGTERM at random moments of `simulate` and `convert`: the command exits with
-`semloc: interrupted` and status 130 / 143 (or finished first, status 0), and its output is
-complete or absent -- never half-written, no staging folder or temporary file left behind.
+"""SIGINT and SIGTERM at random moments of `simulate`, `convert` and `bench --quick`: the command
+exits with `semloc: interrupted` and status 130 / 143 (or finished first, status 0), and its
+output is complete or absent -- never half-written, no staging folder or temporary file left
+behind.
 
 The child signals readiness once semloc is imported; the signal comes at a random moment of
 the command after that (a signal during interpreter start-up is Python's default behaviour)."""
 
 from __future__ import annotations
 
+import json
 import os
 import random
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 from format_fixtures import write_scan2cad
 
-from semloc.io import load_map
+from semloc.eval.recall import read_rows
+from semloc.io import load_map, save_map
+from semloc.maps import ObjectMap, SemanticObject
 
 CHILD = (
     "import sys, semloc.cli; print('ready', flush=True); sys.exit(semloc.cli.main(sys.argv[1:]))"
 )
 
 
-def start(argv: list[str], cwd: Path) -> subprocess.Popen:
+def start(argv: list[str], cwd: Path, child: str = CHILD, **popen) -> subprocess.Popen:
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(sys.path), "OMP_NUM_THREADS": "1",
            "OPENBLAS_NUM_THREADS": "1", "MPLCONFIGDIR": str(cwd / ".mpl")}  # fmt: skip
     proc = subprocess.Popen(
-        [sys.executable, "-c", CHILD, *argv], cwd=cwd, env=env, text=True,
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+        [sys.executable, "-c", child, *argv], cwd=cwd, env=env, text=True,
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, **popen,
     )  # fmt: skip
     assert proc.stdout.readline().strip() == "ready"
     return proc
@@ -131,4 +137,130 @@ def test_convert_interrupted_writes_both_maps_or_neither(tmp_path, signum):
             load_map(cad), load_map(scan)
         else:
             assert interrupted
+    no_leftovers(tmp_path)
+
+
+def write_large_maps(folder: Path, n: int = 1000) -> tuple[Path, Path]:
+    """A global map of `n` objects of 8 labels in 60 m x 60 m and 25 of them as the local map:
+    tens of seconds of localization."""
+    rng = np.random.default_rng(13)
+    positions = np.column_stack([rng.uniform(0, 60, (n, 2)), rng.uniform(0, 2, n)])
+    labels = [f"class{k}" for k in rng.integers(0, 8, n)]
+    objects = [SemanticObject(f"g{i}", labels[i], positions[i]) for i in range(n)]
+    near = np.argsort(np.linalg.norm(positions[:, :2] - 30, axis=1))[:25]
+    local = [SemanticObject(f"l{j}", labels[i], positions[i] - [30, 30, 0])
+             for j, i in enumerate(near)]  # fmt: skip
+    return (save_map(ObjectMap(objects), folder / "global.json"),
+            save_map(ObjectMap(local), folder / "local.json"))  # fmt: skip
+
+
+def test_localize_on_a_large_map_interrupted_promptly(tmp_path):
+    """Ctrl-C or SIGTERM while a large map is localized: the command ends at once (not when
+    the search is done) with the message, and its result file is absent (or complete)."""
+    global_map, local_map = write_large_maps(tmp_path)
+    rng = random.Random(130)
+    runs = []
+    for i, signum in enumerate((signal.SIGINT, signal.SIGTERM)):
+        argv = ["localize", str(global_map), str(local_map), "--format", "json", "-o", f"r{i}.json"]
+        runs.append((start(argv, tmp_path), rng.uniform(0.5, 4.0), signum))
+    begin = time.monotonic()
+    results = interrupt(runs)
+    assert time.monotonic() - begin < 30, "the localization ran on after the signal"
+    for i, ((code, err), (_, _, signum)) in enumerate(zip(results, runs, strict=True)):
+        if not check_status(code, err, signum):
+            assert json.loads((tmp_path / f"r{i}.json").read_text())["status"]
+        else:
+            assert not (tmp_path / f"r{i}.json").exists()
+    no_leftovers(tmp_path)
+
+
+# `bench --quick` is minutes; the child runs the same command, option parsing, Dask run and
+# staged writing with its quick configuration shrunk to one tiny sequence (seconds), and says
+# "writing" when the outputs start to be written, so that some signals land there.
+TINY_BENCH = """
+import sys, semloc.cli
+from semloc.cli import bench
+from semloc.eval import protocol, runner
+
+class Tiny(protocol.BenchConfig):
+    @classmethod
+    def quick(cls, **overrides):
+        tiny = dict(size="tiny", keyframes=40, map_kinds=["cad"], ablation_starts=0, real=False)
+        return protocol.BenchConfig.quick(**{**tiny, **overrides})
+
+bench.BenchConfig = Tiny
+write_outputs = runner.write_outputs
+
+def announced(*args):
+    print("writing", flush=True)
+    return write_outputs(*args)
+
+runner.write_outputs = announced
+print("ready", flush=True)
+sys.exit(semloc.cli.main())  # as the `semloc` script: arguments from sys.argv
+"""
+BENCH = ["bench", "--quick", "--sequences", "1", "--starts", "1", "--workers", "1",
+         "--methods", "semloc", "--no-progress"]  # fmt: skip
+BENCH_FILES = {"results.csv", "hypotheses.csv", "ablation.csv", "comparison.png",
+               "ablation_objects.png", "config.json", "report.md"}  # fmt: skip
+
+
+def bench_complete(out: Path) -> bool:
+    """Whether `out` holds the whole tiny benchmark (False: absent); fails if partial."""
+    if not out.exists():
+        return False
+    assert {p.name for p in out.iterdir()} == BENCH_FILES
+    assert len(read_rows(out / "results.csv")) == 3  # one chain: attempts at +0, +15, +30
+    assert "semloc" in (out / "report.md").read_text()
+    return True
+
+
+def signal_after(proc: subprocess.Popen, anchor: str, delay: float, signum: int) -> None:
+    """Send `signum` `delay` seconds after the child printed `anchor` ("ready": already read)."""
+    if anchor != "ready":
+        for line in proc.stdout:
+            if line.strip() == anchor:
+                break
+        else:
+            return
+    time.sleep(delay)
+    if proc.poll() is None:
+        proc.send_signal(signum)
+
+
+def no_processes_left(group: int) -> None:
+    """The Dask workers of an interrupted run end with it (they share its process group)."""
+    deadline = time.monotonic() + 10
+    try:
+        while time.monotonic() < deadline:
+            os.killpg(group, 0)
+            time.sleep(0.1)
+    except ProcessLookupError:
+        return
+    os.killpg(group, signal.SIGKILL)
+    raise AssertionError("processes of the interrupted benchmark are still running")
+
+
+def test_bench_quick_interrupted_at_random_moments(tmp_path):
+    """SIGINT and SIGTERM at a random moment of the run and during the writing of its outputs:
+    the output folder is complete or absent, and no worker process is left behind."""
+    rng = random.Random(1313)
+    plan = [("ready", rng.uniform(0.3, 5.0), signal.SIGINT),
+            ("ready", rng.uniform(0.3, 5.0), signal.SIGTERM),
+            ("writing", rng.uniform(0.0, 0.4), signal.SIGINT),
+            ("writing", rng.uniform(0.0, 0.4), signal.SIGTERM)]  # fmt: skip
+    runs = [start([*BENCH, "--out", f"out{i}"], tmp_path, TINY_BENCH, start_new_session=True)
+            for i in range(len(plan))]  # fmt: skip
+    senders = [threading.Thread(target=signal_after, args=(proc, *how))
+               for proc, how in zip(runs, plan, strict=True)]  # fmt: skip
+    for sender in senders:
+        sender.start()
+    for sender in senders:
+        sender.join(120)
+    for i, (proc, (_, _, signum)) in enumerate(zip(runs, plan, strict=True)):
+        _, err = proc.communicate(timeout=120)
+        interrupted = check_status(proc.returncode, err, signum)
+        complete = bench_complete(tmp_path / f"out{i}")
+        assert complete or interrupted, err
+        no_processes_left(proc.pid)
     no_leftovers(tmp_path)

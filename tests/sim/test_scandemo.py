@@ -6,6 +6,7 @@ it short, the default settings are checked by running `semloc demo --scan` itsel
 
 from __future__ import annotations
 
+import io
 import json
 from pathlib import Path
 
@@ -13,7 +14,9 @@ import numpy as np
 import pytest
 from rich.console import Console
 
+from semloc import scandemo
 from semloc.eval.datasets import real_data_dir, real_sample
+from semloc.io import write_atomic
 from semloc.maps import MapError
 from semloc.scandemo import ScanDemoConfig, resolve_scan, run_scan_demo
 
@@ -35,6 +38,36 @@ def test_scan2cad_demo_localizes_against_the_cad_map(tmp_path):
     result = json.loads((tmp_path / "result.json").read_text())
     assert result["status"] == "localized"
     assert json.loads((tmp_path / "global.json").read_text())["name"] == "scene0470_00_cad"
+
+
+def test_interrupted_writing_leaves_no_output_folder(tmp_path, monkeypatch):
+    """Ctrl-C while the last file is written: the output folder is absent, not half-written."""
+    if real_sample("scannet", "scene0000_00") is None:
+        pytest.skip("real data sample scannet/scene0000_00 not found (set SEMLOC_DATA)")
+    written = []
+
+    def write_then_interrupt(path, data):
+        written.append(path.name)
+        if path.name == "ground_truth.json":
+            raise KeyboardInterrupt
+        return write_atomic(path, data)
+
+    monkeypatch.setattr(scandemo, "write_atomic", write_then_interrupt)
+    out = tmp_path / "out"
+    config = ScanDemoConfig(scan=Path("scannet/scene0000_00"), keyframes=4, resolution=(40, 30),
+                            out=out)  # fmt: skip
+    with open(tmp_path / "log.txt", "w") as log, pytest.raises(KeyboardInterrupt):
+        run_scan_demo(config, Console(file=log, width=100))
+    assert written == ["result.json", "ground_truth.json"]  # the pictures and maps came before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["log.txt"]  # no out, no staging folder
+
+
+def test_output_that_is_a_file_is_refused_before_the_walk(tmp_path):
+    (tmp_path / "out").write_text("mine")
+    config = ScanDemoConfig(scan=tmp_path / "no-scene", out=tmp_path / "out")
+    with pytest.raises(MapError, match="out: exists and is not a folder"):
+        run_scan_demo(config, Console(file=io.StringIO()))
+    assert (tmp_path / "out").read_text() == "mine"
 
 
 def test_missing_scan_folder_is_one_clear_error(tmp_path, monkeypatch):

@@ -99,8 +99,9 @@ def plan(config: BenchConfig) -> list[tuple[str, int, int, str, str]]:
     return jobs
 
 
-def run_real_walks(client, config: BenchConfig, out: Path, progress: bool = True) -> dict:
-    """Submit the walks and attempts to a Dask `client`, write the outputs; rows and files."""
+def run_real_walks(client, config: BenchConfig, progress: bool = True) -> dict:
+    """Submit the walks and attempts to a Dask `client`: rows, hypotheses and score traces
+    (the arguments of `write_outputs`, which the caller writes with the rest of its files)."""
     data = real_walk_data()
     walks = {
         (scene, walk): client.submit(walk_sequence, str(data), scene, walk_seed(config, walk),
@@ -128,8 +129,7 @@ def run_real_walks(client, config: BenchConfig, out: Path, progress: bool = True
             bar.advance(task)
     rows.sort(key=lambda r: _order(r, config.methods))
     hyps.sort(key=lambda r: _order(r, config.methods))
-    files = write_outputs(out, config, rows, hyps, {s: f.result() for s, f in traces.items()})
-    return {"rows": rows, "hypotheses": hyps, "files": files}
+    return {"rows": rows, "hypotheses": hyps, "traces": {s: f.result() for s, f in traces.items()}}
 
 
 def _order(row: dict, methods: list[str]) -> tuple:

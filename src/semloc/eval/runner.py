@@ -7,9 +7,9 @@ single-threaded worker process per core by default) or on an existing cluster
 progress bar.  Rows are sorted before writing, so the outputs do not depend on completion
 order: for a fixed seed everything except the `ms` column is reproducible.
 
-Outputs (all or none: built beside `out` and moved in at the end): results.csv, hypotheses.csv,
-ablation.csv, the PNG figures and report.md; with `real_walks` also those of
-`semloc.eval.realwalks` (written into `out` as they are computed).
+Outputs (all or none: built beside `out` and moved in at the end, report.md last): results.csv,
+hypotheses.csv, ablation.csv, the PNG figures, config.json and report.md; with `real_walks` also
+those of `semloc.eval.realwalks`.
 """
 
 from __future__ import annotations
@@ -151,8 +151,7 @@ def run_benchmark(
                     hyps += chain_hyps
                 bar.advance(task)
         if config.real_walks:
-            out.mkdir(parents=True, exist_ok=True)  # the real-walk files are written as they come
-            real = realwalks.run_real_walks(client, config, out, progress)
+            real = realwalks.run_real_walks(client, config, progress)
     finally:
         client.close()
         if cluster is not None:
@@ -163,8 +162,10 @@ def run_benchmark(
     seconds = time.perf_counter() - begin
     with staged_folder(out, index="report.md") as stage:  # all files or none
         staged = write_outputs(stage, config, rows, hyps, ablation_rows, seconds)
+        if config.real_walks:
+            staged += realwalks.write_outputs(stage, config, real["rows"], real["hypotheses"],
+                                              real["traces"])  # fmt: skip
     files = [out / f.relative_to(stage) for f in staged]
     if config.real_walks:
-        files += real["files"]
         return BenchOutput(rows, hyps, ablation_rows, files, seconds, real["rows"])
     return BenchOutput(rows, hyps, ablation_rows, files, seconds)

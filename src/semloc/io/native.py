@@ -409,7 +409,8 @@ def write_files(files: list[tuple[Path, bytes | str]]) -> list[Path]:
     Each regular file is written to a temporary file in its own folder (mode 0666 less the
     umask, like a plain write); only when all are written are they renamed into place, in order,
     with SIGINT and SIGTERM held.  A target that exists and is not a regular file (`/dev/full`,
-    `/dev/stdout`, a FIFO) is written as a stream, never renamed over.  The folders must exist.
+    `/dev/stdout`, a FIFO) is written as a stream, never renamed over, before the renames: a
+    stream that fails leaves the regular files as they were.  The folders must exist.
     `MapError` naming the file on any problem.
     """
     staged: list[tuple[str, Path]] = []
@@ -422,6 +423,8 @@ def write_files(files: list[tuple[Path, bytes | str]]) -> list[Path]:
                 streams.append((path, payload))
             else:
                 staged.append((_write_temporary(path, payload), path))
+        for path, payload in streams:
+            _write_stream(path, payload)
         with signals_held():
             while staged:
                 tmp, path = staged[0]
@@ -434,13 +437,15 @@ def write_files(files: list[tuple[Path, bytes | str]]) -> list[Path]:
         for tmp, _ in staged:
             if os.path.exists(tmp):
                 os.unlink(tmp)
-    for path, payload in streams:
-        try:
-            with open(path, "wb") as handle:
-                handle.write(payload)
-        except OSError as exc:
-            raise MapError(f"{path}: cannot write ({exc.strerror or exc})") from None
     return [Path(path) for path, _ in files]
+
+
+def _write_stream(path: Path, payload: bytes) -> None:
+    try:
+        with open(path, "wb") as handle:
+            handle.write(payload)
+    except OSError as exc:
+        raise MapError(f"{path}: cannot write ({exc.strerror or exc})") from None
 
 
 def _is_stream(path: Path) -> bool:
