@@ -77,7 +77,7 @@ def main() -> None:
             f"{sum(localized)} / {len(localized) - sum(localized)}",
             f"{sum(localized) / len(results):.0%}",
         )
-    Console().print(table)
+    Console(width=120).print(table)
     if pooled:
         top1 = np.mean([r == 1 for r, _ in pooled])
         top10 = np.mean([r is not None for r, _ in pooled])
