@@ -22,17 +22,20 @@ Formulation (equivalent to the literal pairwise test, see tests/core/test_cluste
     when D2 ⊆ M(D1), the candidates compatible with (or in) every member of D1.  Nothing is
     kept over all candidates of a map: compatibility is needed only among the *live*
     candidates (members of the sets in the pool, at most K · n_local of them plus the
-    singletons of this update).  It is a sparse graph, found by a range query per pair of
-    local objects (a KD-tree ball of radius (d^B + ε)/γ, then the exact criterion) and kept
-    across updates for candidates that stay live.  With S the sparse (sets x live) membership
-    and N the compatibility (with its diagonal), one sparse product S_F·N counts, for each
-    frontier set A, how many of its members each candidate is compatible with (= |A| means
-    "in M(A)"); a second product with Sᵀ counts |B ∩ M(A)| and |A ∩ B| for every pool set B
-    at once, which decides the merge and gives |A∖B| and |B∖A|.  Merge scores are computed
-    from the object positions on the fly.  Memory grows with the live candidates times their
-    compatible neighbours, never with candidates².  Merges of an iteration are grouped by
-    union through additive 64-bit set keys (key(A ∪ B) = key(A) + Σ over B∖A), checked by a
-    second key and, on disagreement, by the member lists themselves.
+    singletons of this update).  It is a sparse graph, found per new live candidate by a
+    sweep along the map's longest axis (only global objects within the gate's reach
+    (d^B + ε)/γ of it are tested exactly) and kept across updates for candidates that stay
+    live.  Memory grows with the live candidates times their compatible neighbours, never
+    with candidates².
+    One iteration is one compiled pass (numba, `_merges_of_frontier`): for each frontier set
+    A, E(A) = M(A)∖A is counted from its members' neighbourhoods; every pool set is filed
+    under one pivot member (the one held by the fewest sets), so the sets inside M(A) are
+    among those filed under M(A)'s candidates, and a 64-bit member signature screens them
+    before the exact test B∖A ⊆ E(A).  Merges are grouped by union on the fly through
+    additive 64-bit set keys (key(A ∪ B) = key(A) + Σ over B∖A), checked by a second key and,
+    on disagreement, by the member lists themselves; a merge is scored (Σ h over the new
+    cross pairs, from the object positions) only when its bound v_A + v_B + |A∖B|·|B∖A| can
+    beat the best score of its union so far, which leaves every union's score unchanged.
 
 Where the paper is silent (see also DESIGN.md)
     * "Marking merged sets": every pair of sets is tried once.  A clustering round works on a
@@ -70,11 +73,9 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
+from numba import njit
 from pydantic import BaseModel, ConfigDict, Field
-from scipy.spatial import cKDTree
 
-_CHUNK_ELEMENTS = 1 << 21  # bound on the (merges x pairs) intermediate arrays
-_FRONTIER_CHUNK = 4096  # frontier sets per sparse product
 _BRUTE_FORCE_PAIRS = 20_000  # below this many pairs a range query is a dense distance block
 
 
@@ -224,6 +225,12 @@ class HierarchicalClustering:
         self._live = np.zeros(0, dtype=np.int64)
         self._live_index = np.zeros(0, dtype=np.int64)  # candidate -> row of the graph
         self._graph = sp.csr_matrix((0, 0), dtype=np.int64)
+        self._graph_indptr = np.zeros(1, dtype=np.int64)
+        self._graph_indices = np.zeros(0, dtype=np.int64)
+        self._live_global = np.zeros((0, 3))  # per live candidate: global, local position
+        self._live_local = np.zeros((0, 3))
+        self._live_key = np.zeros(0, dtype=np.uint64)  # and its two keys
+        self._live_key2 = np.zeros(0, dtype=np.uint64)
         # sets: member candidates (ascending, -1 padded), score, age, keys
         self._members = np.full((0, 1), -1, dtype=np.int64)
         self._size = np.zeros(0, dtype=np.int64)
@@ -350,69 +357,74 @@ class HierarchicalClustering:
     def _cover_live(self) -> None:
         """Know the compatibility among all live candidates; build its sparse graph N.
 
-        Edges are kept in both directions, sorted by their first candidate, so that the
-        graph's rows need no sort: filtering keeps the order and new edges are merged in.
+        Edges are kept once per pair; the graph has both directions (rows by counting sort).
         """
-        live = np.unique(self._members[self._members >= 0])
+        is_live = np.zeros(len(self._cand_g), dtype=bool)
+        is_live[self._members[self._members >= 0]] = True
+        live = np.flatnonzero(is_live)
         is_covered = np.zeros(len(self._cand_g), dtype=bool)
         is_covered[self._covered] = True
-        is_live = np.zeros(len(self._cand_g), dtype=bool)
-        is_live[live] = True
         is_covered &= is_live
         edges = self._edges[:, is_covered[self._edges[0]] & is_covered[self._edges[1]]]
         added = live[~is_covered[live]]
         if len(added):
-            found = self._compatible_pairs(added, live[is_covered[live]])
-            found = np.hstack([found, found[::-1]])
-            edges = np.hstack([edges, found[:, np.argsort(found[0], kind="stable")]])
-            edges = edges[:, np.argsort(edges[0], kind="stable")]  # a merge of two sorted runs
+            edges = np.hstack([edges, self._compatible_pairs(added, live[is_covered[live]])])
         self._edges, self._covered, self._live = edges, live, live
         index = np.zeros(len(self._cand_g), dtype=np.int64)
         index[live] = np.arange(len(live))
         self._live_index = index
-        counts = np.bincount(index[edges[0]], minlength=len(live))
-        indptr = np.concatenate([[0], np.cumsum(counts)])
-        data = np.ones(edges.shape[1], dtype=np.int64)
-        self._graph = sp.csr_matrix((data, index[edges[1]], indptr), shape=(len(live),) * 2)
+        indptr, indices = _symmetric_csr(index[edges[0]], index[edges[1]], len(live))
+        data = np.ones(len(indices), dtype=np.int64)
+        self._graph = sp.csr_matrix((data, indices, indptr), shape=(len(live),) * 2)
+        self._graph_indptr, self._graph_indices = indptr, indices  # int64 (scipy may narrow)
+        self._live_global = self._global_positions[self._cand_g[live]]
+        self._live_local = self._local_positions[self._cand_l[live]]
+        self._live_key, self._live_key2 = self._cand_key[live], self._cand_key2[live]
 
     def _compatible_pairs(self, added: np.ndarray, covered: np.ndarray) -> np.ndarray:
-        """All compatible (a, b) with a in `added` and b in `added` ∪ `covered` (2 x E)."""
-        local_of = self._cand_l
-        groups_new = {int(l): added[local_of[added] == l] for l in np.unique(local_of[added])}
-        groups_old = {int(l): covered[local_of[covered] == l] for l in np.unique(local_of[covered])}
-        found = [np.zeros((2, 0), dtype=np.int64)]
-        for la, xs in groups_new.items():
-            tree = _LazyTree(self._global_positions[self._cand_g[xs]])
-            for lb in sorted(set(groups_old) | set(groups_new)):
-                if lb == la:
-                    continue
-                ys = groups_old.get(lb, xs[:0])
-                if lb > la and lb in groups_new:  # pairs within `added` are found once
-                    ys = np.concatenate([ys, groups_new[lb]])
-                if len(ys):
-                    found.append(self._compatible_block(la, xs, tree, lb, ys))
-        return np.hstack(found)
+        """All compatible (a, b) with a in `added` and b in `added` ∪ `covered` (2 x E).
 
-    def _compatible_block(
-        self, la: int, xs: np.ndarray, tree: _LazyTree, lb: int, ys: np.ndarray
-    ) -> np.ndarray:
-        """Compatible pairs between candidates `xs` of local object `la` (their global
-        positions in `tree`) and `ys` of `lb`."""
+        Few pairs: all of them, tested in one compiled pass; many: a sweep along the map's
+        longest axis per pair of local objects (only global pairs within the gate's reach)."""
+        if len(added) * (len(added) + len(covered)) <= 10 * _BRUTE_FORCE_PAIRS:
+            cfg = self.config
+            return _compatible_among(
+                added,
+                covered,
+                self._cand_g,
+                self._cand_l,
+                self._global_positions,
+                self._local_distances(),
+                cfg.distance_tolerance,
+                cfg.gamma,
+                cfg.min_distance,
+            )
         cfg = self.config
-        d_local = float(np.linalg.norm(self._local_positions[la] - self._local_positions[lb]))
+        distances = self._local_distances()
         # the gate 1 - max(0, |d^A - d^B| - ε) / max(d^A, d^B) > γ needs d^A < (d^B + ε) / γ
-        reach = max((d_local + cfg.distance_tolerance) / cfg.gamma, cfg.min_distance)
-        reach = reach * (1 + 1e-9) + 1e-12  # the exact test below decides at the boundary
-        gx, gy = tree.points, self._global_positions[self._cand_g[ys]]
-        if len(xs) * len(ys) <= _BRUTE_FORCE_PAIRS:
-            i, j = np.nonzero(np.linalg.norm(gx[:, None] - gy[None], axis=2) <= reach)
-        else:
-            found = tree.get().sparse_distance_matrix(cKDTree(gy), reach, output_type="ndarray")
-            i, j = found["i"].astype(np.int64), found["j"].astype(np.int64)
-        d_global = np.linalg.norm(gx[i] - gy[j], axis=1)
-        ok = self.criterion.compatible(d_global, d_local)
-        ok &= self._cand_g[xs[i]] != self._cand_g[ys[j]]
-        return np.vstack([xs[i[ok]], ys[j[ok]]])
+        reach = np.maximum((distances + cfg.distance_tolerance) / cfg.gamma, cfg.min_distance)
+        reach = reach * (1 + 1e-9) + 1e-12  # the exact test decides at the boundary
+        return _compatible_sweep(
+            added,
+            covered,
+            self._cand_g,
+            self._cand_l,
+            self._global_positions,
+            distances,
+            reach,
+            cfg.distance_tolerance,
+            cfg.gamma,
+            cfg.min_distance,
+        )
+
+    def _local_distances(self) -> np.ndarray:
+        """Distances between the local objects (one `np.linalg.norm` per pair)."""
+        xyz = self._local_positions
+        out = np.zeros((len(xyz), len(xyz)))
+        for i in range(len(xyz)):
+            for j in range(i + 1, len(xyz)):
+                out[i, j] = out[j, i] = float(np.linalg.norm(xyz[i] - xyz[j]))
+        return out
 
     def _gate_of_sets(self, members: np.ndarray) -> np.ndarray:
         """Whether every pair of members of each set (rows, -1 padded) passes the criterion."""
@@ -469,186 +481,65 @@ class HierarchicalClustering:
     # Clustering round
     def _cluster(self, frontier: np.ndarray) -> None:
         while len(frontier):
-            slots = self._slots()  # the pool is fixed until the insert below
-            rows_a, rows_b, shared = self._find_merges(frontier, slots)
-            if not len(rows_a):
+            merges = self._find_merges(frontier)
+            if merges is None:
                 break
-            self._last_merge[rows_a] = self.step
-            self._last_merge[rows_b] = self.step
-            frontier = self._insert(*self._best_merges(rows_a, rows_b, shared, slots))
+            frontier = self._insert(*merges)
             frontier = self._prune(frontier)
         self._prune(np.zeros(0, dtype=np.int64))  # a round ends with at most K sets
 
-    def _membership(self) -> sp.csr_matrix:
-        """The pool's sets as a sparse (sets x live candidates) 0/1 matrix."""
-        valid = self._members >= 0
-        rows = np.repeat(np.arange(len(self._members)), valid.sum(axis=1))
-        cols = self._live_index[self._members[valid]]
-        return _csr(rows, cols, len(self._live), n_rows=len(self._members))
-
-    def _find_merges(
-        self, frontier: np.ndarray, slots: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """All (a, b) rows with a in the frontier whose union passes the merge criterion, and
-        |A ∩ B| for each.
-
-        B ⊆ M(A) and B ⊄ A means that B meets the extensions E(A) = M(A)∖A, so only the sets
-        meeting E(A) are looked at (a sparse product counts |B ∩ E(A)|); they qualify when
-        |B ∩ A| + |B ∩ E(A)| = |B|.
-        """
-        size = self._sizes()
-        membership = self._membership()
-        transposed = membership.T.tocsr()
-        in_frontier = np.zeros(len(size), dtype=bool)
-        in_frontier[frontier] = True
-        floor = self._survival_floor()
-        found = [[], [], []]
-        for start in range(0, len(frontier), _FRONTIER_CHUNK):
-            rows = frontier[start : start + _FRONTIER_CHUNK]
-            tally = self._extensions(rows, size, membership)
-            tally = (tally @ transposed).tocoo()  # |B ∩ E(A)| for every B meeting E(A)
-            ia, ib, in_ext = rows[tally.row], tally.col.astype(np.int64), tally.data
-            once = ~in_frontier[ib] | (ib > ia)  # two frontier sets: tried from the lower
-            if floor > -np.inf:  # |A∖B| ≤ |A|: a first, cheap screen on the score bound
-                bound = self.criterion.UPPER_BOUND * size[ia] * in_ext
-                once &= self._score[ia] + self._score[ib] + bound >= floor
-            rest = size[ib] - in_ext  # B's members outside E(A): all must be in A
-            once &= rest < size[ia]  # (and A ⊄ B)
-            ia, ib, in_ext, rest = ia[once], ib[once], in_ext[once], rest[once]
-            shared = np.zeros(len(ia), dtype=np.int64)
-            check = np.flatnonzero(rest > 0)
-            b_members = self._members[ib[check]]
-            shared[check] = ((b_members >= 0) & ~self._not_in(slots, b_members, ia[check])).sum(
-                axis=1
-            )
-            a_adds = size[ia] - shared
-            keep = shared == rest  # B ⊆ M(A)
-            if floor > -np.inf:  # merges that cannot reach the top K would be pruned at once
-                bound = self.criterion.UPPER_BOUND * a_adds * in_ext
-                keep &= self._score[ia] + self._score[ib] + bound >= floor
-            for out, values in zip(found, (ia, ib, shared)):
-                out.append(values[keep])
-        ia, ib, shared = (np.concatenate(x).astype(np.int64) for x in found)
-        return ia, ib, shared
-
-    def _extensions(self, rows, size, membership) -> sp.csr_matrix:
-        """E(A) = M(A)∖A for the sets `rows`, as a sparse (rows x live candidates) 0/1 matrix."""
-        own = membership[rows]
-        if np.all(size[rows] == 1):  # singletons: E({c}) is c's neighbourhood
-            return self._graph[own.indices]
-        # counts[A, c]: members of A that c is compatible with; a member of A itself is
-        # compatible with the |A| - 1 others only, so E(A) is where the count is |A|
-        counts = (own @ self._graph).tocoo()
-        inside = counts.data == size[rows][counts.row]
-        return sp.csr_matrix(
-            (np.ones(int(inside.sum()), np.int64), (counts.row[inside], counts.col[inside])),
-            shape=counts.shape,
+    def _find_merges(self, frontier: np.ndarray):
+        """The merges of one iteration (A in the frontier, B in the pool), grouped by union:
+        each distinct union's members, its largest merge score and its keys (None: no merge).
+        The parents of every merge are marked as merged at this step."""
+        live_members = np.where(
+            self._members >= 0, self._live_index[np.maximum(self._members, 0)], -1
         )
+        in_frontier = np.zeros(len(self._score), dtype=np.bool_)
+        in_frontier[frontier] = True
+        arguments = (
+            frontier.astype(np.int64),
+            in_frontier,
+            live_members,
+            self._size,
+            self._score,
+            self._graph_indptr,
+            self._graph_indices,
+            self._live_global,
+            self._live_local,
+            self._live_key,
+            self._live_key2,
+            self._key,
+            self._key2,
+            self._survival_floor(),
+            self.criterion.min_distance,
+            self.criterion.UPPER_BOUND,
+        )
+        merged, rows_a, rows_b, best, key, key2, collided = _merges_of_frontier(*arguments, True)
+        if collided:  # a key collision: every merge, grouped by the union's member lists
+            merged, rows_a, rows_b, scores, key, key2, _ = _merges_of_frontier(*arguments, False)
+            unions = _union_rows(self._members, self._size, rows_a, rows_b)
+            _, first, group = np.unique(unions, axis=0, return_index=True, return_inverse=True)
+            best = np.full(len(first), -np.inf)
+            np.maximum.at(best, group.ravel(), scores)
+            rows_a, rows_b, key, key2 = rows_a[first], rows_b[first], key[first], key2[first]
+        if not len(rows_a):
+            return None
+        self._last_merge[merged] = self.step
+        return _union_rows(self._members, self._size, rows_a, rows_b), best, key, key2
 
     def _survival_floor(self) -> float:
         """The K-th best score in the pool (-inf while the pool is not full), less a hair.
 
-        A merge scores at most v_A + v_B + |A∖B|·|B∖A| (h ≤ UPPER_BOUND = 1).  One that cannot reach the
-        K-th best score is pruned at the end of the iteration, and so are both of its parents
-        (their scores are lower still), so such merges are skipped without changing the result.
+        A merge scores at most v_A + v_B + |A∖B|·|B∖A| (h ≤ UPPER_BOUND = 1).  One that cannot
+        reach the K-th best score is pruned at the end of the iteration, and so are both of its
+        parents (their scores are lower still), so such merges are skipped without changing the
+        result.
         """
         if len(self._score) < self.capacity:
             return -np.inf
         kth = np.partition(self._score, len(self._score) - self.capacity)
         return float(kth[len(self._score) - self.capacity]) - 1e-9
-
-    def _slots(self) -> np.ndarray:
-        """Per set and local object, the member candidate (-1: none); sets are one-to-one."""
-        slots = np.full((len(self._members), len(self._local_positions)), -1, dtype=np.int64)
-        rows, cols = np.nonzero(self._members >= 0)
-        members = self._members[rows, cols]
-        slots[rows, self._cand_l[members]] = members
-        return slots
-
-    def _not_in(self, slots: np.ndarray, members: np.ndarray, rows: np.ndarray) -> np.ndarray:
-        """Which of `members[i]` (-1 padded) are valid and not in set `rows[i]`."""
-        width = slots.shape[1]
-        where = rows[:, None] * width + self._cand_l[np.maximum(members, 0)]
-        return (members >= 0) & (np.take(slots.ravel(), where) != members)
-
-    def _best_merges(self, rows_a, rows_b, shared, slots: np.ndarray):
-        """Distinct unions of the merges and, for each, the largest merge score.
-
-        A merge scores v_A + v_B + Σh over |A∖B|·|B∖A| new pairs with h ≤ 1, which bounds it
-        from above.  Per union, one merge (the largest v_A + v_B) is scored exactly; only the
-        merges whose bound beats that score need their own exact score.  Same result as scoring
-        every merge, at a fraction of the work.
-        """
-        size = self._sizes()
-        a_adds, b_adds = size[rows_a] - shared, size[rows_b] - shared
-        b_members = self._members[rows_b]
-        b_new = np.where(self._not_in(slots, b_members, rows_a), b_members, -1)
-        keys = [
-            self._key[rows_a] + _key_sums(self._cand_key, b_new),
-            self._key2[rows_a] + _key_sums(self._cand_key2, b_new),
-        ]
-        first, group = self._group_unions(rows_a, keys, b_new)
-        unions = _sorted_members(np.hstack([self._members[rows_a[first]], b_new[first]]))
-        base = self._score[rows_a] + self._score[rows_b]
-        bound = base + self.criterion.UPPER_BOUND * a_adds * b_adds
-        order = np.lexsort((-base, group))  # per group, the largest v_A + v_B first
-        best_of = order[np.r_[True, group[order][1:] != group[order][:-1]]]
-        best = np.full(len(first), -np.inf)
-        best[group[best_of]] = base[best_of] + self._cross_sum(
-            slots, rows_a[best_of], rows_b[best_of]
-        )
-        todo = np.flatnonzero(bound > best[group] + 1e-12)
-        if len(todo):
-            exact = base[todo] + self._cross_sum(slots, rows_a[todo], rows_b[todo])
-            np.maximum.at(best, group[todo], exact)
-        return unions, best, keys[0][first], keys[1][first]
-
-    def _group_unions(self, rows_a, keys, b_new) -> tuple[np.ndarray, np.ndarray]:
-        """One representative merge per distinct union A ∪ B, and each merge's group.
-
-        The first key groups; the second (independent) key checks every group, and the member
-        lists themselves are compared if the two disagree.
-        """
-        key, check = keys
-        order = np.argsort(key, kind="stable")
-        starts = np.r_[True, key[order][1:] != key[order][:-1]]
-        group = np.empty(len(key), dtype=np.int64)
-        group[order] = np.cumsum(starts) - 1
-        first = order[starts]
-        if np.array_equal(check, check[first][group]):
-            return first, group
-        unions = _sorted_members(np.hstack([self._members[rows_a], b_new]))  # a key collision
-        _, first, group = np.unique(unions, axis=0, return_index=True, return_inverse=True)
-        return first, group.ravel()
-
-    def _cross_sum(self, slots: np.ndarray, rows_a: np.ndarray, rows_b: np.ndarray) -> np.ndarray:
-        """Σ h over the new cross pairs (a ∈ A∖B, b ∈ B∖A) for each merge (A, B), from the
-        object positions; merges are grouped by (|A∖B|, |B∖A|) so no pair is wasted."""
-        a_members, b_members = self._members[rows_a], self._members[rows_b]
-        a_new = _compact(a_members, self._not_in(slots, a_members, rows_b))
-        b_new = _compact(b_members, self._not_in(slots, b_members, rows_a))
-        a_count, b_count = (a_new >= 0).sum(axis=1), (b_new >= 0).sum(axis=1)
-        out = np.zeros(len(rows_a))
-        width = max(a_new.shape[1], b_new.shape[1]) + 1
-        combo = a_count * width + b_count
-        for code in np.unique(combo):
-            p, q = divmod(int(code), width)
-            sel = np.flatnonzero(combo == code)
-            per = max(1, _CHUNK_ELEMENTS // max(p * q, 1))
-            for start in range(0, len(sel), per):
-                part = sel[start : start + per]
-                out[part] = self._h_sum(a_new[part, :p], b_new[part, :q])
-        return out
-
-    def _h_sum(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-        """Σ_{i, j} h(a[:, i], b[:, j]) per row (all members valid)."""
-        ga = self._global_positions[self._cand_g[a]]
-        gb = self._global_positions[self._cand_g[b]]
-        la = self._local_positions[self._cand_l[a]]
-        lb = self._local_positions[self._cand_l[b]]
-        d_global = np.linalg.norm(ga[:, :, None] - gb[:, None], axis=3)
-        d_local = np.linalg.norm(la[:, :, None] - lb[:, None], axis=3)
-        return self.criterion.score(d_global, d_local).sum(axis=(1, 2))
 
     def _insert(self, members: np.ndarray, best: np.ndarray, key: np.ndarray, key2: np.ndarray):
         """Add distinct merged sets (duplicates keep the larger score); return new rows."""
@@ -662,22 +553,11 @@ class HierarchicalClustering:
 
     def _lookup(self, key: np.ndarray, key2: np.ndarray, members: np.ndarray) -> np.ndarray:
         """The pool row holding each given set (-1: not in the pool)."""
-        out = np.full(len(key), -1, dtype=np.int64)
         if not len(self._key) or not len(key):
-            return out
-        order = np.argsort(self._key, kind="stable")
-        sorted_keys = self._key[order]
-        at = np.minimum(np.searchsorted(sorted_keys, key), len(order) - 1)
-        hit = sorted_keys[at] == key
-        unique_keys = not np.any(sorted_keys[1:] == sorted_keys[:-1])
-        rows = order[at[hit]]
-        width = max(members.shape[1], self._members.shape[1])
-        same = (self._key2[rows] == key2[hit]) & np.all(
-            _pad(self._members[rows], width) == _pad(members[hit], width), axis=1
-        )
-        if unique_keys and same.all():
-            out[np.flatnonzero(hit)] = rows
-            return out
+            return np.full(len(key), -1, dtype=np.int64)
+        rows, exact = _find_by_keys(self._key, self._key2, self._members, key, key2, members)
+        if exact:
+            return rows
         # a key collision: look sets up by their member lists
         index = {tuple(m[m >= 0]): r for r, m in enumerate(self._members)}
         return np.array([index.get(tuple(m[m >= 0]), -1) for m in members], dtype=np.int64)
@@ -730,12 +610,23 @@ class HierarchicalClustering:
             set_hash[needs] = hashes.sum(axis=1, dtype=np.uint64)
         return np.lexsort((set_hash, *keys))
 
+    def _best_rows(self, k: int) -> np.ndarray:
+        """Which sets are among the k best of `_ranking` (the same k, without sorting all):
+        the sets above the k-th score for sure, and the k-th score's sets ranked exactly."""
+        score = np.round(self._score, 9)
+        kth = np.partition(score, len(score) - k)[len(score) - k]
+        keep = score > kth
+        at_cut = np.flatnonzero(score == kth)
+        if k - int(keep.sum()) < len(at_cut):
+            at_cut = at_cut[self._ranking(at_cut, limit=k - int(keep.sum()))]
+        keep[at_cut[: k - int(keep.sum())]] = True
+        return keep
+
     def _prune(self, frontier: np.ndarray) -> np.ndarray:
         """Keep the top K sets; return the surviving part of the frontier (renumbered)."""
         if len(self._score) <= self.capacity:
             return frontier
-        keep = np.zeros(len(self._score), dtype=bool)
-        keep[self._ranking(limit=self.capacity)[: self.capacity]] = True
+        keep = self._best_rows(self.capacity)
         is_frontier = np.zeros(len(self._score), dtype=bool)
         is_frontier[frontier] = True
         self._keep_rows(keep)
@@ -745,8 +636,8 @@ class HierarchicalClustering:
         old = self.step - self._last_merge > self.config.expiry_updates
         if not old.any():
             return
-        protected = np.zeros(len(old), dtype=bool)
-        protected[self._ranking(limit=self.config.protect_top)[: self.config.protect_top]] = True
+        top = self.config.protect_top
+        protected = self._best_rows(top) if 0 < top < len(old) else np.full(len(old), top > 0)
         self._keep_rows(~old | protected)
 
     def _keep_rows(self, keep: np.ndarray) -> None:
@@ -758,52 +649,474 @@ class HierarchicalClustering:
         self._key2 = self._key2[keep]
 
 
-class _LazyTree:
-    """A KD-tree over `points`, built on first use."""
-
-    def __init__(self, points: np.ndarray) -> None:
-        self.points = points
-        self._tree: cKDTree | None = None
-
-    def get(self) -> cKDTree:
-        if self._tree is None:
-            self._tree = cKDTree(self.points)
-        return self._tree
-
-
-def _csr(rows: np.ndarray, cols: np.ndarray, n_cols: int, n_rows: int | None = None):
-    """A 0/1 CSR matrix from (row, column) entries without duplicates."""
-    n_rows = n_cols if n_rows is None else n_rows
-    order = np.argsort(rows, kind="stable")
-    indptr = np.concatenate([[0], np.cumsum(np.bincount(rows, minlength=n_rows))])
-    data = np.ones(len(rows), dtype=np.int64)
-    return sp.csr_matrix((data, cols[order], indptr), shape=(n_rows, n_cols))
-
-
-def _key_sums(table: np.ndarray, members: np.ndarray) -> np.ndarray:
-    """Per row of member indices (-1 padded), the wrapping sum of their keys in `table`."""
-    return np.append(table, np.uint64(0))[members].sum(axis=1, dtype=np.uint64)  # -1 reads 0
-
-
-def _sorted_members(members: np.ndarray) -> np.ndarray:
-    """Rows of member indices sorted ascending with the -1 padding last, trimmed."""
-    big = np.iinfo(np.int64).max
-    out = np.sort(np.where(members >= 0, members, big), axis=1)
-    width = max(int((out != big).sum(axis=1).max(initial=0)), 1)
-    out = out[:, :width]
-    return np.where(out == big, -1, out)
-
-
-def _compact(members: np.ndarray, mask: np.ndarray) -> np.ndarray:
-    """The members selected by `mask` moved to the front of each row, -1 padded."""
-    order = np.argsort(~mask, axis=1, kind="stable")
-    picked = np.take_along_axis(np.where(mask, members, -1), order, axis=1)
-    return picked
-
-
 def _pad(members: np.ndarray, width: int) -> np.ndarray:
     if members.shape[1] == width:
         return members
     out = np.full((len(members), width), -1, dtype=np.int64)
     out[:, : members.shape[1]] = members
     return out
+
+
+# ---------------------------------------------------------------------------------------------
+# Compiled inner loops of the clustering round (numba; compiled once, cached on disk)
+@njit(cache=True)
+def _merges_of_frontier(
+    frontier,
+    in_frontier,
+    members,
+    size,
+    score,
+    indptr,
+    indices,
+    global_xyz,
+    local_xyz,
+    cand_key,
+    cand_key2,
+    set_key,
+    set_key2,
+    floor,
+    min_distance,
+    upper_bound,
+    grouped,
+):
+    """The merges (A, B) of one iteration with A in the frontier: which sets merged, and per
+    distinct union (by its first key; with `grouped`, else per merge) one merge's rows, the
+    largest merge score v_A + v_B + Σ h over the new cross pairs, and the two keys; last,
+    whether two unions shared a first key but not the second (then call again ungrouped).
+    A merge whose score bound cannot beat its union's best so far is not scored.
+
+    `members` are the pool's sets in live-candidate indices (-1 padded), `indptr`/`indices`
+    the compatibility graph over the live candidates.  E(A), the candidates compatible with
+    every member of A, is found by counting over the members' neighbourhoods; B qualifies
+    when B∖A ⊆ E(A) and B∖A ≠ ∅ ≠ A∖B (then all new cross pairs are compatible), and only
+    sets meeting E(A) are looked at (an inverted index candidate -> sets).  Two frontier
+    sets are tried from the lower row only; merges whose score bound cannot reach `floor`
+    are skipped.
+    """
+    n_sets, width = members.shape
+    n_live = len(indptr) - 1
+    # every set is filed under one pivot, its member held by the fewest sets: a set inside
+    # M(A) has its pivot in M(A), so only the lists of M(A)'s candidates are looked at
+    held = np.zeros(n_live, dtype=np.int64)
+    for r in range(n_sets):
+        for k in range(size[r]):
+            held[members[r, k]] += 1
+    pivot = np.empty(n_sets, dtype=np.int64)
+    count = np.zeros(n_live + 1, dtype=np.int64)
+    for r in range(n_sets):
+        best = members[r, 0]
+        for k in range(1, size[r]):
+            m = members[r, k]
+            if held[m] < held[best]:
+                best = m
+        pivot[r] = best
+        count[best + 1] += 1
+    starts = np.cumsum(count)
+    fill = starts[:-1].copy()
+    filed = np.empty(n_sets, dtype=np.int64)
+    for r in range(n_sets):
+        filed[fill[pivot[r]]] = r
+        fill[pivot[r]] += 1
+    # a 64-bit signature per set (one bit per member, from its key): B ⊆ M(A) needs
+    # sig(B) ⊆ sig(M(A)), a cheap first screen
+    bit = np.empty(n_live, dtype=np.uint64)
+    for c in range(n_live):
+        bit[c] = np.uint64(1) << (cand_key[c] >> np.uint64(58))
+    sig = np.zeros(n_sets, dtype=np.uint64)
+    for r in range(n_sets):
+        for k in range(size[r]):
+            sig[r] |= bit[members[r, k]]
+    hits = np.zeros(n_live, dtype=np.int64)
+    touched = np.empty(n_live, dtype=np.int64)
+    ext = np.empty(n_live, dtype=np.int64)
+    ext_stamp = np.full(n_live, -1, dtype=np.int64)
+    ext_at = np.zeros(n_live, dtype=np.int64)
+    own_stamp = np.full(n_live, -1, dtype=np.int64)
+    own_at = np.zeros(n_live, dtype=np.int64)
+    h = np.empty(1024)
+    h_known = np.zeros(n_live, dtype=np.bool_)
+    new_at = np.empty(width, dtype=np.int64)
+    kept = np.zeros(width, dtype=np.bool_)
+    merged = np.zeros(n_sets, dtype=np.bool_)
+    capacity = 1024
+    out_a = np.empty(capacity, dtype=np.int64)
+    out_b = np.empty(capacity, dtype=np.int64)
+    out_score = np.empty(capacity)
+    out_key = np.empty(capacity, dtype=np.uint64)
+    out_key2 = np.empty(capacity, dtype=np.uint64)
+    n_out = 0
+    table = np.full(2 * capacity, -1, dtype=np.int64)  # first key -> union (open addressing)
+    for a in frontier:
+        n_a = size[a]
+        n_touched = 0
+        for k in range(n_a):
+            m = members[a, k]
+            for p in range(indptr[m], indptr[m + 1]):
+                c = indices[p]
+                if hits[c] == 0:
+                    touched[n_touched] = c
+                    n_touched += 1
+                hits[c] += 1
+        n_ext = 0
+        for t in range(n_touched):
+            c = touched[t]
+            if hits[c] == n_a:  # members of A are compatible with the |A| - 1 others only
+                ext_stamp[c] = a
+                ext_at[c] = n_ext
+                ext[n_ext] = c
+                n_ext += 1
+            hits[c] = 0
+        if n_ext == 0:
+            continue
+        outside = sig[a]
+        for j in range(n_ext):
+            outside |= bit[ext[j]]
+        outside = ~outside
+        for k in range(n_a):
+            own_stamp[members[a, k]] = a
+            own_at[members[a, k]] = k
+        if n_a * n_ext > len(h):
+            h = np.empty(2 * n_a * n_ext)
+        for j in range(n_ext):
+            h_known[j] = False
+        for j in range(n_a + n_ext):
+            x = members[a, j] if j < n_a else ext[j - n_a]
+            for p in range(starts[x], starts[x + 1]):
+                b = filed[p]
+                if b == a or (in_frontier[b] and b < a) or sig[b] & outside:
+                    continue
+                n_new, shared, ok = 0, 0, True
+                key = set_key[a]
+                key2 = set_key2[a]
+                for k in range(n_a):
+                    kept[k] = False
+                for k in range(size[b]):
+                    m = members[b, k]
+                    if ext_stamp[m] == a:
+                        new_at[n_new] = ext_at[m]
+                        n_new += 1
+                        key += cand_key[m]
+                        key2 += cand_key2[m]
+                    elif own_stamp[m] == a:
+                        kept[own_at[m]] = True
+                        shared += 1
+                    else:
+                        ok = False
+                        break
+                if not ok or shared >= n_a or n_new == 0:
+                    continue
+                base = score[a] + score[b]
+                bound = base + upper_bound * (n_a - shared) * n_new
+                if bound < floor:
+                    continue
+                merged[a] = True
+                merged[b] = True
+                g = n_out
+                if grouped:
+                    at = np.int64(key & np.uint64(len(table) - 1))
+                    while table[at] >= 0 and out_key[table[at]] != key:
+                        at = (at + 1) & (len(table) - 1)
+                    if table[at] >= 0:
+                        g = table[at]
+                        if out_key2[g] != key2:
+                            return (
+                                merged,
+                                out_a[:0],
+                                out_b[:0],
+                                out_score[:0],
+                                out_key[:0],
+                                out_key2[:0],
+                                True,
+                            )
+                if g == n_out:  # a new union (or, ungrouped, a new merge)
+                    if n_out == capacity:
+                        capacity *= 2
+                        out_a = _grown(out_a, capacity)
+                        out_b = _grown(out_b, capacity)
+                        out_score = _grown(out_score, capacity)
+                        out_key = _grown(out_key, capacity)
+                        out_key2 = _grown(out_key2, capacity)
+                        if grouped:
+                            table = _rehashed(out_key, n_out, 2 * capacity)
+                            at = np.int64(key & np.uint64(len(table) - 1))
+                            while table[at] >= 0:
+                                at = (at + 1) & (len(table) - 1)
+                    if grouped:
+                        table[at] = g
+                    out_a[g] = a
+                    out_b[g] = b
+                    out_score[g] = -np.inf
+                    out_key[g] = key
+                    out_key2[g] = key2
+                    n_out += 1
+                elif bound <= out_score[g]:
+                    continue
+                cross = 0.0
+                for q in range(n_new):
+                    j = new_at[q]
+                    if not h_known[j]:  # h(a_k, e_j), the paper's ratio, when first needed
+                        for k in range(n_a):
+                            h[k * n_ext + j] = _ratio(
+                                global_xyz, local_xyz, members[a, k], ext[j], min_distance
+                            )
+                        h_known[j] = True
+                for k in range(n_a):
+                    if not kept[k]:
+                        for q in range(n_new):
+                            cross += h[k * n_ext + new_at[q]]
+                out_score[g] = max(out_score[g], base + cross)
+    return (
+        merged,
+        out_a[:n_out],
+        out_b[:n_out],
+        out_score[:n_out],
+        out_key[:n_out],
+        out_key2[:n_out],
+        False,
+    )
+
+
+@njit(cache=True)
+def _ratio(global_xyz, local_xyz, i, j, min_distance):
+    """The paper's h of live candidates i and j (as `merge_metric` with no tolerance)."""
+    d_global = np.sqrt(
+        (global_xyz[i, 0] - global_xyz[j, 0]) ** 2
+        + (global_xyz[i, 1] - global_xyz[j, 1]) ** 2
+        + (global_xyz[i, 2] - global_xyz[j, 2]) ** 2
+    )
+    d_local = np.sqrt(
+        (local_xyz[i, 0] - local_xyz[j, 0]) ** 2
+        + (local_xyz[i, 1] - local_xyz[j, 1]) ** 2
+        + (local_xyz[i, 2] - local_xyz[j, 2]) ** 2
+    )
+    d_max = max(d_global, d_local)
+    if d_max < min_distance or d_max <= 0:
+        return 1.0
+    return 1.0 - abs(d_global - d_local) / d_max
+
+
+@njit(cache=True)
+def _grown(values, capacity):
+    out = np.empty(capacity, dtype=values.dtype)
+    out[: len(values)] = values
+    return out
+
+
+@njit(cache=True)
+def _rehashed(keys, n, slots):
+    """An open-addressing table (`slots`, a power of 2) of the first n keys (distinct)."""
+    table = np.full(slots, -1, dtype=np.int64)
+    for i in range(n):
+        at = np.int64(keys[i] & np.uint64(slots - 1))
+        while table[at] >= 0:
+            at = (at + 1) & (slots - 1)
+        table[at] = i
+    return table
+
+
+@njit(cache=True)
+def _union_rows(members, size, rows_a, rows_b):
+    """The members of A ∪ B for each merge, ascending and -1 padded (rows are ascending)."""
+    n = len(rows_a)
+    width = 1
+    for i in range(n):
+        width = max(width, size[rows_a[i]] + size[rows_b[i]])
+    out = np.full((n, width), -1, dtype=np.int64)
+    longest = 1
+    for i in range(n):
+        a, b = rows_a[i], rows_b[i]
+        p, q, k = 0, 0, 0
+        while p < size[a] or q < size[b]:
+            x = members[a, p] if p < size[a] else np.iinfo(np.int64).max
+            y = members[b, q] if q < size[b] else np.iinfo(np.int64).max
+            if x <= y:
+                out[i, k] = x
+                p += 1
+                if x == y:
+                    q += 1
+            else:
+                out[i, k] = y
+                q += 1
+            k += 1
+        longest = max(longest, k)
+    return out[:, :longest]
+
+
+@njit(cache=True)
+def _compatible_among(
+    added, covered, cand_g, cand_l, global_xyz, local_distance, tolerance, gamma, min_distance
+):
+    """The compatible pairs (a, b), a in `added`, b in `covered` or later in `added` (2 x E):
+    other local and global objects, and the gate of `MergeCriterion.compatible`."""
+    capacity = 1024
+    out = np.empty((2, capacity), dtype=np.int64)
+    n = 0
+    for i in range(len(added)):
+        x = added[i]
+        for k in range(len(covered) + len(added) - i - 1):
+            y = covered[k] if k < len(covered) else added[i + 1 + k - len(covered)]
+            if cand_l[x] == cand_l[y] or cand_g[x] == cand_g[y]:
+                continue
+            gx, gy = cand_g[x], cand_g[y]
+            d_global = np.sqrt(
+                (global_xyz[gx, 0] - global_xyz[gy, 0]) ** 2
+                + (global_xyz[gx, 1] - global_xyz[gy, 1]) ** 2
+                + (global_xyz[gx, 2] - global_xyz[gy, 2]) ** 2
+            )
+            d_local = local_distance[cand_l[x], cand_l[y]]
+            if not _gate(d_global, d_local, tolerance, gamma, min_distance):
+                continue
+            if n == capacity:
+                capacity *= 2
+                grown = np.empty((2, capacity), dtype=np.int64)
+                grown[:, :n] = out[:, :n]
+                out = grown
+            out[0, n] = x
+            out[1, n] = y
+            n += 1
+    return out[:, :n]
+
+
+@njit(cache=True)
+def _gate(d_global, d_local, tolerance, gamma, min_distance):
+    """`MergeCriterion.compatible` for one pair of distances."""
+    d_max = max(d_global, d_local)
+    if d_max < min_distance or d_max <= 0:
+        return gamma < 1.0
+    excess = max(abs(d_global - d_local) - tolerance, 0.0)
+    return 1.0 - excess / d_max > gamma
+
+
+@njit(cache=True)
+def _compatible_sweep(
+    added,
+    covered,
+    cand_g,
+    cand_l,
+    global_xyz,
+    local_distance,
+    reach,
+    tolerance,
+    gamma,
+    min_distance,
+):
+    """`_compatible_among` for many candidates: per local object, its candidates sorted along
+    the map's longest axis; a candidate of `la` is tested only against those of `lb` within
+    `reach[la, lb]` along it (a necessary condition of the gate)."""
+    n_local = len(local_distance)
+    everyone = np.concatenate((covered, added))
+    spread = np.zeros(3)
+    for axis in range(3):
+        spread[axis] = np.ptp(global_xyz[:, axis]) if len(global_xyz) else 0.0
+    axis = np.argmax(spread)
+    order = np.argsort(global_xyz[cand_g[everyone], axis], kind="mergesort")
+    count = np.zeros(n_local + 1, dtype=np.int64)
+    for c in everyone:
+        count[cand_l[c] + 1] += 1
+    starts = np.cumsum(count)
+    fill = starts[:-1].copy()
+    by_local = np.empty(len(everyone), dtype=np.int64)
+    for k in order:
+        c = everyone[k]
+        by_local[fill[cand_l[c]]] = c
+        fill[cand_l[c]] += 1
+    sorted_x = global_xyz[cand_g[by_local], axis]
+    added_at = np.full(len(cand_g), -1, dtype=np.int64)
+    for i in range(len(added)):
+        added_at[added[i]] = i
+    capacity = 1024
+    out = np.empty((2, capacity), dtype=np.int64)
+    n = 0
+    for i in range(len(added)):
+        x = added[i]
+        la, gx = cand_l[x], cand_g[x]
+        for lb in range(n_local):
+            if lb == la or starts[lb] == starts[lb + 1]:
+                continue
+            r = reach[la, lb]
+            lo, hi = starts[lb], starts[lb + 1]
+            p = lo + np.searchsorted(sorted_x[lo:hi], global_xyz[gx, axis] - r)
+            while p < hi and sorted_x[p] <= global_xyz[gx, axis] + r:
+                y = by_local[p]
+                p += 1
+                if added_at[y] >= 0 and added_at[y] <= i:  # pairs within `added` once
+                    continue
+                gy = cand_g[y]
+                if gx == gy:
+                    continue
+                d_global = np.sqrt(
+                    (global_xyz[gx, 0] - global_xyz[gy, 0]) ** 2
+                    + (global_xyz[gx, 1] - global_xyz[gy, 1]) ** 2
+                    + (global_xyz[gx, 2] - global_xyz[gy, 2]) ** 2
+                )
+                if not _gate(d_global, local_distance[la, lb], tolerance, gamma, min_distance):
+                    continue
+                if n == capacity:
+                    capacity *= 2
+                    grown = np.empty((2, capacity), dtype=np.int64)
+                    grown[:, :n] = out[:, :n]
+                    out = grown
+                out[0, n] = x
+                out[1, n] = y
+                n += 1
+    return out[:, :n]
+
+
+@njit(cache=True)
+def _find_by_keys(pool_key, pool_key2, pool_members, key, key2, members):
+    """The pool row with each given first key (-1: none), and whether that is exact: the
+    pool's first keys are distinct and every hit has the same second key and members."""
+    n = len(pool_key)
+    slots = 1
+    while slots < 2 * n:
+        slots *= 2
+    mask = np.uint64(slots - 1)
+    table = np.full(slots, -1, dtype=np.int64)
+    rows = np.full(len(key), -1, dtype=np.int64)
+    for r in range(n):
+        at = np.int64(pool_key[r] & mask)
+        while table[at] >= 0:
+            if pool_key[table[at]] == pool_key[r]:
+                return rows, False
+            at = (at + 1) & (slots - 1)
+        table[at] = r
+    width = min(members.shape[1], pool_members.shape[1])
+    for i in range(len(key)):
+        at = np.int64(key[i] & mask)
+        while table[at] >= 0 and pool_key[table[at]] != key[i]:
+            at = (at + 1) & (slots - 1)
+        r = table[at]
+        if r < 0:
+            continue
+        if pool_key2[r] != key2[i]:
+            return rows, False
+        for k in range(width):
+            if pool_members[r, k] != members[i, k]:
+                return rows, False
+        for k in range(width, members.shape[1]):
+            if members[i, k] >= 0:
+                return rows, False
+        for k in range(width, pool_members.shape[1]):
+            if pool_members[r, k] >= 0:
+                return rows, False
+        rows[i] = r
+    return rows, True
+
+
+@njit(cache=True)
+def _symmetric_csr(first, second, n):
+    """CSR rows (indptr, indices) of the graph with edges first[i] - second[i], both ways."""
+    count = np.zeros(n + 1, dtype=np.int64)
+    for i in range(len(first)):
+        count[first[i] + 1] += 1
+        count[second[i] + 1] += 1
+    indptr = np.cumsum(count)
+    fill = indptr[:-1].copy()
+    indices = np.empty(2 * len(first), dtype=np.int64)
+    for i in range(len(first)):
+        u, v = first[i], second[i]
+        indices[fill[u]] = v
+        fill[u] += 1
+        indices[fill[v]] = u
+        fill[v] += 1
+    return indptr, indices

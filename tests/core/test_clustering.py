@@ -291,3 +291,30 @@ def test_large_sparse_map_equals_literal_rules(monkeypatch, kd_tree):
             assert got[key] == pytest.approx(score, abs=1e-9)
     assert fast.n_candidates > 80 and max(len(p) for p in got) >= 4
     assert fast._graph.nnz < 0.1 * fast.n_candidates**2  # compatibility stays sparse
+
+
+def test_long_strip_map_equals_literal_rules(monkeypatch):
+    """A corridor-like map, longest along y: the compatibility sweep runs along that axis and
+    still finds every compatible pair (the literal sets, with the pool bound biting)."""
+    import semloc.clustering as module
+
+    monkeypatch.setattr(module, "_BRUTE_FORCE_PAIRS", 0)  # always the sweep
+    rng = np.random.default_rng(5)
+    g = np.column_stack([rng.uniform(0, 4, 36), rng.uniform(0, 60, 36), rng.uniform(0, 2, 36)])
+    labels = rng.integers(0, 2, len(g))
+    chosen = np.argsort(np.linalg.norm(g - g[3], axis=1))[:5]
+    local = g[chosen] + rng.normal(0, 0.1, (5, 3))
+    config = ClusteringConfig(sets_per_object=2, protect_top=3)
+    fast = clustering(g, config)
+    literal = LiteralClustering(g, [f"g{i}" for i in range(len(g))], config)
+    for step, c in enumerate(chosen):
+        ids = [f"l{i}" for i in range(step + 1)]
+        detections = {step: np.flatnonzero(labels == labels[c])}
+        fast.update(local[: step + 1], ids, detections)
+        literal.update(local[: step + 1], ids, detections)
+        expected = {tuple(sorted(k)): v[0] for k, v in literal.sets.items()}
+        got = pair_sets(fast)
+        assert got.keys() == expected.keys()
+        for key, score in expected.items():
+            assert got[key] == pytest.approx(score, abs=1e-9)
+    assert max(len(p) for p in got) >= 3 and fast.n_sets == 2 * len(g)
