@@ -6,7 +6,8 @@ N objects around a random viewpoint with 0.1-0.4 m centre bias, one spurious det
 5 % wrong labels, replayed one object per update.  Success is the paper's 15° / 0.5 m.
 
 Prints, per number of observed objects: top-1 and top-10 success, how often the status is
-`localized`, and how often a `localized` answer is right.
+`localized`, how often a `localized` answer is right (the precision of the claims), the
+claims right / wrong, and the coverage (the share of attempts `localized` and right).
 
     python benchmarks/accuracy_core.py [--trials 50] [--buildings 3] [--gamma 0.8] [--tolerance 0.4]
 """
@@ -56,7 +57,9 @@ def main() -> None:
         rank_by=args.rank_by,
     )
     table = Table(title=f"success at 15° / 0.5 m (γ={args.gamma}, ε={args.tolerance} m)")
-    for column in ("observed", "attempts", "top-1", "top-10", "localized", "localized & right"):
+    columns = ("observed", "attempts", "top-1", "top-10", "localized", "localized & right",
+               "claims right / wrong", "coverage")  # fmt: skip
+    for column in columns:
         table.add_column(column, justify="right")
     pooled = []
     for n, results in rows.items():
@@ -71,8 +74,10 @@ def main() -> None:
             f"{np.mean([r is not None for r in ranks]):.0%}",
             f"{len(localized) / len(results):.0%}",
             f"{np.mean(localized):.0%}" if localized else "-",
+            f"{sum(localized)} / {len(localized) - sum(localized)}",
+            f"{sum(localized) / len(results):.0%}",
         )
-    Console().print(table)
+    Console(width=120).print(table)
     if pooled:
         top1 = np.mean([r == 1 for r, _ in pooled])
         top10 = np.mean([r is not None for r, _ in pooled])

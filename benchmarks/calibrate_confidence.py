@@ -1,14 +1,19 @@
-"""Fit the shipped confidence model on simulated benchmark attempts and show its reliability.
+"""Fit the shipped confidence model on simulated attempts and show its reliability.
 
-    PYTHONPATH=src python benchmarks/calibrate_confidence.py [--sequences 4] [--starts 6]
-        [--seed 1] [--precision 0.995] [--write] [--figure docs/img/reliability.png]
+    PYTHONPATH=src python benchmarks/calibrate_confidence.py [--sequences 3] [--starts 4]
+        [--seed 1] [--layouts 100-105] [--layout-views 6] [--observed 10-15]
+        [--observed-trials 10] [--precision 0.995] [--write] [--figure docs/img/reliability.png]
 
-Collects every hypothesis of the protocol's semloc attempts (`semloc.eval.calibration`) on
-simulated sequences of `--seed` (not the benchmark's seed 0, and never the real layouts, which
-stay held out), fits the evidence and confidence logistic models and the operating point for
-`--precision` of the claims, prints the model and a reliability table (predicted confidence vs
-observed share right) on the fitting attempts and on held-out simulated attempts (seed 0), and
-with `--write` replaces `src/semloc/confidence_model.py`.
+Collects every hypothesis of three kinds of simulated attempts (`semloc.eval.calibration`;
+never the real layouts, which stay held out): the protocol's semloc attempts on sequences of
+`--seed` (every map kind; not the benchmark's seed 0), views of simulated buildings
+(`--layouts`) in the clean / noisy / dynamic variants of `semloc.eval.variants`, and
+centre-only observations of simulated buildings full of repeated objects (`--observed`; not
+accuracy_core's buildings 0-2).  Fits the evidence and confidence logistic models and the
+operating point for `--precision` of the claims, prints the model and a reliability table
+(predicted confidence vs observed share right) on the fitting attempts and on held-out
+simulated attempts (protocol seed 0, buildings 200-201 and 20-21), and with `--write` replaces
+`src/semloc/confidence_model.py`.
 """
 
 from __future__ import annotations
@@ -22,7 +27,15 @@ from pathlib import Path
 import numpy as np
 
 from semloc.decision import MODEL_MODULE
-from semloc.eval.calibration import best_of_answers, collect, confidences, fit, reliability
+from semloc.eval.calibration import (
+    best_of_answers,
+    collect,
+    collect_layouts,
+    collect_observations,
+    confidences,
+    fit,
+    reliability,
+)
 from semloc.eval.protocol import BenchConfig
 from semloc.io import write_atomic
 
@@ -43,6 +56,15 @@ def reliability_table(name: str, samples, model) -> str:
         f"{len(claims) - right_claims} wrong, of {answers} answers"
     )
     return "\n".join(lines)
+
+
+def claims_line(name: str, samples, model) -> str:
+    """Claims right / wrong at the operating point among the answers of `samples`."""
+    claims = [s for s, c in best_of_answers(samples, model)
+              if c >= model.min_confidence and s.pairs >= 3 and s.fitness >= 0.3]  # fmt: skip
+    right = sum(s.right for s in claims)
+    answers = len({s.answer for s in samples})
+    return f"  {name}: {right} right, {len(claims) - right} wrong claims of {answers} answers"
 
 
 def figure(path: Path, sets) -> None:
@@ -67,31 +89,59 @@ def figure(path: Path, sets) -> None:
     fig.savefig(path, dpi=120)
 
 
+def seeds(text: str) -> list[int]:
+    """'100-105' or '100,103': the seeds it names."""
+    if "-" in text:
+        lo, hi = (int(x) for x in text.split("-"))
+        return list(range(lo, hi + 1))
+    return [int(x) for x in text.split(",") if x]
+
+
+def gather(sequences, starts, seed, layouts, views, observed, trials) -> tuple[list, str]:
+    """The samples of the three kinds of attempts, answers numbered apart, and a description."""
+    config = BenchConfig(sequences=sequences, starts=starts, seed=seed, real=False)
+    samples = collect(config) if sequences else []
+    samples += collect_layouts(layouts, views, first_answer=len(samples) and samples[-1].answer + 1)
+    samples += collect_observations(observed, trials,
+                                    first_answer=len(samples) and samples[-1].answer + 1)  # fmt: skip
+    kinds = sorted({s.map_kind for s in samples})
+    answers = len({s.answer for s in samples})
+    data = (f"protocol attempts of seed {seed} ({sequences} sequences, {starts} starts), views "
+            f"of buildings {layouts} ({views} per variant and size), observations of buildings "
+            f"{observed} ({trials} per size); kinds {', '.join(kinds)}; {answers} answers, "
+            f"{len(samples)} hypotheses")  # fmt: skip
+    return samples, data
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--sequences", type=int, default=4)
-    parser.add_argument("--starts", type=int, default=6)
+    parser.add_argument("--sequences", type=int, default=3)
+    parser.add_argument("--starts", type=int, default=4)
     parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--layouts", type=seeds, default=seeds("100-105"))
+    parser.add_argument("--layout-views", type=int, default=6)
+    parser.add_argument("--observed", type=seeds, default=seeds("10-15"))
+    parser.add_argument("--observed-trials", type=int, default=10)
     parser.add_argument("--holdout-sequences", type=int, default=2)
     parser.add_argument("--precision", type=float, default=0.995)
     parser.add_argument("--write", action="store_true", help=f"replace {MODEL_MODULE}")
     parser.add_argument("--figure", type=Path, help="also draw the reliability diagram (PNG)")
     args = parser.parse_args(argv)
-    config = BenchConfig(sequences=args.sequences, starts=args.starts, seed=args.seed, real=False)
-    samples = collect(config)
-    data = (f"semloc attempts of the benchmark protocol: seed {args.seed}, {args.sequences} "
-            f"sequences, {args.starts} starts, map kinds {', '.join(config.map_kinds)}; "
-            f"{len(samples)} hypotheses")  # fmt: skip
-    model = fit(samples, args.precision, data)
+    samples, data = gather(args.sequences, args.starts, args.seed, args.layouts,
+                           args.layout_views, args.observed, args.observed_trials)  # fmt: skip
+    model = fit(samples, args.precision, data, ranking=BenchConfig().map_kinds)
     model = model.model_copy(update={"fitted_by": " ".join(["benchmarks/calibrate_confidence.py",
                                                             *(argv or sys.argv[1:])])})  # fmt: skip
     print(json.dumps(model.model_dump(), indent=2))
     print(reliability_table("fitting attempts", samples, model))
-    holdout = collect(BenchConfig(sequences=args.holdout_sequences, starts=args.starts, seed=0))
-    print(reliability_table("held-out simulated attempts (seed 0)", holdout, model))
+    holdout, _ = gather(args.holdout_sequences, args.starts, 0, [200, 201],
+                        max(args.layout_views // 2, 1), [20, 21], max(args.observed_trials // 2, 1))  # fmt: skip
+    print(reliability_table("held-out simulated attempts", holdout, model))
+    for kind in sorted({s.map_kind for s in holdout}):
+        print(claims_line(kind, [s for s in holdout if s.map_kind == kind], model))
     if args.figure is not None:
-        figure(args.figure, [(f"fitting (seed {args.seed})", samples, model),
-                             ("held out (seed 0)", holdout, model)])  # fmt: skip
+        figure(args.figure, [("fitting attempts", samples, model),
+                             ("held-out attempts", holdout, model)])  # fmt: skip
     if args.write:
         doc = '"""The shipped confidence model\'s coefficients (see `semloc.decision.ConfidenceModel`).\n\n'
         doc += 'Written by `benchmarks/calibrate_confidence.py --write`; data, not I/O: the core reads no files.\n"""\n\n'

@@ -6,13 +6,14 @@ Confidence.  A hypothesis verified by the Localizer carries `features` (`FEATURE
 pairs, share of rejected pairs, centre residual, point fitness, supporting and conflicting
 local objects outside the set; see `semloc.verification.Evidence`).  The shipped
 `ConfidenceModel` (`confidence_model.py` beside this module, fitted on simulated benchmark
-attempts by `benchmarks/calibrate_confidence.py`) turns them into an `evidence` logit, which
-ranks the hypotheses (`rank_by="evidence"`), and a calibrated `confidence`: the probability
-that the pose is right (15 deg / 0.5 m), from the evidence and the best rival's evidence.
+attempts by `benchmarks/calibrate_confidence.py`) turns them into a ranking logit, which
+orders the hypotheses (`rank_by="evidence"`: which place of this answer is right), an
+`evidence` logit and a calibrated `confidence`: the probability that the pose is right
+(15 deg / 0.5 m), from the evidence and its gap to the best rival place's evidence.
 
     localized   the best hypothesis has >= `min_pairs` pairs, a fitness of at least
                 `min_fitness`, and a confidence of at least `min_confidence` (chosen for >= 99 %
-                precision on the calibration attempts).  Hypotheses without a confidence (the
+                precision on every kind of calibration attempt).  Hypotheses without a confidence (the
                 baselines') must instead dominate every *rival* in the terms of the ranking
                 (more pairs or a clearly smaller residual; or a score / fitness larger by the
                 factor 1 + margin); a rival has a different pose that shares less than
@@ -53,9 +54,19 @@ MODEL_MODULE = Path(__file__).with_name("confidence_model.py")
 """Where `benchmarks/calibrate_confidence.py --write` puts a refitted model."""
 
 
+GAP_CAP = 4.0
+"""The evidence gap to the best rival place counts up to this many logits."""
+NO_RIVAL = -4.0
+"""The evidence of a missing rival place; a weaker rival counts as this (a lone weak
+hypothesis is not made sure by having no rival)."""
+
+
 class ConfidenceModel(BaseModel):
     """Two logistic models: evidence = b + w . features; confidence = sigmoid(c0 + c1 *
-    evidence + c2 * rival), where rival = sigmoid(evidence of the best other place), 0 if none."""
+    evidence + c2 * rival + c3 * gap), where r = max(evidence of the best other place,
+    `NO_RIVAL`) (`NO_RIVAL` if none), rival = sigmoid(r) and gap = min(evidence - r, `GAP_CAP`).
+    c1, c3 >= 0 and c2 <= 0: more evidence never lowers the confidence, a stronger rival never
+    raises it."""
 
     model_config = ConfigDict(extra="forbid")
 
@@ -64,6 +75,14 @@ class ConfidenceModel(BaseModel):
     confidence_bias: float
     confidence_evidence: float = Field(ge=0)
     confidence_rival: float = Field(le=0)
+    confidence_gap: float = Field(0.0, ge=0)
+    ranking_bias: float | None = None
+    ranking_weights: dict[str, float] | None = Field(
+        None,
+        description="The logit that orders the hypotheses (`rank_by='evidence'`); None: the "
+        "evidence.  Ranking asks which place of one answer is right, the confidence how often "
+        "the best is: fitted apart (`benchmarks/calibrate_confidence.py`).",
+    )
     min_confidence: float = Field(ge=0, le=1, description="Operating point for >= 99 % precision.")
     fitted_by: str = ""
     data: str = ""
@@ -71,12 +90,21 @@ class ConfidenceModel(BaseModel):
     def evidence(self, features: dict[str, float]) -> float:
         return self.evidence_bias + sum(self.evidence_weights[k] * features[k] for k in FEATURES)
 
+    def ranking(self, features: dict[str, float]) -> float:
+        """The logit by which hypotheses are ranked (the evidence when none is fitted)."""
+        if self.ranking_weights is None:
+            return self.evidence(features)
+        bias = self.ranking_bias or 0.0
+        return bias + sum(self.ranking_weights[k] * features[k] for k in FEATURES)
+
     def confidence(self, evidence: float, rival: float | None) -> float:
-        rival_share = 0.0 if rival is None else _sigmoid(rival)
+        rival = NO_RIVAL if rival is None else max(rival, NO_RIVAL)
+        rival_share, gap = _sigmoid(rival), min(evidence - rival, GAP_CAP)
         return _sigmoid(
             self.confidence_bias
             + self.confidence_evidence * evidence
             + self.confidence_rival * rival_share
+            + self.confidence_gap * gap
         )
 
 
@@ -154,6 +182,25 @@ def same_place(
     return rotation < config.distinct_rotation_deg and translation < config.distinct_translation
 
 
+def local_anchor(local_xyz: np.ndarray) -> np.ndarray | None:
+    """Where `same_place` compares translations: the centroid of the local objects (None for
+    no objects)."""
+    local_xyz = np.asarray(local_xyz, dtype=float).reshape(-1, 3)
+    return local_xyz.mean(axis=0) if len(local_xyz) else None
+
+
+def duplicates(
+    hypotheses: Sequence[Hypothesis], config: DecisionConfig, anchor: np.ndarray | None
+) -> int:
+    """How many of `hypotheses` (ranked) have a pose at the same place (`same_place`, by pose
+    alone) as a better-ranked one; the Localizer's answers have none."""
+    posed = [h for h in hypotheses if h.pose is not None]
+    return sum(
+        any(same_place(((), h.pose), ((), other.pose), config, anchor) for other in posed[:i])
+        for i, h in enumerate(posed)
+    )
+
+
 def distinct(
     places: Iterable[Place],
     top_k: int,
@@ -175,10 +222,10 @@ def distinct(
 
 _INF = float("inf")
 RESIDUAL_RANK = 4.0
-"""Logit per metre of centre residual subtracted from the evidence when ranking (not in the
+"""Logit per metre of centre residual subtracted from the ranking logit (not in the
 confidence): repeated objects give near-equal fitness, their centres still tell them apart."""
 RANKINGS: dict[str, Callable[[Hypothesis], tuple | float]] = {
-    "evidence": lambda h: (
+    "evidence": lambda h: (  # the ranking logit when `rank_places` set it, else the evidence
         _INF if h.evidence is None else -round(h.evidence - RESIDUAL_RANK * (h.residual or 0), 6),
         -h.score,
     ),
@@ -206,9 +253,9 @@ def rank_places(
     """Evidence of every hypothesis with features, the order of `rank_by`, same-place
     duplicates merged into the better-ranked one (poses after refinement), ranks 1, 2, ...
     and confidences against the remaining rivals."""
-    for h in hypotheses:
+    for h in hypotheses:  # ranked by the ranking logit; `score_confidence` sets the evidence
         if h.features is not None:
-            h.evidence = model.evidence(h.features)
+            h.evidence = model.ranking(h.features)
     ordered = rank(hypotheses, rank_by)
     places = ((h.pairs, h.pose) for h in ordered)
     kept = [ordered[i] for i in distinct(places, len(ordered), config, anchor)]

@@ -30,7 +30,15 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from semloc.association import AssociationConfig, CandidateIndex, Describer
 from semloc.clustering import AssociationSet, ClusteringConfig, HierarchicalClustering
-from semloc.decision import DecisionConfig, RankBy, decide, distinct, rank_places, shipped_model
+from semloc.decision import (
+    DecisionConfig,
+    RankBy,
+    decide,
+    distinct,
+    local_anchor,
+    rank_places,
+    shipped_model,
+)
 from semloc.maps import MapError, ObjectMap, SemanticObject, unit_vector
 from semloc.pose import PoseConfig, PoseEstimate, cached_cloud, estimate_pose
 from semloc.results import Hypothesis, Result, Status, Step
@@ -270,7 +278,7 @@ class Localizer:
         if by_size:  # pairs include the guided matches
             screened.sort(key=lambda c: (-len(c.pairs), round(c.residual, 9), -c.aset.score))
         places = [(c.pairs, c.pose) for c in screened]
-        anchor = local_xyz.mean(axis=0) if len(local_xyz) else None
+        anchor = local_anchor(local_xyz)
         chosen = [screened[i] for i in distinct(places, cfg.top_k, cfg.decision, anchor)]
         previous, self._poses = self._poses, {}
         hypotheses = [

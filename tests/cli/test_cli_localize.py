@@ -22,7 +22,7 @@ from semloc.transforms import yaw_pose
 def maps(tmp_path_factory):
     folder = tmp_path_factory.mktemp("maps")
     g = layout(60, seed=5)
-    obs = observe(g, 7, seed=8, spurious=0, wrong_label_rate=0.0, bias=(0.0, 0.05))
+    obs = observe(g, 8, seed=8, spurious=0, wrong_label_rate=0.0, bias=(0.0, 0.05))
     semloc.save_map(g, folder / "global.json")
     semloc.save_map(obs.local_map, folder / "local.json")
     return folder, obs
@@ -40,7 +40,7 @@ def test_json_output_follows_the_contract(maps, capsys):
     assert {"rank", "score", "pairs", "pose", "fitness"} <= set(first)
     assert first["rank"] == 1
     assert {(p["global"], p["local"]) for p in first["pairs"]} == set(obs.true_pairs)
-    assert [s["step"] for s in out["steps"]] == list(range(7))
+    assert [s["step"] for s in out["steps"]] == list(range(8))
     assert {"step", "n_local", "n_sets", "top_scores", "ms"} <= set(out["steps"][0])
     assert out["timing_ms"]["total"] > 0
 

@@ -16,9 +16,12 @@ from hypothesis import strategies as st
 import semloc
 from semloc.decision import (
     FEATURES,
+    NO_RIVAL,
     SIGNS,
     DecisionConfig,
     decide,
+    duplicates,
+    local_anchor,
     rank_places,
     shipped_model,
 )
@@ -169,12 +172,27 @@ def test_no_same_place_duplicates_in_the_localizers_top_k():
          for k, i in enumerate(seen)], up=UP,
     )  # fmt: skip
     result = semloc.localize(gmap, local)
+    assert duplicates(result.hypotheses, DecisionConfig(), local_anchor(local.positions)) == 0
     poses = [h.pose for h in result.hypotheses if h.pose is not None]
     for i in range(len(poses)):
         for j in range(i):
             rotation, translation = pose_error(poses[i], poses[j])
             assert rotation >= 10.0 or translation >= 0.3
     assert pose_error(result.pose, truth)[1] < 1e-6
+
+
+def test_duplicates_are_counted_where_the_local_objects_are():
+    # two poses 1 deg apart about the local origin: the same place there, but objects 30 m
+    # away land 0.52 m apart, so where the local objects are they are two places
+    config = DecisionConfig(distinct_translation=0.3)
+    a = Hypothesis(1, 1.0, [("g0", "l0")], yaw_pose(0.0))
+    b = Hypothesis(2, 1.0, [("g1", "l1")], yaw_pose(np.radians(1.0)))
+    near, far = np.zeros(3), np.array([30.0, 0.0, 0.0])
+    assert local_anchor(np.array([[29.0, 0, 0], [31.0, 0, 0]])) == pytest.approx(far)
+    assert local_anchor(np.zeros((0, 3))) is None
+    assert duplicates([a, b], config, near) == 1
+    assert duplicates([a, b], config, far) == 0
+    assert duplicates([a, Hypothesis(2, 1.0, [], None), b], config, near) == 1
 
 
 # 3. better fitness, equal pairs ------------------------------------------------------------
@@ -211,6 +229,27 @@ def test_confidence_is_monotone_in_the_evidence(values, feature, step, rival):
     assert (after - before) * SIGNS[feature] >= -1e-12
     if rival is not None:  # a stronger rival never raises the confidence
         assert model.confidence(model.evidence(features), rival + 1.0) <= before + 1e-12
+
+
+def test_a_lone_weak_hypothesis_is_not_made_sure_by_having_no_rival():
+    model = shipped_model()
+    weak = {"pairs": 3.0, "rejected_share": 0.0, "residual": 0.04, "fitness": 0.42,
+            "support": 0.0, "conflict_share": 0.0}  # fmt: skip
+    evidence = model.evidence(weak)
+    assert model.confidence(evidence, None) < model.min_confidence
+    assert model.confidence(evidence, NO_RIVAL - 5.0) == model.confidence(evidence, None)
+
+
+def test_hypotheses_are_ranked_by_the_ranking_logit_and_scored_by_the_evidence():
+    by_fitness = dict.fromkeys(FEATURES, 0.0) | {"fitness": 10.0}
+    model = shipped_model().model_copy(update={"ranking_bias": 0.0, "ranking_weights": by_fitness})
+    many = _hyp([("g0", "l0"), ("g1", "l1"), ("g2", "l2"), ("g3", "l3"), ("g4", "l4")],
+                yaw_pose(0.0), pairs=5.0, fitness=0.6)  # fmt: skip
+    fitting = _hyp([("g5", "l0"), ("g6", "l1"), ("g7", "l2")], yaw_pose(2.0, [3, 0, 0]),
+                   pairs=3.0, fitness=0.95)  # fmt: skip
+    assert rank_places([many, fitting], "evidence", DecisionConfig(), model)[0] is fitting
+    assert fitting.evidence == pytest.approx(model.evidence(fitting.features))
+    assert rank_places([many, fitting], "evidence", DecisionConfig(), shipped_model())[0] is many
 
 
 def test_evidence_features_are_bounded():

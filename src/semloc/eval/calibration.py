@@ -15,14 +15,30 @@ claimed (>= 3 pairs, fitness >= 0.3) are right at least `precision` of the time.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
-from semloc.decision import FEATURES, SIGNS, ConfidenceModel, DecisionConfig
+from semloc.decision import (
+    FEATURES,
+    GAP_CAP,
+    NO_RIVAL,
+    RESIDUAL_RANK,
+    SIGNS,
+    ConfidenceModel,
+    DecisionConfig,
+)
 from semloc.eval.protocol import BenchConfig, _targets, simulate, start_keyframes
 from semloc.eval.success import is_success
-from semloc.localizer import Localizer
+from semloc.eval.variants import VARIANTS, make_case
+from semloc.localizer import Localizer, localize
+from semloc.results import Result
+from semloc.sim.layouts import layout, observe
+
+LAYOUT_COUNTS = (3, 4, 5, 6, 8)
+LAYOUT_POINTS = 80
+OBSERVED_COUNTS = (3, 4, 5, 6, 8, 10)
 
 
 @dataclass
@@ -56,12 +72,65 @@ def collect(config: BenchConfig, first_answer: int = 0) -> list[Sample]:
                             localizer.update(kf.objects, answer=False)
                         continue
                     result = localizer.update(kf.objects)
-                    for h in result.hypotheses:
-                        if h.features is not None:
-                            right = is_success(h.pose, replay.T_global_local)
-                            samples.append(Sample(answer, kind, h.rank, len(h.pairs),
-                                                  h.fitness or 0.0, h.features, right))  # fmt: skip
+                    samples += samples_of(result, replay.T_global_local, answer, kind)
                     answer += 1
+    return samples
+
+
+def samples_of(result: Result, truth: np.ndarray, answer: int, kind: str) -> list[Sample]:
+    """The hypotheses of one answer that carry features, labelled against `truth`."""
+    return [
+        Sample(
+            answer,
+            kind,
+            h.rank,
+            len(h.pairs),
+            h.fitness or 0.0,
+            h.features,
+            is_success(h.pose, truth),
+        )  # fmt: skip
+        for h in result.hypotheses
+        if h.features is not None
+    ]
+
+
+def collect_layouts(
+    buildings: Sequence[int], views: int, counts: Sequence[int] = LAYOUT_COUNTS,
+    first_answer: int = 0,
+) -> list[Sample]:  # fmt: skip
+    """Views of the simulated buildings `sim.layouts.layout(seed=b)` (with points) in the
+    real-layout variants of `eval.variants` (clean, noisy, dynamic; `counts` objects)."""
+    samples: list[Sample] = []
+    answer = first_answer
+    for b in buildings:
+        full = layout(150, seed=b, points_per_object=LAYOUT_POINTS)
+        for v, variant in enumerate(VARIANTS):
+            for k in counts:
+                rng = np.random.default_rng([7, b, v, k])
+                for _ in range(views):
+                    case = make_case(full, variant, k, rng)
+                    result = localize(case.prior, case.local)
+                    samples += samples_of(result, case.truth, answer, f"layout-{variant}")
+                    answer += 1
+    return samples
+
+
+def collect_observations(
+    buildings: Sequence[int], trials: int, counts: Sequence[int] = OBSERVED_COUNTS,
+    first_answer: int = 0,
+) -> list[Sample]:  # fmt: skip
+    """Centre-only observations of the simulated buildings (`sim.layouts.observe`: biased
+    centres, a spurious detection, wrong labels; rows of identical chairs and desks)."""
+    samples: list[Sample] = []
+    answer = first_answer
+    for b in buildings:
+        full = layout(150, seed=b)
+        for k in counts:
+            for t in range(trials):
+                obs = observe(full, k, seed=10_000 * b + 100 * k + t)
+                result = localize(full, obs.local_map)
+                samples += samples_of(result, obs.T_global_local, answer, "observed")
+                answer += 1
     return samples
 
 
@@ -82,11 +151,57 @@ def logistic(X: np.ndarray, y: np.ndarray, l2: float = 1e-3, iterations: int = 5
     return w
 
 
-def fit(samples: list[Sample], precision: float = 0.995, data: str = "") -> ConfidenceModel:
-    """The confidence model fitted on `samples` (see the module docstring)."""
+def fit(
+    samples: list[Sample],
+    precision: float = 0.995,
+    data: str = "",
+    features: Sequence[str] = FEATURES,
+    ranking: Sequence[str] | None = None,
+) -> ConfidenceModel:
+    """The confidence model fitted on `samples` (see the module docstring); the evidence
+    uses only `features` (the others get weight 0).  With `ranking` (map kinds), the ranking
+    logit is fitted apart on the samples of those kinds."""
     y = np.array([s.right for s in samples], dtype=float)
+    bias, weights = _evidence_weights(samples, y, features)
+    model = ConfidenceModel(
+        evidence_bias=bias, evidence_weights=weights, confidence_bias=0.0,
+        confidence_evidence=1.0, confidence_rival=0.0, min_confidence=0.5,
+    )  # fmt: skip
+    if ranking is not None:
+        mine = [s for s in samples if s.map_kind in ranking]
+        rank_bias, rank_weights = _evidence_weights(
+            mine, np.array([s.right for s in mine], dtype=float), features
+        )
+        model = model.model_copy(update=dict(ranking_bias=rank_bias, ranking_weights=rank_weights))
+    evidence, rival, gap = _evidence_and_rival(samples, model)
+    inputs = {"evidence": evidence, "rival": rival, "gap": gap}
+    signs = {"evidence": 1, "rival": -1, "gap": 1}
+    used = list(inputs)
+    while True:  # each input constrained to its sign, as the evidence weights
+        c = logistic(np.column_stack([inputs[k] for k in used]), y)
+        wrong = [k for k, v in zip(used, c[1:]) if v * signs[k] < 0]
+        if not wrong:
+            break
+        used.remove(wrong[0])
+    fitted = dict.fromkeys(inputs, 0.0) | {k: float(v) for k, v in zip(used, c[1:])}
+    model = model.model_copy(
+        update=dict(
+            confidence_bias=float(c[0]),
+            confidence_evidence=fitted["evidence"],
+            confidence_rival=fitted["rival"],
+            confidence_gap=fitted["gap"],
+        )  # fmt: skip
+    )
+    threshold = operating_point(samples, model, precision)
+    return model.model_copy(update=dict(min_confidence=threshold, data=data))
+
+
+def _evidence_weights(
+    samples: list[Sample], y: np.ndarray, features: Sequence[str]
+) -> tuple[float, dict[str, float]]:
+    """Bias and weights of the evidence logit, each weight constrained to its sign."""
     X = np.array([[s.features[k] for k in FEATURES] for s in samples])
-    used = list(FEATURES)
+    used = [k for k in FEATURES if k in features]
     while True:
         columns = [FEATURES.index(k) for k in used]
         w = logistic(X[:, columns], y)
@@ -94,41 +209,30 @@ def fit(samples: list[Sample], precision: float = 0.995, data: str = "") -> Conf
         if not wrong:
             break
         used.remove(wrong[0])
-    weights = dict.fromkeys(FEATURES, 0.0) | {k: float(v) for k, v in zip(used, w[1:])}
-    model = ConfidenceModel(
-        evidence_bias=float(w[0]), evidence_weights=weights, confidence_bias=0.0,
-        confidence_evidence=1.0, confidence_rival=0.0, min_confidence=0.5,
-    )  # fmt: skip
-    evidence, rival = _evidence_and_rival(samples, model)
-    c = logistic(np.column_stack([evidence, rival]), y)
-    model = model.model_copy(
-        update=dict(
-            confidence_bias=float(c[0]),
-            confidence_evidence=max(float(c[1]), 0.0),
-            confidence_rival=min(float(c[2]), 0.0),
-        )  # fmt: skip
-    )
-    threshold = operating_point(samples, model, precision)
-    return model.model_copy(update=dict(min_confidence=threshold, data=data))
+    return float(w[0]), dict.fromkeys(FEATURES, 0.0) | {k: float(v) for k, v in zip(used, w[1:])}
 
 
 def _evidence_and_rival(samples: list[Sample], model: ConfidenceModel):
+    """Per sample: its evidence, the rival share and the capped evidence gap to the best
+    other place of its answer (as `ConfidenceModel.confidence` computes them)."""
     evidence = np.array([model.evidence(s.features) for s in samples])
     answers = np.array([s.answer for s in samples])
-    rival = np.zeros(len(samples))
+    strongest = np.full(len(samples), NO_RIVAL)
     for a in np.unique(answers):
         rows = np.flatnonzero(answers == a)
         for i in rows:
             others = evidence[rows[rows != i]]
-            rival[i] = 1.0 / (1.0 + np.exp(-others.max())) if len(others) else 0.0
-    return evidence, rival
+            if len(others):
+                strongest[i] = max(others.max(), NO_RIVAL)
+    rival = 1.0 / (1.0 + np.exp(-strongest))
+    return evidence, rival, np.minimum(evidence - strongest, GAP_CAP)
 
 
 def confidences(samples: list[Sample], model: ConfidenceModel) -> np.ndarray:
     """The model's confidence of every sample (rivals: the other places of its answer)."""
-    evidence, rival = _evidence_and_rival(samples, model)
+    evidence, rival, gap = _evidence_and_rival(samples, model)
     logit = model.confidence_bias + model.confidence_evidence * evidence
-    logit += model.confidence_rival * rival
+    logit += model.confidence_rival * rival + model.confidence_gap * gap
     return 1.0 / (1.0 + np.exp(-np.clip(logit, -50, 50)))
 
 
@@ -137,7 +241,7 @@ def best_of_answers(samples: list[Sample], model: ConfidenceModel) -> list[tuple
     conf = confidences(samples, model)
     best: dict[int, tuple[float, Sample, float]] = {}
     for s, c in zip(samples, conf):
-        e = model.evidence(s.features)
+        e = model.ranking(s.features) - RESIDUAL_RANK * s.features["residual"]
         if s.answer not in best or e > best[s.answer][0]:
             best[s.answer] = (e, s, float(c))
     return [(s, c) for _, s, c in best.values()]
@@ -145,7 +249,12 @@ def best_of_answers(samples: list[Sample], model: ConfidenceModel) -> list[tuple
 
 def operating_point(samples: list[Sample], model: ConfidenceModel, precision: float) -> float:
     """The smallest threshold whose claims (best hypotheses, >= min_pairs, >= min_fitness)
-    are right at least `precision` of the time."""
+    are right at least `precision` of the time on every map kind of `samples`."""
+    kinds = sorted({s.map_kind for s in samples})
+    return max(_threshold([s for s in samples if s.map_kind == k], model, precision) for k in kinds)
+
+
+def _threshold(samples: list[Sample], model: ConfidenceModel, precision: float) -> float:
     gate = DecisionConfig(min_confidence=0.5)
     claims = sorted(
         ((c, s.right) for s, c in best_of_answers(samples, model)
@@ -156,7 +265,7 @@ def operating_point(samples: list[Sample], model: ConfidenceModel, precision: fl
     for n, (c, ok) in enumerate(claims, 1):
         right += ok
         if right / n >= precision:
-            threshold = c
+            threshold = c if n < len(claims) else 0.0  # all claims hold: no bound from here
     return float(min(max(threshold, 0.5), 0.999))
 
 

@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from semloc.decision import DecisionConfig, same_place
+from semloc.decision import duplicates, local_anchor
 from semloc.eval.success import is_success
 from semloc.io.geometry import up_basis
 from semloc.io.importers.replica import load_replica
@@ -32,7 +32,6 @@ from semloc.io.importers.rscan import load_rscan
 from semloc.io.importers.scannet import load_scannet
 from semloc.localizer import LocalizerConfig, localize
 from semloc.maps import ObjectMap
-from semloc.results import Result
 from semloc.sim.crop import crop_with_truth, visible_points
 
 VARIANTS = ("clean", "noisy", "dynamic")
@@ -173,17 +172,9 @@ def evaluate(case: Case, layout: str, variant: str, k: int, settings: dict[str, 
     best = result.best
     return Outcome(
         layout, variant, k, result.status, bool(right and right[0]), any(right),
-        duplicates(result, config.decision), None if best is None else best.confidence, ms,
+        duplicates(result.hypotheses[:10], config.decision, local_anchor(case.local.positions)),
+        None if best is None else best.confidence, ms,
     )  # fmt: skip
-
-
-def duplicates(result: Result, config: DecisionConfig) -> int:
-    """Hypotheses in the top-10 whose pose is the same place as a better-ranked one's."""
-    top = [h for h in result.hypotheses[:10] if h.pose is not None]
-    return sum(
-        any(same_place(((), h.pose), ((), other.pose), config) for other in top[:i])
-        for i, h in enumerate(top)
-    )
 
 
 def run_variants(

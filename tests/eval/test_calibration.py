@@ -1,0 +1,55 @@
+"""Fitting the confidence model: the operating point holds on every kind of attempt, the
+ranking logit is fitted apart, and the collectors label hypotheses against the truth."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from semloc.decision import FEATURES, shipped_model
+from semloc.eval.calibration import Sample, collect_observations, fit, operating_point
+
+SURE = {"pairs": 8.0, "rejected_share": 0.0, "residual": 0.05, "fitness": 0.95, "support": 0.0,
+        "conflict_share": 0.0}  # fmt: skip
+WEAK = SURE | {"pairs": 3.0, "fitness": 0.4, "conflict_share": 0.3}
+
+
+def _answers(kind: str, rights: list[bool], features: dict, first: int) -> list[Sample]:
+    return [Sample(first + i, kind, 1, int(features["pairs"]), features["fitness"], features, ok)
+            for i, ok in enumerate(rights)]  # fmt: skip
+
+
+def test_the_operating_point_holds_on_every_kind():
+    model = shipped_model()
+    middle = SURE | {"pairs": 4.0, "fitness": 0.7}
+    conf = {name: model.confidence(model.evidence(f), None)
+            for name, f in (("sure", SURE), ("middle", middle), ("weak", WEAK))}  # fmt: skip
+    assert conf["sure"] > conf["middle"] > conf["weak"]
+    good = _answers("a", [True] * 40, SURE, 0) + _answers("a", [True] * 40, WEAK, 100)
+    mixed = _answers("b", [True] * 40, SURE, 200) + _answers("b", [False] * 2, middle, 300)
+    assert operating_point(good, model, 0.99) == pytest.approx(max(conf["weak"], 0.5))
+    # kind b's wrong claims are at the middle confidence: the threshold must pass them
+    assert operating_point(good + mixed, model, 0.99) > conf["middle"]
+
+
+def test_the_ranking_logit_is_fitted_on_its_kinds_alone():
+    rng = np.random.default_rng(0)
+    samples = []
+    for i in range(300):  # kind "r": fitness decides; kind "o": pairs decide
+        f = {k: float(rng.uniform(0, 1)) for k in FEATURES} | {"pairs": float(rng.integers(2, 9))}
+        samples.append(Sample(i, "r", 1, int(f["pairs"]), f["fitness"], f, f["fitness"] > 0.5))
+        g = dict(f)
+        samples.append(Sample(1000 + i, "o", 1, int(g["pairs"]), g["fitness"], g, g["pairs"] > 5))
+    model = fit(samples, ranking=["r"])
+    assert model.ranking_weights is not None
+    assert model.ranking_weights["fitness"] > 5 * abs(model.ranking_weights["pairs"])
+    assert model.evidence_weights["pairs"] > 0.5
+    assert model.ranking(samples[0].features) != model.evidence(samples[0].features)
+
+
+def test_observations_are_labelled_against_the_truth():
+    samples = collect_observations([30], 1, counts=(8,))
+    assert samples and {s.map_kind for s in samples} == {"observed"}
+    assert len({s.answer for s in samples}) == 1
+    assert any(s.right for s in samples)
+    assert all(set(s.features) == set(FEATURES) for s in samples)
