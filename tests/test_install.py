@@ -50,7 +50,7 @@ def test_core_install_is_light_and_localizes(tmp_path):
 
     make_maps = (
         "import semloc; from semloc.sim.layouts import layout, observe; "
-        "g = layout(40, seed=1); o = observe(g, 6, seed=2, spurious=0, wrong_label_rate=0.0); "
+        "g = layout(40, seed=1); o = observe(g, 10, seed=2, spurious=0, wrong_label_rate=0.0); "
         "semloc.save_map(g, 'g.json'); semloc.save_map(o.local_map, 'l.json'); "
         "import json; json.dump({'T_global_local': o.T_global_local.tolist()}, open('gt.json', 'w'))"
     )
