@@ -958,23 +958,33 @@ def _compatible_among(
             if cand_l[x] == cand_l[y] or cand_g[x] == cand_g[y]:
                 continue
             gx, gy = cand_g[x], cand_g[y]
-            d_global = np.sqrt(
-                (global_xyz[gx, 0] - global_xyz[gy, 0]) ** 2
-                + (global_xyz[gx, 1] - global_xyz[gy, 1]) ** 2
-                + (global_xyz[gx, 2] - global_xyz[gy, 2]) ** 2
-            )
+            d_global = _distance(global_xyz, gx, gy)
             d_local = local_distance[cand_l[x], cand_l[y]]
             if not _gate(d_global, d_local, tolerance, gamma, min_distance):
                 continue
-            if n == capacity:
-                capacity *= 2
-                grown = np.empty((2, capacity), dtype=np.int64)
-                grown[:, :n] = out[:, :n]
-                out = grown
+            out = _room(out, n)
             out[0, n] = x
             out[1, n] = y
             n += 1
     return out[:, :n]
+
+
+@njit(cache=True)
+def _distance(xyz, i, j):
+    """Euclidean distance of rows i and j of xyz."""
+    return np.sqrt(
+        (xyz[i, 0] - xyz[j, 0]) ** 2 + (xyz[i, 1] - xyz[j, 1]) ** 2 + (xyz[i, 2] - xyz[j, 2]) ** 2
+    )
+
+
+@njit(cache=True)
+def _room(out, n):
+    """`out` (2, capacity) with room for entry n: doubled when full."""
+    if n < out.shape[1]:
+        return out
+    grown = np.empty((2, 2 * out.shape[1]), dtype=np.int64)
+    grown[:, :n] = out[:, :n]
+    return grown
 
 
 @njit(cache=True)
@@ -1044,18 +1054,10 @@ def _compatible_sweep(
                 gy = cand_g[y]
                 if gx == gy:
                     continue
-                d_global = np.sqrt(
-                    (global_xyz[gx, 0] - global_xyz[gy, 0]) ** 2
-                    + (global_xyz[gx, 1] - global_xyz[gy, 1]) ** 2
-                    + (global_xyz[gx, 2] - global_xyz[gy, 2]) ** 2
-                )
+                d_global = _distance(global_xyz, gx, gy)
                 if not _gate(d_global, local_distance[la, lb], tolerance, gamma, min_distance):
                     continue
-                if n == capacity:
-                    capacity *= 2
-                    grown = np.empty((2, capacity), dtype=np.int64)
-                    grown[:, :n] = out[:, :n]
-                    out = grown
+                out = _room(out, n)
                 out[0, n] = x
                 out[1, n] = y
                 n += 1
