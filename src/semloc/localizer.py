@@ -297,8 +297,8 @@ class Localizer:
         found = consensus_many([(local_xyz[p[:, 1]], global_xyz[p[:, 0]]) for p in pairs], *up)
         verified, regrown = [], []
         for aset, p, f in zip(sets, pairs, found):
-            inliers = [(int(g), int(l)) for g, l in p[f.inliers]]
-            rejected = [(int(g), int(l)) for g, l in p[~f.inliers]]
+            inliers = _pair_list(p[f.inliers])
+            rejected = _pair_list(p[~f.inliers])
             if f.pose is None:
                 verified.append(_Verified(aset, inliers, rejected, None, f.residual, 0, 0))
                 continue
@@ -312,10 +312,10 @@ class Localizer:
             if a.pose is None:
                 continue
             kept = set(inliers)
-            grown = [(int(g), int(l)) for g, l in b[a.inliers]]
+            grown = _pair_list(b[a.inliers])
             verified[i] = _Verified(
                 verified[i].aset, grown,
-                verified[i].rejected + [(int(g), int(l)) for g, l in b[~a.inliers]],
+                verified[i].rejected + _pair_list(b[~a.inliers]),
                 a.pose, a.residual, sum(p not in kept for p in grown), verified[i].conflicts,
             )  # fmt: skip
         return verified
@@ -402,6 +402,11 @@ class _Verified:
 
 
 _PoseKey = tuple[bool, frozenset[tuple[int, int]]]  # (refined, pairs)
+
+
+def _pair_list(pairs: np.ndarray) -> list[tuple[int, int]]:
+    """Rows of (global index, local index) as a list of int pairs."""
+    return [(int(g), int(l)) for g, l in pairs]
 
 
 def _warm_start(pairs: frozenset, previous: dict[_PoseKey, PoseEstimate | None]):
