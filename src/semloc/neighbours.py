@@ -5,14 +5,15 @@ Pose recovery asks, many times per localization, for the k nearest points of a p
 within a radius (ICP correspondences, fitness, the rotation search).  The search must run
 inside the compiled ICP loop, so the tree is plain arrays that numba functions read:
 
-- `KdTree(points)` stores the points in tree order (`points`), the split axis of each node
-  (`axes`) and where each tree-ordered point came from (`order`).  The tree is implicit: the
+- `KdTree.build(points)` stores the points in tree order (`points`), the split axis of each
+  node (`axes`) and where each tree-ordered point came from (`order`).  The tree is implicit: the
   node of a range [lo, hi) splits at its median `mid = (lo + hi) // 2` on `axes[mid]`; ranges of
   at most `LEAF` points are scanned.  Built once per object cloud.
 - `knn_within(...)` (compiled) writes the k nearest points closer than a bound, sorted by
   distance; a query farther than the bound from every point costs a few node visits.
 - `Forest.of(trees)` concatenates the trees of several objects so that one compiled call
-  searches each query in its own object's tree (`Forest.nearest`).
+  searches each query in its own object's tree (`Forest.nearest`); answers are rows of the
+  concatenated tree-ordered points.
 - `neighbourhood_shapes(tree, k)`: per point, the unit normal of its k-neighbourhood (the
   smallest-eigenvalue direction of the covariance, in closed form) and its surface variation.
 
@@ -73,7 +74,8 @@ def _build(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 @dataclass(frozen=True)
 class KdTree:
-    """A static KD-tree over (n, 3) points: tree-ordered copy, split axes, original indices."""
+    """A static KD-tree over (n, 3) points: the points in tree order, the split axes, and for
+    each tree row the index of its point in the array the tree was built from."""
 
     points: np.ndarray
     axes: np.ndarray
@@ -83,7 +85,7 @@ class KdTree:
     def build(cls, points: np.ndarray) -> KdTree:
         points = np.ascontiguousarray(points, dtype=np.float64)
         order, axes = _build(points)
-        return cls(np.ascontiguousarray(points[order]), axes, order)
+        return cls(np.ascontiguousarray(points[order]), axes, order.astype(np.int32))
 
     def __len__(self) -> int:
         return len(self.points)
@@ -157,8 +159,8 @@ def scratch() -> tuple[np.ndarray, np.ndarray]:
 
 
 @numba.njit(cache=True)
-def _nearest_rows(points, axes, order, starts, tree_of_row, queries, k: int, bound: float):
-    """`Forest.nearest` in compiled code: indices (original rows) and distances, -1 / inf
+def _nearest_rows(points, axes, starts, tree_of_row, queries, k: int, bound: float):
+    """`Forest.nearest` in compiled code: forest rows and distances, -1 / inf
     where fewer than k points are within `bound`."""
     n = len(queries)
     idx = np.full((n, k), -1, dtype=np.int64)
@@ -174,45 +176,37 @@ def _nearest_rows(points, axes, order, starts, tree_of_row, queries, k: int, bou
             points, axes, lo, hi, queries[r], k, bound2, best_d2, best_j, stack, gaps
         )
         for i in range(found):
-            idx[r, i] = order[best_j[i]]
+            idx[r, i] = best_j[i]
             dist[r, i] = np.sqrt(best_d2[i])
     return idx, dist
 
 
 @dataclass(frozen=True)
 class Forest:
-    """Several KD-trees in one set of arrays: tree i occupies rows [starts[i], starts[i+1]),
-    and `order` maps a row to the index of its point in the concatenation of the trees'
-    original point arrays (tree i's points offset by the sizes of the trees before it)."""
+    """Several KD-trees in one set of arrays: tree i occupies rows [starts[i], starts[i+1])
+    of the concatenated tree-ordered points."""
 
     points: np.ndarray
     axes: np.ndarray
-    order: np.ndarray
     starts: np.ndarray
 
     @classmethod
     def of(cls, trees: Sequence[KdTree]) -> Forest:
         starts = np.cumsum([0] + [len(t) for t in trees]).astype(np.int64)
         if not trees:
-            return cls(np.zeros((0, 3)), np.zeros(0, np.int8), np.zeros(0, np.int64), starts)
-        return cls(
-            np.concatenate([t.points for t in trees]),
-            np.concatenate([t.axes for t in trees]),
-            np.concatenate([t.order + s for t, s in zip(trees, starts[:-1])]),
-            starts,
-        )
+            return cls(np.zeros((0, 3)), np.zeros(0, np.int8), starts)
+        points = np.concatenate([t.points for t in trees])
+        return cls(points, np.concatenate([t.axes for t in trees]), starts)
 
     def nearest(
         self, queries: np.ndarray, tree_of_row: np.ndarray, k: int, bound: float
     ) -> tuple[np.ndarray, np.ndarray]:
         """Per query row, its k nearest points closer than `bound` in tree `tree_of_row[r]`:
-        indices into the concatenated original points (n, k) and distances (n, k), ascending;
+        rows of the forest's points (n, k) and distances (n, k), ascending;
         index -1 and distance inf where there are fewer."""
         queries = np.ascontiguousarray(queries, dtype=np.float64).reshape(-1, 3)
         rows = np.ascontiguousarray(tree_of_row, dtype=np.int64)
-        return _nearest_rows(
-            self.points, self.axes, self.order, self.starts, rows, queries, k, float(bound)
-        )
+        return _nearest_rows(self.points, self.axes, self.starts, rows, queries, k, float(bound))
 
 
 @numba.njit(cache=True)
@@ -248,7 +242,7 @@ def _smallest_eigenvector(C: np.ndarray, out: np.ndarray) -> float:
 
 
 @numba.njit(cache=True)
-def _shapes(points, axes, order, k):
+def _shapes(points, axes, k):
     n = len(points)
     normals = np.empty((n, 3))
     variation = np.empty(n)
@@ -270,14 +264,13 @@ def _shapes(points, axes, order, k):
                 for b in range(3):
                     C[a, b] += d[a] * d[b]
         trace = C[0, 0] + C[1, 1] + C[2, 2]
-        row = order[r]
-        smallest = _smallest_eigenvector(C, normals[row])
-        variation[row] = smallest / trace if trace > 0 else 1.0
+        smallest = _smallest_eigenvector(C, normals[r])
+        variation[r] = smallest / trace if trace > 0 else 1.0
     return normals, variation
 
 
 def neighbourhood_shapes(tree: KdTree, k: int) -> tuple[np.ndarray, np.ndarray]:
-    """Per point of the tree (in its original order): the unit normal of its k nearest points
+    """Per point of the tree (in tree order): the unit normal of its k nearest points
     (itself included; unoriented) and their surface variation, smallest eigenvalue / trace of
     their covariance (0 on a plane, 1/3 when isotropic; 1 for a single repeated point)."""
-    return _shapes(tree.points, tree.axes, tree.order, min(k, len(tree)))
+    return _shapes(tree.points, tree.axes, min(k, len(tree)))

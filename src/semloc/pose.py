@@ -340,17 +340,20 @@ def _align(src, dst, w, up_local, up_global) -> tuple[np.ndarray, np.ndarray]:
 class ObjectCloud:
     """One object's points prepared for pose recovery: downsampled to at most `icp_max_points`
     voxel means, with unoriented unit normals, how flat each neighbourhood is (the weight of
-    the point-to-plane error there), its bounding box and a KD-tree."""
+    the point-to-plane error there), its bounding box and a KD-tree.  The arrays are in the
+    tree's order (`tree.points` is `points`, not a copy); `input_rows[i]` is the row of the
+    i-th downsampled point, so that a thinned view keeps the points' spatial spread."""
 
     points: np.ndarray
     normals: np.ndarray
     flatness: np.ndarray  # (n,) in [0, 1]: 1 where the neighbourhood is a plane, 0 if not flat
     box: np.ndarray  # (2, 3): lower and upper corner
     tree: KdTree
+    input_rows: np.ndarray  # (n,) int32
 
     def nearest(self, query: np.ndarray, k: int, bound: float) -> tuple[np.ndarray, np.ndarray]:
-        """Indices (n, k) and distances (n, k), ascending, of the k nearest cloud points of
-        each query closer than `bound`; index -1 and distance inf where there are fewer."""
+        """Rows of `points` (n, k) and distances (n, k), ascending, of the k nearest cloud points
+        of each query closer than `bound`; row -1 and distance inf where there are fewer."""
         query = np.asarray(query, dtype=float).reshape(-1, 3)
         return Forest.of([self.tree]).nearest(query, np.zeros(len(query), np.int64), k, bound)
 
@@ -366,12 +369,13 @@ def prepare_cloud(points: object, config: PoseConfig | None = None) -> ObjectClo
     if len(points) > cfg.icp_max_points:
         keep = np.random.default_rng(cfg.seed).choice(len(points), cfg.icp_max_points, False)
         points = points[np.sort(keep)]
-    points = np.ascontiguousarray(points)
     tree = KdTree.build(points)
     box = np.stack([points.min(axis=0), points.max(axis=0)])
     normals, variation = neighbourhood_shapes(tree, _NORMAL_NEIGHBOURS)
     flatness = np.clip(1.0 - variation / _FLAT_VARIATION, 0.0, 1.0)
-    return ObjectCloud(points, normals, flatness, box, tree)
+    input_rows = np.empty(len(tree), dtype=np.int32)
+    input_rows[tree.order] = np.arange(len(tree), dtype=np.int32)
+    return ObjectCloud(tree.points, normals, flatness, box, tree, input_rows)
 
 
 _CLOUDS: weakref.WeakKeyDictionary[Any, dict[tuple, ObjectCloud | None]] = (
@@ -444,7 +448,7 @@ class _Pairs:
         return view
 
     def _select(self, limit: int | None) -> None:
-        rows = [np.arange(len(p.points)) for p, _ in self.pairs]
+        rows = [p.input_rows for p, _ in self.pairs]
         total = sum(len(r) for r in rows)
         if limit is not None and total > limit:
             rows = [r[np.unique((np.arange(len(r) * limit / total) * total / limit).astype(int))]

@@ -70,11 +70,11 @@ def _rodrigues(v: np.ndarray) -> np.ndarray:
 
 
 @numba.njit(cache=True, inline="always")
-def _first_compatible(best_j, found, start, pn, f_order, t_normals, t_flatness, cos_max) -> int:
+def _first_compatible(best_j, found, start, pn, t_normals, t_flatness, cos_max) -> int:
     """The first of the found neighbours (from `start`) whose normal is within the angle of
     `pn` (unoriented; any normal of a non-flat point is); -1 if none."""
     for i in range(start, found):
-        j = f_order[best_j[i]]
+        j = best_j[i]
         if cos_max <= 0 or t_flatness[j] < 0.5:
             return i
         if (
@@ -86,7 +86,7 @@ def _first_compatible(best_j, found, start, pn, f_order, t_normals, t_flatness, 
 
 
 @numba.njit(cache=True)
-def _correspondences(src, src_normals, tree_of_row, R, t, f_points, f_axes, f_order, f_starts,
+def _correspondences(src, src_normals, tree_of_row, R, t, f_points, f_axes, f_starts,
                      t_points, t_normals, t_flatness, kernel, cos_max, k, m, q, n, w) -> int:  # fmt: skip
     """For each local point moved by (R, t): the nearest of its k nearest partner points within
     `kernel` whose normal is compatible (any normal of a non-flat point is).  Writes the moved
@@ -109,15 +109,15 @@ def _correspondences(src, src_normals, tree_of_row, R, t, f_points, f_axes, f_or
         found = knn_within(
             f_points, f_axes, lo, hi, p, first, kernel2, best_d2, best_j, stack, gaps
         )
-        i = _first_compatible(best_j, found, 0, pn, f_order, t_normals, t_flatness, cos_max)
+        i = _first_compatible(best_j, found, 0, pn, t_normals, t_flatness, cos_max)
         if i < 0 and found == first < k:
             found = knn_within(
                 f_points, f_axes, lo, hi, p, k, kernel2, best_d2, best_j, stack, gaps
             )
-            i = _first_compatible(best_j, found, first, pn, f_order, t_normals, t_flatness, cos_max)
+            i = _first_compatible(best_j, found, first, pn, t_normals, t_flatness, cos_max)
         if i < 0:
             continue
-        j = f_order[best_j[i]]
+        j = best_j[i]
         m[count] = p
         q[count] = t_points[j]
         n[count] = t_normals[j] * np.sqrt(t_flatness[j])
@@ -171,7 +171,7 @@ def _gauss_newton_step(m, q, n, w, count, axis, has_axis, point_to_point):
 
 @numba.njit(cache=True)
 def _icp(R, t, full_src, full_normals, full_trees, coarse_src, coarse_normals, coarse_trees,
-         f_points, f_axes, f_order, f_starts, t_points, t_normals, t_flatness, axis, has_axis,
+         f_points, f_axes, f_starts, t_points, t_normals, t_flatness, axis, has_axis,
          iterations, kernel_start, kernel_final, cos_max, k_coarse, k_final, converged,
          point_to_point):  # fmt: skip
     kernel = max(kernel_start, kernel_final)
@@ -182,7 +182,7 @@ def _icp(R, t, full_src, full_normals, full_trees, coarse_src, coarse_normals, c
         final = kernel <= kernel_final
         src, normals, trees = (full_src, full_normals, full_trees) if final else (coarse_src, coarse_normals, coarse_trees)  # fmt: skip
         k = k_final if final else k_coarse
-        count = _correspondences(src, normals, trees, R, t, f_points, f_axes, f_order, f_starts,
+        count = _correspondences(src, normals, trees, R, t, f_points, f_axes, f_starts,
                                  t_points, t_normals, t_flatness, kernel, cos_max, k, m, q, n, w)  # fmt: skip
         if count < (2 if has_axis else 3):
             break
@@ -210,7 +210,7 @@ def icp(T: np.ndarray, full: tuple, coarse: tuple, targets: Targets, axis: np.nd
     f = targets.forest
     R, t = _icp(
         np.ascontiguousarray(T[:3, :3]), np.ascontiguousarray(T[:3, 3]), *full, *coarse,
-        f.points, f.axes, f.order, f.starts, targets.points, targets.normals, targets.flatness,
+        f.points, f.axes, f.starts, targets.points, targets.normals, targets.flatness,
         np.zeros(3) if axis is None else np.ascontiguousarray(axis, dtype=float),
         axis is not None, *settings,
     )  # fmt: skip

@@ -25,7 +25,8 @@ def test_forest_search_equals_brute_force_in_each_tree(seed, n, k, bound) -> Non
     rng = np.random.default_rng(seed)
     clouds = [rng.normal(size=(int(m), 3)) * rng.uniform(0.1, 2) + rng.normal(0, 5, 3)
               for m in rng.integers(1, n + 1, size=3)]  # fmt: skip
-    forest = Forest.of([KdTree.build(c) for c in clouds])
+    trees = [KdTree.build(c) for c in clouds]
+    forest = Forest.of(trees)
     offsets = np.cumsum([0] + [len(c) for c in clouds])
     for tree, cloud in enumerate(clouds):
         query = cloud[rng.integers(len(cloud), size=25)] + rng.normal(0, 0.5, (25, 3))
@@ -35,7 +36,7 @@ def test_forest_search_equals_brute_force_in_each_tree(seed, n, k, bound) -> Non
         np.testing.assert_allclose(dist[:, :kk], ref_dist, rtol=1e-12, atol=1e-12)
         found = ref_idx >= 0
         # equal distances may come in either order: compare the distances of the points found
-        got = np.where(found, idx[:, :kk] - offsets[tree], 0)
+        got = trees[tree].order[np.where(found, idx[:, :kk] - offsets[tree], 0)]
         np.testing.assert_allclose(
             np.where(found, np.linalg.norm(cloud[got] - query[:, None], axis=2), np.inf), ref_dist
         )
@@ -44,10 +45,12 @@ def test_forest_search_equals_brute_force_in_each_tree(seed, n, k, bound) -> Non
 
 def test_far_queries_find_nothing_and_duplicates_are_kept() -> None:
     points = np.array([[0.0, 0.0, 0.0]] * 5 + [[1.0, 0.0, 0.0]] * 20)
-    forest = Forest.of([KdTree.build(points)])
-    idx, dist = forest.nearest(np.array([[0.1, 0, 0], [50.0, 0, 0]]), np.zeros(2), 6, 0.5)
+    tree = KdTree.build(points)
+    idx, dist = Forest.of([tree]).nearest(
+        np.array([[0.1, 0, 0], [50.0, 0, 0]]), np.zeros(2), 6, 0.5
+    )
     np.testing.assert_allclose(dist[0, :5], 0.1)
-    assert sorted(idx[0, :5]) == [0, 1, 2, 3, 4] and idx[0, 5] == -1
+    assert sorted(tree.order[idx[0, :5]]) == [0, 1, 2, 3, 4] and idx[0, 5] == -1
     assert np.all(idx[1] == -1) and np.all(np.isinf(dist[1]))
 
 
@@ -58,6 +61,8 @@ def test_neighbourhood_shapes_match_an_eigendecomposition(seed, n) -> None:
     points = rng.normal(size=(n, 3)) * [1.0, 0.7, 0.05]  # a noisy slab: well-defined normals
     tree = KdTree.build(points)
     normals, variation = neighbourhood_shapes(tree, 8)
+    np.testing.assert_array_equal(tree.points, points[tree.order])
+    points = tree.points  # the shapes come in tree order
     idx = np.argsort(np.linalg.norm(points[None] - points[:, None], axis=2), axis=1)[:, :8]
     nb = points[idx] - points[idx].mean(axis=1, keepdims=True)
     values, vectors = np.linalg.eigh(np.swapaxes(nb, 1, 2) @ nb)
