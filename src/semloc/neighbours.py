@@ -210,21 +210,27 @@ class Forest:
 
 
 @numba.njit(cache=True)
-def _smallest_eigenvector(C: np.ndarray, out: np.ndarray) -> float:
+def _smallest_eigenvector(C: np.ndarray, M: np.ndarray, out: np.ndarray) -> float:
     """Unit eigenvector (into `out`) and value of the smallest eigenvalue of a symmetric 3x3
     matrix: trigonometric eigenvalues, then the widest cross product of two rows of
-    C - lambda I.  Isotropic or line-like neighbourhoods get (0, 0, 1)."""
+    C - lambda I (written into the scratch `M`).  Isotropic or line-like neighbourhoods get
+    (0, 0, 1)."""
     q = (C[0, 0] + C[1, 1] + C[2, 2]) / 3
     off = C[0, 1] ** 2 + C[0, 2] ** 2 + C[1, 2] ** 2
     diag = (C[0, 0] - q) ** 2 + (C[1, 1] - q) ** 2 + (C[2, 2] - q) ** 2
     p = np.sqrt((diag + 2 * off) / 6)
-    B = (C - q * np.eye(3)) / (p if p > 0 else 1.0)
-    det = (B[0, 0] * (B[1, 1] * B[2, 2] - B[1, 2] * B[2, 1])
-           - B[0, 1] * (B[1, 0] * B[2, 2] - B[1, 2] * B[2, 0])
-           + B[0, 2] * (B[1, 0] * B[2, 1] - B[1, 1] * B[2, 0]))  # fmt: skip
+    scale = p if p > 0 else 1.0
+    for a in range(3):
+        for b in range(3):
+            M[a, b] = (C[a, b] - (q if a == b else 0.0)) / scale  # B = (C - q I) / p
+    det = (M[0, 0] * (M[1, 1] * M[2, 2] - M[1, 2] * M[2, 1])
+           - M[0, 1] * (M[1, 0] * M[2, 2] - M[1, 2] * M[2, 0])
+           + M[0, 2] * (M[1, 0] * M[2, 1] - M[1, 1] * M[2, 0]))  # fmt: skip
     phi = np.arccos(min(max(det / 2, -1.0), 1.0)) / 3
     smallest = q + 2 * p * np.cos(phi + 2 * np.pi / 3)
-    M = C - smallest * np.eye(3)
+    for a in range(3):
+        for b in range(3):
+            M[a, b] = C[a, b] - (smallest if a == b else 0.0)
     best, size = -1, 0.0
     for a, b in ((0, 1), (0, 2), (1, 2)):
         x = M[a, 1] * M[b, 2] - M[a, 2] * M[b, 1]
@@ -237,7 +243,7 @@ def _smallest_eigenvector(C: np.ndarray, out: np.ndarray) -> float:
     if best < 0 or size <= 1e-12 * max(q, 1e-300) ** 2:
         out[0], out[1], out[2] = 0.0, 0.0, 1.0
     else:
-        out /= size
+        out[0], out[1], out[2] = out[0] / size, out[1] / size, out[2] / size
     return max(smallest, 0.0)
 
 
@@ -249,22 +255,24 @@ def _shapes(points, axes, k):
     best_d2 = np.empty(k)
     best_j = np.empty(k, dtype=np.int64)
     stack, gaps = scratch()
-    C = np.empty((3, 3))
+    C, M = np.empty((3, 3)), np.empty((3, 3))
     mean = np.empty(3)
     for r in range(n):
         found = knn_within(points, axes, 0, n, points[r], k, np.inf, best_d2, best_j, stack, gaps)
-        mean[:] = 0.0
-        for i in range(found):
-            mean += points[best_j[i]]
-        mean /= found
-        C[:, :] = 0.0
-        for i in range(found):
-            d = points[best_j[i]] - mean
-            for a in range(3):
-                for b in range(3):
-                    C[a, b] += d[a] * d[b]
+        for c in range(3):
+            total = 0.0
+            for i in range(found):
+                total += points[best_j[i], c]
+            mean[c] = total / found
+        for a in range(3):
+            for b in range(a, 3):
+                total = 0.0
+                for i in range(found):
+                    j = best_j[i]
+                    total += (points[j, a] - mean[a]) * (points[j, b] - mean[b])
+                C[a, b] = C[b, a] = total
         trace = C[0, 0] + C[1, 1] + C[2, 2]
-        smallest = _smallest_eigenvector(C, normals[r])
+        smallest = _smallest_eigenvector(C, M, normals[r])
         variation[r] = smallest / trace if trace > 0 else 1.0
     return normals, variation
 
