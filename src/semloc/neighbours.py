@@ -102,6 +102,20 @@ def _insert(d2: float, j: int, found: int, k: int, best_d2, best_j) -> int:
     return min(found + 1, k)
 
 
+@numba.njit(cache=True, inline="always")
+def _offer(points, j: int, query, found: int, worst: float, k: int, bound2: float, best_d2, best_j):
+    """Offer tree row j to the best lists; returns the new count and pruning distance."""
+    d2 = 0.0
+    for c in range(3):
+        diff = query[c] - points[j, c]
+        d2 += diff * diff
+    if d2 < worst:
+        found = _insert(d2, j, found, k, best_d2, best_j)
+        if found == k:
+            worst = min(bound2, best_d2[k - 1])
+    return found, worst
+
+
 @numba.njit(cache=True)
 def knn_within(
     points, axes, lo0: int, hi0: int, query, k: int, bound2: float, best_d2, best_j, stack, gaps
@@ -121,24 +135,10 @@ def knn_within(
         lo, hi, gap = stack[top, 0], stack[top, 1], gaps[top]
         if hi - lo <= LEAF:
             for j in range(lo, hi):
-                d2 = 0.0
-                for c in range(3):
-                    diff = query[c] - points[j, c]
-                    d2 += diff * diff
-                if d2 < worst:
-                    found = _insert(d2, j, found, k, best_d2, best_j)
-                    if found == k:
-                        worst = min(bound2, best_d2[k - 1])
+                found, worst = _offer(points, j, query, found, worst, k, bound2, best_d2, best_j)
             continue
         mid = (lo + hi) // 2
-        d2 = 0.0
-        for c in range(3):
-            diff = query[c] - points[mid, c]
-            d2 += diff * diff
-        if d2 < worst:
-            found = _insert(d2, mid, found, k, best_d2, best_j)
-            if found == k:
-                worst = min(bound2, best_d2[k - 1])
+        found, worst = _offer(points, mid, query, found, worst, k, bound2, best_d2, best_j)
         axis = axes[mid]
         side = query[axis] - points[mid, axis]
         far_gap = max(gap, side * side)
