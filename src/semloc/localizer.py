@@ -208,7 +208,7 @@ class Localizer:
                 reason = self._why_no_sets()
             scores = [h.score for h in hypotheses]
         else:
-            scores = [s.score for s in self._clustering.top(self.config.top_k, min_size=2)]
+            scores = self._clustering.top_scores(self.config.top_k, min_size=2)
         end = time.perf_counter()
         self._add_timing(tick - start, tock - tick, end - tock)
         self._steps.append(
