@@ -47,7 +47,7 @@ from semloc.verification import (
     Evidence,
     MapSupport,
     VerificationConfig,
-    consensus_many,
+    consensus_indexed,
 )
 
 _COMPONENTS: dict[str, type[BaseModel]] = {
@@ -294,7 +294,7 @@ class Localizer:
         up = (self.local_up, self.global_map.up, self.config.verification)
         global_xyz = self.global_map.positions
         pairs = [np.array(s.pairs).reshape(-1, 2) for s in sets]  # global index, local index
-        found = consensus_many([(local_xyz[p[:, 1]], global_xyz[p[:, 0]]) for p in pairs], *up)
+        found = consensus_indexed(pairs, local_xyz, global_xyz, *up)
         inliers = [_pair_list(p[f.inliers]) for p, f in zip(pairs, found)]
         posed = [i for i, f in enumerate(found) if f.pose is not None]
         poses = np.array([found[i].pose for i in posed]).reshape(-1, 4, 4)
@@ -312,7 +312,7 @@ class Localizer:
             if added:
                 regrown.append((len(verified) - 1, inliers[i]))
         both = [np.array(verified[i].pairs) for i, _ in regrown]
-        again = consensus_many([(local_xyz[b[:, 1]], global_xyz[b[:, 0]]) for b in both], *up)
+        again = consensus_indexed(both, local_xyz, global_xyz, *up)
         for (i, inliers), b, a in zip(regrown, both, again):
             if a.pose is None:
                 continue

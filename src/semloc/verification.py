@@ -95,10 +95,39 @@ def consensus_many(
     inliers.  Each set's samples are drawn as `consensus` draws them (same seed)."""
     if not problems:
         return []
+    return _consensus_padded(*_padded(problems), up_local, up_global, config, seed)
+
+
+def consensus_indexed(
+    pairs: list[np.ndarray],
+    local_xyz: np.ndarray,
+    global_xyz: np.ndarray,
+    up_local: np.ndarray | None,
+    up_global: np.ndarray | None,
+    config: VerificationConfig,
+    seed: int = 0,
+) -> list[Consensus]:
+    """`consensus_many` of sets given as (global index, local index) rows into the two
+    position arrays (padded in one gather instead of one copy per set)."""
+    if not pairs:
+        return []
+    sizes = np.array([len(p) for p in pairs])
+    rows = np.concatenate(pairs).reshape(-1, 2)
+    owner = np.repeat(np.arange(len(pairs)), sizes)
+    slot = np.arange(len(rows)) - np.repeat(np.cumsum(sizes) - sizes, sizes)
+    src, dst = np.zeros((2, len(pairs), max(sizes.max(), 1), 3))
+    valid = np.zeros(src.shape[:2], dtype=bool)
+    src[owner, slot] = np.asarray(local_xyz, float)[rows[:, 1]]
+    dst[owner, slot] = np.asarray(global_xyz, float)[rows[:, 0]]
+    valid[owner, slot] = True
+    return _consensus_padded(src, dst, valid, up_local, up_global, config, seed)
+
+
+def _consensus_padded(src, dst, valid, up_local, up_global, config, seed) -> list[Consensus]:
+    """`consensus_many` of padded (P, M, 3) positions with their `valid` rows."""
     minimal = 2 if up_local is not None and up_global is not None else 3
-    src, dst, valid = _padded(problems)
     sizes = valid.sum(axis=1)
-    out: list[Consensus | None] = [None] * len(problems)
+    out: list[Consensus | None] = [None] * len(src)
     small = np.flatnonzero(sizes <= minimal)
     if len(small):
         poses, ok = align_positions_batch(
