@@ -327,14 +327,20 @@ class HierarchicalClustering:
         start = len(self._cand_g)
         for local, globals_ in detections.items():
             allowed = np.unique(np.asarray(globals_, dtype=np.int64))
-            known_g, known_c = self._by_local.get(local, (allowed[:0], allowed[:0]))
+            ids_from = start + sum(len(x) for x in new_g)
+            new_l.append(np.full(len(allowed), local, dtype=np.int64))
+            if local not in self._by_local:  # a new object: all its candidates are new
+                new_g.append(allowed)
+                self._by_local[local] = (allowed, ids_from + np.arange(len(allowed)))
+                continue
+            known_g, known_c = self._by_local[local]
             kept = np.isin(known_g, allowed)
             stale.append(known_c[~kept])
             revived.append(known_c[kept])
             fresh = allowed[~np.isin(allowed, known_g)]
-            ids = start + sum(len(x) for x in new_g) + np.arange(len(fresh))
+            new_l[-1] = new_l[-1][: len(fresh)]
+            ids = ids_from + np.arange(len(fresh))
             new_g.append(fresh)
-            new_l.append(np.full(len(fresh), local, dtype=np.int64))
             globals_all = np.concatenate([known_g, fresh])
             order = np.argsort(globals_all, kind="stable")
             self._by_local[local] = (globals_all[order], np.concatenate([known_c, ids])[order])
