@@ -72,7 +72,6 @@ import hashlib
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.sparse as sp
 from numba import njit
 from pydantic import BaseModel, ConfigDict, Field
 
@@ -218,13 +217,13 @@ class HierarchicalClustering:
         self._hashed = np.zeros(0, dtype=bool)
         self._by_local: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # sorted globals, cands
         self._local_positions = np.zeros((0, 3))
+        self._local_distances = np.zeros((0, 0))
         self._local_ids: list[str] = []
         # compatibility among live candidates: edges known between all of `_covered`
         self._covered = np.zeros(0, dtype=np.int64)
         self._edges = np.zeros((2, 0), dtype=np.int64)
         self._live = np.zeros(0, dtype=np.int64)
         self._live_index = np.zeros(0, dtype=np.int64)  # candidate -> row of the graph
-        self._graph = sp.csr_matrix((0, 0), dtype=np.int64)
         self._graph_indptr = np.zeros(1, dtype=np.int64)
         self._graph_indices = np.zeros(0, dtype=np.int64)
         self._live_global = np.zeros((0, 3))  # per live candidate: global, local position
@@ -251,18 +250,36 @@ class HierarchicalClustering:
 
     def sets(self) -> list[AssociationSet]:
         """All sets, best first (score, then size, then an order-independent tie-break)."""
-        return [self._set(row) for row in self._ranking()]
+        return self._sets(self._ranking())
 
     def top(self, k: int, min_size: int = 1, largest_first: bool = False) -> list[AssociationSet]:
         """The k best sets with at least `min_size` pairs (by score, or by size then score)."""
-        rows = np.flatnonzero(self._sizes() >= min_size)
-        ranking = rows[self._ranking(rows, limit=k, largest_first=largest_first)][:k]
-        return [self._set(row) for row in ranking]
+        return self._sets(self._top_rows(k, min_size, largest_first))
 
-    def _set(self, row: int) -> AssociationSet:
-        members = self._members[row][self._members[row] >= 0]
-        pairs = tuple(sorted((int(self._cand_g[c]), int(self._cand_l[c])) for c in members))
-        return AssociationSet(pairs, float(self._score[row]), int(self._last_merge[row]))
+    def top_scores(self, k: int, min_size: int = 1) -> list[float]:
+        """The scores of `top(k, min_size)`, without building the sets."""
+        return self._score[self._top_rows(k, min_size, False)].tolist()
+
+    def _top_rows(self, k: int, min_size: int, largest_first: bool) -> np.ndarray:
+        rows = np.flatnonzero(self._sizes() >= min_size)
+        return rows[self._ranking(rows, limit=k, largest_first=largest_first)][:k]
+
+    def _sets(self, rows: np.ndarray) -> list[AssociationSet]:
+        """The sets of pool rows, each with its (global, local) pairs in ascending order (one
+        global object per set, so ordered by the global index)."""
+        members = self._members[rows]
+        valid = members >= 0
+        g = np.where(valid, self._cand_g[np.maximum(members, 0)], np.iinfo(np.int64).max)
+        order = np.argsort(g, axis=1, kind="stable")
+        g = np.take_along_axis(g, order, axis=1).tolist()
+        l = self._cand_l[np.maximum(np.take_along_axis(members, order, axis=1), 0)].tolist()
+        sizes = self._size[rows].tolist()
+        scores = self._score[rows].tolist()
+        ages = self._last_merge[rows].tolist()
+        return [
+            AssociationSet(tuple(zip(g[i][:n], l[i][:n])), scores[i], ages[i])
+            for i, n in enumerate(sizes)
+        ]
 
     def _sizes(self) -> np.ndarray:
         return self._size
@@ -284,6 +301,7 @@ class HierarchicalClustering:
         self.step += 1
         positions = np.array(local_positions, dtype=float).reshape(-1, 3)  # a copy: see moves
         moved = self._moved_locals(positions, detections)
+        self._local_distances = self._distances_to(positions)
         self._local_positions = positions
         self._local_ids = list(local_ids)
         stale = self._register_candidates(detections)
@@ -309,14 +327,20 @@ class HierarchicalClustering:
         start = len(self._cand_g)
         for local, globals_ in detections.items():
             allowed = np.unique(np.asarray(globals_, dtype=np.int64))
-            known_g, known_c = self._by_local.get(local, (allowed[:0], allowed[:0]))
+            ids_from = start + sum(len(x) for x in new_g)
+            new_l.append(np.full(len(allowed), local, dtype=np.int64))
+            if local not in self._by_local:  # a new object: all its candidates are new
+                new_g.append(allowed)
+                self._by_local[local] = (allowed, ids_from + np.arange(len(allowed)))
+                continue
+            known_g, known_c = self._by_local[local]
             kept = np.isin(known_g, allowed)
             stale.append(known_c[~kept])
             revived.append(known_c[kept])
             fresh = allowed[~np.isin(allowed, known_g)]
-            ids = start + sum(len(x) for x in new_g) + np.arange(len(fresh))
+            new_l[-1] = new_l[-1][: len(fresh)]
+            ids = ids_from + np.arange(len(fresh))
             new_g.append(fresh)
-            new_l.append(np.full(len(fresh), local, dtype=np.int64))
             globals_all = np.concatenate([known_g, fresh])
             order = np.argsort(globals_all, kind="stable")
             self._by_local[local] = (globals_all[order], np.concatenate([known_c, ids])[order])
@@ -373,10 +397,9 @@ class HierarchicalClustering:
         index = np.zeros(len(self._cand_g), dtype=np.int64)
         index[live] = np.arange(len(live))
         self._live_index = index
-        indptr, indices = _symmetric_csr(index[edges[0]], index[edges[1]], len(live))
-        data = np.ones(len(indices), dtype=np.int64)
-        self._graph = sp.csr_matrix((data, indices, indptr), shape=(len(live),) * 2)
-        self._graph_indptr, self._graph_indices = indptr, indices  # int64 (scipy may narrow)
+        self._graph_indptr, self._graph_indices = _symmetric_csr(
+            index[edges[0]], index[edges[1]], len(live)
+        )
         self._live_global = self._global_positions[self._cand_g[live]]
         self._live_local = self._local_positions[self._cand_l[live]]
         self._live_key, self._live_key2 = self._cand_key[live], self._cand_key2[live]
@@ -394,13 +417,13 @@ class HierarchicalClustering:
                 self._cand_g,
                 self._cand_l,
                 self._global_positions,
-                self._local_distances(),
+                self._local_distances,
                 cfg.distance_tolerance,
                 cfg.gamma,
                 cfg.min_distance,
             )
         cfg = self.config
-        distances = self._local_distances()
+        distances = self._local_distances
         # the gate 1 - max(0, |d^A - d^B| - ε) / max(d^A, d^B) > γ needs d^A < (d^B + ε) / γ
         reach = np.maximum((distances + cfg.distance_tolerance) / cfg.gamma, cfg.min_distance)
         reach = reach * (1 + 1e-9) + 1e-12  # the exact test decides at the boundary
@@ -417,13 +440,18 @@ class HierarchicalClustering:
             cfg.min_distance,
         )
 
-    def _local_distances(self) -> np.ndarray:
-        """Distances between the local objects (one `np.linalg.norm` per pair)."""
-        xyz = self._local_positions
-        out = np.zeros((len(xyz), len(xyz)))
-        for i in range(len(xyz)):
-            for j in range(i + 1, len(xyz)):
-                out[i, j] = out[j, i] = float(np.linalg.norm(xyz[i] - xyz[j]))
+    def _distances_to(self, positions: np.ndarray) -> np.ndarray:
+        """Distances between the local objects at `positions` (one `np.linalg.norm` per pair),
+        recomputed only for objects that are new or changed position since the last update."""
+        known = min(len(self._local_positions), len(positions))
+        out = np.zeros((len(positions), len(positions)))
+        out[:known, :known] = self._local_distances[:known, :known]
+        same = np.all(positions[:known] == self._local_positions[:known], axis=1)
+        changed = np.concatenate([np.flatnonzero(~same), np.arange(known, len(positions))])
+        for j in changed.tolist():
+            for i in range(len(positions)):
+                if i != j:
+                    out[i, j] = out[j, i] = float(np.linalg.norm(positions[i] - positions[j]))
         return out
 
     def _gate_of_sets(self, members: np.ndarray) -> np.ndarray:
@@ -440,7 +468,7 @@ class HierarchicalClustering:
 
     def _revalidate(self, stale: np.ndarray, moved: set[int]) -> list[int]:
         """Drop sets with stale candidates or broken cliques; sets with moved objects are fresh."""
-        if not len(self._score):
+        if not len(self._score) or not (len(stale) or moved):
             return []
         members = self._members
         valid = members >= 0
@@ -582,11 +610,17 @@ class HierarchicalClustering:
     ) -> np.ndarray:
         """Positions in `rows` (default: all sets), best first: score (rounded), size, then an
         order-independent hash of the pairs (size first with `largest_first`).  With `limit`,
-        only the first `limit` positions are exact; the hash is computed only where sets tie
-        among them."""
+        only the first `limit` positions are exact (and only the rows that could be among them
+        are ranked); the hash is computed only where sets tie among them."""
         rows = np.arange(len(self._score)) if rows is None else rows
         score = -np.round(self._score[rows], 9)
         size = -self._sizes()[rows]
+        if limit is not None and 0 < limit < len(rows):
+            # only the rows up to the limit's value of the first key can be in its head
+            first = size if largest_first else score
+            near = np.flatnonzero(first <= np.partition(first, limit - 1)[limit - 1])
+            if len(near) < len(rows):
+                return near[self._ranking(rows[near], limit, largest_first)]
         keys = (score, size) if largest_first else (size, score)
         order = np.lexsort(keys)
         head = order if limit is None else order[:limit]

@@ -210,14 +210,53 @@ def distinct(
     """Indices of the first `top_k` places (in the given order) that repeat no earlier pick
     (`anchor`: see `same_place`).
 
-    `places` is consumed lazily, so a generator computes poses only as far as needed."""
-    chosen: list[tuple[int, Place]] = []
-    for i, place in enumerate(places):
-        if not any(same_place(place, other, config, anchor) for _, other in chosen):
-            chosen.append((i, place))
-            if len(chosen) == top_k:
-                break
-    return [i for i, _ in chosen]
+    `places` is consumed lazily, so a generator computes poses only as far as needed.  Each
+    place is tested against all picks at once (`same_place`, batched)."""
+    chosen: list[int] = []
+    pair_sets: list[set] = []
+    poses = np.zeros((0, 4, 4))
+    point = None if anchor is None else np.append(np.asarray(anchor, dtype=float), 1.0)
+    max_cos = math.cos(math.radians(config.distinct_rotation_deg))  # a screen, then exact
+    for i, (pairs, pose) in enumerate(places):
+        if pairs:
+            mine = set(pairs)
+            if any(mine <= other for other in pair_sets):
+                continue
+        if (
+            pose is not None
+            and len(poses)
+            and _near_any(pose, poses, anchor, point, config, max_cos)
+        ):
+            continue
+        chosen.append(i)
+        if len(chosen) == top_k:
+            break
+        pair_sets.append(set(pairs))
+        if pose is not None:
+            poses = np.concatenate([poses, np.asarray(pose, dtype=float)[None]])
+    return chosen
+
+
+def _near_any(pose, poses, anchor, point, config: DecisionConfig, max_cos: float) -> bool:
+    """Whether `pose` is the same place as any of `poses` by `same_place`'s pose test: a
+    batched screen with a margin, then the exact test on the poses that pass it."""
+    pose = np.asarray(pose, dtype=float)
+    if point is None:
+        shift = np.linalg.norm(poses[:, :3, 3] - pose[:3, 3], axis=1)
+    else:
+        shift = np.linalg.norm((pose - poses) @ point, axis=1)
+    near = np.flatnonzero(shift < config.distinct_translation + _SCREEN_MARGIN)
+    if not len(near):
+        return False
+    cos = (np.einsum("ji,kji->k", pose[:3, :3], poses[near, :3, :3]) - 1.0) / 2.0
+    return any(
+        same_place(((), pose), ((), poses[near[k]]), config, anchor)
+        for k in np.flatnonzero(cos > max_cos - _SCREEN_MARGIN).tolist()
+    )
+
+
+_SCREEN_MARGIN = 1e-6
+"""Slack of the batched screen of `distinct` (far above rounding), so the exact test decides."""
 
 
 _INF = float("inf")

@@ -47,7 +47,7 @@ from semloc.verification import (
     Evidence,
     MapSupport,
     VerificationConfig,
-    consensus_many,
+    consensus_indexed,
 )
 
 _COMPONENTS: dict[str, type[BaseModel]] = {
@@ -219,7 +219,7 @@ class Localizer:
                 reason = self._why_no_sets()
             scores = [h.score for h in hypotheses]
         else:
-            scores = [s.score for s in self._clustering.top(self.config.top_k, min_size=2)]
+            scores = self._clustering.top_scores(self.config.top_k, min_size=2)
         end = time.perf_counter()
         self._add_timing(tick - start, tock - tick, end - tock)
         self._steps.append(
@@ -305,20 +305,25 @@ class Localizer:
         up = (self.local_up, self.global_map.up, self.config.verification)
         global_xyz = self.global_map.positions
         pairs = [np.array(s.pairs).reshape(-1, 2) for s in sets]  # global index, local index
-        found = consensus_many([(local_xyz[p[:, 1]], global_xyz[p[:, 0]]) for p in pairs], *up)
+        found = consensus_indexed(pairs, local_xyz, global_xyz, *up)
+        inliers = [_pair_list(p[f.inliers]) for p, f in zip(pairs, found)]
+        posed = [i for i, f in enumerate(found) if f.pose is not None]
+        poses = np.array([found[i].pose for i in posed]).reshape(-1, 4, 4)
+        extended = dict(
+            zip(posed, support.extend_many(poses, local_xyz, [inliers[i] for i in posed]))
+        )
         verified, regrown = [], []
-        for aset, p, f in zip(sets, pairs, found):
-            inliers = _pair_list(p[f.inliers])
+        for i, (aset, p, f) in enumerate(zip(sets, pairs, found)):
             rejected = _pair_list(p[~f.inliers])
             if f.pose is None:
-                verified.append(_Verified(aset, inliers, rejected, None, f.residual, 0, 0))
+                verified.append(_Verified(aset, inliers[i], rejected, None, f.residual, 0, 0))
                 continue
-            grown, added, conflicts = support.extend(f.pose, local_xyz, inliers)
+            grown, added, conflicts = extended[i]
             verified.append(_Verified(aset, grown, rejected, f.pose, f.residual, added, conflicts))
             if added:
-                regrown.append((len(verified) - 1, inliers))
+                regrown.append((len(verified) - 1, inliers[i]))
         both = [np.array(verified[i].pairs) for i, _ in regrown]
-        again = consensus_many([(local_xyz[b[:, 1]], global_xyz[b[:, 0]]) for b in both], *up)
+        again = consensus_indexed(both, local_xyz, global_xyz, *up)
         for (i, inliers), b, a in zip(regrown, both, again):
             if a.pose is None:
                 continue
@@ -417,7 +422,7 @@ _PoseKey = tuple[bool, frozenset[tuple[int, int]]]  # (refined, pairs)
 
 def _pair_list(pairs: np.ndarray) -> list[tuple[int, int]]:
     """Rows of (global index, local index) as a list of int pairs."""
-    return [(int(g), int(l)) for g, l in pairs]
+    return list(map(tuple, pairs.tolist()))
 
 
 def _warm_start(pairs: frozenset, previous: dict[_PoseKey, PoseEstimate | None]):

@@ -20,6 +20,7 @@ point fitness, support and conflicts.  Pure numpy.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 from itertools import combinations
 
 import numpy as np
@@ -94,19 +95,48 @@ def consensus_many(
     inliers.  Each set's samples are drawn as `consensus` draws them (same seed)."""
     if not problems:
         return []
+    return _consensus_padded(*_padded(problems), up_local, up_global, config, seed)
+
+
+def consensus_indexed(
+    pairs: list[np.ndarray],
+    local_xyz: np.ndarray,
+    global_xyz: np.ndarray,
+    up_local: np.ndarray | None,
+    up_global: np.ndarray | None,
+    config: VerificationConfig,
+    seed: int = 0,
+) -> list[Consensus]:
+    """`consensus_many` of sets given as (global index, local index) rows into the two
+    position arrays (padded in one gather instead of one copy per set)."""
+    if not pairs:
+        return []
+    sizes = np.array([len(p) for p in pairs])
+    rows = np.concatenate(pairs).reshape(-1, 2)
+    owner = np.repeat(np.arange(len(pairs)), sizes)
+    slot = np.arange(len(rows)) - np.repeat(np.cumsum(sizes) - sizes, sizes)
+    src, dst = np.zeros((2, len(pairs), max(sizes.max(), 1), 3))
+    valid = np.zeros(src.shape[:2], dtype=bool)
+    src[owner, slot] = np.asarray(local_xyz, float)[rows[:, 1]]
+    dst[owner, slot] = np.asarray(global_xyz, float)[rows[:, 0]]
+    valid[owner, slot] = True
+    return _consensus_padded(src, dst, valid, up_local, up_global, config, seed)
+
+
+def _consensus_padded(src, dst, valid, up_local, up_global, config, seed) -> list[Consensus]:
+    """`consensus_many` of padded (P, M, 3) positions with their `valid` rows."""
     minimal = 2 if up_local is not None and up_global is not None else 3
-    src, dst, valid = _padded(problems)
     sizes = valid.sum(axis=1)
-    out: list[Consensus | None] = [None] * len(problems)
+    out: list[Consensus | None] = [None] * len(src)
     small = np.flatnonzero(sizes <= minimal)
     if len(small):
         poses, ok = align_positions_batch(
             src[small], dst[small], up_local, up_global, valid[small].astype(float)
         )
+        rms = _rms_of(_errors_of(poses, src[small], dst[small], valid[small]), valid[small])
         for k, i in enumerate(small):
-            everything = valid[i][: sizes[i]]
-            pose = poses[k] if ok[k] else None
-            out[i] = Consensus(everything, pose, _rms(pose, src[i], dst[i], valid[i]))
+            pose, residual = (poses[k], float(rms[k])) if ok[k] else (None, float("inf"))
+            out[i] = Consensus(valid[i][: sizes[i]], pose, residual)
     tested = np.flatnonzero(sizes > minimal)
     if len(tested):  # a set that one least-squares pose explains whole needs no sampling
         poses, ok = align_positions_batch(
@@ -114,10 +144,10 @@ def consensus_many(
         )
         errors = _errors_of(poses, src[tested], dst[tested], valid[tested])
         whole = ok & np.all((errors < _WHOLE * config.inlier_tolerance) | ~valid[tested], axis=1)
+        rms = _rms_of(errors, valid[tested])
         for k in np.flatnonzero(whole):
             i = tested[k]
-            rms = float(np.sqrt(np.mean(errors[k][valid[i]] ** 2)))
-            out[i] = Consensus(valid[i][: sizes[i]].copy(), poses[k], rms)
+            out[i] = Consensus(valid[i][: sizes[i]].copy(), poses[k], float(rms[k]))
         tested = tested[~whole]
     if len(tested):
         for i, found in zip(tested, _tested(src[tested], dst[tested], valid[tested], sizes[tested],
@@ -159,20 +189,22 @@ def _tested(src, dst, valid, sizes, minimal, up_local, up_global, config, seed) 
     )
     final = _errors_of(pose, src[of], dst[of], valid[of])
     count, cost = inliers.sum(axis=1), _cost(final, tol)
+    # per set, the start with the most inliers, then the smallest cost; the first tried wins
+    ranked = np.lexsort((np.arange(len(of)), cost, -count, of))
+    firsts = np.flatnonzero(np.diff(of[ranked], prepend=-1) != 0)
+    best_of = np.full(len(sizes), -1)
+    best_of[of[ranked[firsts]]] = ranked[firsts]
+    rms = _rms_of(final, inliers)
     results: list[Consensus] = []
-    for i in range(len(sizes)):
-        mine = np.flatnonzero(of == i)
-        if not len(mine):  # no minimal sample determines a pose
+    for i, best in enumerate(best_of.tolist()):
+        if best < 0:  # no minimal sample determines a pose
             results.append(Consensus(valid[i][: sizes[i]].copy(), None, float("inf")))
             continue
-        # the most inliers, then the smallest cost; the first tried wins a tie
-        best = mine[np.lexsort((np.arange(len(mine)), cost[mine], -count[mine]))[0]]
         kept = inliers[best][: sizes[i]]
         if count[best] < 2:  # no two pairs agree: the set is not one place
             results.append(Consensus(kept, None, float("inf")))
         else:
-            rms = _rms(pose[best], src[i], dst[i], inliers[best])
-            results.append(Consensus(kept, pose[best], rms))
+            results.append(Consensus(kept, pose[best], float(rms[best])))
     return results
 
 
@@ -212,8 +244,10 @@ def _cost(errors: np.ndarray, tol: float) -> np.ndarray:
     return np.sum(np.where(np.isfinite(errors), np.minimum(errors, tol) ** 2, 0.0), axis=-1)
 
 
+@lru_cache(maxsize=256)
 def _samples(m: int, size: int, limit: int, seed: int) -> np.ndarray:
-    """Index tuples of all `size`-subsets of range(m), or `limit` of them drawn with `seed`."""
+    """Index tuples of all `size`-subsets of range(m), or `limit` of them drawn with `seed`
+    (cached: callers must not change the array)."""
     every = np.array(list(combinations(range(m), size)))
     if len(every) <= limit:
         return every
@@ -221,17 +255,16 @@ def _samples(m: int, size: int, limit: int, seed: int) -> np.ndarray:
     return every[np.sort(rng.choice(len(every), size=limit, replace=False))]
 
 
-def _errors(poses: np.ndarray, local_xyz: np.ndarray, global_xyz: np.ndarray) -> np.ndarray:
-    """Distance of every aligned local centre to its partner under each pose: (S, m)."""
-    aligned = local_xyz @ np.swapaxes(poses[:, :3, :3], 1, 2) + poses[:, None, :3, 3]
-    return np.linalg.norm(aligned - global_xyz, axis=2)
+def _rms_of(errors: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """RMS of each row of `errors` over its `mask`ed entries (inf where none is)."""
+    count = mask.sum(axis=1)
+    squares = np.where(mask, errors, 0.0) ** 2
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(count > 0, np.sqrt(squares.sum(axis=1) / np.maximum(count, 1)), np.inf)
 
 
-def _rms(pose, local_xyz, global_xyz, mask) -> float:
-    if pose is None or not mask.any():
-        return float("inf")
-    errors = _errors(pose[None], local_xyz[mask], global_xyz[mask])[0]
-    return float(np.sqrt(np.mean(errors**2)))
+_CHUNK_ENTRIES = 200_000
+"""`MapSupport.extend_many` measures at most this many (local object, candidate) gaps at once."""
 
 
 class MapSupport:
@@ -250,33 +283,70 @@ class MapSupport:
         self._index = np.full((len(candidates), width), -1)
         for j, indices in enumerate(candidates):
             self._index[j, : len(indices)] = indices
-        self._positions = np.full((*self._index.shape, 3), np.nan)
+        positions = np.full((*self._index.shape, 3), np.inf)  # no candidate: infinitely far
         known = self._index >= 0
-        self._positions[known] = np.asarray(global_xyz, float).reshape(-1, 3)[self._index[known]]
+        positions[known] = np.asarray(global_xyz, float).reshape(-1, 3)[self._index[known]]
+        self._x, self._y, self._z = (np.ascontiguousarray(positions[..., k]) for k in range(3))
         self.config = config
 
     def extend(
         self, pose: np.ndarray, local_xyz: np.ndarray, pairs: list[tuple[int, int]]
     ) -> tuple[list[tuple[int, int]], int, int]:
         """(pairs with the guided matches added, how many were added, conflicts)."""
+        return self.extend_many(pose[None], local_xyz, [pairs])[0]
+
+    def extend_many(
+        self, poses: np.ndarray, local_xyz: np.ndarray, pairs: list[list[tuple[int, int]]]
+    ) -> list[tuple[list[tuple[int, int]], int, int]]:
+        """`extend` of many sets at once: (S, 4, 4) poses, one list of pairs per set."""
+        local_xyz = np.asarray(local_xyz, float).reshape(-1, 3)
+        n_local, width = len(local_xyz), self._index.shape[1]
+        chunk = max(1, _CHUNK_ENTRIES // max(n_local * width, 1))
+        out: list[tuple[list[tuple[int, int]], int, int]] = []
+        for start in range(0, len(pairs), chunk):
+            part = pairs[start : start + chunk]
+            out += self._extend_chunk(poses[start : start + chunk], local_xyz, part)
+        return out
+
+    def _extend_chunk(self, poses, local_xyz, pairs):
+        used = np.zeros((len(pairs), len(local_xyz)), dtype=bool)
+        owner = [s for s, set_pairs in enumerate(pairs) for _ in set_pairs]
+        used[owner, [l for set_pairs in pairs for _, l in set_pairs]] = True
+        aligned = local_xyz @ np.swapaxes(poses[:, :3, :3], 1, 2) + poses[:, None, :3, 3]
+        dx = self._x - aligned[:, :, None, 0]  # (S, L, width), per coordinate: fast and exact
+        dy = self._y - aligned[:, :, None, 1]
+        dz = self._z - aligned[:, :, None, 2]
+        gaps = np.sqrt(dx * dx + dy * dy + dz * dz)
+        far = (gaps.min(axis=2) >= self.config.conflict_radius) & ~used
+        conflicts = far.sum(axis=1).tolist()
+        close = (gaps < self.config.inlier_tolerance) & ~used[:, :, None]
+        anything = close.any(axis=(1, 2)).tolist()
+        free = (~used).any(axis=1).tolist()
+        out = []
+        for s, set_pairs in enumerate(pairs):
+            if not free[s]:
+                out.append((list(set_pairs), 0, 0))
+                continue
+            added = list(set_pairs)
+            if anything[s]:
+                self._match(gaps[s], close[s], set_pairs, added)
+            out.append(
+                (sorted(added, key=lambda p: p[1]), len(added) - len(set_pairs), conflicts[s])
+            )
+        return out
+
+    def _match(self, gaps, close, pairs, added) -> None:
+        """Greedy one-to-one guided matching, nearest first (ties: local, then candidate order)."""
         used_local = {l for _, l in pairs}
         used_global = {g for g, _ in pairs}
-        free = np.array([j for j in range(len(local_xyz)) if j not in used_local], dtype=int)
-        if len(free) == 0:
-            return list(pairs), 0, 0
-        aligned = local_xyz[free] @ pose[:3, :3].T + pose[:3, 3]
-        gaps = np.linalg.norm(self._positions[free] - aligned[:, None], axis=2)
-        gaps = np.where(np.isnan(gaps), np.inf, gaps)
-        conflicts = int(np.sum(gaps.min(axis=1) >= self.config.conflict_radius))
-        added = list(pairs)
-        rows, cols = np.nonzero(gaps < self.config.inlier_tolerance)
-        for r, c in sorted(zip(rows, cols), key=lambda rc: gaps[rc]):
-            g, l = int(self._index[free[r], c]), int(free[r])
-            if g not in used_global and l not in used_local:
-                added.append((g, l))
+        rows, cols = np.nonzero(close)
+        order = np.argsort(gaps[rows, cols], kind="stable")
+        for r, c in zip(rows[order].tolist(), cols[order].tolist()):
+            g = int(self._index[r, c])
+            if g not in used_global and r not in used_local:
+                added.append((g, r))
                 used_global.add(g)
-                used_local.add(l)
-        return sorted(added, key=lambda p: p[1]), len(added) - len(pairs), conflicts
+                used_local.add(r)
 
 
 @dataclass(frozen=True)

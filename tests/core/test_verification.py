@@ -33,6 +33,7 @@ from semloc.verification import (
     MapSupport,
     VerificationConfig,
     consensus,
+    consensus_indexed,
     consensus_many,
 )
 
@@ -107,6 +108,27 @@ def test_many_sets_at_once_give_each_set_its_own_answer(up):
             assert found.residual == pytest.approx(alone.residual, abs=1e-9)
     assert together[1].inliers.all() and together[3].inliers.sum() == 3
     assert consensus_many([], up, up, VerificationConfig()) == []
+
+
+def test_sets_given_by_index_pairs_answer_as_their_positions_do():
+    rng = np.random.default_rng(5)
+    truth = yaw_pose(0.7, [1.0, -2.0, 0.3])
+    local_xyz = rng.uniform(-4, 4, size=(9, 3))
+    global_xyz = np.vstack([_apply(truth, local_xyz), rng.uniform(-4, 4, size=(3, 3))])
+    pairs = [np.array([[0, 0], [1, 1]]), np.array([[2, 2], [3, 3], [9, 4], [5, 5], [6, 6]]),
+             np.array([[7, 7], [10, 8], [4, 4]])]  # fmt: skip
+    problems = [(local_xyz[p[:, 1]], global_xyz[p[:, 0]]) for p in pairs]
+    for by_index, by_position in zip(
+        consensus_indexed(pairs, local_xyz, global_xyz, UP, UP, VerificationConfig()),
+        consensus_many(problems, UP, UP, VerificationConfig()),
+    ):
+        assert by_index.inliers.tolist() == by_position.inliers.tolist()
+        np.testing.assert_array_equal(by_index.pose, by_position.pose)
+        assert by_index.residual == by_position.residual
+    assert not consensus_indexed(pairs, local_xyz, global_xyz, UP, UP, VerificationConfig())[
+        1
+    ].inliers[2]  # the wrong pair (global 9) is rejected
+    assert consensus_indexed([], local_xyz, global_xyz, UP, UP, VerificationConfig()) == []
 
 
 def test_the_localizer_drops_a_wrong_pair_from_its_hypothesis():
