@@ -1,6 +1,6 @@
 """The folder tree is the architecture: the core imports nothing from the applications.
 
-Core modules (`CORE`) may import only each other (and numpy, scipy, pydantic, small_gicp, numba,
+Core modules (`CORE`) may import only each other (and numpy, scipy, pydantic, numba,
 the standard library) — anywhere in the file, also inside functions.  The run-time
 descriptors import only the core.  Function-local imports of semloc's own modules stay few
 (heavy optional dependencies are the reason to import late).  `import semloc` loads no extra.
@@ -16,9 +16,9 @@ from pathlib import Path
 import semloc
 
 PACKAGE = Path(semloc.__file__).parent
-CORE = {"maps", "pointsets", "transforms", "association", "clustering", "pose", "verification", "results",
-        "decision", "localizer", "confidence_model"}  # fmt: skip
-THIRD_PARTY_CORE = {"numpy", "scipy", "pydantic", "small_gicp", "numba"}
+CORE = {"maps", "pointsets", "transforms", "association", "clustering", "pose", "neighbours",
+        "registration", "verification", "results", "decision", "localizer", "confidence_model"}  # fmt: skip
+THIRD_PARTY_CORE = {"numpy", "scipy", "pydantic", "numba"}
 EXTRAS = ("open3d", "matplotlib", "dask", "distributed", "sklearn", "torch", "rerun")
 MAX_LOCAL_SEMLOC_IMPORTS = 10
 

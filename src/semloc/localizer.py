@@ -168,6 +168,17 @@ class Localizer:
     def n_sets(self) -> int:
         return self._clustering.n_sets
 
+    def prepare(self) -> Localizer:
+        """Prepare the point cloud of every map object now (downsampled points, normals,
+        KD-tree), instead of when a localization first needs it; returns the Localizer.
+
+        The preparation is kept per map object (`cached_cloud`), so it is done once per
+        loaded map whichever Localizer asks: call it after loading a map, before time-critical
+        use (about half a millisecond per object of a few hundred points)."""
+        for obj in self.global_map:
+            cached_cloud(obj, self.config.pose)
+        return self
+
     def update(
         self, objects: Iterable[SemanticObject] | ObjectMap, answer: bool = True
     ) -> Result | None:

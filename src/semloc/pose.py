@@ -12,10 +12,10 @@ This module owns the last stage of the pipeline (paper, "Camera pose recovery"):
    single 6-DoF pair) and scored by point-set fitness; the best few candidates are refined.
    This is the low-dimensional stand-in for the paper's Go-ICP.
 3. **Robust ICP** of each matched pair's points: a local object's points are matched only to
-   the points of its partner object.  Nearest neighbours come from small_gicp KD-trees (built
-   once per object, see `ObjectCloud`); the update is solved here, by Gauss-Newton on
-   point-to-plane plus a little point-to-point error with Tukey weights (kernel annealed from
-   `icp_kernel_start` to `icp_kernel`) and correspondences restricted to compatible normals.
+   the points of its partner object (its KD-tree, built once per object, see `ObjectCloud`);
+   Gauss-Newton on point-to-plane plus a little point-to-point error with Tukey weights
+   (kernel annealed from `icp_kernel_start` to `icp_kernel`) and correspondences restricted
+   to compatible normals.  The loop runs in compiled code (`semloc.registration`).
    The 4-DoF update is a rotation about the global `up` (plus a translation), and the result
    is snapped to a yaw in the z-up frames, so `R @ up_local == up_global` holds exactly;
    6-DoF updates the full rotation.  Coarse kernel levels move a thinned subset of the local
@@ -23,9 +23,10 @@ This module owns the last stage of the pipeline (paper, "Camera pose recovery"):
 
 Why not a registration library's own ICP loop: small_gicp and Open3D solve 6-DoF only, with
 no normal-compatibility test; semloc needs the exact gravity-aligned 4-DoF mode and
-partner-restricted correspondences, so it takes small_gicp's KD-trees (3-5x faster queries
-than scipy's cKDTree, reusable across calls) and solves the small linear systems itself.
-`benchmarks/bench_pose.py` compares the three on the same problems.
+partner-restricted correspondences.  Their KD-trees cannot be searched from compiled code, so
+semloc keeps its own (`semloc.neighbours`; a query costs about what small_gicp's does) and
+runs the whole ICP loop compiled, with no Python per iteration.
+`benchmarks/bench_pose.py` compares it with small_gicp's and Open3D's ICP on the same problems.
 
 Per-object preparation (voxel downsampling, a cap of `icp_max_points`, normals, flatness,
 KD-tree) is `prepare_cloud`; `cached_cloud` keeps it per object while the object lives, so a
@@ -38,16 +39,16 @@ Convention: `T_global_local`, i.e. `p_global = R @ p_local + t`.
 from __future__ import annotations
 
 import copy
-import functools
 import weakref
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, NamedTuple
 
 import numpy as np
-import small_gicp
 from pydantic import BaseModel, ConfigDict, Field
 
+import semloc.registration as registration
+from semloc.neighbours import Forest, KdTree, neighbourhood_shapes
 from semloc.pointsets import voxel_downsample
 
 __all__ = [
@@ -339,27 +340,22 @@ def _align(src, dst, w, up_local, up_global) -> tuple[np.ndarray, np.ndarray]:
 class ObjectCloud:
     """One object's points prepared for pose recovery: downsampled to at most `icp_max_points`
     voxel means, with unoriented unit normals, how flat each neighbourhood is (the weight of
-    the point-to-plane error there), its bounding box and a small_gicp KD-tree."""
+    the point-to-plane error there), its bounding box and a KD-tree.  The arrays are in the
+    tree's order (`tree.points` is `points`, not a copy); `input_rows[i]` is the row of the
+    i-th downsampled point, so that a thinned view keeps the points' spatial spread."""
 
     points: np.ndarray
     normals: np.ndarray
     flatness: np.ndarray  # (n,) in [0, 1]: 1 where the neighbourhood is a plane, 0 if not flat
     box: np.ndarray  # (2, 3): lower and upper corner
-    tree: small_gicp.KdTree
+    tree: KdTree
+    input_rows: np.ndarray  # (n,) int32
 
     def nearest(self, query: np.ndarray, k: int, bound: float) -> tuple[np.ndarray, np.ndarray]:
-        """Indices (n, k) and distances (n, k) of the k nearest cloud points of each query,
-        inf (index 0) where none is within `bound`.  Only queries within `bound` of the
-        bounding box are looked up: a KD-tree search from far away is slow, its answer unused."""
-        near = np.all((query >= self.box[0] - bound) & (query <= self.box[1] + bound), axis=1)
-        idx = np.zeros((len(query), k), dtype=np.intp)
-        sq = np.full((len(query), k), np.inf)
-        if near.any():
-            found, d2 = self.tree.batch_knn_search(query[near], min(k, len(self.points)))
-            idx[near, : found.shape[1]], sq[near, : found.shape[1]] = found, d2
-        dist = np.sqrt(sq)
-        dist[dist > bound] = np.inf
-        return idx, dist
+        """Rows of `points` (n, k) and distances (n, k), ascending, of the k nearest cloud points
+        of each query closer than `bound`; row -1 and distance inf where there are fewer."""
+        query = np.asarray(query, dtype=float).reshape(-1, 3)
+        return Forest.of([self.tree]).nearest(query, np.zeros(len(query), np.int64), k, bound)
 
 
 def prepare_cloud(points: object, config: PoseConfig | None = None) -> ObjectCloud | None:
@@ -373,10 +369,13 @@ def prepare_cloud(points: object, config: PoseConfig | None = None) -> ObjectClo
     if len(points) > cfg.icp_max_points:
         keep = np.random.default_rng(cfg.seed).choice(len(points), cfg.icp_max_points, False)
         points = points[np.sort(keep)]
-    points = np.ascontiguousarray(points)
-    tree = small_gicp.KdTree(points)
+    tree = KdTree.build(points)
     box = np.stack([points.min(axis=0), points.max(axis=0)])
-    return ObjectCloud(points, *_normals(points, tree), box, tree)
+    normals, variation = neighbourhood_shapes(tree, _NORMAL_NEIGHBOURS)
+    flatness = np.clip(1.0 - variation / _FLAT_VARIATION, 0.0, 1.0)
+    input_rows = np.empty(len(tree), dtype=np.int32)
+    input_rows[tree.order] = np.arange(len(tree), dtype=np.int32)
+    return ObjectCloud(tree.points, normals, flatness, box, tree, input_rows)
 
 
 _CLOUDS: weakref.WeakKeyDictionary[Any, dict[tuple, ObjectCloud | None]] = (
@@ -396,47 +395,6 @@ def cached_cloud(owner: Any, config: PoseConfig | None = None) -> ObjectCloud | 
         points = owner.points
         clouds[key] = None if points is None else prepare_cloud(points, cfg)
     return clouds[key]
-
-
-def _normals(points: np.ndarray, tree: small_gicp.KdTree) -> tuple[np.ndarray, np.ndarray]:
-    """Unoriented unit normals (smallest-eigenvalue direction of the k-neighbour covariance)
-    and flatness: 1 - surface variation (smallest eigenvalue / trace) / `_FLAT_VARIATION`."""
-    k = min(_NORMAL_NEIGHBOURS, len(points))
-    idx, _ = tree.batch_knn_search(points, k)
-    nb = points[idx.astype(np.intp)]
-    nb = nb - nb.mean(axis=1, keepdims=True)
-    C = np.swapaxes(nb, 1, 2) @ nb
-    normals, smallest = _smallest_eigenvectors(C)
-    trace = np.trace(C, axis1=1, axis2=2)
-    variation = np.where(trace > 0, smallest / np.where(trace > 0, trace, 1.0), 1.0)
-    return normals, np.clip(1.0 - variation / _FLAT_VARIATION, 0.0, 1.0)
-
-
-def _smallest_eigenvectors(C: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Unit eigenvectors and values of the smallest eigenvalues of symmetric (N,3,3) matrices.
-
-    Closed form (trigonometric eigenvalues, then the widest cross product of two rows of
-    C - lambda I); several times faster than a batched `eigh`.  Isotropic or line-like
-    neighbourhoods get an arbitrary unit vector.
-    """
-    q = np.trace(C, axis1=1, axis2=2) / 3
-    off = C[:, 0, 1] ** 2 + C[:, 0, 2] ** 2 + C[:, 1, 2] ** 2
-    diag = (C[:, 0, 0] - q) ** 2 + (C[:, 1, 1] - q) ** 2 + (C[:, 2, 2] - q) ** 2
-    p = np.sqrt((diag + 2 * off) / 6)
-    B = (C - q[:, None, None] * np.eye(3)) / np.where(p > 0, p, 1.0)[:, None, None]
-    phi = np.arccos(np.clip(np.linalg.det(B) / 2, -1, 1)) / 3
-    smallest = q + 2 * p * np.cos(phi + 2 * np.pi / 3)
-    M = C - smallest[:, None, None] * np.eye(3)
-    crosses = np.stack(
-        [np.cross(M[:, 0], M[:, 1]), np.cross(M[:, 0], M[:, 2]), np.cross(M[:, 1], M[:, 2])], 1
-    )
-    norms = np.linalg.norm(crosses, axis=2)
-    best = np.argmax(norms, axis=1)
-    rows = np.arange(len(C))
-    n, size = crosses[rows, best], norms[rows, best]
-    ok = size > 1e-12 * np.maximum(q, 1e-300) ** 2
-    unit = np.where(ok[:, None], n / np.where(ok, size, 1.0)[:, None], [0.0, 0.0, 1.0])
-    return unit, np.maximum(smallest, 0.0)
 
 
 def _cloud_pairs(
@@ -466,36 +424,21 @@ def _prepared(points: object, name: str, cfg: PoseConfig) -> ObjectCloud | None:
     return None if points.size == 0 else prepare_cloud(_xyz(points, name), cfg)
 
 
-class _Targets:
-    """The partner clouds' points, normals and flatness concatenated, when first needed (ICP
-    needs them; fitness and the search do not)."""
-
-    def __init__(self, clouds: list[ObjectCloud]):
-        self.clouds = clouds
-
-    @functools.cached_property
-    def points(self) -> np.ndarray:
-        return np.concatenate([g.points for g in self.clouds])
-
-    @functools.cached_property
-    def normals(self) -> np.ndarray:
-        return np.concatenate([g.normals for g in self.clouds])
-
-    @functools.cached_property
-    def flatness(self) -> np.ndarray:
-        return np.concatenate([g.flatness for g in self.clouds])
-
-
 class _Pairs:
-    """The matched clouds of one problem: the local points concatenated (with normals and
-    their partners' bounding boxes) and the partners (`targets`); `limit` thins the local
-    points evenly.  `nearest` indexes the concatenated targets."""
+    """The matched clouds of one problem: the local points concatenated (with normals and the
+    partner tree of each row) and the partners (`targets`: their KD-trees as one forest and
+    their points, normals and flatness concatenated); `limit` thins the local points evenly."""
 
     def __init__(self, pairs: list[tuple[ObjectCloud, ObjectCloud]], limit: int | None = None):
         self.pairs = pairs
-        self.globals = [g for _, g in pairs]
-        self.targets = _Targets(self.globals)  # shared by thinned views
-        self.offsets = np.cumsum([0] + [len(g.points) for g in self.globals])[:-1]
+        globals_ = [g for _, g in pairs]
+        self.targets = registration.Targets(  # shared by thinned views
+            Forest.of([g.tree for g in globals_]),
+            np.concatenate([g.points for g in globals_]),
+            np.concatenate([g.normals for g in globals_]),
+            np.concatenate([g.flatness for g in globals_]),
+        )
+        self.forest = self.targets.forest
         self._select(limit)
 
     def thinned(self, limit: int) -> _Pairs:
@@ -505,57 +448,25 @@ class _Pairs:
         return view
 
     def _select(self, limit: int | None) -> None:
-        rows = [np.arange(len(p.points)) for p, _ in self.pairs]
+        rows = [p.input_rows for p, _ in self.pairs]
         total = sum(len(r) for r in rows)
         if limit is not None and total > limit:
             rows = [r[np.unique((np.arange(len(r) * limit / total) * total / limit).astype(int))]
                     for r in rows]  # fmt: skip
         self.src = np.concatenate([p.points[r] for (p, _), r in zip(self.pairs, rows)])
         self.src_normals = np.concatenate([p.normals[r] for (p, _), r in zip(self.pairs, rows)])
-        self.bounds = np.cumsum([0] + [len(r) for r in rows])
-        sizes = np.diff(self.bounds)
-        self.box_lo = np.repeat([g.box[0] for g in self.globals], sizes, axis=0).reshape(-1, 3)
-        self.box_hi = np.repeat([g.box[1] for g in self.globals], sizes, axis=0).reshape(-1, 3)
+        self.tree_of_row = np.repeat(np.arange(len(rows), dtype=np.int64), [len(r) for r in rows])
 
-    def nearest(self, moved, k: int, bound: float, repeat: int = 1):
-        """Indices into `targets` (n, k) and distances (n, k; inf, index 0, beyond `bound`) of
-        each moved local point's k nearest partner points (as `ObjectCloud.nearest`, one
-        vectorised box test for all pairs); with `repeat`, each local row comes `repeat`
-        times in a row."""
-        lo, hi = self.box_lo, self.box_hi
-        if repeat > 1:
-            lo, hi = np.repeat(lo, repeat, axis=0), np.repeat(hi, repeat, axis=0)
-        near = np.all((moved >= lo - bound) & (moved <= hi + bound), axis=1)
-        idx = np.zeros((len(moved), k), dtype=np.intp)
-        sq = np.full((len(moved), k), np.inf)
-        for cloud, offset, a, b in zip(
-            self.globals, self.offsets, self.bounds[:-1] * repeat, self.bounds[1:] * repeat
-        ):
-            kk = min(k, len(cloud.points))
-            if near[a:b].all():  # the common case, on plain slices
-                found, d2 = cloud.tree.batch_knn_search(moved[a:b], kk)
-                idx[a:b, :kk], sq[a:b, :kk] = found, d2
-                idx[a:b, :kk] += offset
-            elif near[a:b].any():
-                rows = a + np.flatnonzero(near[a:b])
-                found, d2 = cloud.tree.batch_knn_search(moved[rows], kk)
-                idx[rows, :kk], sq[rows, :kk] = found + offset, d2
-        dist = np.sqrt(sq)
-        dist[dist > bound] = np.inf
-        return idx, dist
-
-
-def _apply(T: np.ndarray, points: np.ndarray) -> np.ndarray:
-    return points @ T[:3, :3].T + T[:3, 3]
+    @property
+    def view(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(points, normals, tree_of_row) of the local points, as `registration.icp` takes."""
+        return self.src, self.src_normals, self.tree_of_row
 
 
 def _point_fitness(T: np.ndarray, pairs: _Pairs, radius: float) -> tuple[float, float, float]:
     """Inlier share, inlier RMS distance and the smooth score (mean of 1 - (d/r)^2, truncated)
     of the local points moved by T against their partners' points."""
-    d = pairs.nearest(_apply(T, pairs.src), 1, radius)[1][:, 0]
-    inliers = d[d < radius]
-    rmse = float(np.sqrt(np.mean(inliers**2))) if len(inliers) else 0.0
-    return len(inliers) / len(d), rmse, float(np.mean(np.maximum(0.0, 1 - (d / radius) ** 2)))
+    return registration.fitness(T, pairs.src, pairs.tree_of_row, pairs.forest, radius)
 
 
 def _centre_fitness(T, src, dst) -> tuple[float, float]:
@@ -565,92 +476,23 @@ def _centre_fitness(T, src, dst) -> tuple[float, float]:
     return len(inliers) / len(src), rmse
 
 
+def _apply(T: np.ndarray, points: np.ndarray) -> np.ndarray:
+    return points @ T[:3, :3].T + T[:3, 3]
+
+
 # --------------------------------------------------------------------------- robust ICP
 
 
-def _correspondences(pairs: _Pairs, moved, normals, kernel: float, cos_max: float, k: int):
-    """For each moved local point the nearest of its `k` nearest partner points within
-    `kernel` whose normal is compatible (unoriented, within the angle; any normal of a
-    non-flat point is); returns the rows that have one, the partner indices and the distances.
-    A large k lets a partial view find the face it sees behind closer faces it does not."""
-    k = 1 if cos_max <= 0 else k
-    idx, d = pairs.nearest(moved, k, kernel)
-    ok = d < kernel
-    if cos_max > 0:
-        cos = np.abs(np.einsum("nkj,nj->nk", pairs.targets.normals[idx], normals))
-        ok &= (cos >= cos_max) | (pairs.targets.flatness[idx] < 0.5)
-    first = np.argmax(ok, axis=1)
-    rows = np.arange(len(moved))
-    found = ok[rows, first]
-    return found, idx[rows, first][found], d[rows, first][found]
-
-
-def _rotation(axis_angle: np.ndarray) -> np.ndarray:
-    """Rodrigues' rotation of a rotation vector."""
-    angle = float(np.linalg.norm(axis_angle))
-    if angle < 1e-15:
-        return np.eye(3)
-    k = axis_angle / angle
-    K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
-    return np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * (K @ K)
-
-
-def _gauss_newton_step(m, q, n, w, axis: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
-    """Rotation and translation that best move points `m` onto `q`: point-to-plane error
-    (normals `n`, scaled by the plane term's weight) plus `_POINT_TO_POINT` x point-to-point,
-    Tukey weights `w`, linearised about the identity; with `axis`, a rotation about it only."""
-    e = m - q
-    N = len(m)
-    if axis is None:  # d(omega x m) / d omega = -[m]_x
-        J = np.zeros((N, 3, 6))
-        J[:, 0, 1], J[:, 0, 2], J[:, 1, 2] = m[:, 2], -m[:, 1], m[:, 0]
-        J[:, 1, 0], J[:, 2, 0], J[:, 2, 1] = -m[:, 2], m[:, 1], -m[:, 0]
-    else:  # d(R(axis, theta) m) / d theta = axis x m
-        J = np.zeros((N, 3, 4))
-        J[:, 0, 0] = axis[1] * m[:, 2] - axis[2] * m[:, 1]
-        J[:, 1, 0] = axis[2] * m[:, 0] - axis[0] * m[:, 2]
-        J[:, 2, 0] = axis[0] * m[:, 1] - axis[1] * m[:, 0]
-    J[:, 0, -3], J[:, 1, -2], J[:, 2, -1] = 1.0, 1.0, 1.0
-    Jp = (n[:, :, None] * J).sum(axis=1)  # (N, P): the plane term's rows
-    rp = (n * e).sum(axis=1)
-    Jw = (J * w[:, None, None]).reshape(3 * N, -1)
-    H = (Jp * w[:, None]).T @ Jp + _POINT_TO_POINT * (Jw.T @ J.reshape(3 * N, -1))
-    g = (Jp * w[:, None]).T @ rp + _POINT_TO_POINT * (Jw.T @ e.reshape(-1))
-    H[np.diag_indices_from(H)] += 1e-9 * max(np.trace(H), 1e-12)
-    delta = -np.linalg.solve(H, g)
-    return _rotation(delta[:3] if axis is None else delta[0] * axis), delta[-3:]
-
-
 def _icp(T: np.ndarray, full: _Pairs, coarse: _Pairs, axis, cfg: PoseConfig) -> np.ndarray:
-    """Robust ICP from T: Tukey-weighted Gauss-Newton on normal-compatible correspondences.
-
-    Graduated: the kernel starts at `icp_kernel_start` and halves whenever an iteration moves
-    the points by less than 1 % of it on average, so offsets beyond `icp_kernel` (centres
-    biased by partial views) are still pulled in; stops once that happens at `icp_kernel`.
-    Coarse levels use the lighter `coarse` view of the local points.
-    """
-    kernel = max(cfg.icp_kernel_start, cfg.icp_kernel)
+    """Robust ICP from T (`registration.icp`): Tukey-weighted Gauss-Newton on
+    normal-compatible correspondences, the kernel annealed from `icp_kernel_start` to
+    `icp_kernel`; coarse levels move the lighter `coarse` view of the local points."""
     cos_max = np.cos(np.radians(cfg.icp_normal_angle)) if cfg.icp_normal_angle < 90 else 0.0
-    R, t = T[:3, :3], T[:3, 3]
-    for _ in range(cfg.icp_iterations):
-        final = kernel <= cfg.icp_kernel
-        view = full if final else coarse
-        moved = view.src @ R.T + t
-        normals = view.src_normals @ R.T
-        k = _MATCH_NEIGHBOURS[final]
-        ok, idx, d = _correspondences(view, moved, normals, kernel, cos_max, k)
-        if len(d) < (2 if axis is not None else 3):
-            break
-        targets = view.targets
-        m, q = moved[ok], targets.points[idx]
-        n = targets.normals[idx] * np.sqrt(targets.flatness[idx])[:, None]
-        dR, dt = _gauss_newton_step(m, q, n, (1.0 - (d / kernel) ** 2) ** 2, axis)
-        R, t = dR @ R, dR @ t + dt
-        if np.mean(np.linalg.norm(m @ (dR - np.eye(3)).T + dt, axis=1)) < _CONVERGED * kernel:
-            if kernel <= cfg.icp_kernel:
-                break
-            kernel = max(cfg.icp_kernel, 0.5 * kernel)
-    return _transform(R, t)
+    settings = registration.IcpSettings(
+        cfg.icp_iterations, cfg.icp_kernel_start, cfg.icp_kernel, float(cos_max),
+        *_MATCH_NEIGHBOURS, _CONVERGED, _POINT_TO_POINT,
+    )  # fmt: skip
+    return registration.icp(T, full.view, coarse.view, full.targets, axis, settings)
 
 
 # --------------------------------------------------------------------------- global search
@@ -658,11 +500,9 @@ def _icp(T: np.ndarray, full: _Pairs, coarse: _Pairs, axis, cfg: PoseConfig) -> 
 
 def _score(rotations: np.ndarray, pivots, sample: _Pairs, radius: float) -> np.ndarray:
     """Smooth fitness (mean of 1 - (d/r)^2, truncated) of rotations about the matched pivots."""
-    pivot_l, pivot_g = pivots
-    moved = np.einsum("kij,pj->pki", rotations, sample.src - pivot_l) + pivot_g  # (P, K, 3)
-    d = sample.nearest(moved.reshape(-1, 3), 1, radius, repeat=len(rotations))[1][:, 0]
-    d = d.reshape(len(sample.src), len(rotations))
-    return np.where(d < radius, 1.0 - (d / radius) ** 2, 0.0).mean(axis=0)
+    return registration.rotation_scores(
+        rotations, pivots, sample.src, sample.tree_of_row, sample.forest, radius
+    )
 
 
 def _sweep(axis_rot: Callable[[np.ndarray], np.ndarray], pivots, sample, cfg) -> list:

@@ -331,3 +331,25 @@ def test_redetection_recomputes_the_sets_that_use_it(room_with_points, monkeypat
     localizer.update([redetected.replace(points=redetected.points + [0.0, 0.0, 0.01])])
     uses_l0 = [h for h in first.hypotheses if any(l == "l0" for _, l in h.pairs)]
     assert len(spy.inits) - computed >= len(uses_l0) > 0
+
+
+def test_prepare_builds_every_map_cloud_once_and_changes_no_answer(room_with_points, monkeypatch):
+    import semloc.pose as pose
+
+    prepared: list[int] = []
+    real = pose.prepare_cloud
+    monkeypatch.setattr(pose, "prepare_cloud", lambda p, c=None: prepared.append(1) or real(p, c))
+    ids = [room_with_points[i].id for i in (2, 3, 4, 5, 6)]
+    view = local_view(room_with_points, ids, yaw_pose(0.6, [1.0, -1.0, 0.0]))
+    lazy = Localizer(room_with_points, local_up=view.up).update(list(view))
+    objects = [o for o in room_with_points if o.points is not None]
+    fresh = ObjectMap([o.replace() for o in room_with_points], up=room_with_points.up)
+    prepared.clear()
+    localizer = Localizer(fresh, local_up=view.up).prepare()
+    assert len(prepared) == len(objects)
+    Localizer(fresh).prepare()  # kept per map object: nothing prepared again
+    assert len(prepared) == len(objects)
+    eager = localizer.update([o.replace() for o in view])  # new versions: prepared anew
+    assert len(prepared) == len(objects) + len(view)  # only the local objects
+    assert [h.pairs for h in eager.hypotheses] == [h.pairs for h in lazy.hypotheses]
+    np.testing.assert_allclose(eager.pose, lazy.pose)

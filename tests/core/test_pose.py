@@ -466,7 +466,7 @@ def _boxes_scene(rng: np.random.Generator, T_true: np.ndarray, up_tilt: np.ndarr
 )
 def test_4dof_icp_on_prepared_clouds_keeps_up_exactly(seed, yaw, tilt, bias) -> None:
     """Random yaw + translation, a tilted local up, centres biased by `bias` m: the ICP on the
-    small_gicp-backed clouds recovers the pose and maps up_local exactly onto up_global."""
+    prepared clouds (compiled KD-trees and ICP) recovers the pose and maps up_local exactly onto up_global."""
     rng = np.random.default_rng(seed)
     R0 = Rotation.from_euler("xy", tilt).as_matrix()  # the local frame's up is R0 @ z
     T_true = make_T(rot_z(yaw) @ R0.T, rng.uniform(-4, 4, 3))
