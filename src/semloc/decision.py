@@ -9,15 +9,17 @@ local objects outside the set; see `semloc.verification.Evidence`).  The shipped
 attempts by `benchmarks/calibrate_confidence.py`) turns them into a ranking logit, which
 orders the hypotheses (`rank_by="evidence"`: which place of this answer is right), an
 `evidence` logit and a calibrated `confidence`: the probability that the pose is right
-(15 deg / 0.5 m), from the evidence and its gap to the best rival place's evidence.
+(15 deg / 0.5 m), from the evidence and its gap to the best rival place's evidence.  A rival
+is another distinct place that shares less than `rival_overlap` of the hypothesis' pairs
+(`is_rival`); one that shares more is a variant of the same answer, not a rival.
 
     localized   the best hypothesis has >= `min_pairs` pairs, a fitness of at least
                 `min_fitness`, and a confidence of at least `min_confidence` (chosen for >= 99 %
                 precision on every kind of calibration attempt).  Hypotheses without a confidence (the
                 baselines') must instead dominate every *rival* in the terms of the ranking
                 (more pairs or a clearly smaller residual; or a score / fitness larger by the
-                factor 1 + margin); a rival has a different pose that shares less than
-                `rival_overlap` of its pairs with the best one;
+                factor 1 + margin); a rival there has a different pose and shares less
+                than `rival_overlap` of the smaller one's pairs with the best one;
     ambiguous   hypotheses exist (>= 2 pairs) but the best is not trusted; `reason` says why;
     failed      no association set has 2 or more pairs; `reason` says why.
 
@@ -151,8 +153,8 @@ class DecisionConfig(BaseModel):
         0.5,
         ge=0,
         le=1,
-        description="A hypothesis sharing at least this share of pairs with the best one is a "
-        "variant of it, not a rival, when deciding dominance.",
+        description="A hypothesis sharing at least this share of another's pairs is a variant "
+        "of it, not a rival: in its confidence's evidence gap and when deciding dominance.",
     )
     distinct_rotation_deg: float = Field(
         10.0, gt=0, description="Hypotheses closer than this in rotation are the same place."
@@ -300,7 +302,7 @@ def rank_places(
     kept = [ordered[i] for i in distinct(places, len(ordered), config, anchor)]
     for position, h in enumerate(kept, 1):
         h.rank = position
-    score_confidence(kept, model)
+    score_confidence(kept, model, config.rival_overlap)
     return kept
 
 
@@ -311,14 +313,20 @@ class Decision(NamedTuple):
     reason: str
 
 
-def score_confidence(hypotheses: Sequence[Hypothesis], model: ConfidenceModel) -> None:
+def score_confidence(
+    hypotheses: Sequence[Hypothesis], model: ConfidenceModel, rival_overlap: float = 0.5
+) -> None:
     """Set `evidence` and `confidence` of hypotheses that carry `features` (distinct places);
-    each one's rival is the best evidence among the others."""
+    each one's rival is the best evidence among the others that are real rivals of it
+    (`is_rival`: sharing less than `rival_overlap` of the pairs; a variant that keeps most of
+    its pairs and swaps one is the same answer, wrong in one object, not another place)."""
     scored = [h for h in hypotheses if h.features is not None]
     for h in scored:
         h.evidence = model.evidence(h.features)
     for h in scored:
-        others = [o.evidence for o in scored if o is not h]
+        others = [
+            o.evidence for o in scored if o is not h and is_rival(h.pairs, o.pairs, rival_overlap)
+        ]
         h.confidence = model.confidence(h.evidence, max(others) if others else None)
 
 
@@ -343,7 +351,7 @@ def decide(hypotheses: Sequence[Hypothesis], config: DecisionConfig, rank_by: Ra
         )
     if best.confidence is not None:
         return _by_confidence(best, hypotheses[1:], config)
-    rivals = [h for h in hypotheses[1:] if _is_rival(best, h, config.rival_overlap)]
+    rivals = [h for h in hypotheses[1:] if _different(best, h, config.rival_overlap)]
     for rival in rivals:
         if not _dominates(best, rival, rank_by, config):
             return Decision(
@@ -357,7 +365,7 @@ def _by_confidence(best: Hypothesis, others: Sequence[Hypothesis], d: DecisionCo
     if best.confidence >= d.min_confidence:
         # the confidence model is fitted on few attempts; a rival place whose centres fit
         # nearly as well (same pairs, residual within the margin) still makes it ambiguous
-        rivals = [h for h in others if _is_rival(best, h, d.rival_overlap)]
+        rivals = [h for h in others if _different(best, h, d.rival_overlap)]
         close = [h for h in rivals if not _dominates(best, h, "residual", d)]
         if not close:
             return Decision("localized", "")
@@ -366,7 +374,8 @@ def _by_confidence(best: Hypothesis, others: Sequence[Hypothesis], d: DecisionCo
             f"a rival place within the margin: rank {close[0].rank} fits the centres nearly "
             f"as well ({len(close[0].pairs)} pairs, residual {close[0].residual or 0:.2f} m)",
         )
-    rivals = [h for h in others if h.evidence is not None and best.evidence is not None]
+    rivals = [h for h in others if h.evidence is not None and best.evidence is not None
+              and is_rival(best.pairs, h.pairs, d.rival_overlap)]  # fmt: skip
     close = [h for h in rivals if h.evidence >= best.evidence - RIVAL_LOGIT_GAP]
     if close:
         return Decision(
@@ -392,7 +401,16 @@ def _dominates(best: Hypothesis, rival: Hypothesis, rank_by: RankBy, d: Decision
     return rival.residual > (1.0 + d.margin) * (best.residual or 0.0) + d.residual_floor
 
 
-def _is_rival(best: Hypothesis, other: Hypothesis, max_overlap: float) -> bool:
-    """Whether `other` is a different answer: it shares few of its pairs with `best`."""
-    shared = len(set(best.pairs) & set(other.pairs))
-    return shared < max_overlap * min(len(best.pairs), len(other.pairs))
+def is_rival(pairs: Collection, other: Collection, max_overlap: float) -> bool:
+    """Whether the hypothesis with pairs `other` is a rival of the one with `pairs`: it shares
+    less than `max_overlap` of `pairs`.  One that shares more is a variant of the same answer
+    (most of its evidence, one object matched differently), not another place."""
+    return len(set(pairs) & set(other)) < max_overlap * len(pairs)
+
+
+def _different(best: Hypothesis, other: Hypothesis, max_overlap: float) -> bool:
+    """Whether `other` is a rival of `best` in the dominance rules: each is a rival of the
+    other (they share less than `max_overlap` of the smaller one's pairs)."""
+    return is_rival(best.pairs, other.pairs, max_overlap) and is_rival(
+        other.pairs, best.pairs, max_overlap
+    )

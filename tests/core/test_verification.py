@@ -21,6 +21,7 @@ from semloc.decision import (
     DecisionConfig,
     decide,
     duplicates,
+    is_rival,
     local_anchor,
     rank_places,
     shipped_model,
@@ -272,6 +273,39 @@ def test_hypotheses_are_ranked_by_the_ranking_logit_and_scored_by_the_evidence()
     assert rank_places([many, fitting], "evidence", DecisionConfig(), model)[0] is fitting
     assert fitting.evidence == pytest.approx(model.evidence(fitting.features))
     assert rank_places([many, fitting], "evidence", DecisionConfig(), shipped_model())[0] is many
+
+
+def test_a_variant_sharing_most_pairs_is_no_rival():
+    model = shipped_model()
+    best = _hyp([("g0", "l0"), ("g1", "l1"), ("g2", "l2"), ("g3", "l3")], yaw_pose(0.0),
+                fitness=0.95)  # fmt: skip
+    # the same answer with one object matched elsewhere: a different pose, nearly the evidence
+    variant = _hyp([("g0", "l0"), ("g1", "l1"), ("g2", "l2"), ("g9", "l3")],
+                   yaw_pose(0.6, [1.0, 0, 0]), fitness=0.9)  # fmt: skip
+    # another place: it shares one of the best's four pairs
+    rival = _hyp([("g0", "l0"), ("g6", "l1"), ("g7", "l2"), ("g8", "l3")],
+                 yaw_pose(2.0, [-3.0, 1.0, 0]), fitness=0.9)  # fmt: skip
+    assert not is_rival(best.pairs, variant.pairs, 0.5)
+    assert is_rival(best.pairs, rival.pairs, 0.5)
+    alone = model.confidence(model.evidence(best.features), None)
+    with_variant = rank_places([best, variant], "evidence", DecisionConfig(), model)
+    assert with_variant[0] is best and best.confidence == pytest.approx(alone)
+    with_rival = rank_places([best, rival], "evidence", DecisionConfig(), model)
+    assert with_rival[0] is best and best.confidence < alone - 0.1
+    # the confidence of the variant itself still sees `best` as a rival only if it shares
+    # less than half of the variant's pairs: here it is a variant of `best` as well
+    assert variant.confidence == pytest.approx(model.confidence(variant.evidence, None))
+    strict = DecisionConfig(rival_overlap=1.0)  # every other place is a rival
+    rank_places([best, variant], "evidence", strict, model)
+    assert best.confidence < alone - 0.1
+
+
+def test_is_rival_counts_the_shared_share_of_the_first_pairs():
+    four = [("a", "1"), ("b", "2"), ("c", "3"), ("d", "4")]
+    assert is_rival(four, [("a", "1"), ("x", "2")], 0.5)  # 1 of 4 shared
+    assert not is_rival(four, [("a", "1"), ("b", "2"), ("x", "3")], 0.5)  # 2 of 4
+    assert not is_rival([("a", "1"), ("x", "2")], four, 0.5)  # 1 of 2
+    assert is_rival(four, four[:3], 1.0) and not is_rival(four, four, 1.0)
 
 
 def test_evidence_features_are_bounded():

@@ -7,7 +7,13 @@ import numpy as np
 import pytest
 
 from semloc.decision import FEATURES, shipped_model
-from semloc.eval.calibration import Sample, collect_observations, fit, operating_point
+from semloc.eval.calibration import (
+    Sample,
+    collect_observations,
+    confidences,
+    fit,
+    operating_point,
+)
 
 SURE = {"pairs": 8.0, "rejected_share": 0.0, "residual": 0.05, "fitness": 0.95, "support": 0.0,
         "conflict_share": 0.0}  # fmt: skip
@@ -53,3 +59,20 @@ def test_observations_are_labelled_against_the_truth():
     assert len({s.answer for s in samples}) == 1
     assert any(s.right for s in samples)
     assert all(set(s.features) == set(FEATURES) for s in samples)
+
+
+def test_only_real_rivals_enter_the_fit():
+    model = shipped_model()
+    four = frozenset({("g0", "l0"), ("g1", "l1"), ("g2", "l2"), ("g3", "l3")})
+    variant = (four - {("g3", "l3")}) | {("g9", "l3")}
+    other = frozenset({("g5", "l0"), ("g6", "l1"), ("g7", "l2"), ("g8", "l3")})
+
+    def confidence_of_first(second: frozenset) -> float:
+        answer = [Sample(0, "a", 1, 4, SURE["fitness"], SURE, True, four),
+                  Sample(0, "a", 2, 4, SURE["fitness"], SURE, False, second)]  # fmt: skip
+        return float(confidences(answer, model)[0])
+
+    alone = float(confidences(_answers("a", [True], SURE, 0), model)[0])
+    assert confidence_of_first(variant) == pytest.approx(alone)
+    assert confidence_of_first(other) < alone - 0.1
+    assert alone == pytest.approx(model.confidence(model.evidence(SURE), None))

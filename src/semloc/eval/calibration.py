@@ -8,7 +8,8 @@ real layouts are never used here (they are the held-out evaluation).
 Fit: (1) the evidence logit, a logistic regression of right on `FEATURES` over all hypotheses,
 each weight constrained to its sign in `SIGNS` (a feature whose fitted weight has the wrong
 sign is left out); (2) the confidence, a logistic regression of right on (evidence, rival)
-over the same hypotheses, rival = sigmoid(best evidence among the other places of the answer).
+over the same hypotheses, rival = sigmoid(best evidence among the answer's other places that
+are rivals of the hypothesis: `decision.is_rival`, sharing less than half of its pairs).
 Operating point: the smallest `min_confidence` at which the best hypotheses that would be
 claimed (>= 3 pairs, fitness >= 0.3) are right at least `precision` of the time.
 """
@@ -28,6 +29,7 @@ from semloc.decision import (
     SIGNS,
     ConfidenceModel,
     DecisionConfig,
+    is_rival,
 )
 from semloc.eval.protocol import BenchConfig, _targets, simulate, start_keyframes
 from semloc.eval.success import is_success
@@ -52,6 +54,7 @@ class Sample:
     fitness: float
     features: dict[str, float]
     right: bool
+    matches: frozenset[tuple[str, str]] = frozenset()  # its pairs (global id, local id)
 
 
 def collect(config: BenchConfig, first_answer: int = 0) -> list[Sample]:
@@ -88,6 +91,7 @@ def samples_of(result: Result, truth: np.ndarray, answer: int, kind: str) -> lis
             h.fitness or 0.0,
             h.features,
             is_success(h.pose, truth),
+            frozenset(h.pairs),
         )  # fmt: skip
         for h in result.hypotheses
         if h.features is not None
@@ -214,16 +218,19 @@ def _evidence_weights(
 
 def _evidence_and_rival(samples: list[Sample], model: ConfidenceModel):
     """Per sample: its evidence, the rival share and the capped evidence gap to the best
-    other place of its answer (as `ConfidenceModel.confidence` computes them)."""
+    rival place of its answer (`decision.is_rival`, as `decision.score_confidence` and
+    `ConfidenceModel.confidence` compute them)."""
     evidence = np.array([model.evidence(s.features) for s in samples])
     answers = np.array([s.answer for s in samples])
     strongest = np.full(len(samples), NO_RIVAL)
+    overlap = DecisionConfig(min_confidence=0.5).rival_overlap
     for a in np.unique(answers):
         rows = np.flatnonzero(answers == a)
         for i in rows:
-            others = evidence[rows[rows != i]]
-            if len(others):
-                strongest[i] = max(others.max(), NO_RIVAL)
+            others = [evidence[j] for j in rows if j != i
+                      and is_rival(samples[i].matches, samples[j].matches, overlap)]  # fmt: skip
+            if others:
+                strongest[i] = max(max(others), NO_RIVAL)
     rival = 1.0 / (1.0 + np.exp(-strongest))
     return evidence, rival, np.minimum(evidence - strongest, GAP_CAP)
 
