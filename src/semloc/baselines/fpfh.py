@@ -7,7 +7,9 @@ Pipeline: both clouds voxel-downsampled (`voxel`), normals and 33-bin FPFH featu
 vocabulary (k-means words on the global features, "a custom shape vocabulary trained on the
 global map") turns every sub-map and the local cloud into tf-idf word histograms; the
 `retrieve` most similar sub-maps are registered by RANSAC on mutual FPFH matches (edge-length
-and distance checkers) and each registration becomes a hypothesis.  For a comparable final
+and distance checkers; the matches computed here by matrix products, 2x faster than Open3D's
+own search in 33 dimensions and the same matches except among equal features, which planar
+faces have many of) and each registration becomes a hypothesis.  For a comparable final
 pose, local objects are associated with the nearest global object of the same label within
 `association_distance` after the RANSAC pose, and the shared pose recovery
 (`semloc.pose.estimate_pose`) refines it from those associations; without any association the
@@ -85,12 +87,32 @@ def _local_cloud(points: np.ndarray, cfg: FpfhConfig):
     return cloud
 
 
-def _features(array: np.ndarray):
-    import open3d as o3d
+_MATCH_ROWS = 1024  # local features compared with a sub-map's at once (bounds the memory)
 
-    feature = o3d.pipelines.registration.Feature()
-    feature.data = np.ascontiguousarray(array.T, dtype=float)
-    return feature
+
+def _mutual_matches(local: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """(local row, target row) pairs of mutual nearest neighbours in feature space, the
+    correspondences of Open3D's feature-matching RANSAC with its mutual filter (all forward
+    matches when fewer than 3 are mutual; ties go to the first row, where Open3D's search may
+    pick another).  Squared distances come from matrix products,
+    blocks of rows at a time: exact search in 33 dimensions is a brute-force scan anyway."""
+    target_sq = np.einsum("ij,ij->i", target, target)
+    forward = np.empty(len(local), dtype=np.int64)
+    backward = np.zeros(len(target), dtype=np.int64)
+    backward_d2 = np.full(len(target), np.inf)
+    for start in range(0, len(local), _MATCH_ROWS):
+        block = local[start : start + _MATCH_ROWS]
+        d2 = np.einsum("ij,ij->i", block, block)[:, None] + target_sq[None] - 2 * block @ target.T
+        forward[start : start + len(block)] = np.argmin(d2, axis=1)
+        best = np.argmin(d2, axis=0)
+        closer = d2[best, np.arange(len(target))] < backward_d2
+        backward_d2[closer] = d2[best[closer], np.flatnonzero(closer)]
+        backward[closer] = start + best[closer]
+    rows = np.arange(len(local))
+    mutual = backward[forward] == rows
+    if mutual.sum() < 3:
+        mutual[:] = True
+    return np.stack([rows[mutual], forward[mutual]], axis=1).astype(np.int32)
 
 
 def _normalise(hist: np.ndarray, idf: np.ndarray) -> np.ndarray:
@@ -223,10 +245,11 @@ class FpfhRansacBaseline(ObjectBaseline):
         for row in order:
             m = self._members[row]
             sub = self._pcd.select_by_index(m.tolist())
-            result = reg.registration_ransac_based_on_feature_matching(
-                pcd, sub, _features(fpfh), _features(self._fpfh[m]), True,
-                cfg.max_correspondence, reg.TransformationEstimationPointToPoint(False), 3,
-                checkers, reg.RANSACConvergenceCriteria(cfg.ransac_iterations, 0.999),
+            matches = o3d.utility.Vector2iVector(_mutual_matches(fpfh, self._fpfh[m]))
+            result = reg.registration_ransac_based_on_correspondence(
+                pcd, sub, matches, cfg.max_correspondence,
+                reg.TransformationEstimationPointToPoint(False), 3, checkers,
+                reg.RANSACConvergenceCriteria(cfg.ransac_iterations, 0.999),
             )  # fmt: skip
             if result.fitness > 0:
                 candidates.append(np.asarray(result.transformation).copy())
