@@ -313,35 +313,39 @@ class MapSupport:
         owner = [s for s, set_pairs in enumerate(pairs) for _ in set_pairs]
         used[owner, [l for set_pairs in pairs for _, l in set_pairs]] = True
         aligned = local_xyz @ np.swapaxes(poses[:, :3, :3], 1, 2) + poses[:, None, :3, 3]
-        dx = self._x - aligned[:, :, None, 0]  # (S, L, width), per coordinate: fast and exact
-        dy = self._y - aligned[:, :, None, 1]
-        dz = self._z - aligned[:, :, None, 2]
+        sets, locals_ = np.nonzero(~used)  # only the local objects outside each set
+        moved = aligned[sets, locals_]
+        dx = self._x[locals_] - moved[:, None, 0]  # (F, width), per coordinate: fast and exact
+        dy = self._y[locals_] - moved[:, None, 1]
+        dz = self._z[locals_] - moved[:, None, 2]
         gaps = np.sqrt(dx * dx + dy * dy + dz * dz)
-        far = (gaps.min(axis=2) >= self.config.conflict_radius) & ~used
-        conflicts = far.sum(axis=1).tolist()
-        close = (gaps < self.config.inlier_tolerance) & ~used[:, :, None]
-        anything = close.any(axis=(1, 2)).tolist()
-        free = (~used).any(axis=1).tolist()
+        far = gaps.min(axis=1) >= self.config.conflict_radius
+        conflicts = np.bincount(sets[far], minlength=len(pairs)).tolist()
+        close = gaps < self.config.inlier_tolerance
+        bounds = np.searchsorted(sets, np.arange(len(pairs) + 1))
         out = []
         for s, set_pairs in enumerate(pairs):
-            if not free[s]:
+            lo, hi = bounds[s], bounds[s + 1]
+            if lo == hi:  # no local object outside the set
                 out.append((list(set_pairs), 0, 0))
                 continue
             added = list(set_pairs)
-            if anything[s]:
-                self._match(gaps[s], close[s], set_pairs, added)
+            if close[lo:hi].any():
+                self._match(gaps[lo:hi], close[lo:hi], locals_[lo:hi], set_pairs, added)
             out.append(
                 (sorted(added, key=lambda p: p[1]), len(added) - len(set_pairs), conflicts[s])
             )
         return out
 
-    def _match(self, gaps, close, pairs, added) -> None:
-        """Greedy one-to-one guided matching, nearest first (ties: local, then candidate order)."""
+    def _match(self, gaps, close, locals_, pairs, added) -> None:
+        """Greedy one-to-one guided matching, nearest first (ties: local, then candidate order);
+        row i of `gaps` / `close` is local object `locals_[i]`."""
         used_local = {l for _, l in pairs}
         used_global = {g for g, _ in pairs}
         rows, cols = np.nonzero(close)
         order = np.argsort(gaps[rows, cols], kind="stable")
-        for r, c in zip(rows[order].tolist(), cols[order].tolist()):
+        for i, c in zip(rows[order].tolist(), cols[order].tolist()):
+            r = int(locals_[i])
             g = int(self._index[r, c])
             if g not in used_global and r not in used_local:
                 added.append((g, r))
