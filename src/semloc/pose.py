@@ -340,14 +340,13 @@ def _align(src, dst, w, up_local, up_global) -> tuple[np.ndarray, np.ndarray]:
 class ObjectCloud:
     """One object's points prepared for pose recovery: downsampled to at most `icp_max_points`
     voxel means, with unoriented unit normals, how flat each neighbourhood is (the weight of
-    the point-to-plane error there), its bounding box and a KD-tree.  The arrays are in the
+    the point-to-plane error there) and a KD-tree.  The arrays are in the
     tree's order (`tree.points` is `points`, not a copy); `input_rows[i]` is the row of the
     i-th downsampled point, so that a thinned view keeps the points' spatial spread."""
 
     points: np.ndarray
     normals: np.ndarray
     flatness: np.ndarray  # (n,) in [0, 1]: 1 where the neighbourhood is a plane, 0 if not flat
-    box: np.ndarray  # (2, 3): lower and upper corner
     tree: KdTree
     input_rows: np.ndarray  # (n,) int32
 
@@ -370,12 +369,11 @@ def prepare_cloud(points: object, config: PoseConfig | None = None) -> ObjectClo
         keep = np.random.default_rng(cfg.seed).choice(len(points), cfg.icp_max_points, False)
         points = points[np.sort(keep)]
     tree = KdTree.build(points)
-    box = np.stack([points.min(axis=0), points.max(axis=0)])
     normals, variation = neighbourhood_shapes(tree, _NORMAL_NEIGHBOURS)
     flatness = np.clip(1.0 - variation / _FLAT_VARIATION, 0.0, 1.0)
     input_rows = np.empty(len(tree), dtype=np.int32)
     input_rows[tree.order] = np.arange(len(tree), dtype=np.int32)
-    return ObjectCloud(tree.points, normals, flatness, box, tree, input_rows)
+    return ObjectCloud(tree.points, normals, flatness, tree, input_rows)
 
 
 _CLOUDS: weakref.WeakKeyDictionary[Any, dict[tuple, ObjectCloud | None]] = (
@@ -426,19 +424,18 @@ def _prepared(points: object, name: str, cfg: PoseConfig) -> ObjectCloud | None:
 
 class _Pairs:
     """The matched clouds of one problem: the local points concatenated (with normals and the
-    partner tree of each row) and the partners (`targets`: their KD-trees as one forest and
-    their points, normals and flatness concatenated); `limit` thins the local points evenly."""
+    partner tree of each row) and the partners (`targets`: their KD-trees as one forest, whose
+    points are theirs, and their normals and flatness concatenated); `limit` thins the local
+    points evenly."""
 
     def __init__(self, pairs: list[tuple[ObjectCloud, ObjectCloud]], limit: int | None = None):
         self.pairs = pairs
         globals_ = [g for _, g in pairs]
         self.targets = registration.Targets(  # shared by thinned views
             Forest.of([g.tree for g in globals_]),
-            np.concatenate([g.points for g in globals_]),
             np.concatenate([g.normals for g in globals_]),
             np.concatenate([g.flatness for g in globals_]),
         )
-        self.forest = self.targets.forest
         self._select(limit)
 
     def thinned(self, limit: int) -> _Pairs:
@@ -466,7 +463,7 @@ class _Pairs:
 def _point_fitness(T: np.ndarray, pairs: _Pairs, radius: float) -> tuple[float, float, float]:
     """Inlier share, inlier RMS distance and the smooth score (mean of 1 - (d/r)^2, truncated)
     of the local points moved by T against their partners' points."""
-    return registration.fitness(T, pairs.src, pairs.tree_of_row, pairs.forest, radius)
+    return registration.fitness(T, pairs.src, pairs.tree_of_row, pairs.targets.forest, radius)
 
 
 def _centre_fitness(T, src, dst) -> tuple[float, float]:
@@ -501,7 +498,7 @@ def _icp(T: np.ndarray, full: _Pairs, coarse: _Pairs, axis, cfg: PoseConfig) -> 
 def _score(rotations: np.ndarray, pivots, sample: _Pairs, radius: float) -> np.ndarray:
     """Smooth fitness (mean of 1 - (d/r)^2, truncated) of rotations about the matched pivots."""
     return registration.rotation_scores(
-        rotations, pivots, sample.src, sample.tree_of_row, sample.forest, radius
+        rotations, pivots, sample.src, sample.tree_of_row, sample.targets.forest, radius
     )
 
 

@@ -10,8 +10,8 @@ that touch every point, compiled with numba so that no Python runs per iteration
 - `rotation_scores`: the smooth score of many rotations about a pivot (the global search).
 
 The partner objects of a problem are one `semloc.neighbours.Forest`; `tree_of_row[i]` names
-the partner tree of local point i.  Targets (`points`, `normals`, `flatness`) are the partners'
-arrays concatenated in the forest's order.  Pure computation on numpy arrays.
+the partner tree of local point i.  Targets (`normals`, `flatness`) are the partners' arrays
+concatenated in the forest's order; the forest's points are the partners' points.  Pure computation on numpy arrays.
 """
 
 from __future__ import annotations
@@ -29,10 +29,10 @@ _FIRST_NEIGHBOURS = 2  # neighbours tried before the full k of a correspondence 
 
 
 class Targets(NamedTuple):
-    """The partner objects of one problem: their forest and concatenated point attributes."""
+    """The partner objects of one problem: their forest (whose rows are their points) and
+    their point attributes concatenated in the forest's order."""
 
     forest: Forest
-    points: np.ndarray  # (M, 3)
     normals: np.ndarray  # (M, 3) unoriented unit normals
     flatness: np.ndarray  # (M,) in [0, 1]
 
@@ -87,7 +87,7 @@ def _first_compatible(best_j, found, start, pn, t_normals, t_flatness, cos_max) 
 
 @numba.njit(cache=True)
 def _correspondences(src, src_normals, tree_of_row, R, t, f_points, f_axes, f_starts,
-                     t_points, t_normals, t_flatness, kernel, cos_max, k, m, q, n, w) -> int:  # fmt: skip
+                     t_normals, t_flatness, kernel, cos_max, k, m, q, n, w) -> int:  # fmt: skip
     """For each local point moved by (R, t): the nearest of its k nearest partner points within
     `kernel` whose normal is compatible (any normal of a non-flat point is).  Writes the moved
     point, its partner, the partner's normal scaled by sqrt(flatness) and the Tukey weight of
@@ -119,7 +119,7 @@ def _correspondences(src, src_normals, tree_of_row, R, t, f_points, f_axes, f_st
             continue
         j = best_j[i]
         m[count] = p
-        q[count] = t_points[j]
+        q[count] = f_points[j]
         n[count] = t_normals[j] * np.sqrt(t_flatness[j])
         u = 1.0 - best_d2[i] / kernel2
         w[count] = u * u
@@ -171,7 +171,7 @@ def _gauss_newton_step(m, q, n, w, count, axis, has_axis, point_to_point):
 
 @numba.njit(cache=True)
 def _icp(R, t, full_src, full_normals, full_trees, coarse_src, coarse_normals, coarse_trees,
-         f_points, f_axes, f_starts, t_points, t_normals, t_flatness, axis, has_axis,
+         f_points, f_axes, f_starts, t_normals, t_flatness, axis, has_axis,
          iterations, kernel_start, kernel_final, cos_max, k_coarse, k_final, converged,
          point_to_point):  # fmt: skip
     kernel = max(kernel_start, kernel_final)
@@ -183,7 +183,7 @@ def _icp(R, t, full_src, full_normals, full_trees, coarse_src, coarse_normals, c
         src, normals, trees = (full_src, full_normals, full_trees) if final else (coarse_src, coarse_normals, coarse_trees)  # fmt: skip
         k = k_final if final else k_coarse
         count = _correspondences(src, normals, trees, R, t, f_points, f_axes, f_starts,
-                                 t_points, t_normals, t_flatness, kernel, cos_max, k, m, q, n, w)  # fmt: skip
+                                 t_normals, t_flatness, kernel, cos_max, k, m, q, n, w)  # fmt: skip
         if count < (2 if has_axis else 3):
             break
         dR, dt = _gauss_newton_step(m, q, n, w, count, axis, has_axis, point_to_point)
@@ -210,7 +210,7 @@ def icp(T: np.ndarray, full: tuple, coarse: tuple, targets: Targets, axis: np.nd
     f = targets.forest
     R, t = _icp(
         np.ascontiguousarray(T[:3, :3]), np.ascontiguousarray(T[:3, 3]), *full, *coarse,
-        f.points, f.axes, f.starts, targets.points, targets.normals, targets.flatness,
+        f.points, f.axes, f.starts, targets.normals, targets.flatness,
         np.zeros(3) if axis is None else np.ascontiguousarray(axis, dtype=float),
         axis is not None, *settings,
     )  # fmt: skip

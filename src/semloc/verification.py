@@ -93,9 +93,12 @@ def consensus_many(
 
     Sets of different sizes are padded: padded pairs weigh 0 in every fit and never count as
     inliers.  Each set's samples are drawn as `consensus` draws them (same seed)."""
-    if not problems:
-        return []
-    return _consensus_padded(*_padded(problems), up_local, up_global, config, seed)
+    sizes = [len(l_xyz) for l_xyz, _ in problems]
+    offsets = np.cumsum([0, *sizes])
+    pairs = [np.repeat(np.arange(o, o + n)[:, None], 2, axis=1) for o, n in zip(offsets, sizes)]
+    local_xyz = np.concatenate([np.reshape(l_xyz, (-1, 3)) for l_xyz, _ in problems] or [[]])
+    global_xyz = np.concatenate([np.reshape(g_xyz, (-1, 3)) for _, g_xyz in problems] or [[]])
+    return consensus_indexed(pairs, local_xyz, global_xyz, up_local, up_global, config, seed)
 
 
 def consensus_indexed(
@@ -108,7 +111,7 @@ def consensus_indexed(
     seed: int = 0,
 ) -> list[Consensus]:
     """`consensus_many` of sets given as (global index, local index) rows into the two
-    position arrays (padded in one gather instead of one copy per set)."""
+    position arrays (the sets padded in one gather)."""
     if not pairs:
         return []
     sizes = np.array([len(p) for p in pairs])
@@ -154,16 +157,6 @@ def _consensus_padded(src, dst, valid, up_local, up_global, config, seed) -> lis
                                              minimal, up_local, up_global, config, seed)):  # fmt: skip
             out[i] = found
     return out  # type: ignore[return-value]
-
-
-def _padded(problems) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(P, M, 3) local and global positions, zero-padded, and which rows are real pairs."""
-    width = max(len(l) for l, _ in problems)
-    src, dst = np.zeros((len(problems), width, 3)), np.zeros((len(problems), width, 3))
-    valid = np.zeros((len(problems), width), dtype=bool)
-    for i, (l_xyz, g_xyz) in enumerate(problems):
-        src[i, : len(l_xyz)], dst[i, : len(g_xyz)], valid[i, : len(l_xyz)] = l_xyz, g_xyz, True
-    return src, dst, valid
 
 
 def _tested(src, dst, valid, sizes, minimal, up_local, up_global, config, seed) -> list[Consensus]:
