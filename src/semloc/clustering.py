@@ -166,8 +166,19 @@ class AssociationSet:
 
 
 def _pair_hash(global_id: str, local_id: str) -> np.uint64:
-    digest = hashlib.blake2b(f"{global_id}\x00{local_id}".encode(), digest_size=8).digest()
-    return np.frombuffer(digest, dtype=np.uint64)[0]
+    return _pair_hashes_of([global_id], [local_id])[0]
+
+
+def _pair_hashes_of(global_ids: list[str], local_ids: list[str]) -> np.ndarray:
+    """`_pair_hash` of many (global id, local id) pairs (one buffer of digests)."""
+    blake2b = hashlib.blake2b
+    digests = b"".join(
+        [
+            blake2b(f"{g}\x00{l}".encode(), digest_size=8).digest()
+            for g, l in zip(global_ids, local_ids)
+        ]
+    )
+    return np.frombuffer(digests, dtype=np.uint64)
 
 
 def _mix(x: np.ndarray) -> np.ndarray:
@@ -364,8 +375,10 @@ class HierarchicalClustering:
         todo = np.unique(candidates[~self._hashed[candidates]])
         if len(todo):
             gids, lids = self._global_ids, self._local_ids
-            pairs = zip(self._cand_g[todo].tolist(), self._cand_l[todo].tolist())
-            self._cand_hash[todo] = [_pair_hash(gids[g], lids[l]) for g, l in pairs]
+            self._cand_hash[todo] = _pair_hashes_of(
+                [gids[g] for g in self._cand_g[todo].tolist()],
+                [lids[l] for l in self._cand_l[todo].tolist()],
+            )
             self._hashed[todo] = True
         return self._cand_hash[candidates]
 
@@ -1046,13 +1059,16 @@ def _compatible_sweep(
 ):
     """`_compatible_among` for many candidates: per local object, its candidates sorted along
     the map's longest axis; a candidate of `la` is tested only against those of `lb` within
-    `reach[la, lb]` along it (a necessary condition of the gate)."""
+    `reach[la, lb]` along it and along the second longest axis (necessary conditions of the
+    gate; the second is read from a copy in sweep order, so most misses cost no distance)."""
     n_local = len(local_distance)
     everyone = np.concatenate((covered, added))
     spread = np.zeros(3)
     for axis in range(3):
         spread[axis] = np.ptp(global_xyz[:, axis]) if len(global_xyz) else 0.0
     axis = np.argmax(spread)
+    spread[axis] = -1.0
+    cross_axis = np.argmax(spread)
     order = np.argsort(global_xyz[cand_g[everyone], axis], kind="mergesort")
     count = np.zeros(n_local + 1, dtype=np.int64)
     for c in everyone:
@@ -1065,6 +1081,7 @@ def _compatible_sweep(
         by_local[fill[cand_l[c]]] = c
         fill[cand_l[c]] += 1
     sorted_x = global_xyz[cand_g[by_local], axis]
+    sorted_cross = global_xyz[cand_g[by_local], cross_axis]
     added_at = np.full(len(cand_g), -1, dtype=np.int64)
     for i in range(len(added)):
         added_at[added[i]] = i
@@ -1081,8 +1098,10 @@ def _compatible_sweep(
             lo, hi = starts[lb], starts[lb + 1]
             p = lo + np.searchsorted(sorted_x[lo:hi], global_xyz[gx, axis] - r)
             while p < hi and sorted_x[p] <= global_xyz[gx, axis] + r:
-                y = by_local[p]
                 p += 1
+                if abs(sorted_cross[p - 1] - global_xyz[gx, cross_axis]) > r:
+                    continue
+                y = by_local[p - 1]
                 if added_at[y] >= 0 and added_at[y] <= i:  # pairs within `added` once
                     continue
                 gy = cand_g[y]
