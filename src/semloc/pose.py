@@ -414,14 +414,21 @@ class _Pairs:
         return view
 
     def _select(self, limit: int | None) -> None:
-        rows = [p.input_rows for p, _ in self.pairs]
-        total = sum(len(r) for r in rows)
-        if limit is not None and total > limit:
-            rows = [r[np.unique((np.arange(len(r) * limit / total) * total / limit).astype(int))]
-                    for r in rows]  # fmt: skip
-        self.src = np.concatenate([p.points[r] for (p, _), r in zip(self.pairs, rows)])
-        self.src_normals = np.concatenate([p.normals[r] for (p, _), r in zip(self.pairs, rows)])
-        self.tree_of_row = np.repeat(np.arange(len(rows), dtype=np.int64), [len(r) for r in rows])
+        sizes = np.array([len(p.points) for p, _ in self.pairs])
+        total = int(sizes.sum())
+        starts = np.cumsum(sizes) - sizes
+        if limit is not None and total > limit:  # every (total / limit)-th point of each cloud
+            counts = np.array([len(np.arange(n * limit / total)) for n in sizes.tolist()])
+            owner = np.repeat(np.arange(len(sizes)), counts)
+            k = np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
+            input_rows = np.concatenate([p.input_rows for p, _ in self.pairs])
+            rows = starts[owner] + input_rows[starts[owner] + (k * total / limit).astype(int)]
+        else:
+            owner = np.repeat(np.arange(len(sizes)), sizes)
+            rows = np.concatenate([p.input_rows for p, _ in self.pairs]) + starts[owner]
+        self.src = np.concatenate([p.points for p, _ in self.pairs])[rows]
+        self.src_normals = np.concatenate([p.normals for p, _ in self.pairs])[rows]
+        self.tree_of_row = owner.astype(np.int64)
 
     @property
     def view(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
