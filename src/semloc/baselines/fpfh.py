@@ -115,10 +115,13 @@ def _mutual_matches_many(
     backward_d2 = np.full(len(target), np.inf)
     for start in range(0, len(local), _MATCH_ROWS):
         block = local[start : start + _MATCH_ROWS]
-        d2 = np.einsum("ij,ij->i", block, block)[:, None] + target_sq[None] - 2 * (block @ target.T)
+        product = block @ target.T
+        product *= 2  # exact: the same d2 as `sq[:, None] + target_sq[None] - 2 * product`
+        d2 = np.add(np.einsum("ij,ij->i", block, block)[:, None], target_sq[None])
+        d2 -= product
         for rows, cols in zip(forward, columns, strict=True):
-            rows[start : start + len(block)] = cols[np.argmin(d2[:, cols], axis=1)]
-        best = np.argmin(d2, axis=0)
+            rows[start : start + len(block)] = cols[np.argmin(np.take(d2, cols, axis=1), axis=1)]
+        best = np.argmin(np.ascontiguousarray(d2.T), axis=1)  # (faster than along axis 0)
         closer = d2[best, np.arange(len(target))] < backward_d2
         backward_d2[closer] = d2[best[closer], np.flatnonzero(closer)]
         backward[closer] = start + best[closer]
