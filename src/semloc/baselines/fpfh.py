@@ -9,7 +9,8 @@ global map") turns every sub-map and the local cloud into tf-idf word histograms
 `retrieve` most similar sub-maps are registered by RANSAC on mutual FPFH matches (edge-length
 and distance checkers; the matches computed here by matrix products, 2x faster than Open3D's
 own search in 33 dimensions and the same matches except among equal features, which planar
-faces have many of) and each registration becomes a hypothesis.  For a comparable final
+faces have many of; one distance matrix per update serves all retrieved sub-maps, which
+overlap) and each registration becomes a hypothesis.  For a comparable final
 pose, local objects are associated with the nearest global object of the same label within
 `association_distance` after the RANSAC pose, and the shared pose recovery
 (`semloc.pose.estimate_pose`) refines it from those associations; without any association the
