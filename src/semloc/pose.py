@@ -4,7 +4,8 @@ This module owns the last stage of the pipeline (paper, "Camera pose recovery"):
 
 1. **Closed form** (`align_positions`): weighted least-squares alignment of matched object
    centres, 6-DoF (Kabsch/Umeyama without scale) or 4-DoF (yaw about gravity-up + translation)
-   when both frames know their `up` direction.
+   when both frames know their `up` direction; solved in compiled code (`semloc.closed_form`)
+   in the z-up frames (`z_up_rotations`).
 2. **Global search** when the centres alone do not determine the pose (1 pair, 2 pairs on the
    up axis in 4-DoF, 1-2 pairs or collinear centres in 6-DoF; with points, also centres spread
    less than `min_spread`, whose closed-form rotation would be noise): the free rotation is sampled
@@ -47,7 +48,9 @@ from typing import Any, NamedTuple
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
+import semloc.closed_form as closed_form
 import semloc.registration as registration
+from semloc.closed_form import DEGENERATE
 from semloc.neighbours import Forest, KdTree, neighbourhood_shapes
 from semloc.pointsets import voxel_downsample
 
@@ -62,7 +65,6 @@ __all__ = [
     "prepare_cloud",
 ]
 
-_TOL = 1e-9  # spread (m) below which positions are mathematically degenerate
 _CENTRE_INLIER = 0.5  # m: centre-based fitness threshold (no points)
 _SEARCH_POINTS = 256  # local points used to score search candidates
 _SEARCH_CANDIDATES = 3  # best local maxima refined after the coarse search
@@ -206,6 +208,12 @@ def _rot_to_z(up: np.ndarray) -> np.ndarray:
     )
 
 
+def z_up_rotations(up_local: object, up_global: object) -> tuple[np.ndarray, np.ndarray]:
+    """The rotations taking each frame's `up` onto +z (local, global): in these z-up frames
+    a gravity-aligned (4-DoF) pose is a yaw about +z and a translation."""
+    return _rot_to_z(_unit(up_local, "up_local")), _rot_to_z(_unit(up_global, "up_global"))
+
+
 def _rot_z(theta: np.ndarray | float) -> np.ndarray:
     """Rotation(s) about +z; shape (3,3) for a scalar angle or (K,3,3)."""
     if np.ndim(theta) == 0:
@@ -215,55 +223,6 @@ def _rot_z(theta: np.ndarray | float) -> np.ndarray:
     R = np.zeros((len(c), 3, 3))
     R[:, 0, 0], R[:, 0, 1], R[:, 1, 0], R[:, 1, 1], R[:, 2, 2] = c, -s, s, c, 1.0
     return R
-
-
-# The closed-form solvers broadcast over leading axes: (..., m, 3) points with (..., m) weights,
-# so that many small association sets are aligned in one call (see `align_positions_batch`).
-
-
-def _mean(w: np.ndarray, xyz: np.ndarray) -> np.ndarray:
-    return (w[..., None, :] @ xyz)[..., 0, :]
-
-
-def _centroids(src, dst, w):
-    w = w / w.sum(axis=-1, keepdims=True)
-    return _mean(w, src), _mean(w, dst), w
-
-
-def _kabsch(src: np.ndarray, dst: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    cs, cd, w = _centroids(src, dst, w)
-    H = np.swapaxes(src - cs[..., None, :], -1, -2) @ ((dst - cd[..., None, :]) * w[..., None])
-    U, _, Vt = np.linalg.svd(H)
-    V, Ut = np.swapaxes(Vt, -1, -2), np.swapaxes(U, -1, -2)
-    sign = np.sign(np.linalg.det(V @ Ut))
-    V = V.copy()
-    V[..., :, 2] *= np.where(sign == 0, 1.0, sign)[..., None]  # V @ diag(1, 1, sign)
-    R = V @ Ut
-    return R, cd - (R @ cs[..., None])[..., 0]
-
-
-def _yaw(src: np.ndarray, dst: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Weighted yaw about +z and translation (frames already z-up)."""
-    cs, cd, w = _centroids(src, dst, w)
-    a, b = src[..., :2] - cs[..., None, :2], dst[..., :2] - cd[..., None, :2]
-    sin = np.sum(w * (a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]), axis=-1)
-    cos = np.sum(w * (a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1]), axis=-1)
-    R = _rot_z(np.arctan2(sin, cos))
-    return R, cd - (R @ cs[..., None])[..., 0]
-
-
-def _spread(xyz: np.ndarray, w: np.ndarray, horizontal: bool) -> np.ndarray:
-    """Horizontal RMS spread (z-up frame) or RMS distance off the best-fit line (6-DoF)."""
-    w = w / w.sum(axis=-1, keepdims=True)
-    d = xyz - _mean(w, xyz)[..., None, :]
-    cov = np.swapaxes(d, -1, -2) @ (d * w[..., None])
-    if horizontal:
-        return np.sqrt(np.maximum(cov[..., 0, 0] + cov[..., 1, 1], 0.0))
-    return np.sqrt(np.maximum(np.sum(np.linalg.eigvalsh(cov)[..., :2], axis=-1), 0.0))
-
-
-def _degenerate(src, dst, w, yaw_only: bool, tol: float) -> np.ndarray:
-    return np.minimum(_spread(src, w, yaw_only), _spread(dst, w, yaw_only)) <= tol
 
 
 # --------------------------------------------------------------------------- closed form
@@ -322,15 +281,25 @@ def align_positions_batch(
 
 def _align(src, dst, w, up_local, up_global) -> tuple[np.ndarray, np.ndarray]:
     """Batched closed form over (S, m, 3) pairs: poses (S, 4, 4) and which are determined."""
-    T = np.tile(np.eye(4), (len(src), 1, 1))
-    if up_local is not None and up_global is not None:
-        A_l, A_g = _rot_to_z(_unit(up_local, "up_local")), _rot_to_z(_unit(up_global, "up_global"))
+    T, spread = _fit(src, dst, w, up_local, up_global)
+    return T, spread > DEGENERATE
+
+
+def _fit(src, dst, w, up_local, up_global) -> tuple[np.ndarray, np.ndarray]:
+    """`closed_form.fit_many` in the given frames (4-DoF through the z-up frames when both
+    `up`s are given): poses (S, 4, 4) and the spread of each set's positions."""
+    yaw_only = up_local is not None and up_global is not None
+    if yaw_only:
+        A_l, A_g = z_up_rotations(up_local, up_global)
         src, dst = src @ A_l.T, dst @ A_g.T
-        R, t = _yaw(src, dst, w)
-        T[:, :3, :3], T[:, :3, 3] = A_g.T @ R @ A_l, t @ A_g
-        return T, ~_degenerate(src, dst, w, True, _TOL)
-    T[:, :3, :3], T[:, :3, 3] = _kabsch(src, dst, w)
-    return T, ~_degenerate(src, dst, w, False, _TOL)
+    T, spread = closed_form.fit_many(
+        np.ascontiguousarray(src, float), np.ascontiguousarray(dst, float),
+        np.ascontiguousarray(w, float), yaw_only,
+    )  # fmt: skip
+    if yaw_only:
+        T[:, :3, :3] = A_g.T @ T[:, :3, :3] @ A_l
+        T[:, :3, 3] = T[:, :3, 3] @ A_g
+    return T, spread
 
 
 # --------------------------------------------------------------------------- object clouds
@@ -445,14 +414,21 @@ class _Pairs:
         return view
 
     def _select(self, limit: int | None) -> None:
-        rows = [p.input_rows for p, _ in self.pairs]
-        total = sum(len(r) for r in rows)
-        if limit is not None and total > limit:
-            rows = [r[np.unique((np.arange(len(r) * limit / total) * total / limit).astype(int))]
-                    for r in rows]  # fmt: skip
-        self.src = np.concatenate([p.points[r] for (p, _), r in zip(self.pairs, rows)])
-        self.src_normals = np.concatenate([p.normals[r] for (p, _), r in zip(self.pairs, rows)])
-        self.tree_of_row = np.repeat(np.arange(len(rows), dtype=np.int64), [len(r) for r in rows])
+        sizes = np.array([len(p.points) for p, _ in self.pairs])
+        total = int(sizes.sum())
+        starts = np.cumsum(sizes) - sizes
+        if limit is not None and total > limit:  # every (total / limit)-th point of each cloud
+            counts = np.array([len(np.arange(n * limit / total)) for n in sizes.tolist()])
+            owner = np.repeat(np.arange(len(sizes)), counts)
+            k = np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
+            input_rows = np.concatenate([p.input_rows for p, _ in self.pairs])
+            rows = starts[owner] + input_rows[starts[owner] + (k * total / limit).astype(int)]
+        else:
+            owner = np.repeat(np.arange(len(sizes)), sizes)
+            rows = np.concatenate([p.input_rows for p, _ in self.pairs]) + starts[owner]
+        self.src = np.concatenate([p.points for p, _ in self.pairs])[rows]
+        self.src_normals = np.concatenate([p.normals for p, _ in self.pairs])[rows]
+        self.tree_of_row = owner.astype(np.int64)
 
     @property
     def view(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -608,9 +584,9 @@ def estimate_pose(
     if up_local is not None and up_global is not None:
         ups = (_unit(up_local, "up_local"), _unit(up_global, "up_global"))
     tag = "4dof" if ups else "6dof"
-    if _determined(src_c, dst_c, ups, cfg.min_spread if pairs else _TOL):
-        T, _ = _align(src_c[None], dst_c[None], np.ones((1, len(src_c))), *(ups or (None, None)))
-        candidates, method = [T[0]], f"closed-form-{tag}"
+    closed = _closed_form(src_c, dst_c, ups, cfg.min_spread if pairs else DEGENERATE)
+    if closed is not None:
+        candidates, method = [closed], f"closed-form-{tag}"
     elif not pairs:
         return None if init is None else _centre_estimate(init, src_c, dst_c, f"warm-{tag}")
     else:
@@ -620,13 +596,12 @@ def estimate_pose(
     return _best_refined(candidates, method, init, pairs, ups, cfg, tag)
 
 
-def _determined(src, dst, ups, tol: float) -> bool:
-    """Whether the centres fix the pose: enough of them, spread more than `tol`."""
-    if ups is not None:
-        src, dst = src @ _rot_to_z(ups[0]).T, dst @ _rot_to_z(ups[1]).T
+def _closed_form(src, dst, ups, tol: float) -> np.ndarray | None:
+    """The centres' closed-form pose, if they fix it: enough of them, spread more than `tol`."""
     if len(src) < (2 if ups is not None else 3):
-        return False
-    return not _degenerate(src, dst, np.ones(len(src)), ups is not None, tol)
+        return None
+    T, spread = _fit(src[None], dst[None], np.ones((1, len(src))), *(ups or (None, None)))
+    return T[0] if spread[0] > tol else None
 
 
 def _centre_estimate(T, src_c, dst_c, method: str) -> PoseEstimate:

@@ -220,29 +220,36 @@ def icp(T: np.ndarray, full: tuple, coarse: tuple, targets: Targets, axis: np.nd
 
 
 @numba.njit(cache=True)
-def _nearest_distances(moved, tree_of_row, f_points, f_axes, f_starts, radius):
+def _fitness(R, t, src, tree_of_row, f_points, f_axes, f_starts, radius):
+    """(inliers, sum of their squared distances, sum of the smooth scores) of `src` moved by
+    (R, t), each point against its partner tree."""
     best_d2 = np.empty(1)
     best_j = np.empty(1, dtype=np.int64)
     stack, gaps = scratch()
-    d = np.full(len(moved), np.inf)
     r2 = radius * radius
-    for r in range(len(moved)):
+    moved = np.empty(3)
+    inliers, squares, smooth = 0, 0.0, 0.0
+    for r in range(len(src)):
+        _move(R, t, src[r], moved)
         tree = tree_of_row[r]
-        if knn_within(f_points, f_axes, f_starts[tree], f_starts[tree + 1], moved[r], 1, r2,
+        if knn_within(f_points, f_axes, f_starts[tree], f_starts[tree + 1], moved, 1, r2,
                       best_d2, best_j, stack, gaps):  # fmt: skip
-            d[r] = np.sqrt(best_d2[0])
-    return d
+            inliers += 1
+            squares += best_d2[0]
+            smooth += 1.0 - best_d2[0] / r2
+    return inliers, squares, smooth
 
 
 def fitness(T: np.ndarray, src: np.ndarray, tree_of_row: np.ndarray, forest: Forest,
             radius: float) -> tuple[float, float, float]:  # fmt: skip
     """Inlier share, inlier RMS distance and the smooth score (mean of 1 - (d/r)^2, truncated)
     of the local points `src` moved by T against their partner trees."""
-    moved = np.ascontiguousarray(src @ T[:3, :3].T + T[:3, 3])
-    d = _nearest_distances(moved, tree_of_row, forest.points, forest.axes, forest.starts, radius)
-    inliers = d[d < radius]
-    rmse = float(np.sqrt(np.mean(inliers**2))) if len(inliers) else 0.0
-    return len(inliers) / len(d), rmse, float(np.mean(np.maximum(0.0, 1 - (d / radius) ** 2)))
+    inliers, squares, smooth = _fitness(
+        np.ascontiguousarray(T[:3, :3]), np.ascontiguousarray(T[:3, 3]), src, tree_of_row,
+        forest.points, forest.axes, forest.starts, float(radius),
+    )  # fmt: skip
+    rmse = float(np.sqrt(squares / inliers)) if inliers else 0.0
+    return inliers / len(src), rmse, smooth / len(src)
 
 
 @numba.njit(cache=True)

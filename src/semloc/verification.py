@@ -7,14 +7,15 @@ pairs (2 pairs in 4-DoF, 3 in 6-DoF; at most `max_samples` of them, seeded), kee
 that the most pairs agree with (ties: the smallest truncated squared error, MSAC), refits on
 those inliers and reports which pairs they are.  A set whose least-squares pose already puts
 every pair well within tolerance (half of it) is accepted whole without sampling: the sampled
-search finds that pose again there, while near the tolerance it may rightly drop a pair; `consensus_many` does all of this for many sets in a few
-batched arrays.
+search finds that pose again there, while near the tolerance it may rightly drop a pair.
+`consensus_many` does all of this for many sets in one compiled pass (numba), the minimal
+samples fitted by `closed_form.fit`.
 
 `MapSupport` asks what the pose says about the local objects outside the set: those that land
 near a map object they could be join the hypothesis (guided matching: `support`), those with
 no map object of their kind anywhere near are `conflicts`.  `Evidence` is what a hypothesis
 has for it after pose recovery: agreeing pairs, rejected pairs, the residual of its centres,
-point fitness, support and conflicts.  Pure numpy.
+point fitness, support and conflicts.  Pure computation on numpy arrays.
 """
 
 from __future__ import annotations
@@ -24,9 +25,12 @@ from functools import lru_cache
 from itertools import combinations
 
 import numpy as np
+from numba import njit
 from pydantic import BaseModel, ConfigDict, Field
 
-from semloc.pose import align_positions_batch
+from semloc.closed_form import DEGENERATE, fit, fit_into
+from semloc.neighbours import Forest, KdTree, knn_within, scratch
+from semloc.pose import z_up_rotations
 
 
 class VerificationConfig(BaseModel):
@@ -127,114 +131,168 @@ def consensus_indexed(
 
 
 def _consensus_padded(src, dst, valid, up_local, up_global, config, seed) -> list[Consensus]:
-    """`consensus_many` of padded (P, M, 3) positions with their `valid` rows."""
-    minimal = 2 if up_local is not None and up_global is not None else 3
+    """`consensus_many` of padded (P, M, 3) positions whose first `valid` rows are real."""
+    yaw_only = up_local is not None and up_global is not None
+    minimal = 2 if yaw_only else 3
     sizes = valid.sum(axis=1)
-    out: list[Consensus | None] = [None] * len(src)
-    small = np.flatnonzero(sizes <= minimal)
-    if len(small):
-        poses, ok = align_positions_batch(
-            src[small], dst[small], up_local, up_global, valid[small].astype(float)
-        )
-        rms = _rms_of(_errors_of(poses, src[small], dst[small], valid[small]), valid[small])
-        for k, i in enumerate(small):
-            pose, residual = (poses[k], float(rms[k])) if ok[k] else (None, float("inf"))
-            out[i] = Consensus(valid[i][: sizes[i]], pose, residual)
-    tested = np.flatnonzero(sizes > minimal)
-    if len(tested):  # a set that one least-squares pose explains whole needs no sampling
-        poses, ok = align_positions_batch(
-            src[tested], dst[tested], up_local, up_global, valid[tested].astype(float)
-        )
-        errors = _errors_of(poses, src[tested], dst[tested], valid[tested])
-        whole = ok & np.all((errors < _WHOLE * config.inlier_tolerance) | ~valid[tested], axis=1)
-        rms = _rms_of(errors, valid[tested])
-        for k in np.flatnonzero(whole):
-            i = tested[k]
-            out[i] = Consensus(valid[i][: sizes[i]].copy(), poses[k], float(rms[k]))
-        tested = tested[~whole]
-    if len(tested):
-        for i, found in zip(tested, _tested(src[tested], dst[tested], valid[tested], sizes[tested],
-                                             minimal, up_local, up_global, config, seed)):  # fmt: skip
-            out[i] = found
-    return out  # type: ignore[return-value]
+    if yaw_only:  # in z-up frames the 4-DoF pose is a yaw; distances do not change
+        A_l, A_g = z_up_rotations(up_local, up_global)
+        src, dst = src @ A_l.T, dst @ A_g.T
+    tables = [_samples(int(m), minimal, config.max_samples, seed) for m in range(sizes.max() + 1)]
+    counts = np.array([len(t) if m > minimal else 0 for m, t in enumerate(tables)])
+    rows = np.concatenate([t for m, t in enumerate(tables) if m > minimal] or [[]])
+    poses, has_pose, inliers, residual = _consensus_kernel(
+        np.ascontiguousarray(src), np.ascontiguousarray(dst), sizes.astype(np.int64),
+        rows.astype(np.int64).reshape(-1, minimal), np.cumsum(counts) - counts, counts, yaw_only,
+        config.inlier_tolerance, _WHOLE, LOCAL_OPTIMISATIONS, _SETTLE_ROUNDS,
+    )  # fmt: skip
+    if yaw_only:
+        poses[:, :3, :3] = A_g.T @ poses[:, :3, :3] @ A_l
+        poses[:, :3, 3] = poses[:, :3, 3] @ A_g
+    return [
+        Consensus(inliers[i, :n].copy(), poses[i] if has_pose[i] else None, float(residual[i]))
+        for i, n in enumerate(sizes.tolist())
+    ]
 
 
-def _tested(src, dst, valid, sizes, minimal, up_local, up_global, config, seed) -> list[Consensus]:
-    """The consensus of sets with more pairs than a minimal sample (see `consensus`)."""
-    tol = config.inlier_tolerance
-    drawn = [_samples(int(m), minimal, config.max_samples, seed) for m in sizes]
-    owner = np.repeat(np.arange(len(sizes)), [len(d) for d in drawn])
-    picks = np.concatenate(drawn)
-    poses, determined = align_positions_batch(
-        src[owner[:, None], picks], dst[owner[:, None], picks], up_local, up_global
-    )
-    errors = _errors_of(poses, src[owner], dst[owner], valid[owner])  # (S, M)
-    counts = (errors < tol).sum(axis=1)
-    # per set, its determined samples best first: most inliers, then the smallest MSAC cost
-    order = np.lexsort((_cost(errors, tol), -counts, owner))
-    order = order[determined[order]]
-    first = np.searchsorted(owner[order], np.arange(len(sizes)))
-    rank = np.arange(len(order)) - first[owner[order]]
-    starts = order[rank < LOCAL_OPTIMISATIONS]  # grouped by set, in the order they are tried
-    of = owner[starts]
-    inliers, pose = _settle_many(
-        errors[starts] < tol, poses[starts], src[of], dst[of], valid[of], up_local, up_global, tol
-    )
-    final = _errors_of(pose, src[of], dst[of], valid[of])
-    count, cost = inliers.sum(axis=1), _cost(final, tol)
-    # per set, the start with the most inliers, then the smallest cost; the first tried wins
-    ranked = np.lexsort((np.arange(len(of)), cost, -count, of))
-    firsts = np.flatnonzero(np.diff(of[ranked], prepend=-1) != 0)
-    best_of = np.full(len(sizes), -1)
-    best_of[of[ranked[firsts]]] = ranked[firsts]
-    rms = _rms_of(final, inliers)
-    results: list[Consensus] = []
-    for i, best in enumerate(best_of.tolist()):
-        if best < 0:  # no minimal sample determines a pose
-            results.append(Consensus(valid[i][: sizes[i]].copy(), None, float("inf")))
+@njit(cache=True)
+def _consensus_kernel(
+    src, dst, sizes, sample_rows, sample_start, sample_count, yaw_only, tol, whole, starts, rounds
+):
+    """The consensus of each padded set (see `consensus`): poses (P, 4, 4), whether each has
+    one, inliers (P, M) and the inliers' RMS residual (inf without a pose).
+
+    A set of at most a minimal sample is fitted whole; a set whose least-squares pose puts
+    every pair within `whole` x `tol` is kept whole; otherwise each minimal sample of its size
+    (`sample_rows[sample_start[m]:][:sample_count[m]]`) is fitted, the `starts` best determined
+    ones (most inliers, then the smallest MSAC cost, then drawing order) are refit on their
+    inliers until these settle (at most `rounds` refits; a refit is taken when it is
+    determined and keeps 2 inliers), and the start with the most inliers, then the smallest
+    cost, wins (the first tried on ties).  Fewer than 2 agreeing pairs: no pose."""
+    n_sets, width = src.shape[0], src.shape[1]
+    minimal = sample_rows.shape[1]
+    poses = np.zeros((n_sets, 4, 4))
+    has_pose = np.zeros(n_sets, dtype=np.bool_)
+    inliers = np.zeros((n_sets, width), dtype=np.bool_)
+    residual = np.full(n_sets, np.inf)
+    for i in range(n_sets):
+        n = sizes[i]
+        s, d = src[i, :n], dst[i, :n]
+        R, t, spread = fit(s, d, np.ones(n), yaw_only)
+        errors = _errors_into(R, t, s, d, np.empty(n))
+        if n <= minimal or (spread > DEGENERATE and np.all(errors < whole * tol)):
+            inliers[i, :n] = True
+            if spread > DEGENERATE:
+                _store(poses[i], R, t)
+                has_pose[i] = True
+                residual[i] = _rms(errors, inliers[i, :n])
             continue
-        kept = inliers[best][: sizes[i]]
-        if count[best] < 2:  # no two pairs agree: the set is not one place
-            results.append(Consensus(kept, None, float("inf")))
-        else:
-            results.append(Consensus(kept, pose[best], float(rms[best])))
-    return results
-
-
-def _settle_many(inliers, poses, src, dst, valid, up_local, up_global, tol):
-    """Refit each start on its inliers and recompute them, until they no longer change
-    (`_SETTLE_ROUNDS` rounds); a start stops where its refit is undetermined or keeps fewer
-    than 2 inliers (it keeps its last pose and inliers)."""
-    inliers, poses = inliers.copy(), poses.copy()
-    active = np.ones(len(inliers), dtype=bool)
-    for _ in range(_SETTLE_ROUNDS):
-        active &= inliers.sum(axis=1) >= 2  # fewer cannot determine a pose
-        rows = np.flatnonzero(active)
-        if not len(rows):
-            break
-        refit, determined = align_positions_batch(
-            src[rows], dst[rows], up_local, up_global, inliers[rows].astype(float)
+        first, count = sample_start[n], sample_count[n]
+        inl, R, t, found = _best_start(
+            s, d, sample_rows[first : first + count], yaw_only, tol, starts, rounds
         )
-        again = _errors_of(refit, src[rows], dst[rows], valid[rows]) < tol
-        moves = determined & (again.sum(axis=1) >= 2)
-        settled = np.all(again == inliers[rows], axis=1)
-        take = rows[moves]
-        poses[take], inliers[take] = refit[moves], again[moves]
-        active[rows[~moves | settled]] = False
-    return inliers, poses
+        if not found:
+            inliers[i, :n] = True
+        elif inl.sum() < 2:
+            inliers[i, :n] = inl
+        else:
+            inliers[i, :n] = inl
+            _store(poses[i], R, t)
+            has_pose[i] = True
+            residual[i] = _rms(_errors_into(R, t, s, d, np.empty(n)), inl)
+    return poses, has_pose, inliers, residual
 
 
-def _errors_of(poses, src, dst, valid) -> np.ndarray:
-    """Distance of every aligned local centre to its partner, pose k on set k: (S, M); padded
-    pairs are infinitely far."""
-    aligned = src @ np.swapaxes(poses[:, :3, :3], 1, 2) + poses[:, None, :3, 3]
-    return np.where(valid, np.linalg.norm(aligned - dst, axis=2), np.inf)
+@njit(cache=True)
+def _best_start(s, d, samples, yaw_only, tol, starts, rounds):
+    """The settled start with the most inliers (then least cost): (inliers, R, t, found)."""
+    n, minimal = len(s), samples.shape[1]
+    count = np.full(len(samples), -1)  # -1: undetermined
+    cost = np.zeros(len(samples))
+    sample_s, sample_d, ones = np.empty((minimal, 3)), np.empty((minimal, 3)), np.ones(minimal)
+    R, t, errors = np.empty((3, 3)), np.empty(3), np.empty(n)
+    for j in range(len(samples)):
+        for k in range(minimal):
+            sample_s[k], sample_d[k] = s[samples[j, k]], d[samples[j, k]]
+        if fit_into(sample_s, sample_d, ones, yaw_only, R, t) > DEGENERATE:
+            _errors_into(R, t, s, d, errors)
+            count[j] = np.sum(errors < tol)
+            cost[j] = _msac(errors, tol)
+    order = np.argsort(cost, kind="mergesort")  # ties: drawing order
+    order = order[np.argsort(-count[order], kind="mergesort")]
+    best_inl, best_R, best_t = np.zeros(n, dtype=np.bool_), np.eye(3), np.zeros(3)
+    best_count, best_cost, found = -1, np.inf, False
+    for j in order[:starts]:
+        if count[j] < 0:
+            break
+        for k in range(minimal):
+            sample_s[k], sample_d[k] = s[samples[j, k]], d[samples[j, k]]
+        fit_into(sample_s, sample_d, ones, yaw_only, R, t)
+        _errors_into(R, t, s, d, errors)
+        inl = _settle(s, d, errors < tol, R, t, yaw_only, tol, rounds)
+        c, e = inl.sum(), _msac(_errors_into(R, t, s, d, errors), tol)
+        if c > best_count or (c == best_count and e < best_cost):
+            best_inl, best_count, best_cost, found = inl, c, e, True
+            best_R[:, :], best_t[:] = R, t
+    return best_inl, best_R, best_t, found
 
 
-def _cost(errors: np.ndarray, tol: float) -> np.ndarray:
-    """MSAC cost per pose: squared errors truncated at the tolerance, summed over the real
-    pairs (padded pairs, at infinity, add nothing)."""
-    return np.sum(np.where(np.isfinite(errors), np.minimum(errors, tol) ** 2, 0.0), axis=-1)
+@njit(cache=True)
+def _settle(s, d, inl, R, t, yaw_only, tol, rounds):
+    """Refit on the inliers and recompute them until they no longer change; the pose is
+    updated in `R`, `t`, the settled inliers returned."""
+    R2, t2, errors = np.empty((3, 3)), np.empty(3), np.empty(len(s))
+    for _ in range(rounds):
+        if inl.sum() < 2:
+            break
+        spread = fit_into(s, d, inl.astype(np.float64), yaw_only, R2, t2)
+        again = _errors_into(R2, t2, s, d, errors) < tol
+        moves = spread > DEGENERATE and again.sum() >= 2
+        settled = np.all(again == inl)
+        if moves:
+            inl = again
+            R[:, :], t[:] = R2, t2
+        if not moves or settled:
+            break
+    return inl
+
+
+@njit(cache=True)
+def _errors_into(R, t, s, d, out):
+    """Distance of each aligned local centre `R @ s_i + t` to its partner `d_i`, into `out`."""
+    for i in range(len(s)):
+        e = 0.0
+        for k in range(3):
+            v = R[k, 0] * s[i, 0] + R[k, 1] * s[i, 1] + R[k, 2] * s[i, 2] + t[k] - d[i, k]
+            e += v * v
+        out[i] = np.sqrt(e)
+    return out
+
+
+@njit(cache=True)
+def _msac(errors, tol):
+    """Squared errors truncated at the tolerance, summed."""
+    total = 0.0
+    for e in errors:
+        total += min(e, tol) ** 2
+    return total
+
+
+@njit(cache=True)
+def _rms(errors, mask):
+    total, count = 0.0, 0
+    for i in range(len(errors)):
+        if mask[i]:
+            total += errors[i] ** 2
+            count += 1
+    return np.sqrt(total / count) if count else np.inf
+
+
+@njit(cache=True)
+def _store(pose, R, t):
+    pose[:3, :3] = R
+    pose[:3, 3] = t
+    pose[3, 3] = 1.0
 
 
 @lru_cache(maxsize=256)
@@ -248,18 +306,6 @@ def _samples(m: int, size: int, limit: int, seed: int) -> np.ndarray:
     return every[np.sort(rng.choice(len(every), size=limit, replace=False))]
 
 
-def _rms_of(errors: np.ndarray, mask: np.ndarray) -> np.ndarray:
-    """RMS of each row of `errors` over its `mask`ed entries (inf where none is)."""
-    count = mask.sum(axis=1)
-    squares = np.where(mask, errors, 0.0) ** 2
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return np.where(count > 0, np.sqrt(squares.sum(axis=1) / np.maximum(count, 1)), np.inf)
-
-
-_CHUNK_ENTRIES = 200_000
-"""`MapSupport.extend_many` measures at most this many (local object, candidate) gaps at once."""
-
-
 class MapSupport:
     """Where the local objects land under a pose, against the map objects each could be.
 
@@ -267,20 +313,36 @@ class MapSupport:
     descriptor gate), `global_xyz` the map's positions.  `extend(pose, local_xyz, pairs)` adds
     to `pairs` the local objects outside them that land within `inlier_tolerance` of a free
     candidate (nearest first, one-to-one: guided matching) and counts the conflicts: local
-    objects left with no candidate within `conflict_radius`."""
+    objects left with no candidate within `conflict_radius`.
+
+    Each local object's candidates are kept in a KD-tree (`assign` replaces them when the
+    object is re-detected), so a query costs a few node visits however many same-label
+    objects a building has."""
 
     def __init__(
         self, candidates: list[np.ndarray], global_xyz: np.ndarray, config: VerificationConfig
     ) -> None:
-        width = max([len(c) for c in candidates] + [1])
-        self._index = np.full((len(candidates), width), -1)
-        for j, indices in enumerate(candidates):
-            self._index[j, : len(indices)] = indices
-        positions = np.full((*self._index.shape, 3), np.inf)  # no candidate: infinitely far
-        known = self._index >= 0
-        positions[known] = np.asarray(global_xyz, float).reshape(-1, 3)[self._index[known]]
-        self._x, self._y, self._z = (np.ascontiguousarray(positions[..., k]) for k in range(3))
+        self._global_xyz = np.asarray(global_xyz, float).reshape(-1, 3)
         self.config = config
+        self._trees: list[KdTree] = []
+        self._globals: list[np.ndarray] = []  # per tree row: the candidate's global index
+        self._columns: list[np.ndarray] = []  # ... and its place in the candidate list
+        self._forest: tuple | None = None
+        for j, indices in enumerate(candidates):
+            self.assign(j, indices)
+
+    def assign(self, local: int, candidates: np.ndarray) -> None:
+        """Set the candidates (global indices) of local object `local`."""
+        indices = np.asarray(candidates, dtype=np.int64).reshape(-1)
+        tree = KdTree.build(self._global_xyz[indices].reshape(-1, 3))
+        while len(self._trees) <= local:
+            self._trees.append(KdTree.build(np.zeros((0, 3))))
+            self._globals.append(np.zeros(0, np.int64))
+            self._columns.append(np.zeros(0, np.int64))
+        self._trees[local] = tree
+        self._globals[local] = indices[tree.order]
+        self._columns[local] = tree.order.astype(np.int64)
+        self._forest = None
 
     def extend(
         self, pose: np.ndarray, local_xyz: np.ndarray, pairs: list[tuple[int, int]]
@@ -292,58 +354,123 @@ class MapSupport:
         self, poses: np.ndarray, local_xyz: np.ndarray, pairs: list[list[tuple[int, int]]]
     ) -> list[tuple[list[tuple[int, int]], int, int]]:
         """`extend` of many sets at once: (S, 4, 4) poses, one list of pairs per set."""
-        local_xyz = np.asarray(local_xyz, float).reshape(-1, 3)
-        n_local, width = len(local_xyz), self._index.shape[1]
-        chunk = max(1, _CHUNK_ENTRIES // max(n_local * width, 1))
-        out: list[tuple[list[tuple[int, int]], int, int]] = []
-        for start in range(0, len(pairs), chunk):
-            part = pairs[start : start + chunk]
-            out += self._extend_chunk(poses[start : start + chunk], local_xyz, part)
-        return out
-
-    def _extend_chunk(self, poses, local_xyz, pairs):
-        used = np.zeros((len(pairs), len(local_xyz)), dtype=bool)
-        owner = [s for s, set_pairs in enumerate(pairs) for _ in set_pairs]
-        used[owner, [l for set_pairs in pairs for _, l in set_pairs]] = True
-        aligned = local_xyz @ np.swapaxes(poses[:, :3, :3], 1, 2) + poses[:, None, :3, 3]
-        sets, locals_ = np.nonzero(~used)  # only the local objects outside each set
-        moved = aligned[sets, locals_]
-        dx = self._x[locals_] - moved[:, None, 0]  # (F, width), per coordinate: fast and exact
-        dy = self._y[locals_] - moved[:, None, 1]
-        dz = self._z[locals_] - moved[:, None, 2]
-        gaps = np.sqrt(dx * dx + dy * dy + dz * dz)
-        far = gaps.min(axis=1) >= self.config.conflict_radius
-        conflicts = np.bincount(sets[far], minlength=len(pairs)).tolist()
-        close = gaps < self.config.inlier_tolerance
-        bounds = np.searchsorted(sets, np.arange(len(pairs) + 1))
+        local_xyz = np.ascontiguousarray(local_xyz, dtype=float).reshape(-1, 3)
+        n_local = len(local_xyz)
+        if len(self._trees) < n_local:
+            raise ValueError(f"{n_local} local objects but candidates for {len(self._trees)}")
+        partner = np.full((len(pairs), n_local), -1, dtype=np.int64)
+        for s, set_pairs in enumerate(pairs):
+            for g, l in set_pairs:
+                partner[s, l] = g
+        if self._forest is None:
+            forest = Forest.of(self._trees)
+            self._forest = (
+                forest, np.concatenate(self._globals), np.concatenate(self._columns)
+            )  # fmt: skip
+        forest, globals_, columns = self._forest
+        added, conflicts = _guided_matches(
+            np.ascontiguousarray(poses, dtype=float).reshape(-1, 4, 4), local_xyz, partner,
+            forest.points, forest.axes, forest.starts, globals_, columns,
+            self.config.inlier_tolerance, self.config.conflict_radius,
+        )  # fmt: skip
         out = []
         for s, set_pairs in enumerate(pairs):
-            lo, hi = bounds[s], bounds[s + 1]
-            if lo == hi:  # no local object outside the set
+            if len(set_pairs) == n_local:  # no local object outside the set
                 out.append((list(set_pairs), 0, 0))
                 continue
-            added = list(set_pairs)
-            if close[lo:hi].any():
-                self._match(gaps[lo:hi], close[lo:hi], locals_[lo:hi], set_pairs, added)
+            new = [(g, l) for l, g in enumerate(added[s].tolist()) if g >= 0]
             out.append(
-                (sorted(added, key=lambda p: p[1]), len(added) - len(set_pairs), conflicts[s])
+                (sorted([*set_pairs, *new], key=lambda p: p[1]), len(new), int(conflicts[s]))
             )
         return out
 
-    def _match(self, gaps, close, locals_, pairs, added) -> None:
-        """Greedy one-to-one guided matching, nearest first (ties: local, then candidate order);
-        row i of `gaps` / `close` is local object `locals_[i]`."""
-        used_local = {l for _, l in pairs}
-        used_global = {g for g, _ in pairs}
-        rows, cols = np.nonzero(close)
-        order = np.argsort(gaps[rows, cols], kind="stable")
-        for i, c in zip(rows[order].tolist(), cols[order].tolist()):
-            r = int(locals_[i])
-            g = int(self._index[r, c])
-            if g not in used_global and r not in used_local:
-                added.append((g, r))
-                used_global.add(g)
-                used_local.add(r)
+
+@njit(cache=True)
+def _guided_matches(
+    poses, local_xyz, partner, points, axes, starts, globals_, columns, tolerance, radius
+):
+    """Per set s (pose s, `partner[s, l]` the global partner of local l or -1): the guided
+    match of each outside local object (global index or -1) and how many outside objects
+    have no candidate within `radius`.  Matches are made greedily over all (outside object,
+    candidate within `tolerance`) entries, nearest first (ties: local object, then candidate
+    order), each global and local object used once.  At most n_local - 1 globals can be taken
+    before an object's turn, so its n_local nearest candidates are enough."""
+    n_sets, n_local = partner.shape
+    k = max(n_local, 1)
+    added = np.full((n_sets, n_local), -1, dtype=np.int64)
+    conflicts = np.zeros(n_sets, dtype=np.int64)
+    best_d2, best_j = np.empty(k), np.empty(k, dtype=np.int64)
+    stack, gaps = scratch()
+    gap = np.empty(n_local * k)
+    local = np.empty(n_local * k, dtype=np.int64)
+    column = np.empty(n_local * k, dtype=np.int64)
+    glob = np.empty(n_local * k, dtype=np.int64)
+    used = np.empty(n_local * (k + 1), dtype=np.int64)
+    moved = np.empty(3)
+    for s in range(n_sets):
+        R, t = poses[s, :3, :3], poses[s, :3, 3]
+        n_entries = 0
+        for r in range(n_local):
+            if partner[s, r] >= 0:
+                continue
+            for c in range(3):
+                moved[c] = (
+                    local_xyz[r, 0] * R[c, 0] + local_xyz[r, 1] * R[c, 1]
+                    + local_xyz[r, 2] * R[c, 2] + t[c]
+                )  # fmt: skip
+            lo, hi = starts[r], starts[r + 1]
+            if knn_within(points, axes, lo, hi, moved, 1, radius * radius, best_d2, best_j,
+                          stack, gaps) == 0:  # fmt: skip
+                conflicts[s] += 1
+            found = knn_within(points, axes, lo, hi, moved, k, tolerance * tolerance, best_d2,
+                               best_j, stack, gaps)  # fmt: skip
+            for i in range(found):
+                gap[n_entries] = np.sqrt(best_d2[i])
+                local[n_entries] = r
+                column[n_entries] = columns[best_j[i]]
+                glob[n_entries] = globals_[best_j[i]]
+                n_entries += 1
+        if n_entries == 0:
+            continue
+        order = _by_gap_local_column(gap[:n_entries], local[:n_entries], column[:n_entries])
+        n_used = 0
+        for r in range(n_local):
+            if partner[s, r] >= 0:
+                used[n_used] = partner[s, r]
+                n_used += 1
+        for e in order:
+            if added[s, local[e]] >= 0:
+                continue
+            free = True
+            for u in range(n_used):
+                if used[u] == glob[e]:
+                    free = False
+                    break
+            if free:
+                added[s, local[e]] = glob[e]
+                used[n_used] = glob[e]
+                n_used += 1
+    return added, conflicts
+
+
+@njit(cache=True)
+def _by_gap_local_column(gap, local, column):
+    """Entry order by gap, then local object, then candidate order (insertion sort: few)."""
+    order = np.arange(len(gap))
+    for i in range(1, len(order)):
+        e = order[i]
+        j = i
+        while j > 0:
+            o = order[j - 1]
+            if gap[o] < gap[e] or (
+                gap[o] == gap[e]
+                and (local[o] < local[e] or (local[o] == local[e] and column[o] < column[e]))
+            ):
+                break
+            order[j] = o
+            j -= 1
+        order[j] = e
+    return order
 
 
 @dataclass(frozen=True)

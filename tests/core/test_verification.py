@@ -356,3 +356,127 @@ def test_a_set_where_no_two_pairs_agree_has_no_pose():
     global_xyz = ROOM[:3] * [3.0, -2.0, 1.0] + [0, 0, 2.0]  # stretched and lifted: no match
     found = consensus(local_xyz, global_xyz, UP, UP, VerificationConfig(inlier_tolerance=0.1))
     assert found.pose is None and found.inliers.sum() < 2
+
+
+def _literal_consensus(local, global_, up, config):
+    """The consensus as its docstring states it, one sample at a time (the reference)."""
+    from itertools import combinations
+
+    from semloc.pose import align_positions
+    from semloc.verification import LOCAL_OPTIMISATIONS
+
+    minimal, tol, n = (3 if up is None else 2), config.inlier_tolerance, len(local)
+    ups = (None, None) if up is None else (up, up)
+
+    def fit(mask):
+        try:
+            return align_positions(local, global_, *ups, weights=mask.astype(float))
+        except ValueError:
+            return None
+
+    def errors(T):
+        return np.linalg.norm(local @ T[:3, :3].T + T[:3, 3] - global_, axis=1)
+
+    def cost(e):
+        return float(np.sum(np.minimum(e, tol) ** 2))
+
+    whole = fit(np.ones(n, bool))
+    if n <= minimal or (whole is not None and np.all(errors(whole) < 0.5 * tol)):
+        return np.ones(n, bool), whole
+    tried = []
+    for j, sample in enumerate(combinations(range(n), minimal)):
+        mask = np.isin(np.arange(n), sample)
+        T = fit(mask)
+        if T is not None:
+            tried.append((-(errors(T) < tol).sum(), cost(errors(T)), j, T))
+    best = None
+    for _, _, _, T in sorted(tried, key=lambda x: x[:3])[:LOCAL_OPTIMISATIONS]:
+        inliers = errors(T) < tol
+        for _ in range(3):
+            if inliers.sum() < 2:
+                break
+            refit = fit(inliers)
+            again = None if refit is None else errors(refit) < tol
+            moves = refit is not None and again.sum() >= 2
+            if moves:
+                settled = np.array_equal(again, inliers)
+                T, inliers = refit, again
+                if settled:
+                    break
+            else:
+                break
+        key = (inliers.sum(), -cost(errors(T)))
+        if best is None or key > best[0]:
+            best = (key, inliers, T)
+    if best is None:
+        return np.ones(n, bool), None
+    return best[1], (best[2] if best[1].sum() >= 2 else None)
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    seed=st.integers(0, 10_000),
+    n=st.integers(2, 7),
+    wrong=st.integers(0, 3),
+    six_dof=st.booleans(),
+)
+def test_the_compiled_consensus_is_the_literal_one(seed, n, wrong, six_dof):
+    rng = np.random.default_rng(seed)
+    local = rng.uniform(-3, 3, (n, 3))
+    truth = yaw_pose(rng.uniform(-np.pi, np.pi), rng.uniform(-5, 5, 3))
+    global_ = local @ truth[:3, :3].T + truth[:3, 3] + rng.normal(0, 0.05, (n, 3))
+    global_[: min(wrong, n)] += rng.uniform(-2, 2, (min(wrong, n), 3))  # planted wrong pairs
+    up = None if six_dof else np.array([0.0, 0.0, 1.0])
+    config = VerificationConfig()
+    found = consensus(local, global_, up, up, config)
+    inliers, pose = _literal_consensus(local, global_, up, config)
+    assert found.inliers.tolist() == inliers.tolist()
+    assert (found.pose is None) == (pose is None)
+    if pose is not None:
+        np.testing.assert_allclose(found.pose, pose, atol=1e-9)
+
+
+def _literal_extend(pose, local_xyz, pairs, candidates, global_xyz, config):
+    """Guided matching as `MapSupport` states it, by brute force (the reference)."""
+    inside = {l for _, l in pairs}
+    if len(inside) == len(local_xyz):
+        return list(pairs), 0, 0
+    moved = local_xyz @ pose[:3, :3].T + pose[:3, 3]
+    entries, conflicts = [], 0
+    for r in range(len(local_xyz)):
+        if r in inside:
+            continue
+        gaps = np.linalg.norm(global_xyz[candidates[r]] - moved[r], axis=1)
+        conflicts += not np.any(gaps < config.conflict_radius)
+        entries += [(gap, r, c) for c, gap in enumerate(gaps) if gap < config.inlier_tolerance]
+    used_g, added = {g for g, _ in pairs}, []
+    for _, r, c in sorted(entries):
+        g = int(candidates[r][c])
+        if g not in used_g and r not in inside:
+            added.append((g, r))
+            used_g.add(g)
+            inside.add(r)
+    return sorted([*pairs, *added], key=lambda p: p[1]), len(added), conflicts
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 10_000), n_local=st.integers(1, 7), n_global=st.integers(1, 60))
+def test_guided_matching_is_the_literal_greedy_one(seed, n_local, n_global):
+    rng = np.random.default_rng(seed)
+    global_xyz = rng.uniform(0, 3, (n_global, 3))
+    global_xyz[: n_global // 4] = global_xyz[0]  # duplicated positions: ties
+    local_xyz = rng.uniform(0, 3, (n_local, 3))
+    candidates = [
+        np.sort(rng.choice(n_global, rng.integers(0, n_global + 1), replace=False))
+        for _ in range(n_local)
+    ]
+    config = VerificationConfig(inlier_tolerance=0.6, conflict_radius=0.8)
+    support = MapSupport(candidates, global_xyz, config)
+    poses = np.stack([yaw_pose(rng.uniform(-0.3, 0.3), rng.normal(0, 0.2, 3)) for _ in range(4)])
+    sets = []
+    for _ in range(4):
+        inside = rng.choice(n_local, rng.integers(0, n_local + 1), replace=False)
+        sets.append([(int(rng.integers(n_global)), int(l)) for l in sorted(inside)])
+    found = support.extend_many(poses, local_xyz, sets)
+    for pose, pairs, got in zip(poses, sets, found):
+        assert got == _literal_extend(pose, local_xyz, pairs, candidates, global_xyz, config)
