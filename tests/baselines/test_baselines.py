@@ -107,3 +107,28 @@ def test_segmatch_training_is_shared_per_map_and_settings(easy):
     other = SegMatchBaseline(gmap, SegMatchBaseline.config_class(trees=5), local_up=local.up)
     assert other._forest is not first._forest and len(other._forest.estimators_) == 5
     assert _answers(first.update(local)) == _answers(second.update(local))
+
+
+def _brute_mutual(local: np.ndarray, target: np.ndarray) -> list[tuple[int, int]]:
+    d = np.linalg.norm(local[:, None] - target[None], axis=2)
+    forward, backward = d.argmin(axis=1), d.argmin(axis=0)
+    mutual = [(i, int(j)) for i, j in enumerate(forward) if backward[j] == i]
+    return mutual if len(mutual) >= 3 else [(i, int(j)) for i, j in enumerate(forward)]
+
+
+@pytest.mark.parametrize("n_local", [5, 40, 2500])  # 2500: several blocks of rows
+def test_fpfh_matches_over_shared_sub_maps_equal_one_sub_map_at_a_time(n_local):
+    from semloc.baselines import fpfh
+
+    rng = np.random.default_rng(n_local)
+    features = rng.uniform(0, 100, (600, 33))
+    local = features[rng.choice(600, n_local)] + rng.normal(0, 5, (n_local, 33))
+    subsets = [np.sort(rng.choice(600, size, replace=False)) for size in (50, 300, 300, 8)]
+    subsets.append(subsets[1][:100])  # overlapping sub-maps, as the retrieved ones are
+    together = fpfh._mutual_matches_many(local, features, subsets)
+    assert len(together) == len(subsets)
+    for subset, pairs in zip(subsets, together, strict=True):
+        alone = fpfh._mutual_matches(local, features[subset])
+        assert pairs.dtype == np.int32 and np.array_equal(pairs, alone)
+        if n_local <= 40:
+            assert [tuple(p) for p in pairs.tolist()] == _brute_mutual(local, features[subset])

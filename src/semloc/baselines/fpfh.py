@@ -9,7 +9,8 @@ global map") turns every sub-map and the local cloud into tf-idf word histograms
 `retrieve` most similar sub-maps are registered by RANSAC on mutual FPFH matches (edge-length
 and distance checkers; the matches computed here by matrix products, 2x faster than Open3D's
 own search in 33 dimensions and the same matches except among equal features, which planar
-faces have many of) and each registration becomes a hypothesis.  For a comparable final
+faces have many of; one distance matrix per update serves all retrieved sub-maps, which
+overlap) and each registration becomes a hypothesis.  For a comparable final
 pose, local objects are associated with the nearest global object of the same label within
 `association_distance` after the RANSAC pose, and the shared pose recovery
 (`semloc.pose.estimate_pose`) refines it from those associations; without any association the
@@ -87,32 +88,54 @@ def _local_cloud(points: np.ndarray, cfg: FpfhConfig):
     return cloud
 
 
-_MATCH_ROWS = 1024  # local features compared with a sub-map's at once (bounds the memory)
+_MATCH_ROWS = 1024  # local features compared with the sub-maps' at once (bounds the memory)
 
 
 def _mutual_matches(local: np.ndarray, target: np.ndarray) -> np.ndarray:
     """(local row, target row) pairs of mutual nearest neighbours in feature space, the
     correspondences of Open3D's feature-matching RANSAC with its mutual filter (all forward
     matches when fewer than 3 are mutual; ties go to the first row, where Open3D's search may
-    pick another).  Squared distances come from matrix products,
-    blocks of rows at a time: exact search in 33 dimensions is a brute-force scan anyway."""
+    pick another)."""
+    return _mutual_matches_many(local, target, [np.arange(len(target))])[0]
+
+
+def _mutual_matches_many(
+    local: np.ndarray, features: np.ndarray, subsets: list[np.ndarray]
+) -> list[np.ndarray]:
+    """`_mutual_matches(local, features[s])` for every sorted index array `s` of `subsets`,
+    with one distance matrix for all of them: the retrieved sub-maps overlap, and the backward
+    match of a target point (its nearest local feature) does not depend on the sub-map.
+    Squared distances come from matrix products, blocks of rows at a time (exact search in 33
+    dimensions is a brute-force scan anyway), each entry computed as for one sub-map alone."""
+    union = np.unique(np.concatenate(subsets)) if subsets else np.zeros(0, dtype=np.int64)
+    columns = [np.searchsorted(union, s) for s in subsets]  # increasing: ties keep their order
+    target = features[union]
     target_sq = np.einsum("ij,ij->i", target, target)
-    forward = np.empty(len(local), dtype=np.int64)
+    forward = [np.empty(len(local), dtype=np.int64) for _ in subsets]
     backward = np.zeros(len(target), dtype=np.int64)
     backward_d2 = np.full(len(target), np.inf)
     for start in range(0, len(local), _MATCH_ROWS):
         block = local[start : start + _MATCH_ROWS]
-        d2 = np.einsum("ij,ij->i", block, block)[:, None] + target_sq[None] - 2 * block @ target.T
-        forward[start : start + len(block)] = np.argmin(d2, axis=1)
-        best = np.argmin(d2, axis=0)
+        product = block @ target.T
+        product *= 2  # exact: the same d2 as `sq[:, None] + target_sq[None] - 2 * product`
+        d2 = np.add(np.einsum("ij,ij->i", block, block)[:, None], target_sq[None])
+        d2 -= product
+        for rows, cols in zip(forward, columns, strict=True):
+            rows[start : start + len(block)] = cols[np.argmin(np.take(d2, cols, axis=1), axis=1)]
+        best = np.argmin(np.ascontiguousarray(d2.T), axis=1)  # (faster than along axis 0)
         closer = d2[best, np.arange(len(target))] < backward_d2
         backward_d2[closer] = d2[best[closer], np.flatnonzero(closer)]
         backward[closer] = start + best[closer]
     rows = np.arange(len(local))
-    mutual = backward[forward] == rows
-    if mutual.sum() < 3:
-        mutual[:] = True
-    return np.stack([rows[mutual], forward[mutual]], axis=1).astype(np.int32)
+    matches = []
+    for ahead, cols in zip(forward, columns, strict=True):
+        mutual = backward[ahead] == rows
+        if mutual.sum() < 3:
+            mutual[:] = True
+        position = np.empty(len(union), dtype=np.int64)
+        position[cols] = np.arange(len(cols))  # union column -> row of the sub-map
+        matches.append(np.stack([rows[mutual], position[ahead[mutual]]], axis=1).astype(np.int32))
+    return matches
 
 
 def _normalise(hist: np.ndarray, idf: np.ndarray) -> np.ndarray:
@@ -242,10 +265,10 @@ class FpfhRansacBaseline(ObjectBaseline):
             reg.CorrespondenceCheckerBasedOnDistance(cfg.max_correspondence),
         ]
         candidates = []
-        for row in order:
-            m = self._members[row]
+        members = [self._members[row] for row in order]
+        for m, pairs in zip(members, _mutual_matches_many(fpfh, self._fpfh, members), strict=True):
             sub = self._pcd.select_by_index(m.tolist())
-            matches = o3d.utility.Vector2iVector(_mutual_matches(fpfh, self._fpfh[m]))
+            matches = o3d.utility.Vector2iVector(pairs)
             result = reg.registration_ransac_based_on_correspondence(
                 pcd, sub, matches, cfg.max_correspondence,
                 reg.TransformationEstimationPointToPoint(False), 3, checkers,
