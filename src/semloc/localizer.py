@@ -156,7 +156,6 @@ class Localizer:
         self._local: dict[str, SemanticObject] = {}
         self._local_index: dict[str, int] = {}
         self._candidates_of: dict[int, np.ndarray] = {}  # local index -> global indices
-        self._support = MapSupport([], global_map.positions, config.verification)
         self._steps: list[Step] = []
         self._timing = {"association": 0.0, "clustering": 0.0, "pose": 0.0, "total": 0.0}
 
@@ -271,7 +270,6 @@ class Localizer:
             self._local[obj.id] = obj
             detections[index] = self._candidates.candidates(obj)
             self._candidates_of[index] = detections[index]
-            self._support.assign(index, detections[index])
         return detections
 
     # Hypotheses -------------------------------------------------------------------------
@@ -282,8 +280,12 @@ class Localizer:
         by_size = cfg.rank_by in ("residual", "evidence")
         sets = self._clustering.top(cfg.screened_sets, min_size=2, largest_first=by_size)
         local_xyz = np.array([o.position for o in self._local.values()]).reshape(-1, 3)
-        verified = self._verified_all(sets, local_xyz, self._support)
-        screened = [c for c in verified if len(c.pairs) >= 2]
+        support = MapSupport(
+            [self._candidates_of[j] for j in range(len(local_xyz))],
+            self.global_map.positions,
+            cfg.verification,
+        )
+        screened = [c for c in self._verified_all(sets, local_xyz, support) if len(c.pairs) >= 2]
         if by_size:  # pairs include the guided matches
             screened.sort(key=lambda c: (-len(c.pairs), round(c.residual, 9), -c.aset.score))
         places = [(c.pairs, c.pose) for c in screened]

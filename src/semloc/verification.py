@@ -29,7 +29,6 @@ from numba import njit
 from pydantic import BaseModel, ConfigDict, Field
 
 from semloc.closed_form import DEGENERATE, fit, fit_into
-from semloc.neighbours import Forest, KdTree, knn_within, scratch
 from semloc.pose import z_up_rotations
 
 
@@ -306,6 +305,10 @@ def _samples(m: int, size: int, limit: int, seed: int) -> np.ndarray:
     return every[np.sort(rng.choice(len(every), size=limit, replace=False))]
 
 
+_CHUNK_ENTRIES = 200_000
+"""`MapSupport.extend_many` measures at most this many (local object, candidate) gaps at once."""
+
+
 class MapSupport:
     """Where the local objects land under a pose, against the map objects each could be.
 
@@ -313,36 +316,20 @@ class MapSupport:
     descriptor gate), `global_xyz` the map's positions.  `extend(pose, local_xyz, pairs)` adds
     to `pairs` the local objects outside them that land within `inlier_tolerance` of a free
     candidate (nearest first, one-to-one: guided matching) and counts the conflicts: local
-    objects left with no candidate within `conflict_radius`.
-
-    Each local object's candidates are kept in a KD-tree (`assign` replaces them when the
-    object is re-detected), so a query costs a few node visits however many same-label
-    objects a building has."""
+    objects left with no candidate within `conflict_radius`."""
 
     def __init__(
         self, candidates: list[np.ndarray], global_xyz: np.ndarray, config: VerificationConfig
     ) -> None:
-        self._global_xyz = np.asarray(global_xyz, float).reshape(-1, 3)
-        self.config = config
-        self._trees: list[KdTree] = []
-        self._globals: list[np.ndarray] = []  # per tree row: the candidate's global index
-        self._columns: list[np.ndarray] = []  # ... and its place in the candidate list
-        self._forest: tuple | None = None
+        width = max([len(c) for c in candidates] + [1])
+        self._index = np.full((len(candidates), width), -1)
         for j, indices in enumerate(candidates):
-            self.assign(j, indices)
-
-    def assign(self, local: int, candidates: np.ndarray) -> None:
-        """Set the candidates (global indices) of local object `local`."""
-        indices = np.asarray(candidates, dtype=np.int64).reshape(-1)
-        tree = KdTree.build(self._global_xyz[indices].reshape(-1, 3))
-        while len(self._trees) <= local:
-            self._trees.append(KdTree.build(np.zeros((0, 3))))
-            self._globals.append(np.zeros(0, np.int64))
-            self._columns.append(np.zeros(0, np.int64))
-        self._trees[local] = tree
-        self._globals[local] = indices[tree.order]
-        self._columns[local] = tree.order.astype(np.int64)
-        self._forest = None
+            self._index[j, : len(indices)] = indices
+        positions = np.full((*self._index.shape, 3), np.inf)  # no candidate: infinitely far
+        known = self._index >= 0
+        positions[known] = np.asarray(global_xyz, float).reshape(-1, 3)[self._index[known]]
+        self._x, self._y, self._z = (np.ascontiguousarray(positions[..., k]) for k in range(3))
+        self.config = config
 
     def extend(
         self, pose: np.ndarray, local_xyz: np.ndarray, pairs: list[tuple[int, int]]
@@ -354,123 +341,58 @@ class MapSupport:
         self, poses: np.ndarray, local_xyz: np.ndarray, pairs: list[list[tuple[int, int]]]
     ) -> list[tuple[list[tuple[int, int]], int, int]]:
         """`extend` of many sets at once: (S, 4, 4) poses, one list of pairs per set."""
-        local_xyz = np.ascontiguousarray(local_xyz, dtype=float).reshape(-1, 3)
-        n_local = len(local_xyz)
-        if len(self._trees) < n_local:
-            raise ValueError(f"{n_local} local objects but candidates for {len(self._trees)}")
-        partner = np.full((len(pairs), n_local), -1, dtype=np.int64)
-        for s, set_pairs in enumerate(pairs):
-            for g, l in set_pairs:
-                partner[s, l] = g
-        if self._forest is None:
-            forest = Forest.of(self._trees)
-            self._forest = (
-                forest, np.concatenate(self._globals), np.concatenate(self._columns)
-            )  # fmt: skip
-        forest, globals_, columns = self._forest
-        added, conflicts = _guided_matches(
-            np.ascontiguousarray(poses, dtype=float).reshape(-1, 4, 4), local_xyz, partner,
-            forest.points, forest.axes, forest.starts, globals_, columns,
-            self.config.inlier_tolerance, self.config.conflict_radius,
-        )  # fmt: skip
+        local_xyz = np.asarray(local_xyz, float).reshape(-1, 3)
+        n_local, width = len(local_xyz), self._index.shape[1]
+        chunk = max(1, _CHUNK_ENTRIES // max(n_local * width, 1))
+        out: list[tuple[list[tuple[int, int]], int, int]] = []
+        for start in range(0, len(pairs), chunk):
+            part = pairs[start : start + chunk]
+            out += self._extend_chunk(poses[start : start + chunk], local_xyz, part)
+        return out
+
+    def _extend_chunk(self, poses, local_xyz, pairs):
+        used = np.zeros((len(pairs), len(local_xyz)), dtype=bool)
+        owner = [s for s, set_pairs in enumerate(pairs) for _ in set_pairs]
+        used[owner, [l for set_pairs in pairs for _, l in set_pairs]] = True
+        aligned = local_xyz @ np.swapaxes(poses[:, :3, :3], 1, 2) + poses[:, None, :3, 3]
+        sets, locals_ = np.nonzero(~used)  # only the local objects outside each set
+        moved = aligned[sets, locals_]
+        dx = self._x[locals_] - moved[:, None, 0]  # (F, width), per coordinate: fast and exact
+        dy = self._y[locals_] - moved[:, None, 1]
+        dz = self._z[locals_] - moved[:, None, 2]
+        gaps = np.sqrt(dx * dx + dy * dy + dz * dz)
+        far = gaps.min(axis=1) >= self.config.conflict_radius
+        conflicts = np.bincount(sets[far], minlength=len(pairs)).tolist()
+        close = gaps < self.config.inlier_tolerance
+        bounds = np.searchsorted(sets, np.arange(len(pairs) + 1))
         out = []
         for s, set_pairs in enumerate(pairs):
-            if len(set_pairs) == n_local:  # no local object outside the set
+            lo, hi = bounds[s], bounds[s + 1]
+            if lo == hi:  # no local object outside the set
                 out.append((list(set_pairs), 0, 0))
                 continue
-            new = [(g, l) for l, g in enumerate(added[s].tolist()) if g >= 0]
+            added = list(set_pairs)
+            if close[lo:hi].any():
+                self._match(gaps[lo:hi], close[lo:hi], locals_[lo:hi], set_pairs, added)
             out.append(
-                (sorted([*set_pairs, *new], key=lambda p: p[1]), len(new), int(conflicts[s]))
+                (sorted(added, key=lambda p: p[1]), len(added) - len(set_pairs), conflicts[s])
             )
         return out
 
-
-@njit(cache=True)
-def _guided_matches(
-    poses, local_xyz, partner, points, axes, starts, globals_, columns, tolerance, radius
-):
-    """Per set s (pose s, `partner[s, l]` the global partner of local l or -1): the guided
-    match of each outside local object (global index or -1) and how many outside objects
-    have no candidate within `radius`.  Matches are made greedily over all (outside object,
-    candidate within `tolerance`) entries, nearest first (ties: local object, then candidate
-    order), each global and local object used once.  At most n_local - 1 globals can be taken
-    before an object's turn, so its n_local nearest candidates are enough."""
-    n_sets, n_local = partner.shape
-    k = max(n_local, 1)
-    added = np.full((n_sets, n_local), -1, dtype=np.int64)
-    conflicts = np.zeros(n_sets, dtype=np.int64)
-    best_d2, best_j = np.empty(k), np.empty(k, dtype=np.int64)
-    stack, gaps = scratch()
-    gap = np.empty(n_local * k)
-    local = np.empty(n_local * k, dtype=np.int64)
-    column = np.empty(n_local * k, dtype=np.int64)
-    glob = np.empty(n_local * k, dtype=np.int64)
-    used = np.empty(n_local * (k + 1), dtype=np.int64)
-    moved = np.empty(3)
-    for s in range(n_sets):
-        R, t = poses[s, :3, :3], poses[s, :3, 3]
-        n_entries = 0
-        for r in range(n_local):
-            if partner[s, r] >= 0:
-                continue
-            for c in range(3):
-                moved[c] = (
-                    local_xyz[r, 0] * R[c, 0] + local_xyz[r, 1] * R[c, 1]
-                    + local_xyz[r, 2] * R[c, 2] + t[c]
-                )  # fmt: skip
-            lo, hi = starts[r], starts[r + 1]
-            if knn_within(points, axes, lo, hi, moved, 1, radius * radius, best_d2, best_j,
-                          stack, gaps) == 0:  # fmt: skip
-                conflicts[s] += 1
-            found = knn_within(points, axes, lo, hi, moved, k, tolerance * tolerance, best_d2,
-                               best_j, stack, gaps)  # fmt: skip
-            for i in range(found):
-                gap[n_entries] = np.sqrt(best_d2[i])
-                local[n_entries] = r
-                column[n_entries] = columns[best_j[i]]
-                glob[n_entries] = globals_[best_j[i]]
-                n_entries += 1
-        if n_entries == 0:
-            continue
-        order = _by_gap_local_column(gap[:n_entries], local[:n_entries], column[:n_entries])
-        n_used = 0
-        for r in range(n_local):
-            if partner[s, r] >= 0:
-                used[n_used] = partner[s, r]
-                n_used += 1
-        for e in order:
-            if added[s, local[e]] >= 0:
-                continue
-            free = True
-            for u in range(n_used):
-                if used[u] == glob[e]:
-                    free = False
-                    break
-            if free:
-                added[s, local[e]] = glob[e]
-                used[n_used] = glob[e]
-                n_used += 1
-    return added, conflicts
-
-
-@njit(cache=True)
-def _by_gap_local_column(gap, local, column):
-    """Entry order by gap, then local object, then candidate order (insertion sort: few)."""
-    order = np.arange(len(gap))
-    for i in range(1, len(order)):
-        e = order[i]
-        j = i
-        while j > 0:
-            o = order[j - 1]
-            if gap[o] < gap[e] or (
-                gap[o] == gap[e]
-                and (local[o] < local[e] or (local[o] == local[e] and column[o] < column[e]))
-            ):
-                break
-            order[j] = o
-            j -= 1
-        order[j] = e
-    return order
+    def _match(self, gaps, close, locals_, pairs, added) -> None:
+        """Greedy one-to-one guided matching, nearest first (ties: local, then candidate order);
+        row i of `gaps` / `close` is local object `locals_[i]`."""
+        used_local = {l for _, l in pairs}
+        used_global = {g for g, _ in pairs}
+        rows, cols = np.nonzero(close)
+        order = np.argsort(gaps[rows, cols], kind="stable")
+        for i, c in zip(rows[order].tolist(), cols[order].tolist()):
+            r = int(locals_[i])
+            g = int(self._index[r, c])
+            if g not in used_global and r not in used_local:
+                added.append((g, r))
+                used_global.add(g)
+                used_local.add(r)
 
 
 @dataclass(frozen=True)
