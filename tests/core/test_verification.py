@@ -434,3 +434,49 @@ def test_the_compiled_consensus_is_the_literal_one(seed, n, wrong, six_dof):
     assert (found.pose is None) == (pose is None)
     if pose is not None:
         np.testing.assert_allclose(found.pose, pose, atol=1e-9)
+
+
+def _literal_extend(pose, local_xyz, pairs, candidates, global_xyz, config):
+    """Guided matching as `MapSupport` states it, by brute force (the reference)."""
+    inside = {l for _, l in pairs}
+    if len(inside) == len(local_xyz):
+        return list(pairs), 0, 0
+    moved = local_xyz @ pose[:3, :3].T + pose[:3, 3]
+    entries, conflicts = [], 0
+    for r in range(len(local_xyz)):
+        if r in inside:
+            continue
+        gaps = np.linalg.norm(global_xyz[candidates[r]] - moved[r], axis=1)
+        conflicts += not np.any(gaps < config.conflict_radius)
+        entries += [(gap, r, c) for c, gap in enumerate(gaps) if gap < config.inlier_tolerance]
+    used_g, added = {g for g, _ in pairs}, []
+    for _, r, c in sorted(entries):
+        g = int(candidates[r][c])
+        if g not in used_g and r not in inside:
+            added.append((g, r))
+            used_g.add(g)
+            inside.add(r)
+    return sorted([*pairs, *added], key=lambda p: p[1]), len(added), conflicts
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 10_000), n_local=st.integers(1, 7), n_global=st.integers(1, 60))
+def test_guided_matching_is_the_literal_greedy_one(seed, n_local, n_global):
+    rng = np.random.default_rng(seed)
+    global_xyz = rng.uniform(0, 3, (n_global, 3))
+    global_xyz[: n_global // 4] = global_xyz[0]  # duplicated positions: ties
+    local_xyz = rng.uniform(0, 3, (n_local, 3))
+    candidates = [
+        np.sort(rng.choice(n_global, rng.integers(0, n_global + 1), replace=False))
+        for _ in range(n_local)
+    ]
+    config = VerificationConfig(inlier_tolerance=0.6, conflict_radius=0.8)
+    support = MapSupport(candidates, global_xyz, config)
+    poses = np.stack([yaw_pose(rng.uniform(-0.3, 0.3), rng.normal(0, 0.2, 3)) for _ in range(4)])
+    sets = []
+    for _ in range(4):
+        inside = rng.choice(n_local, rng.integers(0, n_local + 1), replace=False)
+        sets.append([(int(rng.integers(n_global)), int(l)) for l in sorted(inside)])
+    found = support.extend_many(poses, local_xyz, sets)
+    for pose, pairs, got in zip(poses, sets, found):
+        assert got == _literal_extend(pose, local_xyz, pairs, candidates, global_xyz, config)
