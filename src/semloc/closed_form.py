@@ -59,13 +59,7 @@ def fit_into(src, dst, w, yaw_only, R, t):
         R[1, 0], R[1, 1], R[1, 2] = s, c, 0.0
         R[2, 0], R[2, 1], R[2, 2] = 0.0, 0.0, 1.0
     else:
-        H = np.zeros((3, 3))
-        for i in range(len(w)):
-            wi = w[i] / total
-            for r in range(3):
-                for q in range(3):
-                    H[r, q] += (src[i, r] - cs[r]) * (dst[i, q] - cd[q]) * wi
-        U, _, Vt = np.linalg.svd(H)
+        U, _, Vt = np.linalg.svd(_cross_covariance(src, cs, dst, cd, w, total))
         V = Vt.T.copy()
         sign = np.sign(np.linalg.det(V @ U.T))
         V[:, 2] *= 1.0 if sign == 0 else sign
@@ -83,14 +77,20 @@ def _spread(xyz, w, total, centre, yaw_only):
             dx, dy = xyz[i, 0] - centre[0], xyz[i, 1] - centre[1]
             horizontal += (dx * dx + dy * dy) * (w[i] / total)
         return np.sqrt(max(horizontal, 0.0))
-    cov = np.zeros((3, 3))
+    values = np.linalg.eigvalsh(_cross_covariance(xyz, centre, xyz, centre, w, total))
+    return np.sqrt(max(values[0] + values[1], 0.0))
+
+
+@njit(cache=True)
+def _cross_covariance(a, a_centre, b, b_centre, w, total):
+    """Σ_i w_i / total · (a_i - a_centre)(b_i - b_centre)ᵀ, (3, 3)."""
+    out = np.zeros((3, 3))
     for i in range(len(w)):
         wi = w[i] / total
         for r in range(3):
             for q in range(3):
-                cov[r, q] += (xyz[i, r] - centre[r]) * (xyz[i, q] - centre[q]) * wi
-    values = np.linalg.eigvalsh(cov)
-    return np.sqrt(max(values[0] + values[1], 0.0))
+                out[r, q] += (a[i, r] - a_centre[r]) * (b[i, q] - b_centre[q]) * wi
+    return out
 
 
 @njit(cache=True)
