@@ -296,10 +296,15 @@ def _fit(src, dst, w, up_local, up_global) -> tuple[np.ndarray, np.ndarray]:
         np.ascontiguousarray(src, float), np.ascontiguousarray(dst, float),
         np.ascontiguousarray(w, float), yaw_only,
     )  # fmt: skip
-    if yaw_only:
-        T[:, :3, :3] = A_g.T @ T[:, :3, :3] @ A_l
-        T[:, :3, 3] = T[:, :3, 3] @ A_g
-    return T, spread
+    return (from_z_up(T, A_l, A_g) if yaw_only else T), spread
+
+
+def from_z_up(T: np.ndarray, A_l: np.ndarray, A_g: np.ndarray) -> np.ndarray:
+    """Poses (S, 4, 4) between the z-up frames of `z_up_rotations` as poses between the
+    original frames (in place)."""
+    T[:, :3, :3] = A_g.T @ T[:, :3, :3] @ A_l
+    T[:, :3, 3] = T[:, :3, 3] @ A_g
+    return T
 
 
 # --------------------------------------------------------------------------- object clouds
@@ -418,11 +423,12 @@ class _Pairs:
         total = int(sizes.sum())
         starts = np.cumsum(sizes) - sizes
         if limit is not None and total > limit:  # every (total / limit)-th point of each cloud
-            counts = np.array([len(np.arange(n * limit / total)) for n in sizes.tolist()])
+            counts = np.ceil(sizes * limit / total).astype(np.int64)
             owner = np.repeat(np.arange(len(sizes)), counts)
             k = np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
+            first = starts[owner]
             input_rows = np.concatenate([p.input_rows for p, _ in self.pairs])
-            rows = starts[owner] + input_rows[starts[owner] + (k * total / limit).astype(int)]
+            rows = first + input_rows[first + (k * total / limit).astype(int)]
         else:
             owner = np.repeat(np.arange(len(sizes)), sizes)
             rows = np.concatenate([p.input_rows for p, _ in self.pairs]) + starts[owner]

@@ -29,7 +29,7 @@ from numba import njit
 from pydantic import BaseModel, ConfigDict, Field
 
 from semloc.closed_form import DEGENERATE, fit, fit_into
-from semloc.pose import z_up_rotations
+from semloc.pose import from_z_up, z_up_rotations
 
 
 class VerificationConfig(BaseModel):
@@ -122,18 +122,15 @@ def consensus_indexed(
     owner = np.repeat(np.arange(len(pairs)), sizes)
     slot = np.arange(len(rows)) - np.repeat(np.cumsum(sizes) - sizes, sizes)
     src, dst = np.zeros((2, len(pairs), max(sizes.max(), 1), 3))
-    valid = np.zeros(src.shape[:2], dtype=bool)
     src[owner, slot] = np.asarray(local_xyz, float)[rows[:, 1]]
     dst[owner, slot] = np.asarray(global_xyz, float)[rows[:, 0]]
-    valid[owner, slot] = True
-    return _consensus_padded(src, dst, valid, up_local, up_global, config, seed)
+    return _consensus_padded(src, dst, sizes, up_local, up_global, config, seed)
 
 
-def _consensus_padded(src, dst, valid, up_local, up_global, config, seed) -> list[Consensus]:
-    """`consensus_many` of padded (P, M, 3) positions whose first `valid` rows are real."""
+def _consensus_padded(src, dst, sizes, up_local, up_global, config, seed) -> list[Consensus]:
+    """`consensus_many` of padded (P, M, 3) positions whose first `sizes` rows are real."""
     yaw_only = up_local is not None and up_global is not None
     minimal = 2 if yaw_only else 3
-    sizes = valid.sum(axis=1)
     if yaw_only:  # in z-up frames the 4-DoF pose is a yaw; distances do not change
         A_l, A_g = z_up_rotations(up_local, up_global)
         src, dst = src @ A_l.T, dst @ A_g.T
@@ -146,8 +143,7 @@ def _consensus_padded(src, dst, valid, up_local, up_global, config, seed) -> lis
         config.inlier_tolerance, _WHOLE, LOCAL_OPTIMISATIONS, _SETTLE_ROUNDS,
     )  # fmt: skip
     if yaw_only:
-        poses[:, :3, :3] = A_g.T @ poses[:, :3, :3] @ A_l
-        poses[:, :3, 3] = poses[:, :3, 3] @ A_g
+        poses = from_z_up(poses, A_l, A_g)
     return [
         Consensus(inliers[i, :n].copy(), poses[i] if has_pose[i] else None, float(residual[i]))
         for i, n in enumerate(sizes.tolist())
@@ -190,12 +186,11 @@ def _consensus_kernel(
         inl, R, t, found = _best_start(
             s, d, sample_rows[first : first + count], yaw_only, tol, starts, rounds
         )
-        if not found:
+        if not found:  # no minimal sample determines a pose
             inliers[i, :n] = True
-        elif inl.sum() < 2:
-            inliers[i, :n] = inl
-        else:
-            inliers[i, :n] = inl
+            continue
+        inliers[i, :n] = inl
+        if inl.sum() >= 2:  # else no two pairs agree: the set is not one place
             _store(poses[i], R, t)
             has_pose[i] = True
             residual[i] = _rms(_errors_into(R, t, s, d, np.empty(n)), inl)
