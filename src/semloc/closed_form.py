@@ -78,7 +78,10 @@ def _spread(xyz, w, total, centre, yaw_only):
             horizontal += (dx * dx + dy * dy) * (w[i] / total)
         return np.sqrt(max(horizontal, 0.0))
     values = np.linalg.eigvalsh(_cross_covariance(xyz, centre, xyz, centre, w, total))
-    return np.sqrt(max(values[0] + values[1], 0.0))
+    # the eigenvalues carry rounding noise of order eps·λ_max (collinear points would
+    # otherwise keep a spread of ~1e-8 on some CPUs): below it, a direction has no spread
+    noise = 1e-14 * max(values[2], 0.0)
+    return np.sqrt(max(values[0] - noise, 0.0) + max(values[1] - noise, 0.0))
 
 
 @njit(cache=True)
