@@ -408,9 +408,8 @@ class HierarchicalClustering:
             new_edges = self._compatible_pairs(added, live[is_covered[live]])
         index = np.zeros(len(self._cand_g), dtype=np.int64)
         index[live] = np.arange(len(live))
-        self._edges, self._graph_indptr, self._graph_indices = _live_graph(
-            self._edges, is_covered, new_edges, index, len(live)
-        )
+        self._edges = _kept_edges(self._edges, is_covered, new_edges)
+        self._graph_indptr, self._graph_indices = _symmetric_csr(self._edges, index, len(live))
         self._covered, self._live, self._live_index = live, live, index
         self._live_global = self._global_positions[self._cand_g[live]]
         self._live_local = self._local_positions[self._cand_l[live]]
@@ -1158,32 +1157,36 @@ def _find_by_keys(pool_key, pool_key2, pool_members, key, key2, members):
 
 
 @njit(cache=True)
-def _live_graph(edges, is_covered, new_edges, index, n):
-    """The edges of `edges` between covered candidates followed by `new_edges` (2 x E, one
-    per pair), and the CSR rows (indptr, indices) of that graph over the live candidates
-    (`index`: candidate -> live row, n rows), both directions, in edge order."""
+def _kept_edges(edges, is_covered, new_edges):
+    """The edges (2 x E) between covered candidates, then `new_edges`, in order."""
     kept = 0
     for i in range(edges.shape[1]):
-        if is_covered[edges[0, i]] and is_covered[edges[1, i]]:
-            kept += 1
+        kept += is_covered[edges[0, i]] and is_covered[edges[1, i]]
     out = np.empty((2, kept + new_edges.shape[1]), dtype=np.int64)
     e = 0
     for i in range(edges.shape[1]):
         if is_covered[edges[0, i]] and is_covered[edges[1, i]]:
-            out[0, e], out[1, e] = edges[0, i], edges[1, i]
+            out[:, e] = edges[:, i]
             e += 1
     out[:, kept:] = new_edges
+    return out
+
+
+@njit(cache=True)
+def _symmetric_csr(edges, index, n):
+    """CSR rows (indptr, indices) over n nodes of the graph with edges (2 x E) between
+    candidates, both ways; `index` maps a candidate to its node."""
     count = np.zeros(n + 1, dtype=np.int64)
-    for i in range(out.shape[1]):
-        count[index[out[0, i]] + 1] += 1
-        count[index[out[1, i]] + 1] += 1
+    for i in range(edges.shape[1]):
+        count[index[edges[0, i]] + 1] += 1
+        count[index[edges[1, i]] + 1] += 1
     indptr = np.cumsum(count)
     fill = indptr[:-1].copy()
-    indices = np.empty(2 * out.shape[1], dtype=np.int64)
-    for i in range(out.shape[1]):
-        u, v = index[out[0, i]], index[out[1, i]]
+    indices = np.empty(2 * edges.shape[1], dtype=np.int64)
+    for i in range(edges.shape[1]):
+        u, v = index[edges[0, i]], index[edges[1, i]]
         indices[fill[u]] = v
         fill[u] += 1
         indices[fill[v]] = u
         fill[v] += 1
-    return out, indptr, indices
+    return indptr, indices

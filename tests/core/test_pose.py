@@ -183,6 +183,7 @@ def test_align_weights_are_respected() -> None:
     [
         ([[0, 0, 0], [1, 0, 0]], None),  # 6-DoF: 2 points
         ([[0, 0, 0], [1, 1, 1], [2, 2, 2]], None),  # 6-DoF: collinear
+        ([[0, 0, 0], [70, 110, 30], [140, 220, 60]], None),  # collinear, building scale
         ([[1, 2, 3]], Z),  # 4-DoF: 1 point
         ([[1, 2, 0], [1, 2, 3]], Z),  # 4-DoF: stacked vertically
     ],
