@@ -14,6 +14,7 @@ built, and a user may pass a describer of their own.
 
 from __future__ import annotations
 
+import weakref
 from collections.abc import Sequence
 from typing import Protocol
 
@@ -98,9 +99,9 @@ def canonical_label(label: str, label_map: dict[str, str]) -> str:
 class CandidateIndex:
     """Global objects grouped by label, ready to answer "which global objects may this be?".
 
-    Built in time linear in the map: labels are canonicalised once per distinct label, and the
-    descriptors of each label group are stacked per length, so a query is one vectorised
-    distance computation over the group.
+    Built in time linear in the map, once per map and label map (`label_groups`): labels are
+    canonicalised once per distinct label, and the descriptors of each label group are
+    stacked per length, so a query is one vectorised distance computation over the group.
     """
 
     def __init__(
@@ -108,16 +109,8 @@ class CandidateIndex:
     ) -> None:
         self.config = config
         self._label_map = {k.strip().lower(): v for k, v in config.label_map.items()}
-        raw, inverse = np.unique(np.asarray(global_map.labels, dtype=str), return_inverse=True)
-        canonical = np.array([canonical_label(str(x), self._label_map) for x in raw], dtype=str)
-        labels = canonical[inverse.ravel()] if len(raw) else np.zeros(0, dtype=str)
-        order = np.argsort(labels, kind="stable")
-        names, starts = np.unique(labels[order], return_index=True)
-        groups = np.split(order, starts[1:]) if len(order) else []
-        self._by_label: dict[str, np.ndarray] = {
-            str(name): np.sort(group) for name, group in zip(names, groups)
-        }
-        self._descriptors = global_map.descriptors
+        self._by_label = label_groups(global_map, self._label_map)
+        self._map = global_map
         self._stacks: dict[tuple[str, int], tuple[np.ndarray, np.ndarray]] = {}
         self._gate = config.delta if gate is None else gate
 
@@ -144,12 +137,33 @@ class CandidateIndex:
         key = (label, shape)
         if key not in self._stacks:
             indices = self._by_label[label]
-            rows = [
-                i
-                for i in indices
-                if self._descriptors[i] is not None and self._descriptors[i].shape == shape
-            ]
-            stack = np.array([np.ravel(self._descriptors[i]) for i in rows], dtype=float)
+            described = [(i, self._map[i].descriptor) for i in indices.tolist()]
+            kept = [(i, d) for i, d in described if d is not None and d.shape == shape]
+            rows = [i for i, _ in kept]
+            stack = np.array([np.ravel(d) for _, d in kept], dtype=float)
             width = int(np.prod(shape))
             self._stacks[key] = (np.array(rows, dtype=int), stack.reshape(len(rows), width))
         return self._stacks[key]
+
+
+_LABEL_GROUPS: weakref.WeakKeyDictionary[ObjectMap, dict[tuple, dict[str, np.ndarray]]] = (
+    weakref.WeakKeyDictionary()
+)
+
+
+def label_groups(global_map: ObjectMap, label_map: dict[str, str]) -> dict[str, np.ndarray]:
+    """The sorted indices of the map's objects per canonical label (read-only arrays), computed
+    once per map (its objects never change) and label map, whichever Localizer asks."""
+    per_map = _LABEL_GROUPS.setdefault(global_map, {})
+    key = tuple(sorted(label_map.items()))
+    if key not in per_map:
+        raw, inverse = np.unique(np.asarray(global_map.labels, dtype=str), return_inverse=True)
+        canonical = np.array([canonical_label(str(x), label_map) for x in raw], dtype=str)
+        labels = canonical[inverse.ravel()] if len(raw) else np.zeros(0, dtype=str)
+        order = np.argsort(labels, kind="stable")
+        names, starts = np.unique(labels[order], return_index=True)
+        groups = np.split(order, starts[1:]) if len(order) else []
+        per_map[key] = {str(name): np.sort(group) for name, group in zip(names, groups)}
+        for group in per_map[key].values():
+            group.flags.writeable = False
+    return per_map[key]

@@ -300,10 +300,6 @@ def _samples(m: int, size: int, limit: int, seed: int) -> np.ndarray:
     return every[np.sort(rng.choice(len(every), size=limit, replace=False))]
 
 
-_CHUNK_ENTRIES = 200_000
-"""`MapSupport.extend_many` measures at most this many (local object, candidate) gaps at once."""
-
-
 class MapSupport:
     """Where the local objects land under a pose, against the map objects each could be.
 
@@ -320,10 +316,18 @@ class MapSupport:
         self._index = np.full((len(candidates), width), -1)
         for j, indices in enumerate(candidates):
             self._index[j, : len(indices)] = indices
+        global_xyz = np.asarray(global_xyz, float).reshape(-1, 3)
         positions = np.full((*self._index.shape, 3), np.inf)  # no candidate: infinitely far
         known = self._index >= 0
-        positions[known] = np.asarray(global_xyz, float).reshape(-1, 3)[self._index[known]]
-        self._x, self._y, self._z = (np.ascontiguousarray(positions[..., k]) for k in range(3))
+        positions[known] = global_xyz[self._index[known]]
+        self._xyz = np.ascontiguousarray(positions)
+        # each local object's candidates sorted along the map's longest axis: a range query
+        spread = np.ptp(global_xyz, axis=0) if len(global_xyz) else np.zeros(3)
+        self._axis = int(np.argmax(spread))
+        self._order = np.argsort(positions[..., self._axis], axis=1, kind="stable")
+        self._sorted = np.take_along_axis(positions[..., self._axis], self._order, axis=1)
+        self._counts = known.sum(axis=1)
+        self._n_global = len(global_xyz)
         self.config = config
 
     def extend(
@@ -337,57 +341,128 @@ class MapSupport:
     ) -> list[tuple[list[tuple[int, int]], int, int]]:
         """`extend` of many sets at once: (S, 4, 4) poses, one list of pairs per set."""
         local_xyz = np.asarray(local_xyz, float).reshape(-1, 3)
-        n_local, width = len(local_xyz), self._index.shape[1]
-        chunk = max(1, _CHUNK_ENTRIES // max(n_local * width, 1))
-        out: list[tuple[list[tuple[int, int]], int, int]] = []
-        for start in range(0, len(pairs), chunk):
-            part = pairs[start : start + chunk]
-            out += self._extend_chunk(poses[start : start + chunk], local_xyz, part)
-        return out
-
-    def _extend_chunk(self, poses, local_xyz, pairs):
-        used = np.zeros((len(pairs), len(local_xyz)), dtype=bool)
-        owner = [s for s, set_pairs in enumerate(pairs) for _ in set_pairs]
-        used[owner, [l for set_pairs in pairs for _, l in set_pairs]] = True
+        if not pairs:
+            return []
+        poses = np.asarray(poses, float).reshape(-1, 4, 4)
         aligned = local_xyz @ np.swapaxes(poses[:, :3, :3], 1, 2) + poses[:, None, :3, 3]
-        sets, locals_ = np.nonzero(~used)  # only the local objects outside each set
-        moved = aligned[sets, locals_]
-        dx = self._x[locals_] - moved[:, None, 0]  # (F, width), per coordinate: fast and exact
-        dy = self._y[locals_] - moved[:, None, 1]
-        dz = self._z[locals_] - moved[:, None, 2]
-        gaps = np.sqrt(dx * dx + dy * dy + dz * dz)
-        far = gaps.min(axis=1) >= self.config.conflict_radius
-        conflicts = np.bincount(sets[far], minlength=len(pairs)).tolist()
-        close = gaps < self.config.inlier_tolerance
-        bounds = np.searchsorted(sets, np.arange(len(pairs) + 1))
+        sizes = np.array([len(p) for p in pairs], dtype=np.int64)
+        flat = np.array([pair for set_pairs in pairs for pair in set_pairs], dtype=np.int64)
+        cfg = self.config
+        added, added_start, conflicts = _guided_matches(
+            np.ascontiguousarray(aligned), flat.reshape(-1, 2), np.cumsum(sizes) - sizes, sizes,
+            self._index, self._xyz, self._order, self._sorted, self._counts, self._axis,
+            self._n_global, cfg.inlier_tolerance, cfg.conflict_radius,
+        )  # fmt: skip
+        found, bounds = added.tolist(), added_start.tolist()
         out = []
         for s, set_pairs in enumerate(pairs):
-            lo, hi = bounds[s], bounds[s + 1]
-            if lo == hi:  # no local object outside the set
+            if len({l for _, l in set_pairs}) == len(local_xyz):  # no local object outside
                 out.append((list(set_pairs), 0, 0))
                 continue
-            added = list(set_pairs)
-            if close[lo:hi].any():
-                self._match(gaps[lo:hi], close[lo:hi], locals_[lo:hi], set_pairs, added)
-            out.append(
-                (sorted(added, key=lambda p: p[1]), len(added) - len(set_pairs), conflicts[s])
-            )
+            new = [tuple(p) for p in found[bounds[s] : bounds[s + 1]]]
+            grown = sorted([*set_pairs, *new], key=lambda p: p[1])
+            out.append((grown, len(new), int(conflicts[s])))
         return out
 
-    def _match(self, gaps, close, locals_, pairs, added) -> None:
-        """Greedy one-to-one guided matching, nearest first (ties: local, then candidate order);
-        row i of `gaps` / `close` is local object `locals_[i]`."""
-        used_local = {l for _, l in pairs}
-        used_global = {g for g, _ in pairs}
-        rows, cols = np.nonzero(close)
-        order = np.argsort(gaps[rows, cols], kind="stable")
-        for i, c in zip(rows[order].tolist(), cols[order].tolist()):
-            r = int(locals_[i])
-            g = int(self._index[r, c])
-            if g not in used_global and r not in used_local:
-                added.append((g, r))
-                used_global.add(g)
-                used_local.add(r)
+
+@njit(cache=True)
+def _guided_matches(
+    aligned, pairs, pair_start, pair_count, index, xyz, order, sorted_axis, counts, axis,
+    n_global, tolerance, conflict_radius,
+):  # fmt: skip
+    """Guided matching of every set (see `MapSupport`): the (global, local) pairs each set
+    gains, nearest first (ties: local, then candidate order), as one array with each set's
+    start, and each set's conflicts.  A local object's candidates are scanned only within the
+    larger radius along the sorted axis (gaps are measured exactly inside it)."""
+    n_sets, n_local = aligned.shape[0], aligned.shape[1]
+    reach = max(tolerance, conflict_radius) + 1e-9  # beyond it along the axis: farther still
+    inside = np.full(n_local, -1, dtype=np.int64)
+    used_global = np.full(max(n_global, 1), -1, dtype=np.int64)
+    conflicts = np.zeros(n_sets, dtype=np.int64)
+    added = np.empty((16, 2), dtype=np.int64)
+    added_start = np.zeros(n_sets + 1, dtype=np.int64)
+    gap = np.empty(16)
+    entry = np.empty((16, 2), dtype=np.int64)
+    n_added = 0
+    for s in range(n_sets):
+        for k in range(pair_start[s], pair_start[s] + pair_count[s]):
+            used_global[pairs[k, 0]] = s
+            inside[pairs[k, 1]] = s
+        n_entries = 0
+        for r in range(n_local):
+            if inside[r] == s:
+                continue
+            m = aligned[s, r]
+            n = counts[r]
+            p = np.searchsorted(sorted_axis[r, :n], m[axis] - reach)
+            near = False
+            while p < n and sorted_axis[r, p] <= m[axis] + reach:
+                c = order[r, p]
+                p += 1
+                dx = xyz[r, c, 0] - m[0]
+                dy = xyz[r, c, 1] - m[1]
+                dz = xyz[r, c, 2] - m[2]
+                d = np.sqrt(dx * dx + dy * dy + dz * dz)
+                near |= d < conflict_radius
+                if d < tolerance:
+                    if n_entries == len(gap):
+                        gap = _grown_values(gap, 2 * n_entries)
+                        entry = _grown_rows(entry, 2 * n_entries)
+                    gap[n_entries] = d
+                    entry[n_entries, 0] = r
+                    entry[n_entries, 1] = c
+                    n_entries += 1
+            conflicts[s] += not near
+        ranked = _by_gap_then_entry(gap[:n_entries], entry[:n_entries])
+        for e in ranked:
+            r, c = entry[e, 0], entry[e, 1]
+            g = index[r, c]
+            if used_global[g] != s and inside[r] != s:
+                if n_added == len(added):
+                    added = _grown_rows(added, 2 * n_added)
+                added[n_added, 0] = g
+                added[n_added, 1] = r
+                n_added += 1
+                used_global[g] = s
+                inside[r] = s
+        added_start[s + 1] = n_added
+    return added[:n_added], added_start, conflicts
+
+
+@njit(cache=True)
+def _by_gap_then_entry(gap, entry):
+    """Positions of the entries ordered by gap, then local, then candidate column."""
+    order = np.arange(len(gap))
+    for i in range(1, len(order)):  # insertion sort: a handful of entries
+        j, e = i, order[i]
+        while j > 0 and _before(gap, entry, e, order[j - 1]):
+            order[j] = order[j - 1]
+            j -= 1
+        order[j] = e
+    return order
+
+
+@njit(cache=True, inline="always")
+def _before(gap, entry, a, b):
+    if gap[a] != gap[b]:
+        return gap[a] < gap[b]
+    if entry[a, 0] != entry[b, 0]:
+        return entry[a, 0] < entry[b, 0]
+    return entry[a, 1] < entry[b, 1]
+
+
+@njit(cache=True)
+def _grown_values(values, capacity):
+    out = np.empty(capacity, dtype=values.dtype)
+    out[: len(values)] = values
+    return out
+
+
+@njit(cache=True)
+def _grown_rows(rows, capacity):
+    out = np.empty((capacity, rows.shape[1]), dtype=rows.dtype)
+    out[: len(rows)] = rows
+    return out
 
 
 @dataclass(frozen=True)
