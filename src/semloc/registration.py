@@ -120,7 +120,9 @@ def _correspondences(src, src_normals, tree_of_row, R, t, f_points, f_axes, f_st
         j = best_j[i]
         m[count] = p
         q[count] = f_points[j]
-        n[count] = t_normals[j] * np.sqrt(t_flatness[j])
+        scale = np.sqrt(t_flatness[j])  # component-wise: no temporary array per point
+        for c in range(3):
+            n[count, c] = t_normals[j, c] * scale
         u = 1.0 - best_d2[i] / kernel2
         w[count] = u * u
         count += 1
@@ -146,15 +148,15 @@ def _gauss_newton_step(m, q, n, w, count, axis, has_axis, point_to_point):
             J[0, 1], J[0, 2], J[1, 2] = mi[2], -mi[1], mi[0]
             J[1, 0], J[2, 0], J[2, 1] = -mi[2], mi[1], -mi[0]
         J[0, P - 3], J[1, P - 2], J[2, P - 1] = 1.0, 1.0, 1.0
-        e = mi - q[i]
+        e0, e1, e2 = mi[0] - q[i, 0], mi[1] - q[i, 1], mi[2] - q[i, 2]  # no temporary array
         ni = n[i]
-        rp = ni[0] * e[0] + ni[1] * e[1] + ni[2] * e[2]
+        rp = ni[0] * e0 + ni[1] * e1 + ni[2] * e2
         for a in range(P):
             Jp[a] = ni[0] * J[0, a] + ni[1] * J[1, a] + ni[2] * J[2, a]
         wi = w[i]
         for a in range(P):
             g[a] += wi * (
-                Jp[a] * rp + point_to_point * (J[0, a] * e[0] + J[1, a] * e[1] + J[2, a] * e[2])
+                Jp[a] * rp + point_to_point * (J[0, a] * e0 + J[1, a] * e1 + J[2, a] * e2)
             )
             for b in range(P):
                 JtJ = J[0, a] * J[0, b] + J[1, a] * J[1, b] + J[2, a] * J[2, b]
