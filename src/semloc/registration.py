@@ -85,13 +85,34 @@ def _first_compatible(best_j, found, start, pn, t_normals, t_flatness, cos_max) 
     return -1
 
 
+@numba.njit(cache=True, inline="always")
+def _bound(p, f_points, last, first, kernel2) -> float:
+    """A squared search bound for the `first` nearest of p: kernel2, or just above the larger
+    squared distance to its two nearest of the last iteration when they are known (the second
+    nearest is no farther; the margin keeps a tie with it inside)."""
+    if first != 2 or last[1] < 0:
+        return kernel2
+    farther = 0.0
+    for j in last:
+        d2 = 0.0
+        for c in range(3):
+            diff = p[c] - f_points[j, c]
+            d2 += diff * diff
+        farther = max(farther, d2)
+    return min(kernel2, farther * (1.0 + 1e-9) + 1e-300)
+
+
 @numba.njit(cache=True)
 def _correspondences(src, src_normals, tree_of_row, R, t, f_points, f_axes, f_starts,
-                     t_normals, t_flatness, kernel, cos_max, k, m, q, n, w) -> int:  # fmt: skip
+                     t_normals, t_flatness, kernel, cos_max, k, m, q, n, w, last) -> int:  # fmt: skip
     """For each local point moved by (R, t): the nearest of its k nearest partner points within
     `kernel` whose normal is compatible (any normal of a non-flat point is).  Writes the moved
     point, its partner, the partner's normal scaled by sqrt(flatness) and the Tukey weight of
-    each found correspondence into m, q, n, w; returns how many."""
+    each found correspondence into m, q, n, w; returns how many.
+
+    `last` (n, 2) holds each point's two nearest partner rows of the previous call (-1: none)
+    and is updated: their distances after the move bound the search for the two nearest (the
+    same answer, fewer tree nodes visited, as points move little between iterations)."""
     if cos_max <= 0:
         k = 1
     best_d2 = np.empty(k)
@@ -107,8 +128,13 @@ def _correspondences(src, src_normals, tree_of_row, R, t, f_points, f_axes, f_st
         lo, hi = f_starts[tree_of_row[r]], f_starts[tree_of_row[r] + 1]
         # the few nearest first: their order is that of the k nearest, and usually one fits
         found = knn_within(
-            f_points, f_axes, lo, hi, p, first, kernel2, best_d2, best_j, stack, gaps
-        )
+            f_points, f_axes, lo, hi, p, first, _bound(p, f_points, last[r], first, kernel2),
+            best_d2, best_j, stack, gaps,
+        )  # fmt: skip
+        if found == 2:
+            last[r, 0], last[r, 1] = best_j[0], best_j[1]
+        else:
+            last[r, 1] = -1
         i = _first_compatible(best_j, found, 0, pn, t_normals, t_flatness, cos_max)
         if i < 0 and found == first < k:
             found = knn_within(
@@ -180,12 +206,15 @@ def _icp(R, t, full_src, full_normals, full_trees, coarse_src, coarse_normals, c
     size = max(len(full_src), len(coarse_src))
     m, q, n, w = np.empty((size, 3)), np.empty((size, 3)), np.empty((size, 3)), np.empty(size)
     R, t = R.copy(), t.copy()
+    last_full = np.full((len(full_src), 2), -1, dtype=np.int64)
+    last_coarse = np.full((len(coarse_src), 2), -1, dtype=np.int64)
     for _ in range(iterations):
         final = kernel <= kernel_final
         src, normals, trees = (full_src, full_normals, full_trees) if final else (coarse_src, coarse_normals, coarse_trees)  # fmt: skip
         k = k_final if final else k_coarse
         count = _correspondences(src, normals, trees, R, t, f_points, f_axes, f_starts,
-                                 t_normals, t_flatness, kernel, cos_max, k, m, q, n, w)  # fmt: skip
+                                 t_normals, t_flatness, kernel, cos_max, k, m, q, n, w,
+                                 last_full if final else last_coarse)  # fmt: skip
         if count < (2 if has_axis else 3):
             break
         dR, dt = _gauss_newton_step(m, q, n, w, count, axis, has_axis, point_to_point)
