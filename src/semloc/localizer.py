@@ -156,6 +156,7 @@ class Localizer:
         self._local: dict[str, SemanticObject] = {}
         self._local_index: dict[str, int] = {}
         self._candidates_of: dict[int, np.ndarray] = {}  # local index -> global indices
+        self._support = MapSupport([], global_map.positions, config.verification)
         self._steps: list[Step] = []
         self._timing = {"association": 0.0, "clustering": 0.0, "pose": 0.0, "total": 0.0}
 
@@ -270,6 +271,7 @@ class Localizer:
             self._local[obj.id] = obj
             detections[index] = self._candidates.candidates(obj)
             self._candidates_of[index] = detections[index]
+            self._support.assign(index, detections[index])
         return detections
 
     # Hypotheses -------------------------------------------------------------------------
@@ -280,12 +282,7 @@ class Localizer:
         by_size = cfg.rank_by in ("residual", "evidence")
         sets = self._clustering.top(cfg.screened_sets, min_size=2, largest_first=by_size)
         local_xyz = np.array([o.position for o in self._local.values()]).reshape(-1, 3)
-        support = MapSupport(
-            [self._candidates_of[j] for j in range(len(local_xyz))],
-            self.global_map.positions,
-            cfg.verification,
-        )
-        screened = [c for c in self._verified_all(sets, local_xyz, support) if len(c.pairs) >= 2]
+        screened = [c for c in self._verified_all(sets, local_xyz) if len(c.pairs) >= 2]
         if by_size:  # pairs include the guided matches
             screened.sort(key=lambda c: (-len(c.pairs), round(c.residual, 9), -c.aset.score))
         places = [(c.pairs, c.pose) for c in screened]
@@ -297,9 +294,7 @@ class Localizer:
         ]
         return rank_places(hypotheses, cfg.rank_by, cfg.decision, shipped_model(), anchor)
 
-    def _verified_all(
-        self, sets: list[AssociationSet], local_xyz: np.ndarray, support: MapSupport
-    ) -> list[_Verified]:
+    def _verified_all(self, sets: list[AssociationSet], local_xyz: np.ndarray) -> list[_Verified]:
         """Each set's pairs split by its consensus pose, grown by guided matching (the grown
         pairs verified once more together), and that pose's evidence on the map."""
         up = (self.local_up, self.global_map.up, self.config.verification)
@@ -310,7 +305,7 @@ class Localizer:
         posed = [i for i, f in enumerate(found) if f.pose is not None]
         poses = np.array([found[i].pose for i in posed]).reshape(-1, 4, 4)
         extended = dict(
-            zip(posed, support.extend_many(poses, local_xyz, [inliers[i] for i in posed]))
+            zip(posed, self._support.extend_many(poses, local_xyz, [inliers[i] for i in posed]))
         )
         verified, regrown = [], []
         for i, (aset, p, f) in enumerate(zip(sets, pairs, found)):

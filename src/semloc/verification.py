@@ -304,31 +304,48 @@ class MapSupport:
     """Where the local objects land under a pose, against the map objects each could be.
 
     `candidates[j]` are the global indices local object j could match (its label, its
-    descriptor gate), `global_xyz` the map's positions.  `extend(pose, local_xyz, pairs)` adds
-    to `pairs` the local objects outside them that land within `inlier_tolerance` of a free
-    candidate (nearest first, one-to-one: guided matching) and counts the conflicts: local
-    objects left with no candidate within `conflict_radius`."""
+    descriptor gate; sorted), `global_xyz` the map's positions.  `extend(pose, local_xyz,
+    pairs)` adds to `pairs` the local objects outside them that land within `inlier_tolerance`
+    of a free candidate (nearest first, one-to-one: guided matching) and counts the conflicts:
+    local objects left with no candidate within `conflict_radius`.
+
+    Each local object's candidates are kept sorted along the map's longest axis, so that the
+    ones near where it lands are a range; `assign(j, candidates)` sets them when an object is
+    new or re-detected (a Localizer keeps one MapSupport across its updates)."""
 
     def __init__(
         self, candidates: list[np.ndarray], global_xyz: np.ndarray, config: VerificationConfig
     ) -> None:
-        width = max([len(c) for c in candidates] + [1])
-        self._index = np.full((len(candidates), width), -1)
-        for j, indices in enumerate(candidates):
-            self._index[j, : len(indices)] = indices
-        global_xyz = np.asarray(global_xyz, float).reshape(-1, 3)
-        positions = np.full((*self._index.shape, 3), np.inf)  # no candidate: infinitely far
-        known = self._index >= 0
-        positions[known] = global_xyz[self._index[known]]
-        self._xyz = np.ascontiguousarray(positions)
-        # each local object's candidates sorted along the map's longest axis: a range query
-        spread = np.ptp(global_xyz, axis=0) if len(global_xyz) else np.zeros(3)
+        self._global_xyz = np.ascontiguousarray(np.asarray(global_xyz, float).reshape(-1, 3))
+        spread = np.ptp(self._global_xyz, axis=0) if len(self._global_xyz) else np.zeros(3)
         self._axis = int(np.argmax(spread))
-        self._order = np.argsort(positions[..., self._axis], axis=1, kind="stable")
-        self._sorted = np.take_along_axis(positions[..., self._axis], self._order, axis=1)
-        self._counts = known.sum(axis=1)
-        self._n_global = len(global_xyz)
+        self._sorted: list[tuple[np.ndarray, np.ndarray]] = []  # per object: globals, columns
+        self._packed: tuple[np.ndarray, ...] | None = None
         self.config = config
+        for j, indices in enumerate(candidates):
+            self.assign(j, indices)
+
+    def assign(self, j: int, candidates: np.ndarray) -> None:
+        """Local object j (the next new one, or a re-detected one) may match `candidates`."""
+        candidates = np.asarray(candidates, dtype=np.int64)
+        columns = np.argsort(self._global_xyz[candidates, self._axis], kind="stable")
+        entry = (candidates[columns], columns)
+        if j == len(self._sorted):
+            self._sorted.append(entry)
+        else:
+            self._sorted[j] = entry
+        self._packed = None
+
+    def _pack(self) -> tuple[np.ndarray, ...]:
+        """All objects' sorted candidates as one CSR: starts, global indices, columns, axis."""
+        if self._packed is None:
+            sizes = [len(g) for g, _ in self._sorted]
+            starts = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+            globals_ = np.concatenate([g for g, _ in self._sorted] + [np.zeros(0, np.int64)])
+            columns = np.concatenate([c for _, c in self._sorted] + [np.zeros(0, np.int64)])
+            along = np.ascontiguousarray(self._global_xyz[globals_, self._axis])
+            self._packed = (starts, globals_, columns, along)
+        return self._packed
 
     def extend(
         self, pose: np.ndarray, local_xyz: np.ndarray, pairs: list[tuple[int, int]]
@@ -350,8 +367,8 @@ class MapSupport:
         cfg = self.config
         added, added_start, conflicts = _guided_matches(
             np.ascontiguousarray(aligned), flat.reshape(-1, 2), np.cumsum(sizes) - sizes, sizes,
-            self._index, self._xyz, self._order, self._sorted, self._counts, self._axis,
-            self._n_global, cfg.inlier_tolerance, cfg.conflict_radius,
+            *self._pack(), self._global_xyz, self._axis, cfg.inlier_tolerance,
+            cfg.conflict_radius,
         )  # fmt: skip
         found, bounds = added.tolist(), added_start.tolist()
         out = []
@@ -367,22 +384,23 @@ class MapSupport:
 
 @njit(cache=True)
 def _guided_matches(
-    aligned, pairs, pair_start, pair_count, index, xyz, order, sorted_axis, counts, axis,
-    n_global, tolerance, conflict_radius,
+    aligned, pairs, pair_start, pair_count, starts, globals_, columns, along, global_xyz, axis,
+    tolerance, conflict_radius,
 ):  # fmt: skip
     """Guided matching of every set (see `MapSupport`): the (global, local) pairs each set
-    gains, nearest first (ties: local, then candidate order), as one array with each set's
-    start, and each set's conflicts.  A local object's candidates are scanned only within the
-    larger radius along the sorted axis (gaps are measured exactly inside it)."""
+    gains, nearest first (ties: local, then candidate column), as one array with each set's
+    start, and each set's conflicts.  A local object's candidates (CSR `starts`, sorted
+    `along` the axis) are scanned only within the larger radius along the axis; gaps are
+    measured exactly inside it."""
     n_sets, n_local = aligned.shape[0], aligned.shape[1]
     reach = max(tolerance, conflict_radius) + 1e-9  # beyond it along the axis: farther still
     inside = np.full(n_local, -1, dtype=np.int64)
-    used_global = np.full(max(n_global, 1), -1, dtype=np.int64)
+    used_global = np.full(max(len(global_xyz), 1), -1, dtype=np.int64)
     conflicts = np.zeros(n_sets, dtype=np.int64)
     added = np.empty((16, 2), dtype=np.int64)
     added_start = np.zeros(n_sets + 1, dtype=np.int64)
     gap = np.empty(16)
-    entry = np.empty((16, 2), dtype=np.int64)
+    entry = np.empty((16, 3), dtype=np.int64)  # local, column, global
     n_added = 0
     for s in range(n_sets):
         for k in range(pair_start[s], pair_start[s] + pair_count[s]):
@@ -393,15 +411,14 @@ def _guided_matches(
             if inside[r] == s:
                 continue
             m = aligned[s, r]
-            n = counts[r]
-            p = np.searchsorted(sorted_axis[r, :n], m[axis] - reach)
+            lo, hi = starts[r], starts[r + 1]
+            p = lo + np.searchsorted(along[lo:hi], m[axis] - reach)
             near = False
-            while p < n and sorted_axis[r, p] <= m[axis] + reach:
-                c = order[r, p]
-                p += 1
-                dx = xyz[r, c, 0] - m[0]
-                dy = xyz[r, c, 1] - m[1]
-                dz = xyz[r, c, 2] - m[2]
+            while p < hi and along[p] <= m[axis] + reach:
+                g = globals_[p]
+                dx = global_xyz[g, 0] - m[0]
+                dy = global_xyz[g, 1] - m[1]
+                dz = global_xyz[g, 2] - m[2]
                 d = np.sqrt(dx * dx + dy * dy + dz * dz)
                 near |= d < conflict_radius
                 if d < tolerance:
@@ -410,13 +427,13 @@ def _guided_matches(
                         entry = _grown_rows(entry, 2 * n_entries)
                     gap[n_entries] = d
                     entry[n_entries, 0] = r
-                    entry[n_entries, 1] = c
+                    entry[n_entries, 1] = columns[p]
+                    entry[n_entries, 2] = g
                     n_entries += 1
+                p += 1
             conflicts[s] += not near
-        ranked = _by_gap_then_entry(gap[:n_entries], entry[:n_entries])
-        for e in ranked:
-            r, c = entry[e, 0], entry[e, 1]
-            g = index[r, c]
+        for e in _by_gap_then_entry(gap[:n_entries], entry[:n_entries]):
+            r, g = entry[e, 0], entry[e, 2]
             if used_global[g] != s and inside[r] != s:
                 if n_added == len(added):
                     added = _grown_rows(added, 2 * n_added)
