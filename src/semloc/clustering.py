@@ -241,6 +241,7 @@ class HierarchicalClustering:
         self._live_local = np.zeros((0, 3))
         self._live_key = np.zeros(0, dtype=np.uint64)  # and its two keys
         self._live_key2 = np.zeros(0, dtype=np.uint64)
+        self._sweep: tuple[int, int, np.ndarray, int] | None = None  # see _sweep_order
         # sets: member candidates (ascending, -1 padded), score, age, keys
         self._members = np.full((0, 1), -1, dtype=np.int64)
         self._size = np.zeros(0, dtype=np.int64)
@@ -449,7 +450,21 @@ class HierarchicalClustering:
             cfg.distance_tolerance,
             cfg.gamma,
             cfg.min_distance,
+            *self._sweep_order(),
         )
+
+    def _sweep_order(self) -> tuple[int, int, np.ndarray, int]:
+        """The map's longest and second longest axes and each global object's dense rank
+        along the longest (equal coordinates, equal rank), computed once per clustering."""
+        if self._sweep is None:
+            xyz = self._global_positions
+            spread = np.ptp(xyz, axis=0) if len(xyz) else np.zeros(3)
+            axis = int(np.argmax(spread))
+            spread[axis] = -1.0
+            _, rank = np.unique(xyz[:, axis], return_inverse=True)
+            rank = rank.ravel().astype(np.int64)
+            self._sweep = (axis, int(np.argmax(spread)), rank, int(rank.max(initial=-1)) + 1)
+        return self._sweep
 
     def _distances_to(self, positions: np.ndarray) -> np.ndarray:
         """Distances between the local objects at `positions` (one `np.linalg.norm` per pair),
@@ -1054,20 +1069,28 @@ def _compatible_sweep(
     tolerance,
     gamma,
     min_distance,
+    axis,
+    cross_axis,
+    rank,
+    n_ranks,
 ):
     """`_compatible_among` for many candidates: per local object, its candidates sorted along
-    the map's longest axis; a candidate of `la` is tested only against those of `lb` within
-    `reach[la, lb]` along it and along the second longest axis (necessary conditions of the
-    gate; the second is read from a copy in sweep order, so most misses cost no distance)."""
+    the map's longest axis `axis` (by `rank`, the global objects' dense rank along it); a
+    candidate of `la` is tested only against those of `lb` within `reach[la, lb]` along it and
+    along the second longest axis `cross_axis` (necessary conditions of the gate; the second
+    is read from a copy in sweep order, so most misses cost no distance)."""
     n_local = len(local_distance)
     everyone = np.concatenate((covered, added))
-    spread = np.zeros(3)
-    for axis in range(3):
-        spread[axis] = np.ptp(global_xyz[:, axis]) if len(global_xyz) else 0.0
-    axis = np.argmax(spread)
-    spread[axis] = -1.0
-    cross_axis = np.argmax(spread)
-    order = np.argsort(global_xyz[cand_g[everyone], axis], kind="mergesort")
+    slot = np.zeros(n_ranks + 1, dtype=np.int64)  # counting sort by rank: stable, as mergesort
+    for c in everyone:
+        slot[rank[cand_g[c]] + 1] += 1
+    for i in range(n_ranks):
+        slot[i + 1] += slot[i]
+    order = np.empty(len(everyone), dtype=np.int64)
+    for k in range(len(everyone)):
+        r = rank[cand_g[everyone[k]]]
+        order[slot[r]] = k
+        slot[r] += 1
     count = np.zeros(n_local + 1, dtype=np.int64)
     for c in everyone:
         count[cand_l[c] + 1] += 1
