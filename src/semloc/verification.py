@@ -397,10 +397,10 @@ def _guided_matches(
     inside = np.full(n_local, -1, dtype=np.int64)
     used_global = np.full(max(len(global_xyz), 1), -1, dtype=np.int64)
     conflicts = np.zeros(n_sets, dtype=np.int64)
-    added = np.empty((16, 2), dtype=np.int64)
+    added = np.empty((n_sets * n_local, 2), dtype=np.int64)  # at most one per local object
     added_start = np.zeros(n_sets + 1, dtype=np.int64)
-    gap = np.empty(16)
-    entry = np.empty((16, 3), dtype=np.int64)  # local, column, global
+    gap = np.empty(len(globals_))  # at most every candidate of one set's outside objects
+    entry = np.empty((len(globals_), 3), dtype=np.int64)  # local, column, global
     n_added = 0
     for s in range(n_sets):
         for k in range(pair_start[s], pair_start[s] + pair_count[s]):
@@ -422,9 +422,6 @@ def _guided_matches(
                 d = np.sqrt(dx * dx + dy * dy + dz * dz)
                 near |= d < conflict_radius
                 if d < tolerance:
-                    if n_entries == len(gap):
-                        gap = _grown_values(gap, 2 * n_entries)
-                        entry = _grown_rows(entry, 2 * n_entries)
                     gap[n_entries] = d
                     entry[n_entries, 0] = r
                     entry[n_entries, 1] = columns[p]
@@ -435,8 +432,6 @@ def _guided_matches(
         for e in _by_gap_then_entry(gap[:n_entries], entry[:n_entries]):
             r, g = entry[e, 0], entry[e, 2]
             if used_global[g] != s and inside[r] != s:
-                if n_added == len(added):
-                    added = _grown_rows(added, 2 * n_added)
                 added[n_added, 0] = g
                 added[n_added, 1] = r
                 n_added += 1
@@ -466,20 +461,6 @@ def _before(gap, entry, a, b):
     if entry[a, 0] != entry[b, 0]:
         return entry[a, 0] < entry[b, 0]
     return entry[a, 1] < entry[b, 1]
-
-
-@njit(cache=True)
-def _grown_values(values, capacity):
-    out = np.empty(capacity, dtype=values.dtype)
-    out[: len(values)] = values
-    return out
-
-
-@njit(cache=True)
-def _grown_rows(rows, capacity):
-    out = np.empty((capacity, rows.shape[1]), dtype=rows.dtype)
-    out[: len(rows)] = rows
-    return out
 
 
 @dataclass(frozen=True)
