@@ -127,6 +127,18 @@ def test_label_map_allows_synonyms(building):
     assert sorted(result.best.pairs) == sorted((g, f"l{k}") for k, g in enumerate(ids))
 
 
+def test_label_groups_are_computed_once_per_map_and_label_map(building):
+    from semloc.association import label_groups
+
+    plain = label_groups(building, {})
+    assert label_groups(building, {}) is plain  # every Localizer of this map shares them
+    renamed = label_groups(building, {"chair": "seat"})
+    assert "seat" in renamed and "chair" not in renamed
+    np.testing.assert_array_equal(renamed["seat"], plain["chair"])
+    assert list(plain["chair"]) == [i for i, lab in enumerate(building.labels) if lab == "chair"]
+    assert not plain["chair"].flags.writeable  # shared: nobody may change them
+
+
 def test_descriptor_gate_removes_candidates():
     objects = [SemanticObject(f"c{i}", "chair", [2.0 * i, (i % 2) * 1.3, 0], descriptor=[float(i), 0.0])
                for i in range(6)]  # fmt: skip

@@ -480,3 +480,25 @@ def test_guided_matching_is_the_literal_greedy_one(seed, n_local, n_global):
     found = support.extend_many(poses, local_xyz, sets)
     for pose, pairs, got in zip(poses, sets, found):
         assert got == _literal_extend(pose, local_xyz, pairs, candidates, global_xyz, config)
+
+
+def test_guided_matching_after_reassigned_candidates_is_that_of_the_final_ones():
+    """A Localizer keeps one MapSupport and assigns an object's candidates again when it is
+    re-detected: the answers are those of a MapSupport built from the final candidates."""
+    rng = np.random.default_rng(3)
+    global_xyz = rng.uniform(0, 4, (40, 3))
+    local_xyz = rng.uniform(0, 4, (5, 3))
+    final = [np.sort(rng.choice(40, 12, replace=False)) for _ in range(5)]
+    config = VerificationConfig(inlier_tolerance=0.8, conflict_radius=1.0)
+    kept = MapSupport([], global_xyz, config)
+    for j in range(len(final)):
+        kept.assign(j, np.arange(j, 40, 3))  # first detection: other candidates
+        if j:
+            kept.assign(j - 1, final[j - 1])  # the previous object re-detected
+    kept.assign(4, final[4])
+    poses = np.stack([yaw_pose(rng.uniform(-0.2, 0.2), rng.normal(0, 0.1, 3)) for _ in range(3)])
+    sets = [[(0, 0)], [(5, 1), (7, 3)], []]
+    fresh = MapSupport(final, global_xyz, config).extend_many(poses, local_xyz, sets)
+    assert kept.extend_many(poses, local_xyz, sets) == fresh
+    for pose, pairs, got in zip(poses, sets, fresh):
+        assert got == _literal_extend(pose, local_xyz, pairs, final, global_xyz, config)
