@@ -293,6 +293,34 @@ def test_large_sparse_map_equals_literal_rules(monkeypatch, kd_tree):
     assert len(fast._graph_indices) < 0.1 * fast.n_candidates**2  # compatibility stays sparse
 
 
+def test_sweep_over_rows_of_equal_coordinates_equals_literal_rules(monkeypatch):
+    """Rows of identical chairs share coordinates along the sweep axis: the sweep's order by
+    rank keeps ties in a stable order and still finds every compatible pair."""
+    import semloc.clustering as module
+
+    monkeypatch.setattr(module, "_BRUTE_FORCE_PAIRS", 0)  # always the sweep
+    rows, seats = np.meshgrid(np.arange(6) * 0.9, np.arange(7) * 1.4)
+    g = np.column_stack([seats.ravel(), rows.ravel(), np.zeros(rows.size)])  # long along x
+    rng = np.random.default_rng(2)
+    labels = rng.integers(0, 2, len(g))
+    chosen = np.argsort(np.linalg.norm(g - g[17], axis=1))[:5]
+    local = g[chosen] + rng.normal(0, 0.05, (5, 3))
+    config = ClusteringConfig(sets_per_object=2, protect_top=3)
+    fast = clustering(g, config)
+    literal = LiteralClustering(g, [f"g{i}" for i in range(len(g))], config)
+    for step, c in enumerate(chosen):
+        ids = [f"l{i}" for i in range(step + 1)]
+        detections = {step: np.flatnonzero(labels == labels[c])}
+        fast.update(local[: step + 1], ids, detections)
+        literal.update(local[: step + 1], ids, detections)
+        expected = {tuple(sorted(k)): v[0] for k, v in literal.sets.items()}
+        got = pair_sets(fast)
+        assert got.keys() == expected.keys()
+        for key, score in expected.items():
+            assert got[key] == pytest.approx(score, abs=1e-9)
+    assert max(len(p) for p in got) >= 3
+
+
 def test_long_strip_map_equals_literal_rules(monkeypatch):
     """A corridor-like map, longest along y: the compatibility sweep runs along that axis and
     still finds every compatible pair (the literal sets, with the pool bound biting)."""
