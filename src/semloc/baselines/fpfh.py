@@ -31,6 +31,7 @@ import hashlib
 from collections import OrderedDict
 
 import numpy as np
+from numba import njit
 from pydantic import Field
 from scipy.spatial import cKDTree
 
@@ -88,7 +89,7 @@ def _local_cloud(points: np.ndarray, cfg: FpfhConfig):
     return cloud
 
 
-_MATCH_ROWS = 1024  # local features compared with the sub-maps' at once (bounds the memory)
+_MATCH_ROWS = 256  # local features compared with the sub-maps' at once (a block stays in cache)
 
 
 def _mutual_matches(local: np.ndarray, target: np.ndarray) -> np.ndarray:
@@ -106,12 +107,18 @@ def _mutual_matches_many(
     with one distance matrix for all of them: the retrieved sub-maps overlap, and the backward
     match of a target point (its nearest local feature) does not depend on the sub-map.
     Squared distances come from matrix products, blocks of rows at a time (exact search in 33
-    dimensions is a brute-force scan anyway), each entry computed as for one sub-map alone."""
+    dimensions is a brute-force scan anyway), each entry computed as for one sub-map alone;
+    one compiled pass over each block finds every sub-map's forward and the backward minima."""
     union = np.unique(np.concatenate(subsets)) if subsets else np.zeros(0, dtype=np.int64)
     columns = [np.searchsorted(union, s) for s in subsets]  # increasing: ties keep their order
+    at = np.concatenate(columns) if columns else np.zeros(0, dtype=np.int64)
+    by_column = np.argsort(at, kind="stable")  # the sub-maps holding each union column
+    holders = np.repeat(np.arange(len(columns)), [len(c) for c in columns])[by_column]
+    column_start = np.searchsorted(at[by_column], np.arange(len(union) + 1))
     target = features[union]
     target_sq = np.einsum("ij,ij->i", target, target)
-    forward = [np.empty(len(local), dtype=np.int64) for _ in subsets]
+    forward = np.zeros((len(subsets), len(local)), dtype=np.int64)
+    forward_d2 = np.full((len(subsets), len(local)), np.inf)
     backward = np.zeros(len(target), dtype=np.int64)
     backward_d2 = np.full(len(target), np.inf)
     for start in range(0, len(local), _MATCH_ROWS):
@@ -120,12 +127,9 @@ def _mutual_matches_many(
         product *= 2  # exact: the same d2 as `sq[:, None] + target_sq[None] - 2 * product`
         d2 = np.add(np.einsum("ij,ij->i", block, block)[:, None], target_sq[None])
         d2 -= product
-        for rows, cols in zip(forward, columns, strict=True):
-            rows[start : start + len(block)] = cols[np.argmin(np.take(d2, cols, axis=1), axis=1)]
-        best = np.argmin(np.ascontiguousarray(d2.T), axis=1)  # (faster than along axis 0)
-        closer = d2[best, np.arange(len(target))] < backward_d2
-        backward_d2[closer] = d2[best[closer], np.flatnonzero(closer)]
-        backward[closer] = start + best[closer]
+        _nearest_in_block(
+            d2, start, column_start, holders, forward, forward_d2, backward, backward_d2
+        )
     rows = np.arange(len(local))
     matches = []
     for ahead, cols in zip(forward, columns, strict=True):
@@ -136,6 +140,25 @@ def _mutual_matches_many(
         position[cols] = np.arange(len(cols))  # union column -> row of the sub-map
         matches.append(np.stack([rows[mutual], position[ahead[mutual]]], axis=1).astype(np.int32))
     return matches
+
+
+@njit(cache=True)
+def _nearest_in_block(d2, first, column_start, holders, forward, forward_d2, backward, backward_d2):
+    """Rows `first`.. of the distance matrix: each row's nearest column within every sub-map
+    holding it (`holders[column_start[c]:column_start[c + 1]]` hold column c) and each
+    column's nearest row so far; the first of equal distances wins, as with argmin."""
+    for i in range(d2.shape[0]):
+        r = first + i
+        for c in range(d2.shape[1]):
+            v = d2[i, c]
+            for k in range(column_start[c], column_start[c + 1]):
+                s = holders[k]
+                if v < forward_d2[s, r]:
+                    forward_d2[s, r] = v
+                    forward[s, r] = c
+            if v < backward_d2[c]:
+                backward_d2[c] = v
+                backward[c] = r
 
 
 def _normalise(hist: np.ndarray, idf: np.ndarray) -> np.ndarray:
