@@ -263,6 +263,25 @@ def test_union_key_collisions_fall_back_to_exact_member_lists(monkeypatch):
         assert collided[pairs] == pytest.approx(score, abs=1e-9)
 
 
+def _replay_against_literal(g, labels, chosen, local, config):
+    """Local objects `chosen` (at `local`) detected one per update, with every same-label map
+    object as candidate: the clustering's sets and scores equal the literal rules' after each
+    update.  Returns the clustering and its final sets."""
+    fast = clustering(g, config)
+    literal = LiteralClustering(g, [f"g{i}" for i in range(len(g))], config)
+    for step, c in enumerate(chosen):
+        ids = [f"l{i}" for i in range(step + 1)]
+        detections = {step: np.flatnonzero(labels == labels[c])}
+        fast.update(local[: step + 1], ids, detections)
+        literal.update(local[: step + 1], ids, detections)
+        expected = {tuple(sorted(k)): v[0] for k, v in literal.sets.items()}
+        got = pair_sets(fast)
+        assert got.keys() == expected.keys()
+        for key, score in expected.items():
+            assert got[key] == pytest.approx(score, abs=1e-9)
+    return fast, got
+
+
 @pytest.mark.parametrize("kd_tree", [False, True])
 def test_large_sparse_map_equals_literal_rules(monkeypatch, kd_tree):
     """A building-like map (many same-label objects far apart, compatibility sparse): the
@@ -277,18 +296,7 @@ def test_large_sparse_map_equals_literal_rules(monkeypatch, kd_tree):
     chosen = np.argsort(np.linalg.norm(g - g[0], axis=1))[:5]
     local = g[chosen] + rng.normal(0, 0.1, (5, 3))
     config = ClusteringConfig(max_sets=None, protect_top=3)
-    fast = clustering(g, config)
-    literal = LiteralClustering(g, [f"g{i}" for i in range(len(g))], config)
-    for step, c in enumerate(chosen):
-        ids = [f"l{i}" for i in range(step + 1)]
-        detections = {step: np.flatnonzero(labels == labels[c])}
-        fast.update(local[: step + 1], ids, detections)
-        literal.update(local[: step + 1], ids, detections)
-        expected = {tuple(sorted(k)): v[0] for k, v in literal.sets.items()}
-        got = pair_sets(fast)
-        assert got.keys() == expected.keys()
-        for key, score in expected.items():
-            assert got[key] == pytest.approx(score, abs=1e-9)
+    fast, got = _replay_against_literal(g, labels, chosen, local, config)
     assert fast.n_candidates > 80 and max(len(p) for p in got) >= 4
     assert len(fast._graph_indices) < 0.1 * fast.n_candidates**2  # compatibility stays sparse
 
@@ -306,18 +314,7 @@ def test_sweep_over_rows_of_equal_coordinates_equals_literal_rules(monkeypatch):
     chosen = np.argsort(np.linalg.norm(g - g[17], axis=1))[:5]
     local = g[chosen] + rng.normal(0, 0.05, (5, 3))
     config = ClusteringConfig(sets_per_object=2, protect_top=3)
-    fast = clustering(g, config)
-    literal = LiteralClustering(g, [f"g{i}" for i in range(len(g))], config)
-    for step, c in enumerate(chosen):
-        ids = [f"l{i}" for i in range(step + 1)]
-        detections = {step: np.flatnonzero(labels == labels[c])}
-        fast.update(local[: step + 1], ids, detections)
-        literal.update(local[: step + 1], ids, detections)
-        expected = {tuple(sorted(k)): v[0] for k, v in literal.sets.items()}
-        got = pair_sets(fast)
-        assert got.keys() == expected.keys()
-        for key, score in expected.items():
-            assert got[key] == pytest.approx(score, abs=1e-9)
+    fast, got = _replay_against_literal(g, labels, chosen, local, config)
     assert max(len(p) for p in got) >= 3
 
 
@@ -333,16 +330,5 @@ def test_long_strip_map_equals_literal_rules(monkeypatch):
     chosen = np.argsort(np.linalg.norm(g - g[3], axis=1))[:5]
     local = g[chosen] + rng.normal(0, 0.1, (5, 3))
     config = ClusteringConfig(sets_per_object=2, protect_top=3)
-    fast = clustering(g, config)
-    literal = LiteralClustering(g, [f"g{i}" for i in range(len(g))], config)
-    for step, c in enumerate(chosen):
-        ids = [f"l{i}" for i in range(step + 1)]
-        detections = {step: np.flatnonzero(labels == labels[c])}
-        fast.update(local[: step + 1], ids, detections)
-        literal.update(local[: step + 1], ids, detections)
-        expected = {tuple(sorted(k)): v[0] for k, v in literal.sets.items()}
-        got = pair_sets(fast)
-        assert got.keys() == expected.keys()
-        for key, score in expected.items():
-            assert got[key] == pytest.approx(score, abs=1e-9)
+    fast, got = _replay_against_literal(g, labels, chosen, local, config)
     assert max(len(p) for p in got) >= 3 and fast.n_sets == 2 * len(g)
