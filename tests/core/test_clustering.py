@@ -314,7 +314,7 @@ def test_sweep_over_rows_of_equal_coordinates_equals_literal_rules(monkeypatch):
     chosen = np.argsort(np.linalg.norm(g - g[17], axis=1))[:5]
     local = g[chosen] + rng.normal(0, 0.05, (5, 3))
     config = ClusteringConfig(sets_per_object=2, protect_top=3)
-    fast, got = _replay_against_literal(g, labels, chosen, local, config)
+    _, got = _replay_against_literal(g, labels, chosen, local, config)
     assert max(len(p) for p in got) >= 3
 
 
