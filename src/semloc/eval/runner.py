@@ -17,6 +17,7 @@ those of `semloc.eval.realwalks`.
 
 from __future__ import annotations
 
+import logging
 import os
 import time
 from collections.abc import Callable
@@ -115,6 +116,14 @@ def plan(config: BenchConfig, n_keyframes: int) -> list[Attempt]:
     return jobs
 
 
+def dask_setup(worker: object) -> None:
+    """Dask preload of each local worker process: its logs stay quiet like the scheduler's.
+
+    A task's error reaches the caller through its future; what is left to log are the heartbeats
+    an interrupt cuts while the cluster closes, printed with a traceback."""
+    logging.getLogger("distributed").setLevel(logging.CRITICAL)
+
+
 def run_benchmark(
     config: BenchConfig,
     out: str | Path,
@@ -147,7 +156,7 @@ def run_benchmark(
         n = workers or os.cpu_count() or 1
         cluster = LocalCluster(
             n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
-            silence_logs=40,
+            silence_logs=logging.CRITICAL, preload=[__name__],
         )  # fmt: skip
         client = Client(cluster)
     try:
