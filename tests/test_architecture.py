@@ -17,7 +17,7 @@ import semloc
 
 PACKAGE = Path(semloc.__file__).parent
 CORE = {"maps", "pointsets", "transforms", "association", "clustering", "pose", "neighbours",
-        "registration", "closed_form", "verification", "results", "decision", "localizer",
+        "registration", "closed_form", "digests", "verification", "results", "decision", "localizer",
         "confidence_model"}  # fmt: skip
 THIRD_PARTY_CORE = {"numpy", "scipy", "pydantic", "numba"}
 EXTRAS = ("open3d", "matplotlib", "dask", "distributed", "sklearn", "torch", "rerun")

@@ -51,8 +51,9 @@ Where the paper is silent (see also DESIGN.md)
       does not depend on the map: work and memory per iteration stay bounded, and only the
       singletons of a new local object (one per same-label global object) grow with the map.
     * Top-K pruning happens after every iteration (bounding work and memory), with ties broken
-      by size and then by an order-independent hash of the set's (global id, local id) pairs
-      (computed only for the sets that tie at a cut).
+      by size and then by an order-independent hash of the set's (global id, local id) pairs:
+      the wrapping sum of their 64-bit BLAKE2b digests (`semloc.digests`; computed only for
+      the sets that tie at a cut).
     * A set's age is reset when it merges (as either parent), when it is created, and when a
       re-detection re-adds it as a singleton.  Expiry spares the `protect_top` best sets, so
       an answer is not forgotten while new detections bring nothing consistent.
@@ -68,12 +69,13 @@ Where the paper is silent (see also DESIGN.md)
 
 from __future__ import annotations
 
-import hashlib
 from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
 from pydantic import BaseModel, ConfigDict, Field
+
+from semloc.digests import encode_ids, pair_digests
 
 _BRUTE_FORCE_PAIRS = 20_000  # below this many pairs a range query is a dense distance block
 
@@ -163,22 +165,6 @@ class AssociationSet:
 
     def __len__(self) -> int:
         return len(self.pairs)
-
-
-def _pair_hash(global_id: str, local_id: str) -> np.uint64:
-    return _pair_hashes_of([global_id], [local_id])[0]
-
-
-def _pair_hashes_of(global_ids: list[str], local_ids: list[str]) -> np.ndarray:
-    """`_pair_hash` of many (global id, local id) pairs (one buffer of digests)."""
-    blake2b = hashlib.blake2b
-    digests = b"".join(
-        [
-            blake2b(f"{g}\x00{l}".encode(), digest_size=8).digest()
-            for g, l in zip(global_ids, local_ids)
-        ]
-    )
-    return np.frombuffer(digests, dtype=np.uint64)
 
 
 def _mix(x: np.ndarray) -> np.ndarray:
@@ -373,12 +359,13 @@ class HierarchicalClustering:
 
     def _pair_hashes(self, candidates: np.ndarray) -> np.ndarray:
         """The order-independent pair hash of each candidate (computed once, when needed)."""
-        todo = np.unique(candidates[~self._hashed[candidates]])
+        wanted = np.zeros(len(self._hashed), dtype=bool)
+        wanted[candidates] = True
+        todo = np.flatnonzero(wanted & ~self._hashed)
         if len(todo):
-            gids, lids = self._global_ids, self._local_ids
-            self._cand_hash[todo] = _pair_hashes_of(
-                [gids[g] for g in self._cand_g[todo].tolist()],
-                [lids[l] for l in self._cand_l[todo].tolist()],
+            global_ids = encode_ids([self._global_ids[g] for g in self._cand_g[todo].tolist()])
+            self._cand_hash[todo] = pair_digests(
+                global_ids, np.arange(len(todo)), encode_ids(self._local_ids), self._cand_l[todo]
             )
             self._hashed[todo] = True
         return self._cand_hash[candidates]

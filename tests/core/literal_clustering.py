@@ -7,9 +7,17 @@ pruning, tie-breaking and expiry rules are the ones documented in `semloc.cluste
 
 from __future__ import annotations
 
+import hashlib
+
 import numpy as np
 
-from semloc.clustering import ClusteringConfig, _pair_hash, merge_metric
+from semloc.clustering import ClusteringConfig, merge_metric
+
+
+def pair_hash(global_id: str, local_id: str) -> int:
+    """The tie-break digest of a pair, as documented: 8-byte BLAKE2b of 'global\\x00local'."""
+    text = f"{global_id}\x00{local_id}".encode()
+    return int.from_bytes(hashlib.blake2b(text, digest_size=8).digest(), "little")
 
 
 class LiteralClustering:
@@ -77,9 +85,7 @@ class LiteralClustering:
         def key(s):
             total = np.uint64(0)
             for g, l in s:
-                total = np.uint64(
-                    (int(total) + int(_pair_hash(self.gids[g], self.lids[l]))) % 2**64
-                )
+                total = np.uint64((int(total) + pair_hash(self.gids[g], self.lids[l])) % 2**64)
             return (-round(self.sets[s][0], 9), -len(s), int(total))
 
         return sorted(self.sets, key=key)
