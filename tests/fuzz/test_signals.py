@@ -280,3 +280,26 @@ def test_an_interrupt_swallowed_by_a_finaliser_is_delivered_again():
         for _ in range(200):
             time.sleep(0.005)
     assert caught.value.signum == signal.SIGTERM
+
+
+def test_an_interrupt_waits_while_numba_runs_its_own_python_code():
+    """A signal that lands in numba's Python code (compiling, loading compiled code, turning a
+    compiled function's results into Python objects) is raised only once that code is done:
+    raised in there, it left a returned tuple half-built and the process crashed."""
+    import numba
+
+    from semloc.cli import Interrupted, _interrupts_raise
+
+    numba_file = str(Path(numba.__file__).parent / "boxing_stand_in.py")
+    source = (
+        "def work(signal_me, done):\n    signal_me()\n    time.sleep(0.1)\n    done.append(1)\n"
+    )
+    scope: dict = {}
+    exec(compile(source, numba_file, "exec"), {"time": time}, scope)
+    done: list[int] = []
+    with pytest.raises(Interrupted) as caught, _interrupts_raise(script=False):
+        scope["work"](lambda: os.kill(os.getpid(), signal.SIGTERM), done)
+        for _ in range(200):
+            time.sleep(0.005)
+    assert done == [1]
+    assert caught.value.signum == signal.SIGTERM

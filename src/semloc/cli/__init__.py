@@ -16,6 +16,7 @@ import threading
 import warnings
 from collections.abc import Iterator
 from contextlib import contextmanager
+from types import FrameType
 
 import numpy as np
 import typer
@@ -39,8 +40,35 @@ class Interrupted(BaseException):
         self.signum = signum
 
 
-def _raise_interrupted(signum: int, frame: object) -> None:
+def _raise_interrupted(signum: int, frame: FrameType | None) -> None:
+    if _inside_numba(frame):
+        _send_again(signum)  # raised in there it could crash the process: a moment later
+        return
     raise Interrupted(signum)
+
+
+def _inside_numba(frame: FrameType | None) -> bool:
+    """Whether the signal landed in numba's or llvmlite's own Python code: compiling, loading
+    compiled code, or turning a compiled function's results into Python objects (it unpickles
+    their types there).  An exception raised in there is not cleaned up after (a returned
+    tuple left half-built crashed the process), so the interrupt waits until they are done."""
+    roots = tuple(
+        os.path.dirname(module.__file__) + os.sep
+        for module in map(sys.modules.get, ("numba", "llvmlite"))
+        if module is not None and module.__file__
+    )
+    while frame is not None:
+        if frame.f_code.co_filename.startswith(roots):
+            return True
+        frame = frame.f_back
+    return False
+
+
+def _send_again(signum: int) -> None:
+    """Send `signum` to this process again in a moment, from a thread."""
+    again = threading.Timer(0.01, os.kill, (os.getpid(), signum))
+    again.daemon = True
+    again.start()
 
 
 @contextmanager
@@ -72,9 +100,7 @@ def _redeliver(previous_hook):
 
     def hook(unraisable) -> None:
         if isinstance(unraisable.exc_value, Interrupted):
-            again = threading.Timer(0.01, os.kill, (os.getpid(), unraisable.exc_value.signum))
-            again.daemon = True
-            again.start()
+            _send_again(unraisable.exc_value.signum)
         else:
             previous_hook(unraisable)
 
