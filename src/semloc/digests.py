@@ -78,6 +78,7 @@ def pair_digests(
 
 @njit(cache=True)
 def _pair_digests(g_data, g_starts, g_rows, l_data, l_starts, l_rows, iv, sigma):
+    """`pair_digests` on the arrays: each message is built in one scratch buffer."""
     longest = 1
     for i in range(len(g_rows)):
         n = g_starts[g_rows[i] + 1] - g_starts[g_rows[i]] + 1
@@ -85,7 +86,7 @@ def _pair_digests(g_data, g_starts, g_rows, l_data, l_starts, l_rows, iv, sigma)
         longest = max(longest, n)
     message = np.empty(longest, dtype=np.uint8)
     out = np.empty(len(g_rows), dtype=np.uint64)
-    h, v, m = np.empty(8, dtype=np.uint64), np.empty(16, dtype=np.uint64), np.empty(16, np.uint64)
+    h, m = np.empty(8, dtype=np.uint64), np.empty(16, dtype=np.uint64)
     for i in range(len(g_rows)):
         g0, g1 = g_starts[g_rows[i]], g_starts[g_rows[i] + 1]
         l0, l1 = l_starts[l_rows[i]], l_starts[l_rows[i] + 1]
@@ -93,14 +94,14 @@ def _pair_digests(g_data, g_starts, g_rows, l_data, l_starts, l_rows, iv, sigma)
         message[:n] = g_data[g0:g1]
         message[n] = _SEPARATOR
         message[n + 1 : n + 1 + l1 - l0] = l_data[l0:l1]
-        out[i] = _blake2b_64(message[: n + 1 + l1 - l0], iv, sigma, h, v, m)
+        out[i] = _blake2b_64(message[: n + 1 + l1 - l0], iv, sigma, h, m)
     return out
 
 
 @njit(cache=True)
-def _blake2b_64(message, iv, sigma, h, v, m):
+def _blake2b_64(message, iv, sigma, h, m):
     """BLAKE2b of `message` with an 8-byte digest, unkeyed, as the number its bytes spell
-    (little-endian); h, v, m are scratch arrays of 8, 16 and 16 words."""
+    (little-endian); h and m are scratch arrays of 8 and 16 words."""
     h[:] = iv
     h[0] ^= np.uint64(0x01010000 ^ _DIGEST_BYTES)
     size = len(message)
@@ -112,7 +113,7 @@ def _blake2b_64(message, iv, sigma, h, v, m):
         for k in range(end - begin):
             m[k >> 3] |= np.uint64(message[begin + k]) << np.uint64(8 * (k & 7))
         last = b == blocks - 1
-        _compress(h, m, np.uint64(end if last else begin + _BLOCK), last, iv, sigma, v)
+        _compress(h, m, np.uint64(end if last else begin + _BLOCK), last, iv, sigma)
     return h[0]
 
 
@@ -136,8 +137,9 @@ def _mix(a, b, c, d, x, y):
 
 
 @njit(cache=True)
-def _compress(h, m, counter, last, iv, sigma, v):
-    """The compression function F on the state h with the block m (words), counter bytes."""
+def _compress(h, m, counter, last, iv, sigma):
+    """The compression function F on the state h with the block m (words), counter bytes;
+    the working vector v0..v15 stays in registers."""
     v0, v1, v2, v3, v4, v5, v6, v7 = h[0], h[1], h[2], h[3], h[4], h[5], h[6], h[7]
     v8, v9, v10, v11, v12, v13, v14, v15 = iv[0], iv[1], iv[2], iv[3], iv[4], iv[5], iv[6], iv[7]
     v12 ^= counter  # the counter's high word is 0 below 2**64 bytes
