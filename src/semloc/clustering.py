@@ -76,6 +76,7 @@ from numba import njit
 from pydantic import BaseModel, ConfigDict, Field
 
 from semloc.digests import encode_ids, pair_digests
+from semloc.pointsets import axes_by_spread
 
 _BRUTE_FORCE_PAIRS = 20_000  # below this many pairs a range query is a dense distance block
 
@@ -444,13 +445,10 @@ class HierarchicalClustering:
         """The map's longest and second longest axes and each global object's dense rank
         along the longest (equal coordinates, equal rank), computed once per clustering."""
         if self._sweep is None:
-            xyz = self._global_positions
-            spread = np.ptp(xyz, axis=0) if len(xyz) else np.zeros(3)
-            axis = int(np.argmax(spread))
-            spread[axis] = -1.0
-            _, rank = np.unique(xyz[:, axis], return_inverse=True)
+            axis, cross_axis, _ = axes_by_spread(self._global_positions).tolist()
+            _, rank = np.unique(self._global_positions[:, axis], return_inverse=True)
             rank = rank.ravel().astype(np.int64)
-            self._sweep = (axis, int(np.argmax(spread)), rank, int(rank.max(initial=-1)) + 1)
+            self._sweep = (axis, cross_axis, rank, int(rank.max(initial=-1)) + 1)
         return self._sweep
 
     def _distances_to(self, positions: np.ndarray) -> np.ndarray:

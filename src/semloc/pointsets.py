@@ -1,4 +1,5 @@
-"""Point-set utilities shared by every stage: voxel keys and voxel-centroid downsampling.
+"""Point-set utilities shared by every stage: voxel keys, voxel-centroid downsampling and the
+axes along which a set of positions spreads most.
 
 Pure numpy; used by the front-end (fusion), the simulator, the dataset importers and pose
 recovery, so that "downsample with voxel v" means the same everywhere.
@@ -36,3 +37,12 @@ def voxel_downsample(points: np.ndarray, voxel_size: float) -> np.ndarray:
         return points
     _, sums, counts = voxel_accumulate(points, voxel_size)
     return sums / counts[:, None]
+
+
+def axes_by_spread(points: np.ndarray) -> np.ndarray:
+    """The coordinate axes ordered by the points' extent along them, largest first (equal
+    extents: lower axis first); (0, 1, 2) for no points.  Sweeps over a map sort along the
+    first."""
+    points = np.asarray(points, float).reshape(-1, 3)
+    spread = np.ptp(points, axis=0) if len(points) else np.zeros(3)
+    return np.argsort(-spread, kind="stable")

@@ -29,6 +29,7 @@ from numba import njit
 from pydantic import BaseModel, ConfigDict, Field
 
 from semloc.closed_form import DEGENERATE, fit, fit_into
+from semloc.pointsets import axes_by_spread
 from semloc.pose import from_z_up, z_up_rotations
 
 
@@ -317,8 +318,7 @@ class MapSupport:
         self, candidates: list[np.ndarray], global_xyz: np.ndarray, config: VerificationConfig
     ) -> None:
         self._global_xyz = np.ascontiguousarray(np.asarray(global_xyz, float).reshape(-1, 3))
-        spread = np.ptp(self._global_xyz, axis=0) if len(self._global_xyz) else np.zeros(3)
-        self._axis = int(np.argmax(spread))
+        self._axis = int(axes_by_spread(self._global_xyz)[0])
         self._sorted: list[tuple[np.ndarray, np.ndarray]] = []  # per object: globals, columns
         self._packed: tuple[np.ndarray, ...] | None = None
         self.config = config
