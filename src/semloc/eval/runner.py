@@ -117,11 +117,12 @@ def plan(config: BenchConfig, n_keyframes: int) -> list[Attempt]:
 
 
 def dask_setup(worker: object) -> None:
-    """Dask preload of each local worker process: its logs stay quiet like the scheduler's.
-
-    A task's error reaches the caller through its future; what is left to log are the heartbeats
-    an interrupt cuts while the cluster closes, printed with a traceback."""
-    logging.getLogger("distributed").setLevel(logging.CRITICAL)
+    """Dask preload of each local worker process: it logs nothing below CRITICAL, like the
+    scheduler.  The workers share the command's stderr: what they log lands among its output,
+    also after its last line (an interrupt's heartbeat traceback, matplotlib building its font
+    cache), while a task's error reaches the caller through its future anyway."""
+    for name in ("", "distributed"):  # the root logger, and distributed's own level
+        logging.getLogger(name).setLevel(logging.CRITICAL)
 
 
 def run_benchmark(
