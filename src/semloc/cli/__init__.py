@@ -42,7 +42,7 @@ class Interrupted(BaseException):
 
 def _raise_interrupted(signum: int, frame: FrameType | None) -> None:
     if _inside_numba(frame):
-        _send_again(signum)  # raised in there it could crash the process: a moment later
+        _Resend.later(signum)  # raised in there it could crash the process: a moment later
         return
     raise Interrupted(signum)
 
@@ -64,11 +64,36 @@ def _inside_numba(frame: FrameType | None) -> bool:
     return False
 
 
-def _send_again(signum: int) -> None:
-    """Send `signum` to this process again in a moment, from a thread."""
-    again = threading.Timer(0.01, os.kill, (os.getpid(), signum))
-    again.daemon = True
-    again.start()
+class _Resend:
+    """A signal held back, sent to the process again a moment later from a thread, but only
+    while the handlers that raise `Interrupted` are installed: sent after the command, it would
+    land in Python's shutdown (a KeyboardInterrupt traceback there)."""
+
+    lock = threading.RLock()  # re-entrant: a second signal can land while the first is held
+    armed = False
+    pending: int | None = None
+
+    @classmethod
+    def later(cls, signum: int) -> None:
+        with cls.lock:
+            cls.pending = signum
+        again = threading.Timer(0.01, cls._deliver)
+        again.daemon = True
+        again.start()
+
+    @classmethod
+    def _deliver(cls) -> None:
+        with cls.lock:
+            if cls.armed and cls.pending is not None:
+                os.kill(os.getpid(), cls.pending)
+            cls.pending = None
+
+    @classmethod
+    def arm(cls, armed: bool) -> None:
+        """While armed, held signals are sent again; disarming drops one still held (the
+        command is done: it keeps its status and its complete outputs)."""
+        with cls.lock:
+            cls.armed, cls.pending = armed, None
 
 
 @contextmanager
@@ -84,9 +109,11 @@ def _interrupts_raise(script: bool) -> Iterator[None]:
     previous = {s: signal.signal(s, _raise_interrupted) for s in signals}
     previous_hook = sys.unraisablehook
     sys.unraisablehook = _redeliver(previous_hook)
+    _Resend.arm(True)
     try:
         yield
     finally:
+        _Resend.arm(False)
         for signum, handler in previous.items():
             signal.signal(signum, signal.SIG_IGN if script else handler)
         sys.unraisablehook = previous_hook
@@ -100,7 +127,7 @@ def _redeliver(previous_hook):
 
     def hook(unraisable) -> None:
         if isinstance(unraisable.exc_value, Interrupted):
-            _send_again(unraisable.exc_value.signum)
+            _Resend.later(unraisable.exc_value.signum)
         else:
             previous_hook(unraisable)
 
