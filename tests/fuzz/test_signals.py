@@ -303,3 +303,25 @@ def test_an_interrupt_waits_while_numba_runs_its_own_python_code():
             time.sleep(0.005)
     assert done == [1]
     assert caught.value.signum == signal.SIGTERM
+
+
+def test_an_interrupt_held_back_is_dropped_once_the_command_is_done():
+    """A signal held back while numba's code ran is not sent again after the command's
+    handlers are gone: it would reach the caller's handler (or Python's shutdown) late."""
+    import numba
+
+    from semloc.cli import _interrupts_raise
+
+    numba_file = str(Path(numba.__file__).parent / "boxing_stand_in.py")
+    scope: dict = {}
+    exec(compile("def work(signal_me):\n    signal_me()\n", numba_file, "exec"), {}, scope)
+    received: list[int] = []
+    before = signal.signal(signal.SIGINT, lambda signum, frame: received.append(signum))
+    try:
+        with _interrupts_raise(script=False):
+            scope["work"](lambda: os.kill(os.getpid(), signal.SIGINT))
+        for _ in range(40):
+            time.sleep(0.005)
+    finally:
+        signal.signal(signal.SIGINT, before)
+    assert received == []
