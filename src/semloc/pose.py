@@ -40,6 +40,8 @@ Convention: `T_global_local`, i.e. `p_global = R @ p_local + t`.
 from __future__ import annotations
 
 import copy
+import functools
+import math
 import weakref
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -156,9 +158,9 @@ def _xyz(array: object, name: str) -> np.ndarray:
 
 def _unit(vector: object, name: str) -> np.ndarray:
     v = np.asarray(vector, dtype=float)
-    if v.shape != (3,) or not np.all(np.isfinite(v)):
+    if v.shape != (3,) or not np.isfinite(v).all():
         raise ValueError(f"{name} must be 3 finite numbers, got {v!r}")
-    norm = np.linalg.norm(v)
+    norm = math.sqrt(v.dot(v))  # what np.linalg.norm computes, without its dispatch
     if norm < 1e-12:
         raise ValueError(f"{name} must be non-zero")
     return v / norm
@@ -194,18 +196,27 @@ def _transform(R: np.ndarray, t: np.ndarray) -> np.ndarray:
 
 
 def _rot_to_z(up: np.ndarray) -> np.ndarray:
-    """Smallest rotation taking the unit vector `up` onto +z (Rodrigues, axis up x z)."""
-    x, y, c = float(up[0]), float(up[1]), float(up[2])
+    """Smallest rotation taking the unit vector `up` onto +z (Rodrigues, axis up x z); read-only
+    (a map's few `up` vectors recur in every pose recovery, so their rotations are kept)."""
+    return _rot_to_z_of(np.asarray(up, dtype=float)[:3].tobytes())  # bytes: -0.0 is not 0.0
+
+
+@functools.lru_cache(maxsize=64)
+def _rot_to_z_of(up: bytes) -> np.ndarray:
+    x, y, c = np.frombuffer(up).tolist()
     if c < -1 + 1e-12:
-        return np.diag([1.0, -1.0, -1.0])
-    k = 1.0 / (1.0 + c)
-    return np.array(
-        [
-            [1 - k * x * x, -k * x * y, -x],
-            [-k * x * y, 1 - k * y * y, -y],
-            [x, y, 1 - k * (x * x + y * y)],
-        ]
-    )
+        R = np.diag([1.0, -1.0, -1.0])
+    else:
+        k = 1.0 / (1.0 + c)
+        R = np.array(
+            [
+                [1 - k * x * x, -k * x * y, -x],
+                [-k * x * y, 1 - k * y * y, -y],
+                [x, y, 1 - k * (x * x + y * y)],
+            ]
+        )
+    R.flags.writeable = False
+    return R
 
 
 def z_up_rotations(up_local: object, up_global: object) -> tuple[np.ndarray, np.ndarray]:
@@ -410,6 +421,12 @@ class _Pairs:
             np.concatenate([g.normals for g in globals_]),
             np.concatenate([g.flatness for g in globals_]),
         )
+        # the local clouds concatenated, in their trees' order (shared by thinned views)
+        self._sizes = np.array([len(p.points) for p, _ in pairs])
+        self._starts = np.cumsum(self._sizes) - self._sizes
+        self._points = np.concatenate([p.points for p, _ in pairs])
+        self._normals = np.concatenate([p.normals for p, _ in pairs])
+        self._input_rows = np.concatenate([p.input_rows for p, _ in pairs])
         self._select(limit)
 
     def thinned(self, limit: int) -> _Pairs:
@@ -419,21 +436,19 @@ class _Pairs:
         return view
 
     def _select(self, limit: int | None) -> None:
-        sizes = np.array([len(p.points) for p, _ in self.pairs])
-        total = int(sizes.sum())
-        starts = np.cumsum(sizes) - sizes
+        sizes, starts = self._sizes, self._starts
+        total = len(self._points)
         if limit is not None and total > limit:  # every (total / limit)-th point of each cloud
             counts = np.ceil(sizes * limit / total).astype(np.int64)
             owner = np.repeat(np.arange(len(sizes)), counts)
             k = np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
             first = starts[owner]
-            input_rows = np.concatenate([p.input_rows for p, _ in self.pairs])
-            rows = first + input_rows[first + (k * total / limit).astype(int)]
+            rows = first + self._input_rows[first + (k * total / limit).astype(int)]
         else:
             owner = np.repeat(np.arange(len(sizes)), sizes)
-            rows = np.concatenate([p.input_rows for p, _ in self.pairs]) + starts[owner]
-        self.src = np.concatenate([p.points for p, _ in self.pairs])[rows]
-        self.src_normals = np.concatenate([p.normals for p, _ in self.pairs])[rows]
+            rows = self._input_rows + starts[owner]
+        self.src = self._points[rows]
+        self.src_normals = self._normals[rows]
         self.tree_of_row = owner.astype(np.int64)
 
     @property
