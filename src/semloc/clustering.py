@@ -231,6 +231,7 @@ class HierarchicalClustering:
         self._sweep: tuple[int, int, np.ndarray, int] | None = None  # see _sweep_order
         # sets: member candidates (ascending, -1 padded), score, age, keys
         self._members = np.full((0, 1), -1, dtype=np.int64)
+        self._live_members: np.ndarray | None = None  # members as graph rows, while known
         self._size = np.zeros(0, dtype=np.int64)
         self._score = np.zeros(0)
         self._last_merge = np.zeros(0, dtype=np.int64)
@@ -256,8 +257,19 @@ class HierarchicalClustering:
         return self._sets(self._top_rows(k, min_size, largest_first))
 
     def top_scores(self, k: int, min_size: int = 1) -> list[float]:
-        """The scores of `top(k, min_size)`, without building the sets."""
-        return self._score[self._top_rows(k, min_size, False)].tolist()
+        """The scores of `top(k, min_size)`, largest first, without building the sets and,
+        unless sets of equal rounded score but different scores tie at the cut, without
+        ranking them (which of the tied sets are chosen then does not change the scores)."""
+        scores = self._score[self._size >= min_size]
+        if len(scores) > k:
+            rounded = np.round(scores, 9)
+            cut = np.partition(rounded, len(rounded) - k)[len(rounded) - k]
+            above, at_cut = scores[rounded > cut], scores[rounded == cut]
+            if np.any(at_cut != at_cut[0]):
+                scores = self._score[self._top_rows(k, min_size, False)]
+            else:
+                scores = np.concatenate([above, at_cut[: k - len(above)]])
+        return sorted(scores.tolist(), reverse=True)
 
     def _top_rows(self, k: int, min_size: int, largest_first: bool) -> np.ndarray:
         rows = np.flatnonzero(self._sizes() >= min_size)
@@ -298,6 +310,7 @@ class HierarchicalClustering:
         global indices it may be associated with.
         """
         self.step += 1
+        self._live_members = None  # the graph's rows change: known again once it is built
         positions = np.array(local_positions, dtype=float).reshape(-1, 3)  # a copy: see moves
         moved = self._moved_locals(positions, detections)
         self._local_distances = self._distances_to(positions)
@@ -400,9 +413,14 @@ class HierarchicalClustering:
         self._edges = _kept_edges(self._edges, is_covered, new_edges)
         self._graph_indptr, self._graph_indices = _symmetric_csr(self._edges, index, len(live))
         self._covered, self._live, self._live_index = live, live, index
+        self._live_members = self._as_live(self._members)
         self._live_global = self._global_positions[self._cand_g[live]]
         self._live_local = self._local_positions[self._cand_l[live]]
         self._live_key, self._live_key2 = self._cand_key[live], self._cand_key2[live]
+
+    def _as_live(self, members: np.ndarray) -> np.ndarray:
+        """Members (candidates, -1 padded) as rows of the compatibility graph."""
+        return np.where(members >= 0, self._live_index[np.maximum(members, 0)], -1)
 
     def _compatible_pairs(self, added: np.ndarray, covered: np.ndarray) -> np.ndarray:
         """All compatible (a, b) with a in `added` and b in `added` ∪ `covered` (2 x E).
@@ -531,9 +549,8 @@ class HierarchicalClustering:
         """The merges of one iteration (A in the frontier, B in the pool), grouped by union:
         each distinct union's members, its largest merge score and its keys (None: no merge).
         The parents of every merge are marked as merged at this step."""
-        live_members = np.where(
-            self._members >= 0, self._live_index[np.maximum(self._members, 0)], -1
-        )
+        live_members = self._live_members
+        assert live_members is not None  # known from _cover_live to the end of the update
         in_frontier = np.zeros(len(self._score), dtype=np.bool_)
         in_frontier[frontier] = True
         arguments = (
@@ -605,6 +622,9 @@ class HierarchicalClustering:
         start = len(self._score)
         width = max(self._members.shape[1], members.shape[1])
         self._members = np.vstack([_pad(self._members, width), _pad(members, width)])
+        if self._live_members is not None:
+            live = self._as_live(members)
+            self._live_members = np.vstack([_pad(self._live_members, width), _pad(live, width)])
         self._size = np.concatenate([self._size, (members >= 0).sum(axis=1)])
         self._score = np.concatenate([self._score, scores])
         self._last_merge = np.concatenate(
@@ -687,6 +707,8 @@ class HierarchicalClustering:
 
     def _keep_rows(self, keep: np.ndarray) -> None:
         self._members = self._members[keep]
+        if self._live_members is not None:
+            self._live_members = self._live_members[keep]
         self._size = self._size[keep]
         self._score = self._score[keep]
         self._last_merge = self._last_merge[keep]

@@ -233,6 +233,30 @@ def test_bitset_clustering_equals_literal_rules(
             assert got[key] == pytest.approx(score, abs=1e-9)
 
 
+@settings(max_examples=25, deadline=None)
+@given(
+    seed=st.integers(0, 10_000),
+    n_global=st.integers(4, 10),
+    n_local=st.integers(2, 6),
+    n_labels=st.integers(1, 3),
+    nudge=st.booleans(),
+)
+def test_top_scores_are_the_scores_of_the_top_sets(seed, n_global, n_local, n_labels, nudge):
+    """With or without sets whose scores round alike but differ (nudged below the ranking's
+    rounding) at the cut, the scores are those of `top`'s sets, largest first."""
+    n_local = min(n_local, n_global)
+    g, local, detections = _scenario(seed, n_global, n_local, n_labels)
+    hc = clustering(g, ClusteringConfig(distance_tolerance=0.4))
+    for step in range(n_local):
+        feed(hc, local[: step + 1], detections[step])
+        if nudge:
+            hc._score += np.random.default_rng(seed).uniform(0, 4e-10, hc.n_sets)
+        for k in (1, 2, 5, 40):
+            for min_size in (1, 2):
+                expected = sorted((s.score for s in hc.top(k, min_size)), reverse=True)
+                assert hc.top_scores(k, min_size) == expected
+
+
 def test_union_key_collisions_fall_back_to_exact_member_lists(monkeypatch):
     """Merges are grouped and sets looked up by a sum of candidate keys; when that collides,
     the second key and the member lists decide."""
