@@ -538,13 +538,17 @@ class HierarchicalClustering:
     # Clustering round
     def _cluster(self, frontier: np.ndarray) -> None:
         while len(frontier):
-            frontier = self._prune(self._merge(frontier))
+            merges = self._find_merges(frontier)
+            if merges is None:
+                break
+            frontier = self._insert(*merges)
+            frontier = self._prune(frontier)
         self._prune(np.zeros(0, dtype=np.int64))  # a round ends with at most K sets
 
-    def _merge(self, frontier: np.ndarray) -> np.ndarray:
-        """One iteration: the merges of A in the frontier with B in the pool.  Unions already
-        in the pool keep the larger score, the others are added; returns their rows.  The
-        parents of every merge are marked as merged at this step."""
+    def _find_merges(self, frontier: np.ndarray):
+        """The merges of one iteration (A in the frontier, B in the pool), grouped by union:
+        each distinct union's members, its largest merge score and its keys (None: no merge).
+        The parents of every merge are marked as merged at this step."""
         live_members = self._live_members
         assert live_members is not None  # known from _cover_live to the end of the update
         in_frontier = np.zeros(len(self._score), dtype=np.bool_)
@@ -567,23 +571,18 @@ class HierarchicalClustering:
             self.criterion.min_distance,
             self.criterion.UPPER_BOUND,
         )
-        merged, rows_a, rows_b, best, key, key2, collided, raised, scores = _merges_of_frontier(
-            *arguments, True
-        )
+        merged, rows_a, rows_b, best, key, key2, collided = _merges_of_frontier(*arguments, True)
         if collided:  # a key collision: every merge, grouped by the union's member lists
-            merged, rows_a, rows_b, each, key, key2, _, raised, scores = _merges_of_frontier(
-                *arguments, False
-            )
+            merged, rows_a, rows_b, scores, key, key2, _ = _merges_of_frontier(*arguments, False)
             unions = _union_rows(self._members, self._size, rows_a, rows_b)
             _, first, group = np.unique(unions, axis=0, return_index=True, return_inverse=True)
             best = np.full(len(first), -np.inf)
-            np.maximum.at(best, group.ravel(), each)
+            np.maximum.at(best, group.ravel(), scores)
             rows_a, rows_b, key, key2 = rows_a[first], rows_b[first], key[first], key2[first]
-        self._last_merge[merged] = self.step
-        self._score[raised] = scores
         if not len(rows_a):
-            return np.zeros(0, dtype=np.int64)
-        return self._append(_union_rows(self._members, self._size, rows_a, rows_b), best, key, key2)
+            return None
+        self._last_merge[merged] = self.step
+        return _union_rows(self._members, self._size, rows_a, rows_b), best, key, key2
 
     def _survival_floor(self) -> float:
         """The K-th best score in the pool (-inf while the pool is not full), less a hair.
@@ -597,6 +596,16 @@ class HierarchicalClustering:
             return -np.inf
         kth = np.partition(self._score, len(self._score) - self.capacity)
         return float(kth[len(self._score) - self.capacity]) - 1e-9
+
+    def _insert(self, members: np.ndarray, best: np.ndarray, key: np.ndarray, key2: np.ndarray):
+        """Add distinct merged sets (duplicates keep the larger score); return new rows."""
+        rows = self._lookup(key, key2, members)
+        known = rows >= 0
+        np.maximum.at(self._score, rows[known], best[known])
+        if known.all():
+            return np.zeros(0, dtype=np.int64)
+        new = ~known
+        return self._append(members[new], best[new], key[new], key2[new])
 
     def _lookup(self, key: np.ndarray, key2: np.ndarray, members: np.ndarray) -> np.ndarray:
         """The pool row holding each given set (-1: not in the pool)."""
@@ -737,13 +746,11 @@ def _merges_of_frontier(
     upper_bound,
     grouped,
 ):
-    """The merges (A, B) of one iteration with A in the frontier: which sets merged; per
-    distinct union not yet in the pool (by its first key; with `grouped`, else per merge) one
-    merge's rows, the largest merge score v_A + v_B + Σ h over the new cross pairs, and the
-    two keys; whether two such unions shared a first key but not the second (then call again
-    ungrouped); and the pool rows whose set a merge rebuilt with a higher score, with those
-    scores (a union is found in the pool by its keys and checked member by member).  A merge
-    whose score bound cannot beat its union's best so far is not scored.
+    """The merges (A, B) of one iteration with A in the frontier: which sets merged, and per
+    distinct union (by its first key; with `grouped`, else per merge) one merge's rows, the
+    largest merge score v_A + v_B + Σ h over the new cross pairs, and the two keys; last,
+    whether two unions shared a first key but not the second (then call again ungrouped).
+    A merge whose score bound cannot beat its union's best so far is not scored.
 
     `members` are the pool's sets in live-candidate indices (-1 padded), `indptr`/`indices`
     the compatibility graph over the live candidates.  E(A), the candidates compatible with
@@ -786,10 +793,6 @@ def _merges_of_frontier(
     for r in range(n_sets):
         for k in range(size[r]):
             sig[r] |= bit[members[r, k]]
-    pool_table = _rehashed(set_key, n_sets, _table_slots(n_sets))
-    pool_best = score.copy()  # a pool set's score, raised by merges that rebuild it
-    new_mark = np.full(n_live, -1, dtype=np.int64)  # B∖A of the merge `tried` being looked at
-    tried = 0
     hits = np.zeros(n_live, dtype=np.int64)
     touched = np.empty(n_live, dtype=np.int64)
     ext = np.empty(n_live, dtype=np.int64)
@@ -852,7 +855,6 @@ def _merges_of_frontier(
                 n_new, shared, ok = 0, 0, True
                 key = set_key[a]
                 key2 = set_key2[a]
-                tried += 1
                 for k in range(n_a):
                     kept[k] = False
                 for k in range(size[b]):
@@ -862,7 +864,6 @@ def _merges_of_frontier(
                         n_new += 1
                         key += cand_key[m]
                         key2 += cand_key2[m]
-                        new_mark[m] = tried
                     elif own_stamp[m] == a:
                         kept[own_at[m]] = True
                         shared += 1
@@ -877,16 +878,6 @@ def _merges_of_frontier(
                     continue
                 merged[a] = True
                 merged[b] = True
-                known = _pool_row(pool_table, set_key, set_key2, members, size, key, key2,
-                                  n_a + n_new, own_stamp, a, new_mark, tried)  # fmt: skip
-                if known >= 0:  # the union is in the pool: only a higher score changes it
-                    if bound <= pool_best[known]:
-                        continue
-                    _fill_ratios(h, h_known, new_at, n_new, n_a, n_ext, members, a, ext,
-                                 global_xyz, local_xyz, min_distance)  # fmt: skip
-                    cross = _cross_sum(h, kept, new_at, n_new, n_a, n_ext)
-                    pool_best[known] = max(pool_best[known], base + cross)
-                    continue
                 g = n_out
                 if grouped:
                     at = np.int64(key & np.uint64(len(table) - 1))
@@ -903,8 +894,6 @@ def _merges_of_frontier(
                                 out_key[:0],
                                 out_key2[:0],
                                 True,
-                                out_a[:0],
-                                out_score[:0],
                             )
                 if g == n_out:  # a new union (or, ungrouped, a new merge)
                     if n_out == capacity:
@@ -929,11 +918,20 @@ def _merges_of_frontier(
                     n_out += 1
                 elif bound <= out_score[g]:
                     continue
-                _fill_ratios(h, h_known, new_at, n_new, n_a, n_ext, members, a, ext,
-                             global_xyz, local_xyz, min_distance)  # fmt: skip
-                cross = _cross_sum(h, kept, new_at, n_new, n_a, n_ext)
+                cross = 0.0
+                for q in range(n_new):
+                    j = new_at[q]
+                    if not h_known[j]:  # h(a_k, e_j), the paper's ratio, when first needed
+                        for k in range(n_a):
+                            h[k * n_ext + j] = _ratio(
+                                global_xyz, local_xyz, members[a, k], ext[j], min_distance
+                            )
+                        h_known[j] = True
+                for k in range(n_a):
+                    if not kept[k]:
+                        for q in range(n_new):
+                            cross += h[k * n_ext + new_at[q]]
                 out_score[g] = max(out_score[g], base + cross)
-    raised = np.flatnonzero(pool_best > score)
     return (
         merged,
         out_a[:n_out],
@@ -942,65 +940,7 @@ def _merges_of_frontier(
         out_key[:n_out],
         out_key2[:n_out],
         False,
-        raised,
-        pool_best[raised],
     )
-
-
-@njit(cache=True, inline="always")
-def _fill_ratios(h, h_known, new_at, n_new, n_a, n_ext, members, a, ext, global_xyz, local_xyz,
-                 min_distance):  # fmt: skip
-    """h(a_k, e_j), the paper's ratio, for the new members e_j of a merge not yet known."""
-    for q in range(n_new):
-        j = new_at[q]
-        if not h_known[j]:
-            for k in range(n_a):
-                h[k * n_ext + j] = _ratio(
-                    global_xyz, local_xyz, members[a, k], ext[j], min_distance
-                )
-            h_known[j] = True
-
-
-@njit(cache=True, inline="always")
-def _cross_sum(h, kept, new_at, n_new, n_a, n_ext):
-    """Σ h over the new cross pairs of a merge: A's members not in B times B∖A."""
-    cross = 0.0
-    for k in range(n_a):
-        if not kept[k]:
-            for q in range(n_new):
-                cross += h[k * n_ext + new_at[q]]
-    return cross
-
-
-@njit(cache=True)
-def _table_slots(n):
-    """The slots of an open-addressing table for n keys: a power of 2, at least 2n."""
-    slots = 1
-    while slots < 2 * n:
-        slots *= 2
-    return slots
-
-
-@njit(cache=True, inline="always")
-def _pool_row(table, set_key, set_key2, members, size, key, key2, n_union, own_stamp, a,
-              new_mark, tried):  # fmt: skip
-    """The pool row holding A ∪ B (keys `key`, `key2`; A's members stamped `a` in
-    `own_stamp`, B∖A's marked `tried` in `new_mark`), checked member by member; -1: none."""
-    mask = len(table) - 1
-    at = np.int64(key & np.uint64(mask))
-    while table[at] >= 0:
-        r = table[at]
-        if set_key[r] == key and set_key2[r] == key2 and size[r] == n_union:
-            same = True
-            for k in range(size[r]):
-                m = members[r, k]
-                if own_stamp[m] != a and new_mark[m] != tried:
-                    same = False
-                    break
-            if same:
-                return r
-        at = (at + 1) & mask
-    return -1
 
 
 @njit(cache=True)
@@ -1031,8 +971,7 @@ def _grown(values, capacity):
 
 @njit(cache=True)
 def _rehashed(keys, n, slots):
-    """An open-addressing table (`slots`, a power of 2) of the first n keys (equal keys: in
-    successive slots)."""
+    """An open-addressing table (`slots`, a power of 2) of the first n keys (distinct)."""
     table = np.full(slots, -1, dtype=np.int64)
     for i in range(n):
         at = np.int64(keys[i] & np.uint64(slots - 1))
