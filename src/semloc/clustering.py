@@ -229,6 +229,8 @@ class HierarchicalClustering:
         self._live_key = np.zeros(0, dtype=np.uint64)  # and its two keys
         self._live_key2 = np.zeros(0, dtype=np.uint64)
         self._sweep: tuple[int, int, np.ndarray, int] | None = None  # see _sweep_order
+        self._merge_room = 4096  # unions one merge pass has room for (see _with_room)
+        self._edge_room = 4096  # compatible pairs one search has room for
         # sets: member candidates (ascending, -1 padded), score, age, keys
         self._members = np.full((0, 1), -1, dtype=np.int64)
         self._live_members: np.ndarray | None = None  # members as graph rows, while known
@@ -427,37 +429,21 @@ class HierarchicalClustering:
 
         Few pairs: all of them, tested in one compiled pass; many: a sweep along the map's
         longest axis per pair of local objects (only global pairs within the gate's reach)."""
-        if len(added) * (len(added) + len(covered)) <= 10 * _BRUTE_FORCE_PAIRS:
-            cfg = self.config
-            return _compatible_among(
-                added,
-                covered,
-                self._cand_g,
-                self._cand_l,
-                self._global_positions,
-                self._local_distances,
-                cfg.distance_tolerance,
-                cfg.gamma,
-                cfg.min_distance,
-            )
         cfg = self.config
+        candidates = (added, covered, self._cand_g, self._cand_l, self._global_positions)
+        gate = (cfg.distance_tolerance, cfg.gamma, cfg.min_distance)
         distances = self._local_distances
-        # the gate 1 - max(0, |d^A - d^B| - ε) / max(d^A, d^B) > γ needs d^A < (d^B + ε) / γ
-        reach = np.maximum((distances + cfg.distance_tolerance) / cfg.gamma, cfg.min_distance)
-        reach = reach * (1 + 1e-9) + 1e-12  # the exact test decides at the boundary
-        return _compatible_sweep(
-            added,
-            covered,
-            self._cand_g,
-            self._cand_l,
-            self._global_positions,
-            distances,
-            reach,
-            cfg.distance_tolerance,
-            cfg.gamma,
-            cfg.min_distance,
-            *self._sweep_order(),
-        )
+        if len(added) * (len(added) + len(covered)) <= 10 * _BRUTE_FORCE_PAIRS:
+            arguments: tuple = (*candidates, distances, *gate)
+            kernel = _compatible_among
+        else:
+            # the gate 1 - max(0, |d^A - d^B| - ε) / max(d^A, d^B) > γ needs d^A < (d^B + ε) / γ
+            reach = np.maximum((distances + cfg.distance_tolerance) / cfg.gamma, cfg.min_distance)
+            reach = reach * (1 + 1e-9) + 1e-12  # the exact test decides at the boundary
+            arguments = (*candidates, distances, reach, *gate, *self._sweep_order())
+            kernel = _compatible_sweep
+        (edges,), self._edge_room = _with_room(kernel, arguments, self._edge_room)
+        return edges
 
     def _sweep_order(self) -> tuple[int, int, np.ndarray, int]:
         """The map's longest and second longest axes and each global object's dense rank
@@ -571,9 +557,9 @@ class HierarchicalClustering:
             self.criterion.min_distance,
             self.criterion.UPPER_BOUND,
         )
-        merged, rows_a, rows_b, best, key, key2, collided = _merges_of_frontier(*arguments, True)
+        merged, rows_a, rows_b, best, key, key2, collided = self._merges(arguments, True)
         if collided:  # a key collision: every merge, grouped by the union's member lists
-            merged, rows_a, rows_b, scores, key, key2, _ = _merges_of_frontier(*arguments, False)
+            merged, rows_a, rows_b, scores, key, key2, _ = self._merges(arguments, False)
             unions = _union_rows(self._members, self._size, rows_a, rows_b)
             _, first, group = np.unique(unions, axis=0, return_index=True, return_inverse=True)
             best = np.full(len(first), -np.inf)
@@ -583,6 +569,10 @@ class HierarchicalClustering:
             return None
         self._last_merge[merged] = self.step
         return _union_rows(self._members, self._size, rows_a, rows_b), best, key, key2
+
+    def _merges(self, arguments: tuple, grouped: bool) -> tuple:
+        found, self._merge_room = _with_room(_merges_of_frontier, (*arguments, grouped), self._merge_room)  # fmt: skip
+        return found
 
     def _survival_floor(self) -> float:
         """The K-th best score in the pool (-inf while the pool is not full), less a hair.
@@ -724,6 +714,18 @@ def _pad(members: np.ndarray, width: int) -> np.ndarray:
     return out
 
 
+def _with_room(kernel, arguments: tuple, room: int) -> tuple[list, int]:
+    """`kernel(*arguments, room)`, whose last output says whether it ran out of room for its
+    output arrays, called again with four times the room until they fit; its other outputs
+    and the room that sufficed.  A kernel that never grows its arrays inside its compiled
+    loop runs markedly faster than one that can (the rare second call costs less)."""
+    while True:
+        *found, full = kernel(*arguments, room)
+        if not full:
+            return found, room
+        room *= 4
+
+
 # ---------------------------------------------------------------------------------------------
 # Compiled inner loops of the clustering round (numba; compiled once, cached on disk)
 @njit(cache=True)
@@ -745,6 +747,7 @@ def _merges_of_frontier(
     min_distance,
     upper_bound,
     grouped,
+    capacity,
 ):
     """The merges (A, B) of one iteration with A in the frontier: which sets merged, and per
     distinct union (by its first key; with `grouped`, else per merge) one merge's rows, the
@@ -805,7 +808,6 @@ def _merges_of_frontier(
     new_at = np.empty(width, dtype=np.int64)
     kept = np.zeros(width, dtype=np.bool_)
     merged = np.zeros(n_sets, dtype=np.bool_)
-    capacity = 1024
     out_a = np.empty(capacity, dtype=np.int64)
     out_b = np.empty(capacity, dtype=np.int64)
     out_score = np.empty(capacity)
@@ -894,20 +896,11 @@ def _merges_of_frontier(
                                 out_key[:0],
                                 out_key2[:0],
                                 True,
+                                False,
                             )
                 if g == n_out:  # a new union (or, ungrouped, a new merge)
-                    if n_out == capacity:
-                        capacity *= 2
-                        out_a = _grown(out_a, capacity)
-                        out_b = _grown(out_b, capacity)
-                        out_score = _grown(out_score, capacity)
-                        out_key = _grown(out_key, capacity)
-                        out_key2 = _grown(out_key2, capacity)
-                        if grouped:
-                            table = _rehashed(out_key, n_out, 2 * capacity)
-                            at = np.int64(key & np.uint64(len(table) - 1))
-                            while table[at] >= 0:
-                                at = (at + 1) & (len(table) - 1)
+                    if n_out == capacity:  # no room: the caller calls again with more
+                        return merged, out_a[:0], out_b[:0], out_score[:0], out_key[:0], out_key2[:0], False, True  # fmt: skip
                     if grouped:
                         table[at] = g
                     out_a[g] = a
@@ -940,6 +933,7 @@ def _merges_of_frontier(
         out_key[:n_out],
         out_key2[:n_out],
         False,
+        False,
     )
 
 
@@ -960,25 +954,6 @@ def _ratio(global_xyz, local_xyz, i, j, min_distance):
     if d_max < min_distance or d_max <= 0:
         return 1.0
     return 1.0 - abs(d_global - d_local) / d_max
-
-
-@njit(cache=True)
-def _grown(values, capacity):
-    out = np.empty(capacity, dtype=values.dtype)
-    out[: len(values)] = values
-    return out
-
-
-@njit(cache=True)
-def _rehashed(keys, n, slots):
-    """An open-addressing table (`slots`, a power of 2) of the first n keys (distinct)."""
-    table = np.full(slots, -1, dtype=np.int64)
-    for i in range(n):
-        at = np.int64(keys[i] & np.uint64(slots - 1))
-        while table[at] >= 0:
-            at = (at + 1) & (slots - 1)
-        table[at] = i
-    return table
 
 
 @njit(cache=True)
@@ -1011,11 +986,19 @@ def _union_rows(members, size, rows_a, rows_b):
 
 @njit(cache=True)
 def _compatible_among(
-    added, covered, cand_g, cand_l, global_xyz, local_distance, tolerance, gamma, min_distance
+    added,
+    covered,
+    cand_g,
+    cand_l,
+    global_xyz,
+    local_distance,
+    tolerance,
+    gamma,
+    min_distance,
+    capacity,
 ):
     """The compatible pairs (a, b), a in `added`, b in `covered` or later in `added` (2 x E):
     other local and global objects, and the gate of `MergeCriterion.compatible`."""
-    capacity = 1024
     out = np.empty((2, capacity), dtype=np.int64)
     n = 0
     for i in range(len(added)):
@@ -1029,11 +1012,12 @@ def _compatible_among(
             d_local = local_distance[cand_l[x], cand_l[y]]
             if not _gate(d_global, d_local, tolerance, gamma, min_distance):
                 continue
-            out = _room(out, n)
+            if n == capacity:  # no room: the caller calls again with more
+                return out[:, :0], True
             out[0, n] = x
             out[1, n] = y
             n += 1
-    return out[:, :n]
+    return out[:, :n], False
 
 
 @njit(cache=True)
@@ -1042,16 +1026,6 @@ def _distance(xyz, i, j):
     return np.sqrt(
         (xyz[i, 0] - xyz[j, 0]) ** 2 + (xyz[i, 1] - xyz[j, 1]) ** 2 + (xyz[i, 2] - xyz[j, 2]) ** 2
     )
-
-
-@njit(cache=True)
-def _room(out, n):
-    """`out` (2, capacity) with room for entry n: doubled when full."""
-    if n < out.shape[1]:
-        return out
-    grown = np.empty((2, 2 * out.shape[1]), dtype=np.int64)
-    grown[:, :n] = out[:, :n]
-    return grown
 
 
 @njit(cache=True)
@@ -1080,6 +1054,7 @@ def _compatible_sweep(
     cross_axis,
     rank,
     n_ranks,
+    capacity,
 ):
     """`_compatible_among` for many candidates: per local object, its candidates sorted along
     the map's longest axis `axis` (by `rank`, the global objects' dense rank along it); a
@@ -1113,7 +1088,6 @@ def _compatible_sweep(
     added_at = np.full(len(cand_g), -1, dtype=np.int64)
     for i in range(len(added)):
         added_at[added[i]] = i
-    capacity = 1024
     out = np.empty((2, capacity), dtype=np.int64)
     n = 0
     for i in range(len(added)):
@@ -1138,11 +1112,12 @@ def _compatible_sweep(
                 d_global = _distance(global_xyz, gx, gy)
                 if not _gate(d_global, local_distance[la, lb], tolerance, gamma, min_distance):
                     continue
-                out = _room(out, n)
+                if n == capacity:  # no room: the caller calls again with more
+                    return out[:, :0], True
                 out[0, n] = x
                 out[1, n] = y
                 n += 1
-    return out[:, :n]
+    return out[:, :n], False
 
 
 @njit(cache=True)

@@ -356,3 +356,31 @@ def test_long_strip_map_equals_literal_rules(monkeypatch):
     config = ClusteringConfig(sets_per_object=2, protect_top=3)
     fast, got = _replay_against_literal(g, labels, chosen, local, config)
     assert max(len(p) for p in got) >= 3 and fast.n_sets == 2 * len(g)
+
+
+@pytest.mark.parametrize("sweep", [False, True])
+def test_kernels_out_of_room_are_called_again_with_more(monkeypatch, sweep):
+    """Every merge pass and compatibility search starts with room for one output: each runs
+    out, is called again with four times the room until its outputs fit, and the sets are
+    still the literal rules'."""
+    import semloc.clustering as module
+
+    if sweep:
+        monkeypatch.setattr(module, "_BRUTE_FORCE_PAIRS", 0)
+    rooms: list[int] = []
+    original = module._with_room
+
+    def cramped(kernel, arguments, room):
+        found, room = original(kernel, arguments, 1)
+        rooms.append(room)
+        return found, room
+
+    monkeypatch.setattr(module, "_with_room", cramped)
+    rng = np.random.default_rng(11)
+    g = np.column_stack([rng.uniform(0, 8, 30), rng.uniform(0, 8, 30), rng.uniform(0, 2, 30)])
+    labels = rng.integers(0, 2, len(g))
+    chosen = np.argsort(np.linalg.norm(g - g[0], axis=1))[:5]
+    local = g[chosen] + rng.normal(0, 0.1, (5, 3))
+    _, got = _replay_against_literal(g, labels, chosen, local, ClusteringConfig(protect_top=3))
+    assert max(len(p) for p in got) >= 3
+    assert max(rooms) >= 64  # some calls ran out of room several times
