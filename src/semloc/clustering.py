@@ -230,7 +230,7 @@ class HierarchicalClustering:
         self._live_key2 = np.zeros(0, dtype=np.uint64)
         self._sweep: tuple[int, int, np.ndarray, int] | None = None  # see _sweep_order
         self._merge_room = 4096  # unions one merge pass has room for (see _with_room)
-        self._edge_room = 4096  # compatible pairs one search has room for
+        self._edge_room = 16384  # compatible pairs one search has room for
         # sets: member candidates (ascending, -1 padded), score, age, keys
         self._members = np.full((0, 1), -1, dtype=np.int64)
         self._live_members: np.ndarray | None = None  # members as graph rows, while known
