@@ -120,16 +120,19 @@ def compare(reference_cls, session: dict) -> str:
     return found[0] if found else ""
 
 
-def timed(classes: list, session: dict, repeat: int) -> list[np.ndarray]:
-    """Per class, the least CPU ms of each update over `repeat` replays of the session; the
-    classes take turns going first, so that neither always runs on the other's warm caches."""
+def timed(classes: list, session: dict, repeat: int) -> tuple[list[np.ndarray], list[int]]:
+    """Per class, the least CPU ms of each update over `repeat` replays of the session (the
+    classes take turns going first, so that neither always runs on the other's warm caches),
+    and the pool sizes of the first class after each update."""
     best: list = [None] * len(classes)
+    sizes: list[int] = []
     for r in range(repeat):
         order = range(len(classes)) if r % 2 == 0 else reversed(range(len(classes)))
         for i in order:
-            times, _ = replay(classes[i], session)
+            times, sizes_i = replay(classes[i], session)
             best[i] = np.asarray(times) if best[i] is None else np.minimum(best[i], times)
-    return best
+            sizes = sizes_i if i == 0 else sizes
+    return best, sizes
 
 
 def load_module(path: str):
@@ -164,11 +167,11 @@ def main(argv: list[str] | None = None) -> int:
     classes = [HierarchicalClustering]
     if reference is not None:
         classes.append(reference.HierarchicalClustering)
-    warm_up = time.process_time()  # compiles (or loads from numba's cache) the inner loops
+    warm_up = 0.0
     for session in _sessions(args.maps[0], args.views[0], args)[:1]:
+        tick = time.process_time()  # compiles (or loads from numba's cache) the inner loops
         replay(HierarchicalClustering, session)
-    warm_up = (time.process_time() - warm_up) * 1e3
-    for session in _sessions(args.maps[0], args.views[0], args)[:1]:
+        warm_up = (time.process_time() - tick) * 1e3
         for cls in classes[1:]:
             replay(cls, session)  # the reference's first-call costs, outside its times
     for name in args.maps:
@@ -179,10 +182,10 @@ def main(argv: list[str] | None = None) -> int:
                 continue
             per_loc, per_update, pool, ref_loc, equal = [], [], [], [], True
             for session in sessions:
-                best = timed(classes, session, max(args.repeat, 2 if reference else 1))
+                best, sizes = timed(classes, session, max(args.repeat, 2 if reference else 1))
                 per_loc.append(float(np.sum(best[0])))
                 per_update += list(best[0])
-                pool.append(max(replay(HierarchicalClustering, session)[1]))
+                pool.append(max(sizes))
                 if reference is not None:
                     ref_loc.append(float(np.sum(best[1])))
                     mismatch = compare(reference.HierarchicalClustering, session)

@@ -27,6 +27,10 @@ a label-constrained RANSAC on centres on the same cases (2 same-label pairs per 
 centre; its per-map label trees built inside its timing), as the ratio semloc / RANSAC.  Last,
 how time and memory grow with the buildings' size: the slope of a log-log fit.
 
+`--profile MAP` instead prints where the time of 4 x `--trials` localizations of the largest
+view size goes on one map (cProfile, own CPU ms per localization by function; each compiled
+kernel is one entry).
+
 Times are CPU seconds of the benchmark process (`time.process_time`; the stage times too, by
 reading the Localizer's clock as process time), so that other work on a shared machine does
 not inflate them; wall-clock medians of the localizations are printed beside.
@@ -40,12 +44,15 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")  # one core, as the targets are stated
 
 import argparse  # noqa: E402
+import cProfile  # noqa: E402
 import json  # noqa: E402
+import pstats  # noqa: E402
 import resource  # noqa: E402
 import subprocess  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
 from dataclasses import asdict, dataclass, field  # noqa: E402
+from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 from scipy.spatial import cKDTree  # noqa: E402
@@ -225,6 +232,40 @@ def measure_case(
     )
 
 
+def profile_map(name: str, view: int, trials: int, seed: int, points: int, top: int = 30) -> str:
+    """Where the time of `trials` localizations of `view` objects goes on one map: cProfile's
+    functions by own time, in CPU ms per localization (compiled kernels are single entries)."""
+    global_map = load_map(name, points)
+    if global_map is None:
+        return f"{name}: real data not found (set SEMLOC_DATA)"
+    Localizer(global_map).prepare()
+    cases = [local for local, _ in views(global_map, view, trials, seed + view)]
+    for local, _ in views(global_map, view, 1, seed + 1000):
+        localize(global_map, local)  # warm-up, as in the timed runs
+    profiler = cProfile.Profile(time.process_time)
+    profiler.enable()
+    for local in cases:
+        localize(global_map, local)
+    profiler.disable()
+    stats = pstats.Stats(profiler).stats  # (file, line, name) -> (_, calls, own, with callees, _)
+    rows = sorted(stats.items(), key=lambda item: -item[1][2])[:top]
+    total = sum(own for _, _, own, _, _ in stats.values())
+    lines = [
+        f"cProfile of {trials} localizations of {view} objects on {name}: "
+        f"{total * 1e3 / trials:.1f} CPU ms each",
+        "",
+        "| function | calls per localization | own ms | with callees ms |",
+        "|---|---:|---:|---:|",
+    ]
+    for (file, line, function), (_, calls, own, cumulative, _) in rows:
+        where = f"{Path(file).name}:{line}({function})" if line else function
+        lines.append(
+            f"| {where} | {calls / trials:.1f} | {own * 1e3 / trials:.2f} | "
+            f"{cumulative * 1e3 / trials:.2f} |"
+        )
+    return "\n".join(lines)
+
+
 def run_child(name: str, args: argparse.Namespace) -> list[Row]:
     """Measure one map in a fresh process pinned to one core; its rows."""
     command = [sys.executable, __file__, "--worker", name, "--trials", str(args.trials)]
@@ -327,12 +368,18 @@ def main(argv: list[str] | None = None) -> int:
         "--points", type=int, default=POINTS_PER_OBJECT, help="points per building object"
     )
     parser.add_argument("--no-real", action="store_true", help="buildings only")
+    parser.add_argument(
+        "--profile", metavar="MAP", help="instead: where the time goes on MAP (e.g. building-300)"
+    )
     parser.add_argument("--worker", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     preset = QUICK if args.quick else FULL
     args.sizes = args.sizes or preset["sizes"]
     args.views = args.views or preset["views"]
     args.trials = args.trials or preset["trials"]
+    if args.profile:
+        print(profile_map(args.profile, max(args.views), 4 * args.trials, args.seed, args.points))
+        return 0
     if args.worker:
         rows = measure_map(args.worker, args.views, args.trials, args.seed, args.points)
         print(json.dumps([asdict(row) for row in rows]))

@@ -570,8 +570,9 @@ class HierarchicalClustering:
         self._last_merge[merged] = self.step
         return _union_rows(self._members, self._size, rows_a, rows_b), best, key, key2
 
-    def _merges(self, arguments: tuple, grouped: bool) -> tuple:
-        found, self._merge_room = _with_room(_merges_of_frontier, (*arguments, grouped), self._merge_room)  # fmt: skip
+    def _merges(self, arguments: tuple, grouped: bool) -> list:
+        arguments = (*arguments, grouped)
+        found, self._merge_room = _with_room(_merges_of_frontier, arguments, self._merge_room)
         return found
 
     def _survival_floor(self) -> float:
@@ -751,8 +752,9 @@ def _merges_of_frontier(
 ):
     """The merges (A, B) of one iteration with A in the frontier: which sets merged, and per
     distinct union (by its first key; with `grouped`, else per merge) one merge's rows, the
-    largest merge score v_A + v_B + Σ h over the new cross pairs, and the two keys; last,
-    whether two unions shared a first key but not the second (then call again ungrouped).
+    largest merge score v_A + v_B + Σ h over the new cross pairs, and the two keys; then
+    whether two unions shared a first key but not the second (then call again ungrouped);
+    last, whether `capacity` unions were too few (then call again with more: `_with_room`).
     A merge whose score bound cannot beat its union's best so far is not scored.
 
     `members` are the pool's sets in live-candidate indices (-1 padded), `indptr`/`indices`
@@ -985,20 +987,11 @@ def _union_rows(members, size, rows_a, rows_b):
 
 
 @njit(cache=True)
-def _compatible_among(
-    added,
-    covered,
-    cand_g,
-    cand_l,
-    global_xyz,
-    local_distance,
-    tolerance,
-    gamma,
-    min_distance,
-    capacity,
-):
+def _compatible_among(added, covered, cand_g, cand_l, global_xyz, local_distance, tolerance,
+                      gamma, min_distance, capacity):  # fmt: skip
     """The compatible pairs (a, b), a in `added`, b in `covered` or later in `added` (2 x E):
-    other local and global objects, and the gate of `MergeCriterion.compatible`."""
+    other local and global objects, and the gate of `MergeCriterion.compatible`; then whether
+    `capacity` pairs were too few (the pairs are then incomplete, see `_with_room`)."""
     out = np.empty((2, capacity), dtype=np.int64)
     n = 0
     for i in range(len(added)):
@@ -1060,7 +1053,8 @@ def _compatible_sweep(
     the map's longest axis `axis` (by `rank`, the global objects' dense rank along it); a
     candidate of `la` is tested only against those of `lb` within `reach[la, lb]` along it and
     along the second longest axis `cross_axis` (necessary conditions of the gate; the second
-    is read from a copy in sweep order, so most misses cost no distance)."""
+    is read from a copy in sweep order, so most misses cost no distance).  Returns as
+    `_compatible_among` does."""
     n_local = len(local_distance)
     everyone = np.concatenate((covered, added))
     slot = np.zeros(n_ranks + 1, dtype=np.int64)  # counting sort by rank: stable, as mergesort
