@@ -422,8 +422,7 @@ class _Pairs:
             np.concatenate([g.flatness for g in globals_]),
         )
         # the local clouds concatenated, in their trees' order (shared by thinned views)
-        self._sizes = np.array([len(p.points) for p, _ in pairs])
-        self._starts = np.cumsum(self._sizes) - self._sizes
+        self._sizes = np.array([len(p.points) for p, _ in pairs], dtype=np.int64)
         self._points = np.concatenate([p.points for p, _ in pairs])
         self._normals = np.concatenate([p.normals for p, _ in pairs])
         self._input_rows = np.concatenate([p.input_rows for p, _ in pairs])
@@ -436,20 +435,10 @@ class _Pairs:
         return view
 
     def _select(self, limit: int | None) -> None:
-        sizes, starts = self._sizes, self._starts
-        total = len(self._points)
-        if limit is not None and total > limit:  # every (total / limit)-th point of each cloud
-            counts = np.ceil(sizes * limit / total).astype(np.int64)
-            owner = np.repeat(np.arange(len(sizes)), counts)
-            k = np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
-            first = starts[owner]
-            rows = first + self._input_rows[first + (k * total / limit).astype(int)]
-        else:
-            owner = np.repeat(np.arange(len(sizes)), sizes)
-            rows = self._input_rows + starts[owner]
+        rows, owner = registration.thinned_rows(self._sizes, self._input_rows, limit or 0)
         self.src = self._points[rows]
         self.src_normals = self._normals[rows]
-        self.tree_of_row = owner.astype(np.int64)
+        self.tree_of_row = owner
 
     @property
     def view(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -23,7 +23,7 @@ import numpy as np
 
 from semloc.neighbours import Forest, knn_within, scratch
 
-__all__ = ["IcpSettings", "Targets", "fitness", "icp", "rotation_scores"]
+__all__ = ["IcpSettings", "Targets", "fitness", "icp", "rotation_scores", "thinned_rows"]
 
 _FIRST_NEIGHBOURS = 2  # neighbours tried before the full k of a correspondence search
 
@@ -281,6 +281,29 @@ def fitness(T: np.ndarray, src: np.ndarray, tree_of_row: np.ndarray, forest: For
     )  # fmt: skip
     rmse = float(np.sqrt(squares / inliers)) if inliers else 0.0
     return inliers / len(src), rmse, smooth / len(src)
+
+
+@numba.njit(cache=True)
+def thinned_rows(sizes, input_rows, limit):
+    """The local points one problem uses, as rows of its clouds' concatenated tree-ordered
+    points (`sizes` points each; `input_rows` maps each cloud's input order to its tree
+    order), and the cloud of each row: every point, or with `limit` > 0 below their number
+    every (total / limit)-th point of each cloud in input order (which keeps its spread)."""
+    total = len(input_rows)
+    thin = 0 < limit < total
+    counts = np.empty(len(sizes), dtype=np.int64)
+    for o in range(len(sizes)):
+        counts[o] = np.int64(np.ceil(sizes[o] * limit / total)) if thin else sizes[o]
+    rows = np.empty(counts.sum(), dtype=np.int64)
+    owner = np.empty(len(rows), dtype=np.int64)
+    at, first = 0, 0
+    for o in range(len(sizes)):
+        for k in range(counts[o]):
+            rows[at] = first + input_rows[first + (np.int64(k * total / limit) if thin else k)]
+            owner[at] = o
+            at += 1
+        first += sizes[o]
+    return rows, owner
 
 
 @numba.njit(cache=True)

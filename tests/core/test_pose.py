@@ -560,3 +560,22 @@ def test_far_queries_are_answered_without_neighbours() -> None:
     np.testing.assert_allclose(dist[:2, 0], exact)
     _, wide = cloud.nearest(query, 1, 1.0)
     assert np.isfinite(wide[2, 0]) and np.isinf(wide[3, 0])
+
+
+@given(sizes=st.lists(st.integers(1, 40), min_size=1, max_size=8), limit=st.integers(0, 200))
+def test_thinned_rows_keep_every_cloud_evenly_in_input_order(sizes: list[int], limit: int) -> None:
+    from semloc.registration import thinned_rows
+
+    rng = np.random.default_rng(sum(sizes) + limit)
+    orders = [rng.permutation(n).astype(np.int32) for n in sizes]  # input row -> tree row
+    rows, owner = thinned_rows(np.array(sizes), np.concatenate(orders), limit)
+    total = sum(sizes)
+    first = np.cumsum([0, *sizes])
+    for cloud, (n, order) in enumerate(zip(sizes, orders)):
+        mine = rows[owner == cloud] - first[cloud]
+        if 0 < limit < total:  # every (total / limit)-th point, in input order
+            kept = [int(k * total / limit) for k in range(int(np.ceil(n * limit / total)))]
+        else:
+            kept = list(range(n))
+        assert mine.tolist() == order[kept].tolist()
+    assert np.all(np.diff(owner) >= 0)
