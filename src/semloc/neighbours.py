@@ -13,7 +13,9 @@ inside the compiled ICP loop, so the tree is plain arrays that numba functions r
   distance; a query farther than the bound from every point costs a few node visits.
 - `Forest.of(trees)` concatenates the trees of several objects so that one compiled call
   searches each query in its own object's tree (`Forest.nearest`); answers are rows of the
-  concatenated tree-ordered points.
+  concatenated tree-ordered points.  `knn_in_tree(...)` (compiled) searches one tree of a forest
+  and answers "none" without a search when the tree's bounding box is beyond the bound (the
+  rotation search, whose rotations put most points far from their partner).
 - `neighbourhood_shapes(tree, k)`: per point, the unit normal of its k-neighbourhood (the
   smallest-eigenvalue direction of the covariance, in closed form) and its surface variation.
 
@@ -28,7 +30,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-__all__ = ["Forest", "KdTree", "knn_within", "neighbourhood_shapes"]
+__all__ = ["Forest", "KdTree", "knn_in_tree", "knn_within", "neighbourhood_shapes"]
 
 LEAF = 8  # ranges of at most this many points are scanned, not split
 _STACK = 128  # deeper than any tree of up to 2^60 points needs
@@ -72,6 +74,9 @@ def _build(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return order, axes
 
 
+_EMPTY = np.array([np.inf] * 3 + [-np.inf] * 3)
+
+
 @dataclass(frozen=True)
 class KdTree:
     """A static KD-tree over (n, 3) points: the points in tree order, the split axes, and for
@@ -80,12 +85,14 @@ class KdTree:
     points: np.ndarray
     axes: np.ndarray
     order: np.ndarray
+    box: np.ndarray  # (6,): the points' lower then upper corner (inf / -inf without points)
 
     @classmethod
     def build(cls, points: np.ndarray) -> KdTree:
         points = np.ascontiguousarray(points, dtype=np.float64)
         order, axes = _build(points)
-        return cls(np.ascontiguousarray(points[order]), axes, order.astype(np.int32))
+        box = np.concatenate([points.min(axis=0), points.max(axis=0)]) if len(points) else _EMPTY
+        return cls(np.ascontiguousarray(points[order]), axes, order.astype(np.int32), box)
 
     def __len__(self) -> int:
         return len(self.points)
@@ -152,6 +159,26 @@ def knn_within(
     return found
 
 
+@numba.njit(cache=True, inline="always")
+def knn_in_tree(points, axes, starts, boxes, tree: int, query, k: int, bound2: float, best_d2,
+                best_j, stack, gaps) -> int:  # fmt: skip
+    """`knn_within` in tree `tree` of a forest's arrays; no search when the tree's bounding
+    box is not closer than the bound (the same answer: no point is closer than its box, in
+    floating point too, as each squared axis gap is at most the point's)."""
+    gap2 = 0.0
+    for c in range(3):
+        below = boxes[tree, c] - query[c]
+        above = query[c] - boxes[tree, 3 + c]
+        if below > 0:
+            gap2 += below * below
+        elif above > 0:
+            gap2 += above * above
+    if gap2 >= bound2:
+        return 0
+    lo, hi = starts[tree], starts[tree + 1]
+    return knn_within(points, axes, lo, hi, query, k, bound2, best_d2, best_j, stack, gaps)
+
+
 @numba.njit(cache=True)
 def scratch() -> tuple[np.ndarray, np.ndarray]:
     """The scratch space `knn_within` needs (allocate once per batch of queries)."""
@@ -159,7 +186,7 @@ def scratch() -> tuple[np.ndarray, np.ndarray]:
 
 
 @numba.njit(cache=True)
-def _nearest_rows(points, axes, starts, tree_of_row, queries, k: int, bound: float):
+def _nearest_rows(points, axes, starts, boxes, tree_of_row, queries, k: int, bound: float):
     """`Forest.nearest` in compiled code: forest rows and distances, -1 / inf
     where fewer than k points are within `bound`."""
     n = len(queries)
@@ -170,11 +197,10 @@ def _nearest_rows(points, axes, starts, tree_of_row, queries, k: int, bound: flo
     stack, gaps = scratch()
     bound2 = bound * bound
     for r in range(n):
-        tree = tree_of_row[r]
-        lo, hi = starts[tree], starts[tree + 1]
-        found = knn_within(
-            points, axes, lo, hi, queries[r], k, bound2, best_d2, best_j, stack, gaps
-        )
+        found = knn_in_tree(
+            points, axes, starts, boxes, tree_of_row[r], queries[r], k, bound2, best_d2, best_j,
+            stack, gaps,
+        )  # fmt: skip
         for i in range(found):
             idx[r, i] = best_j[i]
             dist[r, i] = np.sqrt(best_d2[i])
@@ -184,19 +210,26 @@ def _nearest_rows(points, axes, starts, tree_of_row, queries, k: int, bound: flo
 @dataclass(frozen=True)
 class Forest:
     """Several KD-trees in one set of arrays: tree i occupies rows [starts[i], starts[i+1])
-    of the concatenated tree-ordered points."""
+    of the concatenated tree-ordered points; `boxes[i]` is its bounding box."""
 
     points: np.ndarray
     axes: np.ndarray
     starts: np.ndarray
+    boxes: np.ndarray  # (trees, 6): lower then upper corner
 
     @classmethod
     def of(cls, trees: Sequence[KdTree]) -> Forest:
         starts = np.cumsum([0] + [len(t) for t in trees]).astype(np.int64)
         if not trees:
-            return cls(np.zeros((0, 3)), np.zeros(0, np.int8), starts)
+            return cls(np.zeros((0, 3)), np.zeros(0, np.int8), starts, np.zeros((0, 6)))
         points = np.concatenate([t.points for t in trees])
-        return cls(points, np.concatenate([t.axes for t in trees]), starts)
+        boxes = np.stack([t.box for t in trees])
+        return cls(points, np.concatenate([t.axes for t in trees]), starts, boxes)
+
+    @property
+    def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(points, axes, starts, boxes), as `knn_in_tree` takes them."""
+        return self.points, self.axes, self.starts, self.boxes
 
     def nearest(
         self, queries: np.ndarray, tree_of_row: np.ndarray, k: int, bound: float
@@ -206,7 +239,7 @@ class Forest:
         index -1 and distance inf where there are fewer."""
         queries = np.ascontiguousarray(queries, dtype=np.float64).reshape(-1, 3)
         rows = np.ascontiguousarray(tree_of_row, dtype=np.int64)
-        return _nearest_rows(self.points, self.axes, self.starts, rows, queries, k, float(bound))
+        return _nearest_rows(*self.arrays, rows, queries, k, float(bound))
 
 
 @numba.njit(cache=True)

@@ -21,7 +21,7 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from semloc.neighbours import Forest, knn_within, scratch
+from semloc.neighbours import Forest, knn_in_tree, knn_within, scratch
 
 __all__ = ["IcpSettings", "Targets", "fitness", "icp", "rotation_scores", "thinned_rows"]
 
@@ -308,7 +308,7 @@ def thinned_rows(sizes, input_rows, limit):
 
 @numba.njit(cache=True)
 def _rotation_scores(rotations, pivot_l, pivot_g, src, tree_of_row, f_points, f_axes, f_starts,
-                     radius):  # fmt: skip
+                     f_boxes, radius):  # fmt: skip
     best_d2 = np.empty(1)
     best_j = np.empty(1, dtype=np.int64)
     stack, gaps = scratch()
@@ -320,9 +320,9 @@ def _rotation_scores(rotations, pivot_l, pivot_g, src, tree_of_row, f_points, f_
         total = 0.0
         for r in range(len(src)):
             _move(rotations[a], pivot_g, centred[r], p)
-            tree = tree_of_row[r]
-            if knn_within(f_points, f_axes, f_starts[tree], f_starts[tree + 1], p, 1, r2,
-                          best_d2, best_j, stack, gaps):  # fmt: skip
+            # most rotations put most points far from their partner: the box answers first
+            if knn_in_tree(f_points, f_axes, f_starts, f_boxes, tree_of_row[r], p, 1, r2,
+                           best_d2, best_j, stack, gaps):  # fmt: skip
                 total += 1.0 - best_d2[0] / r2
         scores[a] = total / len(src)
     return scores
@@ -334,6 +334,5 @@ def rotation_scores(rotations: np.ndarray, pivots: tuple, src: np.ndarray,
     matched pivots (local, global) of the local points `src`."""
     return _rotation_scores(
         np.ascontiguousarray(rotations, dtype=float), np.asarray(pivots[0], dtype=float),
-        np.asarray(pivots[1], dtype=float), src, tree_of_row, forest.points, forest.axes,
-        forest.starts, float(radius),
+        np.asarray(pivots[1], dtype=float), src, tree_of_row, *forest.arrays, float(radius),
     )  # fmt: skip

@@ -71,3 +71,30 @@ def test_neighbourhood_shapes_match_an_eigendecomposition(seed, n) -> None:
     cos = np.abs(np.sum(normals * vectors[:, :, 0], axis=1))
     np.testing.assert_allclose(cos[separated], 1.0, atol=1e-6)
     np.testing.assert_allclose(np.linalg.norm(normals, axis=1), 1.0)
+
+
+@settings(max_examples=40, deadline=None)
+@given(seeds, st.floats(0.05, 2.0))
+def test_box_test_keeps_answers_at_the_bound_on_lattice_points(seed, bound) -> None:
+    """Points and queries on a lattice put many distances exactly at the bound and queries
+    exactly on the trees' box faces: the box test must answer as the search does."""
+    rng = np.random.default_rng(seed)
+    step = bound / rng.integers(1, 4)
+    clouds = [rng.integers(-3, 4, size=(int(m), 3)) * step for m in rng.integers(1, 30, size=3)]
+    forest = Forest.of([KdTree.build(c) for c in clouds])
+    queries = rng.integers(-8, 9, size=(200, 3)) * step
+    tree_of_row = rng.integers(0, 3, size=200)
+    idx, dist = forest.nearest(queries, tree_of_row, 2, bound)
+    for r, (q, t) in enumerate(zip(queries, tree_of_row)):
+        rows = np.arange(forest.starts[t], forest.starts[t + 1])
+        d = np.sqrt(np.sum((forest.points[rows] - q) ** 2, axis=1))
+        within = np.sort(d[np.sum((forest.points[rows] - q) ** 2, axis=1) < bound**2])[:2]
+        assert np.array_equal(np.sort(dist[r][np.isfinite(dist[r])]), within)
+        assert np.all((idx[r] >= 0) == np.isfinite(dist[r]))
+
+
+def test_a_tree_without_points_has_an_empty_box_and_finds_nothing() -> None:
+    empty = KdTree.build(np.zeros((0, 3)))
+    forest = Forest.of([empty, KdTree.build(np.zeros((1, 3)))])
+    idx, dist = forest.nearest(np.zeros((2, 3)), np.array([0, 1]), 1, 1.0)
+    assert idx.tolist() == [[-1], [0]] and dist[1, 0] == 0.0  # the empty tree has no rows
