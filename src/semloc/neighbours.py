@@ -24,6 +24,7 @@ Pure computation on numpy arrays (no I/O).
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -74,7 +75,8 @@ def _build(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return order, axes
 
 
-_EMPTY = np.array([np.inf] * 3 + [-np.inf] * 3)
+_EMPTY = np.array([np.inf] * 3 + [-np.inf] * 3)  # the box of no points (shared: read-only)
+_EMPTY.flags.writeable = False
 
 
 @dataclass(frozen=True)
@@ -215,16 +217,22 @@ class Forest:
     points: np.ndarray
     axes: np.ndarray
     starts: np.ndarray
-    boxes: np.ndarray  # (trees, 6): lower then upper corner
+    tree_boxes: tuple[np.ndarray, ...]  # each tree's `KdTree.box`
 
     @classmethod
     def of(cls, trees: Sequence[KdTree]) -> Forest:
         starts = np.cumsum([0] + [len(t) for t in trees]).astype(np.int64)
+        boxes = tuple(t.box for t in trees)
         if not trees:
-            return cls(np.zeros((0, 3)), np.zeros(0, np.int8), starts, np.zeros((0, 6)))
+            return cls(np.zeros((0, 3)), np.zeros(0, np.int8), starts, boxes)
         points = np.concatenate([t.points for t in trees])
-        boxes = np.stack([t.box for t in trees])
         return cls(points, np.concatenate([t.axes for t in trees]), starts, boxes)
+
+    @functools.cached_property
+    def boxes(self) -> np.ndarray:
+        """(trees, 6): each tree's lower then upper corner (stacked when first asked: only
+        the searches that test boxes need them)."""
+        return np.stack(self.tree_boxes) if self.tree_boxes else np.zeros((0, 6))
 
     @property
     def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:

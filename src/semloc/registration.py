@@ -7,7 +7,9 @@ that touch every point, compiled with numba so that no Python runs per iteration
   point-to-plane plus a little point-to-point error, normal-compatible correspondences searched
   in each local point's partner object only, 4-DoF about an axis or 6-DoF);
 - `fitness`: inlier share, inlier RMS and smooth score of a pose;
-- `rotation_scores`: the smooth score of many rotations about a pivot (the global search).
+- `rotation_scores`: the smooth score of many rotations about a pivot (the global search);
+- `thinned_rows`: which local points a problem moves (every point, or every (total / limit)-th
+  of each cloud).
 
 The partner objects of a problem are one `semloc.neighbours.Forest`; `tree_of_row[i]` names
 the partner tree of local point i.  Targets (`normals`, `flatness`) are the partners' arrays

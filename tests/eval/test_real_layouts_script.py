@@ -2,23 +2,14 @@
 
 from __future__ import annotations
 
-import importlib.util
-import sys
-from pathlib import Path
-
 import numpy as np
+from helpers import benchmark_script
 
 from semloc.maps import ObjectMap, SemanticObject
 
-SCRIPT = Path(__file__).resolve().parents[2] / "benchmarks" / "real_layouts.py"
-
 
 def _script():
-    spec = importlib.util.spec_from_file_location("real_layouts", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules["real_layouts"] = module  # dataclasses look their module up
-    spec.loader.exec_module(module)
-    return module
+    return benchmark_script("real_layouts")
 
 
 def _room() -> ObjectMap:
