@@ -69,13 +69,14 @@ Where the paper is silent (see also DESIGN.md)
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
 from pydantic import BaseModel, ConfigDict, Field
 
-from semloc.digests import encode_ids, pair_digests
+from semloc.digests import EncodedIds, encode_ids, pair_digests
 from semloc.pointsets import axes_by_spread
 
 _BRUTE_FORCE_PAIRS = 20_000  # below this many pairs a range query is a dense distance block
@@ -194,13 +195,16 @@ class HierarchicalClustering:
     def __init__(
         self,
         global_positions: np.ndarray,
-        global_ids: list[str],
+        global_ids: Sequence[str],
         config: ClusteringConfig | None = None,
+        *,
+        encoded_ids: EncodedIds | None = None,
     ) -> None:
         self.config = config or ClusteringConfig()
         self.criterion = MergeCriterion.of(self.config)
         self._global_positions = np.asarray(global_positions, dtype=float).reshape(-1, 3)
         self._global_ids = list(global_ids)
+        self._encoded_global = encoded_ids  # their UTF-8 bytes, encoded when first needed
         self.capacity = self.config.sets_per_object * max(len(self._global_ids), 1)
         if self.config.max_sets is not None:
             self.capacity = min(self.capacity, self.config.max_sets)
@@ -265,7 +269,7 @@ class HierarchicalClustering:
         scores = self._score[self._size >= min_size]
         if len(scores) > k:
             rounded = np.round(scores, 9)
-            cut = np.partition(rounded, len(rounded) - k)[len(rounded) - k]
+            cut = _kth_largest(rounded, k)
             above, at_cut = scores[rounded > cut], scores[rounded == cut]
             if np.any(at_cut != at_cut[0]):
                 scores = self._score[self._top_rows(k, min_size, False)]
@@ -379,9 +383,13 @@ class HierarchicalClustering:
         wanted[candidates] = True
         todo = np.flatnonzero(wanted & ~self._hashed)
         if len(todo):
-            global_ids = encode_ids([self._global_ids[g] for g in self._cand_g[todo].tolist()])
+            if self._encoded_global is None:
+                self._encoded_global = encode_ids(self._global_ids)
             self._cand_hash[todo] = pair_digests(
-                global_ids, np.arange(len(todo)), encode_ids(self._local_ids), self._cand_l[todo]
+                self._encoded_global,
+                self._cand_g[todo],
+                encode_ids(self._local_ids),
+                self._cand_l[todo],
             )
             self._hashed[todo] = True
         return self._cand_hash[candidates]
@@ -585,8 +593,7 @@ class HierarchicalClustering:
         """
         if len(self._score) < self.capacity:
             return -np.inf
-        kth = np.partition(self._score, len(self._score) - self.capacity)
-        return float(kth[len(self._score) - self.capacity]) - 1e-9
+        return _kth_largest(self._score, self.capacity) - 1e-9
 
     def _insert(self, members: np.ndarray, best: np.ndarray, key: np.ndarray, key2: np.ndarray):
         """Add distinct merged sets (duplicates keep the larger score); return new rows."""
@@ -640,7 +647,7 @@ class HierarchicalClustering:
         if limit is not None and 0 < limit < len(rows):
             # only the rows up to the limit's value of the first key can be in its head
             first = size if largest_first else score
-            near = np.flatnonzero(first <= np.partition(first, limit - 1)[limit - 1])
+            near = np.flatnonzero(first <= -_kth_largest(-first, limit))
             if len(near) < len(rows):
                 return near[self._ranking(rows[near], limit, largest_first)]
         keys = (score, size) if largest_first else (size, score)
@@ -670,7 +677,7 @@ class HierarchicalClustering:
         """Which sets are among the k best of `_ranking` (the same k, without sorting all):
         the sets above the k-th score for sure, and the k-th score's sets ranked exactly."""
         score = np.round(self._score, 9)
-        kth = np.partition(score, len(score) - k)[len(score) - k]
+        kth = _kth_largest(score, k)
         keep = score > kth
         at_cut = np.flatnonzero(score == kth)
         if k - int(keep.sum()) < len(at_cut):
@@ -705,6 +712,19 @@ class HierarchicalClustering:
         self._last_merge = self._last_merge[keep]
         self._key = self._key[keep]
         self._key2 = self._key2[keep]
+
+
+def _kth_largest(scores: np.ndarray, k: int) -> float:
+    """The k-th largest of `scores` (1 <= k <= len).  Scores are sums of h >= 0; when at most
+    k are positive (a pruned pool plus new singletons) it is the smallest positive one or 0,
+    found without the partition that the general case needs."""
+    if k == len(scores):
+        return float(scores.min())
+    positive = scores > 0
+    count = np.count_nonzero(positive)
+    if count <= k and not (scores < 0).any():
+        return float(scores[positive].min()) if count == k else 0.0
+    return float(np.partition(scores, len(scores) - k)[len(scores) - k])
 
 
 def _pad(members: np.ndarray, width: int) -> np.ndarray:

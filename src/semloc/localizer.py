@@ -151,7 +151,10 @@ class Localizer:
         self._pose_unrefined = config.pose.model_copy(update={"refine": False})
         self._poses: dict[_PoseKey, PoseEstimate | None] = {}  # of the last answer's sets
         self._clustering = HierarchicalClustering(
-            global_map.positions, list(global_map.ids), config.clustering
+            global_map.positions,
+            list(global_map.ids),
+            config.clustering,
+            encoded_ids=global_map.encoded_ids,
         )
         self._local: dict[str, SemanticObject] = {}
         self._local_index: dict[str, int] = {}

@@ -22,6 +22,8 @@ from typing import Any
 
 import numpy as np
 
+from semloc.digests import EncodedIds, encode_ids
+
 
 class MapError(ValueError):
     """A map (file or in-memory) is invalid; the message names the source, object and problem."""
@@ -333,6 +335,11 @@ class ObjectMap(Sequence[SemanticObject]):
     @cached_property
     def ids(self) -> np.ndarray:
         return np.array([o.id for o in self._objects], dtype=object)
+
+    @cached_property
+    def encoded_ids(self) -> EncodedIds:
+        """The ids' UTF-8 bytes, as `semloc.digests` reads them."""
+        return encode_ids(self.ids.tolist())
 
     @cached_property
     def labels(self) -> np.ndarray:

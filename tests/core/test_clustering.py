@@ -384,3 +384,18 @@ def test_kernels_out_of_room_are_called_again_with_more(monkeypatch, sweep):
     _, got = _replay_against_literal(g, labels, chosen, local, ClusteringConfig(protect_top=3))
     assert max(len(p) for p in got) >= 3
     assert max(rooms) >= 64  # some calls ran out of room several times
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    st.lists(st.sampled_from([0.0, 0.0, 0.25, 0.5, 1.0, 1.75, 3.0]), min_size=1, max_size=30),
+    st.data(),
+)
+def test_kth_largest_score_equals_a_partition(scores, data):
+    """The pool's k-th best score (its shortcuts: exactly k sets, at most k positive) is the
+    value a full partition gives."""
+    from semloc.clustering import _kth_largest
+
+    values = np.array(scores)
+    k = data.draw(st.integers(1, len(values)))
+    assert _kth_largest(values, k) == np.sort(values)[::-1][k - 1]

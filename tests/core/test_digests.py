@@ -51,3 +51,16 @@ def test_equal_to_hashlib(global_ids, local_ids, data):
     )
     expected = [blake2b_64(global_ids[g], local_ids[l]) for g, l in pairs]
     assert digests(global_ids, local_ids, pairs) == expected
+
+
+def test_a_maps_encoded_ids_are_its_ids():
+    """`ObjectMap.encoded_ids` (what the clustering digests) spells the map's ids in order."""
+    from semloc.maps import ObjectMap, SemanticObject
+
+    ids = ["chair_1", "tisch-ü", "😀"]
+    objects = [SemanticObject(i, "chair", [float(k), 0.0, 0.0]) for k, i in enumerate(ids)]
+    encoded = ObjectMap(objects).encoded_ids
+    data = encoded.data.tobytes()
+    spelled = [data[a:b].decode() for a, b in zip(encoded.starts[:-1], encoded.starts[1:])]
+    assert spelled == ids
+    assert digests(ids, ["l"], [(2, 0)]) == [blake2b_64("😀", "l")]
