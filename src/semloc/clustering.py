@@ -650,6 +650,9 @@ class HierarchicalClustering:
             near = np.flatnonzero(first <= -_kth_largest(-first, limit))
             if len(near) < len(rows):
                 return near[self._ranking(rows[near], limit, largest_first)]
+        if len(rows) > 1 and (score == score[0]).all() and (size == size[0]).all():
+            # all tied (the singletons at a cut): the hashes decide, as they would below
+            return np.argsort(self._set_hashes(rows), kind="stable")
         keys = (score, size) if largest_first else (size, score)
         order = np.lexsort(keys)
         head = order if limit is None else order[:limit]
@@ -666,12 +669,18 @@ class HierarchicalClustering:
         set_hash = np.zeros(len(rows), dtype=np.uint64)
         needs = order[tied]
         if len(needs):
-            members = self._members[rows[needs]]
-            hashes = np.zeros(members.shape, dtype=np.uint64)
-            valid = members >= 0
-            hashes[valid] = self._pair_hashes(members[valid])
-            set_hash[needs] = hashes.sum(axis=1, dtype=np.uint64)
+            set_hash[needs] = self._set_hashes(rows[needs])
         return np.lexsort((set_hash, *keys))
+
+    def _set_hashes(self, rows: np.ndarray) -> np.ndarray:
+        """The order-independent hash of each set: the wrapping sum of its pair hashes."""
+        members = self._members[rows]
+        if (self._size[rows] == 1).all():  # singletons: the pair hash itself
+            return self._pair_hashes(members[:, 0])
+        hashes = np.zeros(members.shape, dtype=np.uint64)
+        valid = members >= 0
+        hashes[valid] = self._pair_hashes(members[valid])
+        return hashes.sum(axis=1, dtype=np.uint64)
 
     def _best_rows(self, k: int) -> np.ndarray:
         """Which sets are among the k best of `_ranking` (the same k, without sorting all):

@@ -399,3 +399,22 @@ def test_kth_largest_score_equals_a_partition(scores, data):
     values = np.array(scores)
     k = data.draw(st.integers(1, len(values)))
     assert _kth_largest(values, k) == np.sort(values)[::-1][k - 1]
+
+
+def test_singletons_tied_at_the_cut_are_kept_by_their_pair_digests():
+    """One object with more candidates than the pool holds: every singleton scores 0, so the
+    pool keeps those with the smallest BLAKE2b digests of "global id NUL local id", whatever
+    the order of the candidates."""
+    import hashlib
+
+    def digest(g: int, l: int) -> int:
+        text = f"g{g}\x00l{l}".encode()
+        return int.from_bytes(hashlib.blake2b(text, digest_size=8).digest(), "little")
+
+    g = np.random.default_rng(5).uniform(0, 20, (40, 3))
+    config = ClusteringConfig(distance_tolerance=0.0, max_sets=7, protect_top=0)
+    expected = sorted(range(40), key=lambda i: digest(i, 0))[:7]
+    for order in (list(range(40)), list(range(39, -1, -1))):
+        hc = clustering(g, config)
+        feed(hc, [[0.0, 0.0, 0.0]], {0: order})
+        assert [s.pairs for s in hc.sets()] == [((i, 0),) for i in expected]
