@@ -6,9 +6,14 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from literal_clustering import LiteralClustering
+from literal_clustering import LiteralClustering, pair_hash
 
-from semloc.clustering import ClusteringConfig, HierarchicalClustering, merge_metric
+from semloc.clustering import (
+    ClusteringConfig,
+    HierarchicalClustering,
+    _kth_largest,
+    merge_metric,
+)
 
 PAPER = ClusteringConfig(distance_tolerance=0.0)  # the paper's pure ratio
 
@@ -394,8 +399,6 @@ def test_kernels_out_of_room_are_called_again_with_more(monkeypatch, sweep):
 def test_kth_largest_score_equals_a_partition(scores, data):
     """The pool's k-th best score (its shortcuts: exactly k sets, at most k positive) is the
     value a full partition gives."""
-    from semloc.clustering import _kth_largest
-
     values = np.array(scores)
     k = data.draw(st.integers(1, len(values)))
     assert _kth_largest(values, k) == np.sort(values)[::-1][k - 1]
@@ -405,15 +408,9 @@ def test_singletons_tied_at_the_cut_are_kept_by_their_pair_digests():
     """One object with more candidates than the pool holds: every singleton scores 0, so the
     pool keeps those with the smallest BLAKE2b digests of "global id NUL local id", whatever
     the order of the candidates."""
-    import hashlib
-
-    def digest(g: int, l: int) -> int:
-        text = f"g{g}\x00l{l}".encode()
-        return int.from_bytes(hashlib.blake2b(text, digest_size=8).digest(), "little")
-
     g = np.random.default_rng(5).uniform(0, 20, (40, 3))
     config = ClusteringConfig(distance_tolerance=0.0, max_sets=7, protect_top=0)
-    expected = sorted(range(40), key=lambda i: digest(i, 0))[:7]
+    expected = sorted(range(40), key=lambda i: pair_hash(f"g{i}", "l0"))[:7]
     for order in (list(range(40)), list(range(39, -1, -1))):
         hc = clustering(g, config)
         feed(hc, [[0.0, 0.0, 0.0]], {0: order})

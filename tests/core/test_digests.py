@@ -9,6 +9,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from semloc.digests import encode_ids, pair_digests
+from semloc.maps import ObjectMap, SemanticObject
 
 
 def blake2b_64(global_id: str, local_id: str) -> int:
@@ -54,13 +55,13 @@ def test_equal_to_hashlib(global_ids, local_ids, data):
 
 
 def test_a_maps_encoded_ids_are_its_ids():
-    """`ObjectMap.encoded_ids` (what the clustering digests) spells the map's ids in order."""
-    from semloc.maps import ObjectMap, SemanticObject
-
+    """`ObjectMap.encoded_ids` (what the clustering digests) spells the map's ids in order,
+    and digests read from it are hashlib's."""
     ids = ["chair_1", "tisch-ü", "😀"]
     objects = [SemanticObject(i, "chair", [float(k), 0.0, 0.0]) for k, i in enumerate(ids)]
     encoded = ObjectMap(objects).encoded_ids
     data = encoded.data.tobytes()
     spelled = [data[a:b].decode() for a, b in zip(encoded.starts[:-1], encoded.starts[1:])]
     assert spelled == ids
-    assert digests(ids, ["l"], [(2, 0)]) == [blake2b_64("😀", "l")]
+    got = pair_digests(encoded, np.array([2, 0]), encode_ids(["l"]), np.array([0, 0]))
+    assert got.tolist() == [blake2b_64("😀", "l"), blake2b_64("chair_1", "l")]
