@@ -77,7 +77,7 @@ from numba import njit
 from pydantic import BaseModel, ConfigDict, Field
 
 from semloc.digests import EncodedIds, encode_ids, pair_digests
-from semloc.pointsets import axes_by_spread
+from semloc.pointsets import SweepOrder
 
 _BRUTE_FORCE_PAIRS = 20_000  # below this many pairs a range query is a dense distance block
 
@@ -189,7 +189,9 @@ class HierarchicalClustering:
 
     `global_positions` and `global_ids` describe the global map; `update()` receives the
     positions of all local objects so far and the candidate global indices of the local
-    objects that are new or re-detected at this update.
+    objects that are new or re-detected at this update.  `encoded_ids` and `sweep_order`
+    (the map's `ObjectMap.encoded_ids` and `ObjectMap.sweep_order`, computed once per map)
+    spare a clustering per localization from deriving them again.
     """
 
     def __init__(
@@ -199,6 +201,7 @@ class HierarchicalClustering:
         config: ClusteringConfig | None = None,
         *,
         encoded_ids: EncodedIds | None = None,
+        sweep_order: SweepOrder | None = None,
     ) -> None:
         self.config = config or ClusteringConfig()
         self.criterion = MergeCriterion.of(self.config)
@@ -232,7 +235,7 @@ class HierarchicalClustering:
         self._live_local = np.zeros((0, 3))
         self._live_key = np.zeros(0, dtype=np.uint64)  # and its two keys
         self._live_key2 = np.zeros(0, dtype=np.uint64)
-        self._sweep: tuple[int, int, np.ndarray, int] | None = None  # see _sweep_order
+        self._sweep = sweep_order  # of the global positions, found when first needed
         self._merge_room = 4096  # unions one merge pass has room for (see _with_room)
         self._edge_room = 16384  # compatible pairs one search has room for
         # sets: member candidates (ascending, -1 padded), score, age, keys
@@ -453,14 +456,10 @@ class HierarchicalClustering:
         (edges,), self._edge_room = _with_room(kernel, arguments, self._edge_room)
         return edges
 
-    def _sweep_order(self) -> tuple[int, int, np.ndarray, int]:
-        """The map's longest and second longest axes and each global object's dense rank
-        along the longest (equal coordinates, equal rank), computed once per clustering."""
+    def _sweep_order(self) -> SweepOrder:
+        """The sweep order of the global positions (given, or found once per clustering)."""
         if self._sweep is None:
-            axis, cross_axis, _ = axes_by_spread(self._global_positions).tolist()
-            _, rank = np.unique(self._global_positions[:, axis], return_inverse=True)
-            rank = rank.ravel().astype(np.int64)
-            self._sweep = (axis, cross_axis, rank, int(rank.max(initial=-1)) + 1)
+            self._sweep = SweepOrder.of(self._global_positions)
         return self._sweep
 
     def _distances_to(self, positions: np.ndarray) -> np.ndarray:

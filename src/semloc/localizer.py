@@ -155,11 +155,14 @@ class Localizer:
             list(global_map.ids),
             config.clustering,
             encoded_ids=global_map.encoded_ids,
+            sweep_order=global_map.sweep_order,
         )
         self._local: dict[str, SemanticObject] = {}
         self._local_index: dict[str, int] = {}
         self._candidates_of: dict[int, np.ndarray] = {}  # local index -> global indices
-        self._support = MapSupport([], global_map.positions, config.verification)
+        self._support = MapSupport(
+            [], global_map.positions, config.verification, axis=global_map.sweep_order.axis
+        )
         self._steps: list[Step] = []
         self._timing = {"association": 0.0, "clustering": 0.0, "pose": 0.0, "total": 0.0}
 

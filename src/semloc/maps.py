@@ -2,7 +2,8 @@
 
 An `ObjectMap` is an immutable sequence of objects plus frame metadata (`up`, `name`) and the
 unknown top-level keys of the file it came from.  Column views (`ids`, `labels`, `positions`,
-`sizes`, `rotations`, `seen`) are numpy arrays computed once.  Construction validates every
+`sizes`, `rotations`, `seen`) are numpy arrays computed once, and so is the order of sweeps over
+the positions (`sweep_order`).  Construction validates every
 object and raises `MapError` naming the object and the problem, so API users get the same
 guarantees as file readers.  This module does no I/O.
 
@@ -23,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from semloc.digests import EncodedIds, encode_ids
+from semloc.pointsets import SweepOrder
 
 
 class MapError(ValueError):
@@ -350,6 +352,11 @@ class ObjectMap(Sequence[SemanticObject]):
         if not self._objects:
             return np.zeros((0, 3))
         return np.stack([o.position for o in self._objects])
+
+    @cached_property
+    def sweep_order(self) -> SweepOrder:
+        """The order of sweeps over the positions (see `semloc.pointsets.SweepOrder`)."""
+        return SweepOrder.of(self.positions)
 
     @cached_property
     def sizes(self) -> np.ndarray:

@@ -1,11 +1,13 @@
-"""Point-set utilities shared by every stage: voxel keys, voxel-centroid downsampling and the
-axes along which a set of positions spreads most.
+"""Point-set utilities shared by every stage: voxel keys, voxel-centroid downsampling, the
+axes along which a set of positions spreads most and the order sweeps over them follow.
 
 Pure numpy; used by the front-end (fusion), the simulator, the dataset importers and pose
 recovery, so that "downsample with voxel v" means the same everywhere.
 """
 
 from __future__ import annotations
+
+from typing import NamedTuple
 
 import numpy as np
 
@@ -47,3 +49,22 @@ def axes_by_spread(points: np.ndarray) -> np.ndarray:
     points = np.asarray(points, float).reshape(-1, 3)
     spread = np.ptp(points, axis=0) if len(points) else np.zeros(3)
     return np.argsort(-spread, kind="stable")
+
+
+class SweepOrder(NamedTuple):
+    """How sweeps over a set of positions run: along their longest axis (`axis`), screening
+    across the second longest (`cross_axis`); `rank` is each position's dense rank along
+    `axis` (equal coordinates, equal rank) and `n_ranks` the number of distinct ranks."""
+
+    axis: int
+    cross_axis: int
+    rank: np.ndarray
+    n_ranks: int
+
+    @classmethod
+    def of(cls, positions: np.ndarray) -> SweepOrder:
+        positions = np.asarray(positions, float).reshape(-1, 3)
+        axis, cross_axis, _ = axes_by_spread(positions).tolist()
+        _, rank = np.unique(positions[:, axis], return_inverse=True)
+        rank = rank.ravel().astype(np.int64)
+        return cls(axis, cross_axis, rank, int(rank.max(initial=-1)) + 1)

@@ -310,15 +310,21 @@ class MapSupport:
     of a free candidate (nearest first, one-to-one: guided matching) and counts the conflicts:
     local objects left with no candidate within `conflict_radius`.
 
-    Each local object's candidates are kept sorted along the map's longest axis, so that the
+    Each local object's candidates are kept sorted along the map's longest axis (`axis`: given,
+    e.g. the map's `sweep_order.axis`, or found from `global_xyz`), so that the
     ones near where it lands are a range; `assign(j, candidates)` sets them when an object is
     new or re-detected (a Localizer keeps one MapSupport across its updates)."""
 
     def __init__(
-        self, candidates: list[np.ndarray], global_xyz: np.ndarray, config: VerificationConfig
+        self,
+        candidates: list[np.ndarray],
+        global_xyz: np.ndarray,
+        config: VerificationConfig,
+        *,
+        axis: int | None = None,
     ) -> None:
         self._global_xyz = np.ascontiguousarray(np.asarray(global_xyz, float).reshape(-1, 3))
-        self._axis = int(axes_by_spread(self._global_xyz)[0])
+        self._axis = int(axes_by_spread(self._global_xyz)[0]) if axis is None else int(axis)
         self._sorted: list[tuple[np.ndarray, np.ndarray]] = []  # per object: globals, columns
         self._packed: tuple[np.ndarray, ...] | None = None
         self.config = config

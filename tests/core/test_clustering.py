@@ -14,6 +14,7 @@ from semloc.clustering import (
     _kth_largest,
     merge_metric,
 )
+from semloc.maps import ObjectMap, SemanticObject
 
 PAPER = ClusteringConfig(distance_tolerance=0.0)  # the paper's pure ratio
 
@@ -361,6 +362,35 @@ def test_long_strip_map_equals_literal_rules(monkeypatch):
     config = ClusteringConfig(sets_per_object=2, protect_top=3)
     fast, got = _replay_against_literal(g, labels, chosen, local, config)
     assert max(len(p) for p in got) >= 3 and fast.n_sets == 2 * len(g)
+
+
+def test_a_maps_sweep_order_serves_the_clustering(monkeypatch):
+    """Given the map's sweep order (as a Localizer gives it, computed once per map), the
+    clustering sweeps in it and finds the same sets as one that derives the order itself."""
+    import semloc.clustering as module
+
+    monkeypatch.setattr(module, "_BRUTE_FORCE_PAIRS", 0)  # always the sweep
+    rng = np.random.default_rng(5)
+    g = np.column_stack([rng.uniform(0, 4, 36), rng.uniform(0, 60, 36), rng.uniform(0, 2, 36)])
+    labels = rng.integers(0, 2, len(g))
+    chosen = np.argsort(np.linalg.norm(g - g[3], axis=1))[:5]
+    local = g[chosen] + rng.normal(0, 0.1, (5, 3))
+    ids = [f"g{i}" for i in range(len(g))]
+    world = ObjectMap([SemanticObject(i, str(c), p) for i, c, p in zip(ids, labels, g)])
+    config = ClusteringConfig(sets_per_object=2, protect_top=3)
+    given_order = HierarchicalClustering(g, ids, config, sweep_order=world.sweep_order)
+    own_order = HierarchicalClustering(g, ids, config)
+    for step, c in enumerate(chosen):
+        local_ids = [f"l{i}" for i in range(step + 1)]
+        detections = {step: np.flatnonzero(labels == labels[c])}
+        given_order.update(local[: step + 1], local_ids, detections)
+        own_order.update(local[: step + 1], local_ids, detections)
+        assert pair_sets(given_order) == pair_sets(own_order)
+    assert given_order._sweep_order() is world.sweep_order
+    own, given = own_order._sweep_order(), world.sweep_order
+    assert (own.axis, own.cross_axis, own.n_ranks) == (given.axis, given.cross_axis, given.n_ranks)
+    assert np.array_equal(own.rank, given.rank)
+    assert max(len(p) for p in pair_sets(given_order)) >= 3
 
 
 @pytest.mark.parametrize("sweep", [False, True])

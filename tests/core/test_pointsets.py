@@ -1,5 +1,5 @@
 """The axes along which positions spread most (the sweeps of the clustering and of guided
-matching sort along the first)."""
+matching sort along the first) and the sweep order built on them."""
 
 from __future__ import annotations
 
@@ -8,7 +8,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from semloc.pointsets import axes_by_spread
+from semloc.maps import ObjectMap, SemanticObject
+from semloc.pointsets import SweepOrder, axes_by_spread
 
 
 def test_largest_extent_first_and_ties_keep_axis_order():
@@ -24,3 +25,27 @@ def test_extents_never_increase_along_the_order(points):
     extent = np.ptp(points, axis=0)[order]
     assert sorted(order.tolist()) == [0, 1, 2]
     assert np.all(np.diff(extent) <= 0)
+
+
+@settings(max_examples=100, deadline=None)
+@given(arrays(float, st.tuples(st.integers(0, 20), st.just(3)), elements=st.integers(-5, 5)))
+def test_sweep_ranks_are_dense_and_follow_the_longest_axis(points):
+    """Whole-number coordinates make ties along the axis common: equal coordinates share a
+    rank, a larger coordinate has a larger one, and the ranks are 0..n_ranks-1."""
+    order = SweepOrder.of(points)
+    assert [order.axis, order.cross_axis] == axes_by_spread(points).tolist()[:2]
+    along = points[:, order.axis]
+    assert order.rank.dtype == np.int64 and len(order.rank) == len(points)
+    assert order.n_ranks == len(np.unique(along))
+    assert sorted(set(order.rank.tolist())) == list(range(order.n_ranks))
+    less = along[:, None] < along[None, :]
+    assert np.array_equal(order.rank[:, None] < order.rank[None, :], less)
+
+
+def test_a_map_finds_its_sweep_order_once():
+    objects = [SemanticObject(f"o{i}", "chair", [0.0, 2.0 * (i % 3), 0.1 * i]) for i in range(6)]
+    world = ObjectMap(objects)
+    order = world.sweep_order
+    assert order is world.sweep_order  # cached with the map's other column views
+    assert (order.axis, order.cross_axis) == (1, 2)
+    assert order.rank.tolist() == [0, 1, 2, 0, 1, 2] and order.n_ranks == 3

@@ -460,8 +460,15 @@ def _literal_extend(pose, local_xyz, pairs, candidates, global_xyz, config):
 
 
 @settings(max_examples=60, deadline=None)
-@given(seed=st.integers(0, 10_000), n_local=st.integers(1, 7), n_global=st.integers(1, 60))
-def test_guided_matching_is_the_literal_greedy_one(seed, n_local, n_global):
+@given(
+    seed=st.integers(0, 10_000),
+    n_local=st.integers(1, 7),
+    n_global=st.integers(1, 60),
+    axis=st.sampled_from([None, 0, 1, 2]),
+)
+def test_guided_matching_is_the_literal_greedy_one(seed, n_local, n_global, axis):
+    """Whichever axis the candidates are sorted along (the map's longest, found or given:
+    it only narrows the search), the answer is the literal greedy one."""
     rng = np.random.default_rng(seed)
     global_xyz = rng.uniform(0, 3, (n_global, 3))
     global_xyz[: n_global // 4] = global_xyz[0]  # duplicated positions: ties
@@ -471,7 +478,7 @@ def test_guided_matching_is_the_literal_greedy_one(seed, n_local, n_global):
         for _ in range(n_local)
     ]
     config = VerificationConfig(inlier_tolerance=0.6, conflict_radius=0.8)
-    support = MapSupport(candidates, global_xyz, config)
+    support = MapSupport(candidates, global_xyz, config, axis=axis)
     poses = np.stack([yaw_pose(rng.uniform(-0.3, 0.3), rng.normal(0, 0.2, 3)) for _ in range(4)])
     sets = []
     for _ in range(4):
