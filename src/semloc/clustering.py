@@ -169,19 +169,24 @@ class AssociationSet:
         return len(self.pairs)
 
 
-def _mix(x: np.ndarray) -> np.ndarray:
+@njit(cache=True, inline="always")
+def _mix(x: np.uint64) -> np.uint64:
     """A bijective 64-bit mixer (splitmix64's finaliser)."""
-    x = np.asarray(x, dtype=np.uint64)
     x = (x ^ (x >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
     x = (x ^ (x >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
     return x ^ (x >> np.uint64(31))
 
 
+@njit(cache=True)
 def _candidate_keys(candidates: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Two independent 64-bit keys per candidate index (set keys are their wrapping sums)."""
-    base = np.asarray(candidates, dtype=np.uint64) * np.uint64(2)
-    with np.errstate(over="ignore"):
-        return _mix(base + np.uint64(1)), _mix(base + np.uint64(2))
+    key = np.empty(len(candidates), dtype=np.uint64)
+    key2 = np.empty(len(candidates), dtype=np.uint64)
+    for i in range(len(candidates)):
+        base = np.uint64(candidates[i]) * np.uint64(2)
+        key[i] = _mix(base + np.uint64(1))
+        key2[i] = _mix(base + np.uint64(2))
+    return key, key2
 
 
 class HierarchicalClustering:
@@ -433,7 +438,7 @@ class HierarchicalClustering:
 
     def _as_live(self, members: np.ndarray) -> np.ndarray:
         """Members (candidates, -1 padded) as rows of the compatibility graph."""
-        return np.where(members >= 0, self._live_index[np.maximum(members, 0)], -1)
+        return _renumbered(members, self._live_index)
 
     def _compatible_pairs(self, added: np.ndarray, covered: np.ndarray) -> np.ndarray:
         """All compatible (a, b) with a in `added` and b in `added` ∪ `covered` (2 x E).
@@ -617,12 +622,10 @@ class HierarchicalClustering:
 
     def _append(self, members, scores, key, key2) -> np.ndarray:
         start = len(self._score)
-        width = max(self._members.shape[1], members.shape[1])
-        self._members = np.vstack([_pad(self._members, width), _pad(members, width)])
+        self._members = _stacked(self._members, members)
         if self._live_members is not None:
-            live = self._as_live(members)
-            self._live_members = np.vstack([_pad(self._live_members, width), _pad(live, width)])
-        self._size = np.concatenate([self._size, (members >= 0).sum(axis=1)])
+            self._live_members = _stacked(self._live_members, self._as_live(members))
+        self._size = np.concatenate([self._size, _row_sizes(members)])
         self._score = np.concatenate([self._score, scores])
         self._last_merge = np.concatenate(
             [self._last_merge, np.full(len(scores), self.step, dtype=np.int64)]
@@ -735,11 +738,33 @@ def _kth_largest(scores: np.ndarray, k: int) -> float:
     return float(np.partition(scores, len(scores) - k)[len(scores) - k])
 
 
-def _pad(members: np.ndarray, width: int) -> np.ndarray:
-    if members.shape[1] == width:
-        return members
-    out = np.full((len(members), width), -1, dtype=np.int64)
-    out[:, : members.shape[1]] = members
+@njit(cache=True)
+def _stacked(top: np.ndarray, bottom: np.ndarray) -> np.ndarray:
+    """The rows of `top` then those of `bottom`, -1 padded to the wider of the two."""
+    out = np.full((len(top) + len(bottom), max(top.shape[1], bottom.shape[1])), -1, np.int64)
+    out[: len(top), : top.shape[1]] = top
+    out[len(top) :, : bottom.shape[1]] = bottom
+    return out
+
+
+@njit(cache=True)
+def _renumbered(members: np.ndarray, index: np.ndarray) -> np.ndarray:
+    """`index[m]` for each member m (-1 padding stays -1)."""
+    out = np.empty(members.shape, dtype=np.int64)
+    for r in range(members.shape[0]):
+        for k in range(members.shape[1]):
+            m = members[r, k]
+            out[r, k] = index[m] if m >= 0 else -1
+    return out
+
+
+@njit(cache=True)
+def _row_sizes(members: np.ndarray) -> np.ndarray:
+    """The number of members (entries >= 0) of each row."""
+    out = np.zeros(members.shape[0], dtype=np.int64)
+    for r in range(members.shape[0]):
+        for k in range(members.shape[1]):
+            out[r] += members[r, k] >= 0
     return out
 
 

@@ -11,7 +11,11 @@ from literal_clustering import LiteralClustering, pair_hash
 from semloc.clustering import (
     ClusteringConfig,
     HierarchicalClustering,
+    _candidate_keys,
     _kth_largest,
+    _renumbered,
+    _row_sizes,
+    _stacked,
     merge_metric,
 )
 from semloc.maps import ObjectMap, SemanticObject
@@ -445,3 +449,43 @@ def test_singletons_tied_at_the_cut_are_kept_by_their_pair_digests():
         hc = clustering(g, config)
         feed(hc, [[0.0, 0.0, 0.0]], {0: order})
         assert [s.pairs for s in hc.sets()] == [((i, 0),) for i in expected]
+
+
+def _splitmix64_finaliser(x: int) -> int:
+    mask = (1 << 64) - 1
+    x = ((x ^ (x >> 30)) * 0xBF58476D1CE4E5B9) & mask
+    x = ((x ^ (x >> 27)) * 0x94D049BB133111EB) & mask
+    return x ^ (x >> 31)
+
+
+@settings(max_examples=50, deadline=None)
+@given(st.lists(st.integers(0, 2**62 - 1), max_size=20))
+def test_candidate_keys_are_splitmix64_of_two_odd_and_even_counters(indices):
+    key, key2 = _candidate_keys(np.array(indices, dtype=np.int64))
+    assert key.dtype == key2.dtype == np.uint64
+    assert key.tolist() == [_splitmix64_finaliser(2 * i + 1) for i in indices]
+    assert key2.tolist() == [_splitmix64_finaliser(2 * i + 2) for i in indices]
+
+
+@settings(max_examples=50, deadline=None)
+@given(
+    st.lists(st.lists(st.integers(-1, 9), min_size=1, max_size=4), max_size=6),
+    st.lists(st.lists(st.integers(-1, 9), min_size=1, max_size=4), max_size=6),
+)
+def test_pool_rows_stack_renumber_and_count_like_numpy(top_rows, bottom_rows):
+    """The pool's append: rows padded with -1 to the wider width, stacked; members renumbered
+    through an index (padding stays -1); sizes count the members."""
+
+    def matrix(rows):
+        width = max((len(r) for r in rows), default=1)
+        return np.array([r + [-1] * (width - len(r)) for r in rows] or np.zeros((0, 1)), np.int64)
+
+    top, bottom = matrix(top_rows), matrix(bottom_rows)
+    width = max(top.shape[1], bottom.shape[1])
+    padded = [
+        np.pad(m, ((0, 0), (0, width - m.shape[1])), constant_values=-1) for m in (top, bottom)
+    ]
+    assert np.array_equal(_stacked(top, bottom), np.vstack(padded))
+    index = np.arange(10, dtype=np.int64)[::-1] * 3
+    assert np.array_equal(_renumbered(bottom, index), np.where(bottom >= 0, index[bottom], -1))
+    assert _row_sizes(bottom).tolist() == (bottom >= 0).sum(axis=1).tolist()
