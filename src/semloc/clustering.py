@@ -1106,7 +1106,9 @@ def _compatible_sweep(
     the map's longest axis `axis` (by `rank`, the global objects' dense rank along it); a
     candidate of `la` is tested only against those of `lb` within `reach[la, lb]` along it and
     along the second longest axis `cross_axis` (necessary conditions of the gate; the second
-    is read from a copy in sweep order, so most misses cost no distance).  Returns as
+    is read from a copy in sweep order, so most misses cost no distance).  Where each window
+    starts is found for all candidates of `la` at once, walking them in sweep order along
+    those of `lb` (a merge, not a binary search per candidate).  Returns as
     `_compatible_among` does."""
     n_local = len(local_distance)
     everyone = np.concatenate((covered, added))
@@ -1135,6 +1137,7 @@ def _compatible_sweep(
     added_at = np.full(len(cand_g), -1, dtype=np.int64)
     for i in range(len(added)):
         added_at[added[i]] = i
+    window = _window_starts(added, cand_g, cand_l, global_xyz, reach, axis, order, starts, sorted_x)
     out = np.empty((2, capacity), dtype=np.int64)
     n = 0
     for i in range(len(added)):
@@ -1144,8 +1147,7 @@ def _compatible_sweep(
             if lb == la or starts[lb] == starts[lb + 1]:
                 continue
             r = reach[la, lb]
-            lo, hi = starts[lb], starts[lb + 1]
-            p = lo + np.searchsorted(sorted_x[lo:hi], global_xyz[gx, axis] - r)
+            p, hi = window[i, lb], starts[lb + 1]
             while p < hi and sorted_x[p] <= global_xyz[gx, axis] + r:
                 p += 1
                 if abs(sorted_cross[p - 1] - global_xyz[gx, cross_axis]) > r:
@@ -1165,6 +1167,41 @@ def _compatible_sweep(
                 out[1, n] = y
                 n += 1
     return out[:, :n], False
+
+
+@njit(cache=True)
+def _window_starts(added, cand_g, cand_l, global_xyz, reach, axis, order, starts, sorted_x):
+    """For each added candidate i (of local object la) and local object lb: the first row p of
+    lb's candidates in sweep order (rows starts[lb]..starts[lb + 1] of `sorted_x`) with
+    sorted_x[p] >= its coordinate along `axis` less reach[la, lb], i.e. the binary search's
+    answer.  `order` is the sweep order of covered + added (added last), so each local
+    object's added candidates are walked in ascending coordinate, and the row only advances."""
+    n_local = len(starts) - 1
+    n_covered = len(order) - len(added)
+    count = np.zeros(n_local + 1, dtype=np.int64)
+    for i in range(len(added)):
+        count[cand_l[added[i]] + 1] += 1
+    first = np.cumsum(count)
+    fill = first[:-1].copy()
+    in_order = np.empty(len(added), dtype=np.int64)  # per local object, in sweep order
+    for k in order:
+        if k >= n_covered:
+            la = cand_l[added[k - n_covered]]
+            in_order[fill[la]] = k - n_covered
+            fill[la] += 1
+    window = np.empty((len(added), n_local), dtype=np.int64)
+    for la in range(n_local):
+        for lb in range(n_local):
+            if lb == la:
+                continue
+            p, hi = starts[lb], starts[lb + 1]
+            for q in range(first[la], first[la + 1]):
+                i = in_order[q]
+                at = global_xyz[cand_g[added[i]], axis] - reach[la, lb]
+                while p < hi and sorted_x[p] < at:
+                    p += 1
+                window[i, lb] = p
+    return window
 
 
 @njit(cache=True)

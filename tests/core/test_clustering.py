@@ -16,6 +16,7 @@ from semloc.clustering import (
     _renumbered,
     _row_sizes,
     _stacked,
+    _window_starts,
     merge_metric,
 )
 from semloc.maps import ObjectMap, SemanticObject
@@ -489,3 +490,41 @@ def test_pool_rows_stack_renumber_and_count_like_numpy(top_rows, bottom_rows):
     index = np.arange(10, dtype=np.int64)[::-1] * 3
     assert np.array_equal(_renumbered(bottom, index), np.where(bottom >= 0, index[bottom], -1))
     assert _row_sizes(bottom).tolist() == (bottom >= 0).sum(axis=1).tolist()
+
+
+@settings(max_examples=80, deadline=None)
+@given(
+    seed=st.integers(0, 10_000),
+    n_global=st.integers(1, 12),
+    n_local=st.integers(1, 4),
+    n_covered=st.integers(0, 10),
+    n_added=st.integers(1, 10),
+)
+def test_sweep_windows_start_where_a_binary_search_would(
+    seed, n_global, n_local, n_covered, n_added
+):
+    """The compatibility sweep finds where each added candidate's window starts among another
+    local object's candidates by one merge walk; whole-number coordinates and reaches put many
+    window edges exactly on a candidate (ties, and the boundary that the search includes)."""
+    rng = np.random.default_rng(seed)
+    global_xyz = rng.integers(0, 5, (n_global, 3)).astype(float)
+    n = n_covered + n_added
+    cand_g = rng.integers(0, n_global, n)
+    cand_l = rng.integers(0, n_local, n)
+    covered, added = np.arange(n_covered), np.arange(n_covered, n)
+    reach = rng.integers(0, 3, (n_local, n_local)).astype(float)
+    axis = int(rng.integers(3))
+    everyone = np.concatenate([covered, added])
+    order = np.argsort(global_xyz[cand_g[everyone], axis], kind="stable")
+    by_local = everyone[order][np.argsort(cand_l[everyone[order]], kind="stable")]
+    starts = np.concatenate([[0], np.cumsum(np.bincount(cand_l, minlength=n_local))])
+    sorted_x = global_xyz[cand_g[by_local], axis]
+    window = _window_starts(added, cand_g, cand_l, global_xyz, reach, axis, order, starts, sorted_x)
+    for i, x in enumerate(added):
+        la = cand_l[x]
+        for lb in range(n_local):
+            if lb == la:
+                continue
+            lo, hi = starts[lb], starts[lb + 1]
+            at = global_xyz[cand_g[x], axis] - reach[la, lb]
+            assert window[i, lb] == lo + np.searchsorted(sorted_x[lo:hi], at)
