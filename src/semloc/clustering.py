@@ -330,12 +330,12 @@ class HierarchicalClustering:
         self._local_distances = self._distances_to(positions)
         self._local_positions = positions
         self._local_ids = list(local_ids)
-        stale = self._register_candidates(detections)
+        stale, detected = self._register_candidates(detections)
         self._forget_edges(moved, stale)
         fresh_rows = self._revalidate(stale, moved)
-        fresh_rows += self._add_singletons(detections)
+        fresh_rows = np.concatenate([fresh_rows, self._add_singletons(detected)])
         self._cover_live()
-        self._cluster(np.unique(np.array(fresh_rows, dtype=np.int64)))
+        self._cluster(np.unique(fresh_rows))
         self._expire()
 
     def _moved_locals(self, positions: np.ndarray, detections: dict[int, np.ndarray]) -> set[int]:
@@ -347,9 +347,12 @@ class HierarchicalClustering:
             and np.linalg.norm(positions[local] - self._local_positions[local]) > 1e-6
         }
 
-    def _register_candidates(self, detections: dict[int, np.ndarray]) -> np.ndarray:
-        """Add new candidate pairs; return candidates that a re-detection no longer allows."""
-        stale, revived, new_g, new_l = [], [], [], []
+    def _register_candidates(
+        self, detections: dict[int, np.ndarray]
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Add new candidate pairs; return the candidates that a re-detection no longer allows
+        and those of the detected objects (ascending)."""
+        stale, revived, new_g, new_l, detected = [], [], [], [], []
         start = len(self._cand_g)
         for local, globals_ in detections.items():
             allowed = np.unique(np.asarray(globals_, dtype=np.int64))
@@ -358,6 +361,7 @@ class HierarchicalClustering:
             if local not in self._by_local:  # a new object: all its candidates are new
                 new_g.append(allowed)
                 self._by_local[local] = (allowed, ids_from + np.arange(len(allowed)))
+                detected.append(self._by_local[local][1])
                 continue
             known_g, known_c = self._by_local[local]
             kept = np.isin(known_g, allowed)
@@ -370,6 +374,7 @@ class HierarchicalClustering:
             globals_all = np.concatenate([known_g, fresh])
             order = np.argsort(globals_all, kind="stable")
             self._by_local[local] = (globals_all[order], np.concatenate([known_c, ids])[order])
+            detected.append(self._by_local[local][1][np.searchsorted(globals_all[order], allowed)])
         count = sum(len(x) for x in new_g)
         if count:
             key, key2 = _candidate_keys(np.arange(start, start + count))
@@ -383,7 +388,7 @@ class HierarchicalClustering:
         stale_c = np.concatenate([np.zeros(0, np.int64), *stale]).astype(np.int64)
         self._cand_alive[np.concatenate([np.zeros(0, np.int64), *revived])] = True
         self._cand_alive[stale_c] = False
-        return stale_c
+        return stale_c, np.sort(np.concatenate([np.zeros(0, np.int64), *detected]))
 
     def _pair_hashes(self, candidates: np.ndarray) -> np.ndarray:
         """The order-independent pair hash of each candidate (computed once, when needed)."""
@@ -416,8 +421,7 @@ class HierarchicalClustering:
 
         Edges are kept once per pair; the graph has both directions (rows by counting sort).
         """
-        is_live = np.zeros(len(self._cand_g), dtype=bool)
-        is_live[self._members[self._members >= 0]] = True
+        is_live = _held(self._members, len(self._cand_g))
         live = np.flatnonzero(is_live)
         is_covered = np.zeros(len(self._cand_g), dtype=bool)
         is_covered[self._covered] = True
@@ -432,8 +436,8 @@ class HierarchicalClustering:
         self._graph_indptr, self._graph_indices = _symmetric_csr(self._edges, index, len(live))
         self._covered, self._live, self._live_index = live, live, index
         self._live_members = self._as_live(self._members)
-        self._live_global = self._global_positions[self._cand_g[live]]
-        self._live_local = self._local_positions[self._cand_l[live]]
+        self._live_global = _rows_of(self._global_positions, self._cand_g, live)
+        self._live_local = _rows_of(self._local_positions, self._cand_l, live)
         self._live_key, self._live_key2 = self._cand_key[live], self._cand_key2[live]
 
     def _as_live(self, members: np.ndarray) -> np.ndarray:
@@ -493,10 +497,11 @@ class HierarchicalClustering:
         pair = valid[:, :, None] & valid[:, None, :] & ~np.eye(members.shape[1], dtype=bool)
         return np.all(compatible | ~pair, axis=(1, 2))
 
-    def _revalidate(self, stale: np.ndarray, moved: set[int]) -> list[int]:
-        """Drop sets with stale candidates or broken cliques; sets with moved objects are fresh."""
+    def _revalidate(self, stale: np.ndarray, moved: set[int]) -> np.ndarray:
+        """Drop sets with stale candidates or broken cliques; return the rows of the sets with
+        moved objects (fresh: they take part in the next round as new ones)."""
         if not len(self._score) or not (len(stale) or moved):
-            return []
+            return np.zeros(0, dtype=np.int64)
         members = self._members
         valid = members >= 0
         keep = ~(np.isin(members, stale) & valid).any(axis=1)
@@ -507,18 +512,12 @@ class HierarchicalClustering:
         if len(check):
             keep[check] = self._gate_of_sets(members[check])
         self._keep_rows(keep)
-        return list(np.flatnonzero(touched[keep]))
+        return np.flatnonzero(touched[keep])
 
-    def _add_singletons(self, detections: dict[int, np.ndarray]) -> list[int]:
-        """Add (or refresh) the singleton of every candidate of the detected objects."""
-        parts = []
-        for local, globals_ in detections.items():
-            known_g, known_c = self._by_local[local]
-            allowed = np.unique(np.asarray(globals_, dtype=np.int64))
-            parts.append(known_c[np.searchsorted(known_g, allowed)])
-        candidates = np.sort(np.concatenate([np.zeros(0, np.int64), *parts]))
+    def _add_singletons(self, candidates: np.ndarray) -> np.ndarray:
+        """Add (or refresh) the singleton of each given candidate; return their rows."""
         if not len(candidates):
-            return []
+            return np.zeros(0, dtype=np.int64)
         members = candidates[:, None]
         rows = self._lookup(self._cand_key[candidates], self._cand_key2[candidates], members)
         missing = np.flatnonzero(rows < 0)
@@ -530,7 +529,7 @@ class HierarchicalClustering:
                 self._cand_key2[candidates[missing]],
             )
         self._last_merge[rows] = self.step
-        return list(rows)
+        return rows
 
     # ------------------------------------------------------------------------------------
     # Clustering round
@@ -736,6 +735,28 @@ def _kth_largest(scores: np.ndarray, k: int) -> float:
     if count <= k and not (scores < 0).any():
         return float(scores[positive].min()) if count == k else 0.0
     return float(np.partition(scores, len(scores) - k)[len(scores) - k])
+
+
+@njit(cache=True)
+def _held(members: np.ndarray, n: int) -> np.ndarray:
+    """Which of n candidates are members of some set (rows -1 padded)."""
+    out = np.zeros(n, dtype=np.bool_)
+    for r in range(members.shape[0]):
+        for k in range(members.shape[1]):
+            if members[r, k] >= 0:
+                out[members[r, k]] = True
+    return out
+
+
+@njit(cache=True)
+def _rows_of(table: np.ndarray, owner: np.ndarray, which: np.ndarray) -> np.ndarray:
+    """table[owner[which]]: the rows (e.g. positions) of the given candidates' objects."""
+    out = np.empty((len(which), table.shape[1]))
+    for i in range(len(which)):
+        row = owner[which[i]]
+        for c in range(table.shape[1]):
+            out[i, c] = table[row, c]
+    return out
 
 
 @njit(cache=True)
