@@ -714,14 +714,15 @@ class HierarchicalClustering:
         self._keep_rows(~old | protected)
 
     def _keep_rows(self, keep: np.ndarray) -> None:
-        self._members = self._members[keep]
+        rows = np.flatnonzero(keep)  # taking rows is several times faster than masking
+        self._members = self._members.take(rows, axis=0)
         if self._live_members is not None:
-            self._live_members = self._live_members[keep]
-        self._size = self._size[keep]
-        self._score = self._score[keep]
-        self._last_merge = self._last_merge[keep]
-        self._key = self._key[keep]
-        self._key2 = self._key2[keep]
+            self._live_members = self._live_members.take(rows, axis=0)
+        self._size = self._size.take(rows)
+        self._score = self._score.take(rows)
+        self._last_merge = self._last_merge.take(rows)
+        self._key = self._key.take(rows)
+        self._key2 = self._key2.take(rows)
 
 
 def _kth_largest(scores: np.ndarray, k: int) -> float:

@@ -12,9 +12,11 @@ from semloc.clustering import (
     ClusteringConfig,
     HierarchicalClustering,
     _candidate_keys,
+    _held,
     _kth_largest,
     _renumbered,
     _row_sizes,
+    _rows_of,
     _stacked,
     _window_starts,
     merge_metric,
@@ -490,6 +492,13 @@ def test_pool_rows_stack_renumber_and_count_like_numpy(top_rows, bottom_rows):
     index = np.arange(10, dtype=np.int64)[::-1] * 3
     assert np.array_equal(_renumbered(bottom, index), np.where(bottom >= 0, index[bottom], -1))
     assert _row_sizes(bottom).tolist() == (bottom >= 0).sum(axis=1).tolist()
+    held = np.zeros(12, dtype=bool)
+    held[bottom[bottom >= 0]] = True
+    assert np.array_equal(_held(bottom, 12), held)
+    table = np.arange(30, dtype=float).reshape(10, 3)
+    owner = np.arange(10) * 7 % 10  # candidate -> object row
+    which = np.flatnonzero(held)
+    assert np.array_equal(_rows_of(table, owner, which), table[owner[which]])
 
 
 @settings(max_examples=80, deadline=None)
