@@ -80,6 +80,7 @@ from semloc.digests import EncodedIds, encode_ids, pair_digests
 from semloc.pointsets import SweepOrder
 
 _BRUTE_FORCE_PAIRS = 20_000  # below this many pairs a range query is a dense distance block
+_WINDOW_ENTRIES = 1 << 22  # the sweep keeps window starts (8 bytes each) up to this many
 
 
 class ClusteringConfig(BaseModel):
@@ -460,7 +461,8 @@ class HierarchicalClustering:
             # the gate 1 - max(0, |d^A - d^B| - ε) / max(d^A, d^B) > γ needs d^A < (d^B + ε) / γ
             reach = np.maximum((distances + cfg.distance_tolerance) / cfg.gamma, cfg.min_distance)
             reach = reach * (1 + 1e-9) + 1e-12  # the exact test decides at the boundary
-            arguments = (*candidates, distances, reach, *gate, *self._sweep_order())
+            order = self._sweep_order()
+            arguments = (*candidates, distances, reach, *gate, *order, _WINDOW_ENTRIES)
             kernel = _compatible_sweep
         (edges,), self._edge_room = _with_room(kernel, arguments, self._edge_room)
         return edges
@@ -1122,6 +1124,7 @@ def _compatible_sweep(
     cross_axis,
     rank,
     n_ranks,
+    window_entries,
     capacity,
 ):
     """`_compatible_among` for many candidates: per local object, its candidates sorted along
@@ -1130,8 +1133,9 @@ def _compatible_sweep(
     along the second longest axis `cross_axis` (necessary conditions of the gate; the second
     is read from a copy in sweep order, so most misses cost no distance).  Where each window
     starts is found for all candidates of `la` at once, walking them in sweep order along
-    those of `lb` (a merge, not a binary search per candidate).  Returns as
-    `_compatible_among` does."""
+    those of `lb` (a merge, not a binary search per candidate), unless that table would have
+    more than `window_entries` entries (many objects added at once: then binary searches).
+    Returns as `_compatible_among` does."""
     n_local = len(local_distance)
     everyone = np.concatenate((covered, added))
     slot = np.zeros(n_ranks + 1, dtype=np.int64)  # counting sort by rank: stable, as mergesort
@@ -1159,7 +1163,12 @@ def _compatible_sweep(
     added_at = np.full(len(cand_g), -1, dtype=np.int64)
     for i in range(len(added)):
         added_at[added[i]] = i
-    window = _window_starts(added, cand_g, cand_l, global_xyz, reach, axis, order, starts, sorted_x)
+    merged = len(added) * n_local <= window_entries
+    window = np.empty((0, 0), dtype=np.int64)
+    if merged:
+        window = _window_starts(
+            added, cand_g, cand_l, global_xyz, reach, axis, order, starts, sorted_x
+        )
     out = np.empty((2, capacity), dtype=np.int64)
     n = 0
     for i in range(len(added)):
@@ -1169,7 +1178,11 @@ def _compatible_sweep(
             if lb == la or starts[lb] == starts[lb + 1]:
                 continue
             r = reach[la, lb]
-            p, hi = window[i, lb], starts[lb + 1]
+            lo, hi = starts[lb], starts[lb + 1]
+            if merged:
+                p = window[i, lb]
+            else:
+                p = lo + np.searchsorted(sorted_x[lo:hi], global_xyz[gx, axis] - r)
             while p < hi and sorted_x[p] <= global_xyz[gx, axis] + r:
                 p += 1
                 if abs(sorted_cross[p - 1] - global_xyz[gx, cross_axis]) > r:

@@ -355,12 +355,16 @@ def test_sweep_over_rows_of_equal_coordinates_equals_literal_rules(monkeypatch):
     assert max(len(p) for p in got) >= 3
 
 
-def test_long_strip_map_equals_literal_rules(monkeypatch):
+@pytest.mark.parametrize("window_table", [True, False])
+def test_long_strip_map_equals_literal_rules(monkeypatch, window_table):
     """A corridor-like map, longest along y: the compatibility sweep runs along that axis and
-    still finds every compatible pair (the literal sets, with the pool bound biting)."""
+    still finds every compatible pair (the literal sets, with the pool bound biting), whether
+    its windows start from the merged table or, for many added candidates, binary searches."""
     import semloc.clustering as module
 
     monkeypatch.setattr(module, "_BRUTE_FORCE_PAIRS", 0)  # always the sweep
+    if not window_table:
+        monkeypatch.setattr(module, "_WINDOW_ENTRIES", 0)
     rng = np.random.default_rng(5)
     g = np.column_stack([rng.uniform(0, 4, 36), rng.uniform(0, 60, 36), rng.uniform(0, 2, 36)])
     labels = rng.integers(0, 2, len(g))
