@@ -355,6 +355,15 @@ def test_sweep_over_rows_of_equal_coordinates_equals_literal_rules(monkeypatch):
     assert max(len(p) for p in got) >= 3
 
 
+def _long_strip():
+    """A corridor-like map of two labels, 60 m along y, and 5 objects seen near one end."""
+    rng = np.random.default_rng(5)
+    g = np.column_stack([rng.uniform(0, 4, 36), rng.uniform(0, 60, 36), rng.uniform(0, 2, 36)])
+    labels = rng.integers(0, 2, len(g))
+    chosen = np.argsort(np.linalg.norm(g - g[3], axis=1))[:5]
+    return g, labels, chosen, g[chosen] + rng.normal(0, 0.1, (5, 3))
+
+
 @pytest.mark.parametrize("window_table", [True, False])
 def test_long_strip_map_equals_literal_rules(monkeypatch, window_table):
     """A corridor-like map, longest along y: the compatibility sweep runs along that axis and
@@ -365,11 +374,7 @@ def test_long_strip_map_equals_literal_rules(monkeypatch, window_table):
     monkeypatch.setattr(module, "_BRUTE_FORCE_PAIRS", 0)  # always the sweep
     if not window_table:
         monkeypatch.setattr(module, "_WINDOW_ENTRIES", 0)
-    rng = np.random.default_rng(5)
-    g = np.column_stack([rng.uniform(0, 4, 36), rng.uniform(0, 60, 36), rng.uniform(0, 2, 36)])
-    labels = rng.integers(0, 2, len(g))
-    chosen = np.argsort(np.linalg.norm(g - g[3], axis=1))[:5]
-    local = g[chosen] + rng.normal(0, 0.1, (5, 3))
+    g, labels, chosen, local = _long_strip()
     config = ClusteringConfig(sets_per_object=2, protect_top=3)
     fast, got = _replay_against_literal(g, labels, chosen, local, config)
     assert max(len(p) for p in got) >= 3 and fast.n_sets == 2 * len(g)
@@ -381,11 +386,7 @@ def test_a_maps_sweep_order_serves_the_clustering(monkeypatch):
     import semloc.clustering as module
 
     monkeypatch.setattr(module, "_BRUTE_FORCE_PAIRS", 0)  # always the sweep
-    rng = np.random.default_rng(5)
-    g = np.column_stack([rng.uniform(0, 4, 36), rng.uniform(0, 60, 36), rng.uniform(0, 2, 36)])
-    labels = rng.integers(0, 2, len(g))
-    chosen = np.argsort(np.linalg.norm(g - g[3], axis=1))[:5]
-    local = g[chosen] + rng.normal(0, 0.1, (5, 3))
+    g, labels, chosen, local = _long_strip()
     ids = [f"g{i}" for i in range(len(g))]
     world = ObjectMap([SemanticObject(i, str(c), p) for i, c, p in zip(ids, labels, g)])
     config = ClusteringConfig(sets_per_object=2, protect_top=3)
