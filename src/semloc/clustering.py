@@ -374,8 +374,9 @@ class HierarchicalClustering:
             new_g.append(fresh)
             globals_all = np.concatenate([known_g, fresh])
             order = np.argsort(globals_all, kind="stable")
-            self._by_local[local] = (globals_all[order], np.concatenate([known_c, ids])[order])
-            detected.append(self._by_local[local][1][np.searchsorted(globals_all[order], allowed)])
+            known_g, known_c = globals_all[order], np.concatenate([known_c, ids])[order]
+            self._by_local[local] = (known_g, known_c)
+            detected.append(known_c[np.searchsorted(known_g, allowed)])
         count = sum(len(x) for x in new_g)
         if count:
             key, key2 = _candidate_keys(np.arange(start, start + count))

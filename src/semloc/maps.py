@@ -3,9 +3,9 @@
 An `ObjectMap` is an immutable sequence of objects plus frame metadata (`up`, `name`) and the
 unknown top-level keys of the file it came from.  Column views (`ids`, `labels`, `positions`,
 `sizes`, `rotations`, `seen`) are numpy arrays computed once, and so is the order of sweeps over
-the positions (`sweep_order`).  Construction validates every
-object and raises `MapError` naming the object and the problem, so API users get the same
-guarantees as file readers.  This module does no I/O.
+the positions (`sweep_order`).  Construction validates every object and raises `MapError`
+naming the object and the problem, so API users get the same guarantees as file readers.  This
+module does no I/O.
 
 Points may be any N x 3 array-like or anything with a `.points` attribute convertible to one
 (an `open3d.geometry.PointCloud`, duck-typed: open3d is not imported here).  The one use of an

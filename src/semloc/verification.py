@@ -311,9 +311,9 @@ class MapSupport:
     local objects left with no candidate within `conflict_radius`.
 
     Each local object's candidates are kept sorted along the map's longest axis (`axis`: given,
-    e.g. the map's `sweep_order.axis`, or found from `global_xyz`), so that the
-    ones near where it lands are a range; `assign(j, candidates)` sets them when an object is
-    new or re-detected (a Localizer keeps one MapSupport across its updates)."""
+    e.g. the map's `sweep_order.axis`, or found from `global_xyz`), so that the ones near where
+    it lands are a range; `assign(j, candidates)` sets them when an object is new or
+    re-detected (a Localizer keeps one MapSupport across its updates)."""
 
     def __init__(
         self,
