@@ -79,7 +79,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from semloc.digests import EncodedIds, encode_ids, pair_digests
 from semloc.pointsets import SweepOrder
 
-_BRUTE_FORCE_PAIRS = 20_000  # below this many pairs a range query is a dense distance block
+_BRUTE_FORCE_PAIRS = 3_000  # up to this many candidate pairs the compatibility test takes them all
 _WINDOW_ENTRIES = 1 << 22  # the sweep keeps window starts (8 bytes each) up to this many
 
 
@@ -455,7 +455,7 @@ class HierarchicalClustering:
         candidates = (added, covered, self._cand_g, self._cand_l, self._global_positions)
         gate = (cfg.distance_tolerance, cfg.gamma, cfg.min_distance)
         distances = self._local_distances
-        if len(added) * (len(added) + len(covered)) <= 10 * _BRUTE_FORCE_PAIRS:
+        if len(added) * (len(added) + len(covered)) <= _BRUTE_FORCE_PAIRS:
             arguments: tuple = (*candidates, distances, *gate)
             kernel = _compatible_among
         else:
