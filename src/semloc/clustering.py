@@ -605,7 +605,8 @@ class HierarchicalClustering:
         """Add distinct merged sets (duplicates keep the larger score); return new rows."""
         rows = self._lookup(key, key2, members)
         known = rows >= 0
-        np.maximum.at(self._score, rows[known], best[known])
+        at = rows[known]  # distinct: the merges come grouped by union
+        self._score[at] = np.maximum(self._score[at], best[known])
         if known.all():
             return np.zeros(0, dtype=np.int64)
         new = ~known
