@@ -47,7 +47,7 @@ from semloc.verification import (
     Evidence,
     MapSupport,
     VerificationConfig,
-    consensus_indexed,
+    consensus_rows,
 )
 
 _COMPONENTS: dict[str, type[BaseModel]] = {
@@ -302,39 +302,65 @@ class Localizer:
 
     def _verified_all(self, sets: list[AssociationSet], local_xyz: np.ndarray) -> list[_Verified]:
         """Each set's pairs split by its consensus pose, grown by guided matching (the grown
-        pairs verified once more together), and that pose's evidence on the map."""
+        pairs verified once more together), and that pose's evidence on the map.
+
+        All sets go through each step at once, as (global index, local index) rows one set
+        after the other; only the result is turned into per-set lists."""
+        if not sets:
+            return []
         up = (self.local_up, self.global_map.up, self.config.verification)
         global_xyz = self.global_map.positions
-        pairs = [np.array(s.pairs).reshape(-1, 2) for s in sets]  # global index, local index
-        found = consensus_indexed(pairs, local_xyz, global_xyz, *up)
-        inliers = [_pair_list(p[f.inliers]) for p, f in zip(pairs, found)]
-        posed = [i for i, f in enumerate(found) if f.pose is not None]
-        poses = np.array([found[i].pose for i in posed]).reshape(-1, 4, 4)
-        extended = dict(
-            zip(posed, self._support.extend_many(poses, local_xyz, [inliers[i] for i in posed]))
+        sizes = np.array([len(s.pairs) for s in sets], dtype=np.int64)
+        pairs = np.array([p for s in sets for p in s.pairs], dtype=np.int64).reshape(-1, 2)
+        first = consensus_rows(pairs, sizes, local_xyz, global_xyz, *up)
+        agree = _rows_of_sets(first.inliers, sizes)
+        kept, kept_sizes = pairs[agree], _per_set(agree, sizes)
+        rejected, rejected_owner = pairs[~agree], _owners(sizes)[~agree]
+        added, added_start, conflicts = self._support.extend_rows(
+            first.poses, local_xyz, kept, kept_sizes
         )
-        verified, regrown = [], []
-        for i, (aset, p, f) in enumerate(zip(sets, pairs, found)):
-            rejected = _pair_list(p[~f.inliers])
-            if f.pose is None:
-                verified.append(_Verified(aset, inliers[i], rejected, None, f.residual, 0, 0))
-                continue
-            grown, added, conflicts = extended[i]
-            verified.append(_Verified(aset, grown, rejected, f.pose, f.residual, added, conflicts))
-            if added:
-                regrown.append((len(verified) - 1, inliers[i]))
-        both = [np.array(verified[i].pairs) for i, _ in regrown]
-        again = consensus_indexed(both, local_xyz, global_xyz, *up)
-        for (i, inliers), b, a in zip(regrown, both, again):
-            if a.pose is None:
-                continue
-            kept = set(inliers)
-            grown = _pair_list(b[a.inliers])
-            verified[i] = _Verified(
-                verified[i].aset, grown,
-                verified[i].rejected + _pair_list(b[~a.inliers]),
-                a.pose, a.residual, sum(p not in kept for p in grown), verified[i].conflicts,
-            )  # fmt: skip
+        # a posed set with local objects outside it grows (its pairs then by local object)
+        grows = first.has_pose & (kept_sizes < len(local_xyz))
+        added_owner = _owners(np.diff(added_start))
+        taken = grows[added_owner]
+        rows = np.concatenate([kept, added[taken]])
+        owner = np.concatenate([_owners(kept_sizes), added_owner[taken]])
+        is_new = np.arange(len(rows)) >= len(kept)
+        order = np.lexsort((np.where(grows[owner], rows[:, 1], np.arange(len(rows))), owner))
+        rows, owner, is_new = rows[order], owner[order], is_new[order]
+        poses, residual = first.poses, first.residual
+        regrown = grows & (np.bincount(owner[is_new], minlength=len(sets)) > 0)
+        if regrown.any():  # the grown pairs verified together
+            again = np.flatnonzero(regrown[owner])
+            again_sizes = np.bincount(owner, minlength=len(sets))[regrown]
+            second = consensus_rows(rows[again], again_sizes, local_xyz, global_xyz, *up)
+            settled = np.zeros(len(sets), dtype=bool)
+            settled[regrown] = second.has_pose
+            disagree = again[~_rows_of_sets(second.inliers, again_sizes)]
+            disagree = disagree[settled[owner[disagree]]]
+            rejected = np.concatenate([rejected, rows[disagree]])
+            rejected_owner = np.concatenate([rejected_owner, owner[disagree]])
+            keep = np.ones(len(rows), dtype=bool)
+            keep[disagree] = False
+            rows, owner, is_new = rows[keep], owner[keep], is_new[keep]
+            poses, residual = poses.copy(), residual.copy()
+            poses[settled] = second.poses[second.has_pose]
+            residual[settled] = second.residual[second.has_pose]
+        rejected = rejected[np.argsort(rejected_owner, kind="stable")]  # a set's first ones first
+        support = np.bincount(owner[is_new], minlength=len(sets)).tolist()
+        conflicts = np.where(grows, conflicts, 0).tolist()
+        rows_list, rejected_list = rows.tolist(), rejected.tolist()
+        ends = np.cumsum(np.bincount(owner, minlength=len(sets))).tolist()
+        rejected_ends = np.cumsum(np.bincount(rejected_owner, minlength=len(sets))).tolist()
+        verified, begin, rejected_begin = [], 0, 0
+        for i, aset in enumerate(sets):
+            pose = poses[i] if first.has_pose[i] else None
+            verified.append(_Verified(
+                aset, list(map(tuple, rows_list[begin : ends[i]])),
+                list(map(tuple, rejected_list[rejected_begin : rejected_ends[i]])),
+                pose, float(residual[i]), support[i], conflicts[i],
+            ))  # fmt: skip
+            begin, rejected_begin = ends[i], rejected_ends[i]
         return verified
 
     def _hypothesis(
@@ -421,9 +447,19 @@ class _Verified:
 _PoseKey = tuple[bool, frozenset[tuple[int, int]]]  # (refined, pairs)
 
 
-def _pair_list(pairs: np.ndarray) -> list[tuple[int, int]]:
-    """Rows of (global index, local index) as a list of int pairs."""
-    return list(map(tuple, pairs.tolist()))
+def _owners(sizes: np.ndarray) -> np.ndarray:
+    """The set of each row, for sets of `sizes` rows one after the other."""
+    return np.repeat(np.arange(len(sizes)), sizes)
+
+
+def _rows_of_sets(padded: np.ndarray, sizes: np.ndarray) -> np.ndarray:
+    """A per-set padded (S, M) array as one value per row of the sets (`sizes` rows each)."""
+    return padded[np.arange(padded.shape[1]) < np.asarray(sizes)[:, None]]
+
+
+def _per_set(flags: np.ndarray, sizes: np.ndarray) -> np.ndarray:
+    """How many rows of each set (`sizes` rows each, one after the other) are flagged."""
+    return np.bincount(_owners(sizes)[flags], minlength=len(sizes))
 
 
 def _warm_start(pairs: frozenset, previous: dict[_PoseKey, PoseEstimate | None]):

@@ -23,6 +23,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from functools import lru_cache
 from itertools import combinations
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -120,15 +121,49 @@ def consensus_indexed(
         return []
     sizes = np.array([len(p) for p in pairs])
     rows = np.concatenate(pairs).reshape(-1, 2)
-    owner = np.repeat(np.arange(len(pairs)), sizes)
-    slot = np.arange(len(rows)) - np.repeat(np.cumsum(sizes) - sizes, sizes)
-    src, dst = np.zeros((2, len(pairs), max(sizes.max(), 1), 3))
-    src[owner, slot] = np.asarray(local_xyz, float)[rows[:, 1]]
-    dst[owner, slot] = np.asarray(global_xyz, float)[rows[:, 0]]
+    found = consensus_rows(rows, sizes, local_xyz, global_xyz, up_local, up_global, config, seed)
+    return found.listed(sizes)
+
+
+class Consensuses(NamedTuple):
+    """The consensus of many sets as arrays, one row per set (pairs padded to the widest)."""
+
+    inliers: np.ndarray  # (S, M) bool, False past a set's size
+    poses: np.ndarray  # (S, 4, 4), where `has_pose`
+    has_pose: np.ndarray  # (S,) bool
+    residual: np.ndarray  # (S,), inf without a pose
+
+    def listed(self, sizes: np.ndarray) -> list[Consensus]:
+        """One `Consensus` per set (`sizes` pairs each)."""
+        return [
+            Consensus(self.inliers[i, :n].copy(), self.poses[i] if self.has_pose[i] else None,
+                      float(self.residual[i]))
+            for i, n in enumerate(sizes.tolist())
+        ]  # fmt: skip
+
+
+def consensus_rows(
+    pairs: np.ndarray,
+    sizes: np.ndarray,
+    local_xyz: np.ndarray,
+    global_xyz: np.ndarray,
+    up_local: np.ndarray | None,
+    up_global: np.ndarray | None,
+    config: VerificationConfig,
+    seed: int = 0,
+) -> Consensuses:
+    """`consensus_indexed` of sets whose (global index, local index) rows come one set after
+    the other in `pairs` (`sizes` rows each), as arrays: no per-set Python objects."""
+    sizes = np.asarray(sizes, dtype=np.int64)
+    owner = np.repeat(np.arange(len(sizes)), sizes)
+    slot = np.arange(len(pairs)) - np.repeat(np.cumsum(sizes) - sizes, sizes)
+    src, dst = np.zeros((2, len(sizes), max(sizes.max(initial=0), 1), 3))
+    src[owner, slot] = np.asarray(local_xyz, float)[pairs[:, 1]]
+    dst[owner, slot] = np.asarray(global_xyz, float)[pairs[:, 0]]
     return _consensus_padded(src, dst, sizes, up_local, up_global, config, seed)
 
 
-def _consensus_padded(src, dst, sizes, up_local, up_global, config, seed) -> list[Consensus]:
+def _consensus_padded(src, dst, sizes, up_local, up_global, config, seed) -> Consensuses:
     """`consensus_many` of padded (P, M, 3) positions whose first `sizes` rows are real."""
     yaw_only = up_local is not None and up_global is not None
     minimal = 2 if yaw_only else 3
@@ -145,10 +180,7 @@ def _consensus_padded(src, dst, sizes, up_local, up_global, config, seed) -> lis
     )  # fmt: skip
     if yaw_only:
         poses = from_z_up(poses, A_l, A_g)
-    return [
-        Consensus(inliers[i, :n].copy(), poses[i] if has_pose[i] else None, float(residual[i]))
-        for i, n in enumerate(sizes.tolist())
-    ]
+    return Consensuses(inliers, poses, has_pose, residual)
 
 
 @njit(cache=True)
@@ -366,16 +398,9 @@ class MapSupport:
         local_xyz = np.asarray(local_xyz, float).reshape(-1, 3)
         if not pairs:
             return []
-        poses = np.asarray(poses, float).reshape(-1, 4, 4)
-        aligned = local_xyz @ np.swapaxes(poses[:, :3, :3], 1, 2) + poses[:, None, :3, 3]
         sizes = np.array([len(p) for p in pairs], dtype=np.int64)
         flat = np.array([pair for set_pairs in pairs for pair in set_pairs], dtype=np.int64)
-        cfg = self.config
-        added, added_start, conflicts = _guided_matches(
-            np.ascontiguousarray(aligned), flat.reshape(-1, 2), np.cumsum(sizes) - sizes, sizes,
-            *self._pack(), self._global_xyz, self._axis, cfg.inlier_tolerance,
-            cfg.conflict_radius,
-        )  # fmt: skip
+        added, added_start, conflicts = self.extend_rows(poses, local_xyz, flat, sizes)
         found, bounds = added.tolist(), added_start.tolist()
         out = []
         for s, set_pairs in enumerate(pairs):
@@ -386,6 +411,25 @@ class MapSupport:
             grown = sorted([*set_pairs, *new], key=lambda p: p[1])
             out.append((grown, len(new), int(conflicts[s])))
         return out
+
+    def extend_rows(
+        self, poses: np.ndarray, local_xyz: np.ndarray, pairs: np.ndarray, sizes: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Guided matching of many sets whose (global index, local index) rows come one set
+        after the other in `pairs` (`sizes` rows each), under (S, 4, 4) `poses`: the pairs the
+        sets gain, nearest first, as one (A, 2) array with each set's start (S + 1), and each
+        set's conflicts (no shortcut for a set holding every local object: it gains nothing
+        and has no conflicts anyway)."""
+        local_xyz = np.asarray(local_xyz, float).reshape(-1, 3)
+        poses = np.asarray(poses, float).reshape(-1, 4, 4)
+        aligned = local_xyz @ np.swapaxes(poses[:, :3, :3], 1, 2) + poses[:, None, :3, 3]
+        sizes = np.asarray(sizes, dtype=np.int64)
+        cfg = self.config
+        return _guided_matches(
+            np.ascontiguousarray(aligned), np.asarray(pairs, np.int64).reshape(-1, 2),
+            np.cumsum(sizes) - sizes, sizes, *self._pack(), self._global_xyz, self._axis,
+            cfg.inlier_tolerance, cfg.conflict_radius,
+        )  # fmt: skip
 
 
 @njit(cache=True)

@@ -365,3 +365,106 @@ def test_prepare_builds_every_map_cloud_once_and_changes_no_answer(room_with_poi
     assert len(prepared) == len(objects) + len(view)  # only the local objects
     assert [h.pairs for h in eager.hypotheses] == [h.pairs for h in lazy.hypotheses]
     np.testing.assert_allclose(eager.pose, lazy.pose)
+
+
+def _verified_alone(localizer: Localizer, pairs: tuple, local_xyz: np.ndarray) -> tuple:
+    """One set verified on its own, as the Localizer states it: consensus, guided matching
+    from its pose, and the consensus of the grown pairs when guided matching added some."""
+    from semloc.verification import consensus
+
+    cfg, global_xyz = localizer.config.verification, localizer.global_map.positions
+    ups = (localizer.local_up, localizer.global_map.up)
+
+    def split(rows: np.ndarray):
+        found = consensus(local_xyz[rows[:, 1]], global_xyz[rows[:, 0]], *ups, cfg)
+        as_list = lambda mask: list(map(tuple, rows[mask].tolist()))  # noqa: E731
+        return found, as_list(found.inliers), as_list(~found.inliers)
+
+    first, inliers, rejected = split(np.array(pairs).reshape(-1, 2))
+    if first.pose is None:
+        return inliers, rejected, None, first.residual, 0, 0
+    grown, added, conflicts = localizer._support.extend(first.pose, local_xyz, inliers)
+    if added:
+        again, agreed, disagreed = split(np.array(grown))
+        if again.pose is not None:
+            support = sum(p not in set(inliers) for p in agreed)
+            return agreed, rejected + disagreed, again.pose, again.residual, support, conflicts
+    return grown, rejected, first.pose, first.residual, added, conflicts
+
+
+def _assert_verified_as_alone(localizer: Localizer, sets: list) -> list[tuple]:
+    """The Localizer's verification of `sets` all at once equals verifying each alone (pairs
+    and their order, rejected pairs, pose, residual, support, conflicts); the alone results."""
+    xyz = localizer.local_map.positions
+    alone = [_verified_alone(localizer, aset.pairs, xyz) for aset in sets]
+    for got, (pairs, rejected, pose, residual, support, conflicts) in zip(
+        localizer._verified_all(sets, xyz), alone, strict=True
+    ):
+        assert (got.pairs, got.rejected, got.support, got.conflicts) == (
+            pairs, rejected, support, conflicts,
+        )  # fmt: skip
+        assert (got.pose is None) == (pose is None) and got.residual == pytest.approx(residual)
+        if pose is not None:
+            np.testing.assert_allclose(got.pose, pose, atol=1e-12)
+    return alone
+
+
+@pytest.mark.parametrize("seed", [1, 4, 9])
+def test_screened_sets_verified_together_as_each_alone(building, seed):
+    """The Localizer verifies its screened sets all at once, each as it would alone, on
+    noisy views with wrong labels and a spurious object."""
+    view = observe(building, 7, seed, spurious=1, wrong_label_rate=0.2, position_noise=0.15)
+    localizer = Localizer(building, local_up=view.local_map.up)
+    localizer.update(view.local_map, answer=False)
+    sets = localizer._clustering.top(60, min_size=2, largest_first=True)
+    alone = _assert_verified_as_alone(localizer, sets)
+    assert len(sets) > 10 and any(a[1] for a in alone) and any(a[4] for a in alone)
+
+
+def test_any_sets_verified_together_as_each_alone():
+    """Hand-drawn sets (right and wrong pairs, stacked objects whose centres fix no yaw, sets
+    holding every local object): verified together, each comes out as verified alone, and
+    every path is taken (no pose, pairs rejected first, grown, grown and then rejected)."""
+    from semloc.clustering import AssociationSet
+
+    seen = {"no pose": 0, "rejected": 0, "grown": 0, "rejected after growing": 0, "all": 0}
+    for seed in range(30):
+        rng = np.random.default_rng(seed)
+        noise = 0.15 if seed % 2 else 0.3
+        g_xyz = rng.uniform(0, 6, (30, 3))
+        g_xyz[1, :2] = g_xyz[0, :2]  # stacked: a pair of these alone fixes no yaw
+        labels = rng.integers(0, 2, 30)
+        world = ObjectMap(
+            [SemanticObject(f"g{i}", f"c{c}", p) for i, (c, p) in enumerate(zip(labels, g_xyz))],
+            up=[0, 0, 1],
+        )
+        true = np.concatenate([[0, 1], rng.choice(np.arange(2, 30), 5, replace=False)])
+        inverse = np.linalg.inv(yaw_pose(rng.uniform(-3, 3), rng.normal(0, 2, 3)))
+        l_xyz = g_xyz[true] @ inverse[:3, :3].T + inverse[:3, 3] + rng.normal(0, noise, (7, 3))
+        l_xyz[1, :2] = l_xyz[0, :2]
+        local = [SemanticObject(f"l{k}", f"c{labels[g]}", p) for k, (g, p) in enumerate(zip(true, l_xyz))]  # fmt: skip
+        # one minimal sample per set (two seeds in three): poor poses, so the grown pairs are often split again
+        localizer = Localizer(world, local_up=[0, 0, 1], max_samples=1 if seed % 3 else 200)
+        localizer.update(local, answer=False)
+        sets = []
+        for _ in range(25):
+            size = int(rng.integers(2, 8))
+            chosen = [0, 1] if size == 2 and rng.random() < 0.3 else rng.choice(7, size, False)
+            pairs, used = [], set()
+            for l in chosen:
+                options = [g for g in localizer._candidates_of[int(l)] if g not in used]
+                g = int(true[l]) if rng.random() < 0.7 and true[l] not in used else None
+                g = g if g is not None else (int(rng.choice(options)) if options else None)
+                if g is not None:
+                    pairs.append((g, int(l)))
+                    used.add(g)
+            if len(pairs) >= 2:
+                sets.append(AssociationSet(tuple(sorted(pairs)), float(rng.random()), 0))
+        for aset, alone in zip(sets, _assert_verified_as_alone(localizer, sets)):
+            pairs, rejected, pose, residual, support, conflicts = alone
+            seen["no pose"] += pose is None
+            seen["rejected"] += any(p in aset.pairs for p in rejected)
+            seen["grown"] += support > 0
+            seen["rejected after growing"] += any(p not in aset.pairs for p in rejected)
+            seen["all"] += len(pairs) == len(local)
+    assert all(seen.values()), seen
