@@ -475,17 +475,19 @@ class HierarchicalClustering:
         return self._sweep
 
     def _distances_to(self, positions: np.ndarray) -> np.ndarray:
-        """Distances between the local objects at `positions` (one `np.linalg.norm` per pair),
-        recomputed only for objects that are new or changed position since the last update."""
+        """Distances between the local objects at `positions` (each as `np.linalg.norm` of the
+        difference computes it: the root of its dot product with itself), recomputed only for
+        objects that are new or changed position since the last update."""
         known = min(len(self._local_positions), len(positions))
         out = np.zeros((len(positions), len(positions)))
         out[:known, :known] = self._local_distances[:known, :known]
         same = np.all(positions[:known] == self._local_positions[:known], axis=1)
         changed = np.concatenate([np.flatnonzero(~same), np.arange(known, len(positions))])
         for j in changed.tolist():
-            for i in range(len(positions)):
-                if i != j:
-                    out[i, j] = out[j, i] = float(np.linalg.norm(positions[i] - positions[j]))
+            row = np.sqrt([d.dot(d) for d in positions - positions[j]])
+            row[j] = 0.0
+            out[j, :] = row
+            out[:, j] = row
         return out
 
     def _gate_of_sets(self, members: np.ndarray) -> np.ndarray:
@@ -729,17 +731,23 @@ class HierarchicalClustering:
         self._key2 = self._key2.take(rows)
 
 
-def _kth_largest(scores: np.ndarray, k: int) -> float:
-    """The k-th largest of `scores` (1 <= k <= len).  Scores are sums of h >= 0; when at most
-    k are positive (a pruned pool plus new singletons) it is the smallest positive one or 0,
-    found without the partition that the general case needs."""
-    if k == len(scores):
-        return float(scores.min())
-    positive = scores > 0
-    count = np.count_nonzero(positive)
-    if count <= k and not (scores < 0).any():
-        return float(scores[positive].min()) if count == k else 0.0
-    return float(np.partition(scores, len(scores) - k)[len(scores) - k])
+def _kth_largest(values: np.ndarray, k: int) -> float:
+    """The k-th largest of `values` (1 <= k <= len): set sizes (integers >= 1) or scores (sums
+    of h >= 0).  `np.partition` slows down many times over on many equal values (the
+    singletons' zero scores, the few distinct sizes), so sizes are counted and scores are
+    partitioned over the positive ones only; when at most k are positive (a pruned pool plus
+    new singletons) it is the smallest positive one or 0, found without a partition."""
+    if k == len(values):
+        return float(values.min())
+    if values.dtype.kind in "iu" and values.min() >= 0:
+        at_least = np.cumsum(np.bincount(values)[::-1])  # how many are >= max, max - 1, ...
+        return float(len(at_least) - 1 - np.searchsorted(at_least, k))
+    if (values < 0).any():
+        return float(np.partition(values, len(values) - k)[len(values) - k])
+    positive = values[values > 0]
+    if len(positive) <= k:
+        return float(positive.min()) if len(positive) == k else 0.0
+    return float(np.partition(positive, len(positive) - k)[len(positive) - k])
 
 
 @njit(cache=True)

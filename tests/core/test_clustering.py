@@ -438,9 +438,18 @@ def test_kernels_out_of_room_are_called_again_with_more(monkeypatch, sweep):
     st.data(),
 )
 def test_kth_largest_score_equals_a_partition(scores, data):
-    """The pool's k-th best score (its shortcuts: exactly k sets, at most k positive) is the
-    value a full partition gives."""
+    """The pool's k-th best score (its shortcuts: exactly k sets, at most k positive, only the
+    positive ones partitioned) is the value a full partition gives."""
     values = np.array(scores)
+    k = data.draw(st.integers(1, len(values)))
+    assert _kth_largest(values, k) == np.sort(values)[::-1][k - 1]
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.integers(1, 9), min_size=1, max_size=40), st.data())
+def test_kth_largest_size_equals_a_partition(sizes, data):
+    """The k-th largest set size, counted rather than partitioned, is a full partition's."""
+    values = np.array(sizes, dtype=np.int64)
     k = data.draw(st.integers(1, len(values)))
     assert _kth_largest(values, k) == np.sort(values)[::-1][k - 1]
 
