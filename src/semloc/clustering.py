@@ -71,6 +71,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -168,6 +169,15 @@ class AssociationSet:
 
     def __len__(self) -> int:
         return len(self.pairs)
+
+
+class SetPairs(NamedTuple):
+    """Association sets as arrays: their (global index, local index) pairs one set after the
+    other (`sizes` pairs each, ascending by global index) and their scores."""
+
+    pairs: np.ndarray  # (P, 2) int64
+    sizes: np.ndarray  # (S,) int64
+    scores: np.ndarray  # (S,)
 
 
 @njit(cache=True, inline="always")
@@ -271,6 +281,10 @@ class HierarchicalClustering:
         """The k best sets with at least `min_size` pairs (by score, or by size then score)."""
         return self._sets(self._top_rows(k, min_size, largest_first))
 
+    def top_pairs(self, k: int, min_size: int = 1, largest_first: bool = False) -> SetPairs:
+        """`top` as arrays, without a Python object per set or pair."""
+        return self._set_pairs(self._top_rows(k, min_size, largest_first))
+
     def top_scores(self, k: int, min_size: int = 1) -> list[float]:
         """The scores of `top(k, min_size)`, largest first, without building the sets and,
         unless sets of equal rounded score but different scores tie at the cut, without
@@ -293,19 +307,22 @@ class HierarchicalClustering:
     def _sets(self, rows: np.ndarray) -> list[AssociationSet]:
         """The sets of pool rows, each with its (global, local) pairs in ascending order (one
         global object per set, so ordered by the global index)."""
-        members = self._members[rows]
-        valid = members >= 0
-        g = np.where(valid, self._cand_g[np.maximum(members, 0)], np.iinfo(np.int64).max)
-        order = np.argsort(g, axis=1, kind="stable")
-        g = np.take_along_axis(g, order, axis=1).tolist()
-        l = self._cand_l[np.maximum(np.take_along_axis(members, order, axis=1), 0)].tolist()
-        sizes = self._size[rows].tolist()
-        scores = self._score[rows].tolist()
+        found = self._set_pairs(rows)
+        pairs, ends = found.pairs.tolist(), np.cumsum(found.sizes).tolist()
         ages = self._last_merge[rows].tolist()
         return [
-            AssociationSet(tuple(zip(g[i][:n], l[i][:n])), scores[i], ages[i])
-            for i, n in enumerate(sizes)
+            AssociationSet(tuple(map(tuple, pairs[end - n : end])), score, age)
+            for n, end, score, age in zip(found.sizes.tolist(), ends, found.scores.tolist(), ages)
         ]
+
+    def _set_pairs(self, rows: np.ndarray) -> SetPairs:
+        """The sets of pool rows as arrays, each set's pairs ascending by global index."""
+        members = self._members[rows]
+        g = np.where(members >= 0, self._cand_g[np.maximum(members, 0)], np.iinfo(np.int64).max)
+        members = np.take_along_axis(members, np.argsort(g, axis=1, kind="stable"), axis=1)
+        members = members[members >= 0]  # each row's members first: the padding sorts last
+        pairs = np.stack([self._cand_g[members], self._cand_l[members]], axis=1)
+        return SetPairs(pairs, self._size[rows], self._score[rows])
 
     def _sizes(self) -> np.ndarray:
         return self._size

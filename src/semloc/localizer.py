@@ -29,7 +29,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from semloc.association import AssociationConfig, CandidateIndex, Describer
-from semloc.clustering import AssociationSet, ClusteringConfig, HierarchicalClustering
+from semloc.clustering import ClusteringConfig, HierarchicalClustering, SetPairs
 from semloc.decision import (
     DecisionConfig,
     RankBy,
@@ -286,11 +286,11 @@ class Localizer:
         poses of the top-k, measure their evidence, rank, merge duplicates, attach confidence."""
         cfg = self.config
         by_size = cfg.rank_by in ("residual", "evidence")
-        sets = self._clustering.top(cfg.screened_sets, min_size=2, largest_first=by_size)
+        sets = self._clustering.top_pairs(cfg.screened_sets, min_size=2, largest_first=by_size)
         local_xyz = np.array([o.position for o in self._local.values()]).reshape(-1, 3)
         screened = [c for c in self._verified_all(sets, local_xyz) if len(c.pairs) >= 2]
         if by_size:  # pairs include the guided matches
-            screened.sort(key=lambda c: (-len(c.pairs), round(c.residual, 9), -c.aset.score))
+            screened.sort(key=lambda c: (-len(c.pairs), round(c.residual, 9), -c.score))
         places = [(c.pairs, c.pose) for c in screened]
         anchor = local_anchor(local_xyz)
         chosen = [screened[i] for i in distinct(places, cfg.top_k, cfg.decision, anchor)]
@@ -300,18 +300,17 @@ class Localizer:
         ]
         return rank_places(hypotheses, cfg.rank_by, cfg.decision, shipped_model(), anchor)
 
-    def _verified_all(self, sets: list[AssociationSet], local_xyz: np.ndarray) -> list[_Verified]:
+    def _verified_all(self, sets: SetPairs, local_xyz: np.ndarray) -> list[_Verified]:
         """Each set's pairs split by its consensus pose, grown by guided matching (the grown
         pairs verified once more together), and that pose's evidence on the map.
 
         All sets go through each step at once, as (global index, local index) rows one set
         after the other; only the result is turned into per-set lists."""
-        if not sets:
+        pairs, sizes, n = sets.pairs, sets.sizes, len(sets.sizes)
+        if not n:
             return []
         up = (self.local_up, self.global_map.up, self.config.verification)
         global_xyz = self.global_map.positions
-        sizes = np.array([len(s.pairs) for s in sets], dtype=np.int64)
-        pairs = np.array([p for s in sets for p in s.pairs], dtype=np.int64).reshape(-1, 2)
         first = consensus_rows(pairs, sizes, local_xyz, global_xyz, *up)
         agree = _rows_of_sets(first.inliers, sizes)
         kept, kept_sizes = pairs[agree], _per_set(agree, sizes)
@@ -329,12 +328,12 @@ class Localizer:
         order = np.lexsort((np.where(grows[owner], rows[:, 1], np.arange(len(rows))), owner))
         rows, owner, is_new = rows[order], owner[order], is_new[order]
         poses, residual = first.poses, first.residual
-        regrown = grows & (np.bincount(owner[is_new], minlength=len(sets)) > 0)
+        regrown = grows & (np.bincount(owner[is_new], minlength=n) > 0)
         if regrown.any():  # the grown pairs verified together
             again = np.flatnonzero(regrown[owner])
-            again_sizes = np.bincount(owner, minlength=len(sets))[regrown]
+            again_sizes = np.bincount(owner, minlength=n)[regrown]
             second = consensus_rows(rows[again], again_sizes, local_xyz, global_xyz, *up)
-            settled = np.zeros(len(sets), dtype=bool)
+            settled = np.zeros(n, dtype=bool)
             settled[regrown] = second.has_pose
             disagree = again[~_rows_of_sets(second.inliers, again_sizes)]
             disagree = disagree[settled[owner[disagree]]]
@@ -347,16 +346,16 @@ class Localizer:
             poses[settled] = second.poses[second.has_pose]
             residual[settled] = second.residual[second.has_pose]
         rejected = rejected[np.argsort(rejected_owner, kind="stable")]  # a set's first ones first
-        support = np.bincount(owner[is_new], minlength=len(sets)).tolist()
+        support = np.bincount(owner[is_new], minlength=n).tolist()
         conflicts = np.where(grows, conflicts, 0).tolist()
         rows_list, rejected_list = rows.tolist(), rejected.tolist()
-        ends = np.cumsum(np.bincount(owner, minlength=len(sets))).tolist()
-        rejected_ends = np.cumsum(np.bincount(rejected_owner, minlength=len(sets))).tolist()
+        ends = np.cumsum(np.bincount(owner, minlength=n)).tolist()
+        rejected_ends = np.cumsum(np.bincount(rejected_owner, minlength=n)).tolist()
         verified, begin, rejected_begin = [], 0, 0
-        for i, aset in enumerate(sets):
+        for i, score in enumerate(sets.scores.tolist()):
             pose = poses[i] if first.has_pose[i] else None
             verified.append(_Verified(
-                aset, list(map(tuple, rows_list[begin : ends[i]])),
+                score, list(map(tuple, rows_list[begin : ends[i]])),
                 list(map(tuple, rejected_list[rejected_begin : rejected_ends[i]])),
                 pose, float(residual[i]), support[i], conflicts[i],
             ))  # fmt: skip
@@ -393,7 +392,7 @@ class Localizer:
         ids = self.global_map.ids
         return Hypothesis(
             rank=rank,
-            score=verified.aset.score,
+            score=verified.score,
             pairs=[(g.id, l.id) for g, l in zip(globals_, locals_)],
             pose=pose,
             fitness=None if estimate is None else estimate.fitness,
@@ -435,7 +434,7 @@ class _Verified:
     """A screened association set after the consensus: inlier and rejected (global index,
     local index) pairs, the inliers' closed-form pose and residual, and its map evidence."""
 
-    aset: AssociationSet
+    score: float  # the set's clustering score
     pairs: list[tuple[int, int]]
     rejected: list[tuple[int, int]]
     pose: np.ndarray | None

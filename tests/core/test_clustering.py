@@ -550,3 +550,22 @@ def test_sweep_windows_start_where_a_binary_search_would(
             lo, hi = starts[lb], starts[lb + 1]
             at = global_xyz[cand_g[x], axis] - reach[la, lb]
             assert window[i, lb] == lo + np.searchsorted(sorted_x[lo:hi], at)
+
+
+def test_top_pairs_are_the_top_sets_as_arrays():
+    """`top_pairs` gives the sets of `top` (same order, pairs ascending by global index, same
+    scores) as arrays, for both orders."""
+    g, labels, chosen, local = _long_strip()
+    ids = [f"g{i}" for i in range(len(g))]
+    clustering = HierarchicalClustering(g, ids, ClusteringConfig(sets_per_object=2))
+    for step, c in enumerate(chosen):
+        detections = {step: np.flatnonzero(labels == labels[c])}
+        clustering.update(local[: step + 1], [f"l{i}" for i in range(step + 1)], detections)
+    for largest_first in (False, True):
+        sets = clustering.top(25, min_size=2, largest_first=largest_first)
+        rows = clustering.top_pairs(25, min_size=2, largest_first=largest_first)
+        assert rows.sizes.tolist() == [len(s) for s in sets]
+        assert rows.scores.tolist() == [s.score for s in sets]
+        assert rows.pairs.tolist() == [list(p) for s in sets for p in s.pairs]
+        assert all(list(s.pairs) == sorted(s.pairs) for s in sets)
+        assert len(sets) > 5 and max(rows.sizes) >= 3

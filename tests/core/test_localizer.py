@@ -395,13 +395,20 @@ def _verified_alone(localizer: Localizer, pairs: tuple, local_xyz: np.ndarray) -
 def _assert_verified_as_alone(localizer: Localizer, sets: list) -> list[tuple]:
     """The Localizer's verification of `sets` all at once equals verifying each alone (pairs
     and their order, rejected pairs, pose, residual, support, conflicts); the alone results."""
+    from semloc.clustering import SetPairs
+
     xyz = localizer.local_map.positions
     alone = [_verified_alone(localizer, aset.pairs, xyz) for aset in sets]
-    for got, (pairs, rejected, pose, residual, support, conflicts) in zip(
-        localizer._verified_all(sets, xyz), alone, strict=True
+    rows = SetPairs(
+        np.array([p for aset in sets for p in aset.pairs], dtype=np.int64).reshape(-1, 2),
+        np.array([len(aset) for aset in sets], dtype=np.int64),
+        np.array([aset.score for aset in sets]),
+    )
+    for aset, got, (pairs, rejected, pose, residual, support, conflicts) in zip(
+        sets, localizer._verified_all(rows, xyz), alone, strict=True
     ):
-        assert (got.pairs, got.rejected, got.support, got.conflicts) == (
-            pairs, rejected, support, conflicts,
+        assert (got.score, got.pairs, got.rejected, got.support, got.conflicts) == (
+            aset.score, pairs, rejected, support, conflicts,
         )  # fmt: skip
         assert (got.pose is None) == (pose is None) and got.residual == pytest.approx(residual)
         if pose is not None:
