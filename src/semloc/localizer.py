@@ -304,63 +304,49 @@ class Localizer:
         """Each set's pairs split by its consensus pose, grown by guided matching (the grown
         pairs verified once more together), and that pose's evidence on the map.
 
-        All sets go through each step at once, as (global index, local index) rows one set
-        after the other; only the result is turned into per-set lists."""
-        pairs, sizes, n = sets.pairs, sets.sizes, len(sets.sizes)
+        All sets go through each step at once, as (global index, local index) rows with the
+        set of each row (`owner`); only the result is turned into per-set lists."""
+        n = len(sets.sizes)
         if not n:
             return []
         up = (self.local_up, self.global_map.up, self.config.verification)
-        global_xyz = self.global_map.positions
-        first = consensus_rows(pairs, sizes, local_xyz, global_xyz, *up)
-        agree = _rows_of_sets(first.inliers, sizes)
-        kept, kept_sizes = pairs[agree], _per_set(agree, sizes)
-        rejected, rejected_owner = pairs[~agree], _owners(sizes)[~agree]
+        first = consensus_rows(sets.pairs, sets.sizes, local_xyz, self.global_map.positions, *up)
+        agree, owner = _rows_of_sets(first.inliers, sets.sizes), _owners(sets.sizes)
+        kept, kept_owner = sets.pairs[agree], owner[agree]
+        rejected, rejected_owner = sets.pairs[~agree], owner[~agree]
+        kept_sizes = np.bincount(kept_owner, minlength=n)
         added, added_start, conflicts = self._support.extend_rows(
             first.poses, local_xyz, kept, kept_sizes
         )
         # a posed set with local objects outside it grows (its pairs then by local object)
         grows = first.has_pose & (kept_sizes < len(local_xyz))
-        added_owner = _owners(np.diff(added_start))
-        taken = grows[added_owner]
-        rows = np.concatenate([kept, added[taken]])
-        owner = np.concatenate([_owners(kept_sizes), added_owner[taken]])
-        is_new = np.arange(len(rows)) >= len(kept)
-        order = np.lexsort((np.where(grows[owner], rows[:, 1], np.arange(len(rows))), owner))
-        rows, owner, is_new = rows[order], owner[order], is_new[order]
-        poses, residual = first.poses, first.residual
+        rows, owner, is_new = _grown(kept, kept_owner, added, _owners(np.diff(added_start)), grows)
+        poses, residual = first.poses.copy(), first.residual.copy()
         regrown = grows & (np.bincount(owner[is_new], minlength=n) > 0)
         if regrown.any():  # the grown pairs verified together
             again = np.flatnonzero(regrown[owner])
-            again_sizes = np.bincount(owner, minlength=n)[regrown]
-            second = consensus_rows(rows[again], again_sizes, local_xyz, global_xyz, *up)
+            sizes = np.bincount(owner, minlength=n)[regrown]
+            second = consensus_rows(rows[again], sizes, local_xyz, self.global_map.positions, *up)
             settled = np.zeros(n, dtype=bool)
             settled[regrown] = second.has_pose
-            disagree = again[~_rows_of_sets(second.inliers, again_sizes)]
+            poses[settled] = second.poses[second.has_pose]
+            residual[settled] = second.residual[second.has_pose]
+            disagree = again[~_rows_of_sets(second.inliers, sizes)]
             disagree = disagree[settled[owner[disagree]]]
             rejected = np.concatenate([rejected, rows[disagree]])
             rejected_owner = np.concatenate([rejected_owner, owner[disagree]])
             keep = np.ones(len(rows), dtype=bool)
             keep[disagree] = False
             rows, owner, is_new = rows[keep], owner[keep], is_new[keep]
-            poses, residual = poses.copy(), residual.copy()
-            poses[settled] = second.poses[second.has_pose]
-            residual[settled] = second.residual[second.has_pose]
-        rejected = rejected[np.argsort(rejected_owner, kind="stable")]  # a set's first ones first
+        order = np.argsort(rejected_owner, kind="stable")  # a set's first rejections first
+        pairs, rejected = _split(rows, owner, n), _split(rejected[order], rejected_owner[order], n)
         support = np.bincount(owner[is_new], minlength=n).tolist()
         conflicts = np.where(grows, conflicts, 0).tolist()
-        rows_list, rejected_list = rows.tolist(), rejected.tolist()
-        ends = np.cumsum(np.bincount(owner, minlength=n)).tolist()
-        rejected_ends = np.cumsum(np.bincount(rejected_owner, minlength=n)).tolist()
-        verified, begin, rejected_begin = [], 0, 0
-        for i, score in enumerate(sets.scores.tolist()):
-            pose = poses[i] if first.has_pose[i] else None
-            verified.append(_Verified(
-                score, list(map(tuple, rows_list[begin : ends[i]])),
-                list(map(tuple, rejected_list[rejected_begin : rejected_ends[i]])),
-                pose, float(residual[i]), support[i], conflicts[i],
-            ))  # fmt: skip
-            begin, rejected_begin = ends[i], rejected_ends[i]
-        return verified
+        return [
+            _Verified(score, pairs[i], rejected[i], poses[i] if first.has_pose[i] else None,
+                      float(residual[i]), support[i], conflicts[i])
+            for i, score in enumerate(sets.scores.tolist())
+        ]  # fmt: skip
 
     def _hypothesis(
         self, rank: int, verified: _Verified, local_xyz: np.ndarray, previous: dict
@@ -456,9 +442,23 @@ def _rows_of_sets(padded: np.ndarray, sizes: np.ndarray) -> np.ndarray:
     return padded[np.arange(padded.shape[1]) < np.asarray(sizes)[:, None]]
 
 
-def _per_set(flags: np.ndarray, sizes: np.ndarray) -> np.ndarray:
-    """How many rows of each set (`sizes` rows each, one after the other) are flagged."""
-    return np.bincount(_owners(sizes)[flags], minlength=len(sizes))
+def _grown(kept, kept_owner, added, added_owner, grows) -> tuple[np.ndarray, ...]:
+    """The kept rows of every set with the added rows of the sets that grow, set after set:
+    a growing set's rows ordered by local object, the others' as they were; (rows, owner,
+    whether each row was added)."""
+    taken = grows[added_owner]
+    rows = np.concatenate([kept, added[taken]])
+    owner = np.concatenate([kept_owner, added_owner[taken]])
+    is_new = np.arange(len(rows)) >= len(kept)
+    order = np.lexsort((np.where(grows[owner], rows[:, 1], np.arange(len(rows))), owner))
+    return rows[order], owner[order], is_new[order]
+
+
+def _split(rows: np.ndarray, owner: np.ndarray, n: int) -> list[list[tuple[int, int]]]:
+    """Rows grouped set after set (`owner` ascending) as n lists of int pairs."""
+    sizes = np.bincount(owner, minlength=n)
+    listed, ends = rows.tolist(), np.cumsum(sizes).tolist()
+    return [list(map(tuple, listed[end - size : end])) for end, size in zip(ends, sizes.tolist())]
 
 
 def _warm_start(pairs: frozenset, previous: dict[_PoseKey, PoseEstimate | None]):
