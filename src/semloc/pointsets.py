@@ -1,8 +1,9 @@
 """Point-set utilities shared by every stage: voxel keys, voxel-centroid downsampling, the
 axes along which a set of positions spreads most and the order sweeps over them follow.
 
-Pure numpy; used by the front-end (fusion), the simulator, the dataset importers and pose
-recovery, so that "downsample with voxel v" means the same everywhere.
+Pure computation on numpy arrays (the voxel sums in one compiled pass); used by the front-end
+(fusion), the simulator, the dataset importers and pose recovery, so that "downsample with
+voxel v" means the same everywhere.
 """
 
 from __future__ import annotations
@@ -10,6 +11,7 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
+from numba import njit
 
 _OFFSET = 1 << 20  # keys cover +-1,048 km at 1 mm voxels; plenty for indoor maps
 
@@ -23,13 +25,38 @@ def voxel_keys(points: np.ndarray, voxel_size: float) -> np.ndarray:
 def voxel_accumulate(
     points: np.ndarray, voxel_size: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Unique voxel keys of `points` with the per-voxel point sums (K, 3) and counts (K,)."""
-    keys = voxel_keys(points, voxel_size)
-    unique, inverse = np.unique(keys, return_inverse=True)
-    inverse = inverse.ravel()
-    # per coordinate, summed in input order (as np.add.at would, several times faster)
-    sums = np.stack([np.bincount(inverse, points[:, c], len(unique)) for c in range(3)], axis=1)
-    counts = np.bincount(inverse, minlength=len(unique)).astype(float)
+    """Unique voxel keys of `points` (ascending, as `voxel_keys`) with the per-voxel point
+    sums (K, 3), summed in input order, and counts (K,)."""
+    return _voxel_sums(np.ascontiguousarray(points, dtype=float).reshape(-1, 3), voxel_size)
+
+
+@njit(cache=True)
+def _voxel_sums(points: np.ndarray, voxel_size: float):
+    """`voxel_accumulate` in one compiled pass: the points sorted stably by key, so that each
+    voxel's points are summed in input order (as `np.bincount` sums its weights)."""
+    n = len(points)
+    keys = np.empty(n, dtype=np.int64)
+    for i in range(n):
+        x = np.int64(np.floor(points[i, 0] / voxel_size)) + _OFFSET
+        y = np.int64(np.floor(points[i, 1] / voxel_size)) + _OFFSET
+        z = np.int64(np.floor(points[i, 2] / voxel_size)) + _OFFSET
+        keys[i] = (x << 42) | (y << 21) | z
+    order = np.argsort(keys, kind="mergesort")
+    n_unique = 0
+    for i in range(n):
+        n_unique += i == 0 or keys[order[i]] != keys[order[i - 1]]
+    unique = np.empty(n_unique, dtype=np.int64)
+    sums = np.zeros((n_unique, 3))
+    counts = np.zeros(n_unique)
+    u = -1
+    for i in range(n):
+        j = order[i]
+        if i == 0 or keys[j] != keys[order[i - 1]]:
+            u += 1
+            unique[u] = keys[j]
+        for c in range(3):
+            sums[u, c] += points[j, c]
+        counts[u] += 1.0
     return unique, sums, counts
 
 
