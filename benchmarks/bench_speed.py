@@ -1,7 +1,7 @@
 """Speed and memory of full localizations with point sets, from rooms to buildings (issue 11).
 
     PYTHONPATH=src python benchmarks/bench_speed.py [--quick] [--sizes 300 1000 3000 10000 20000]
-        [--views 3 5 8] [--trials 5] [--markdown TABLE.md]
+        [--views 3 5 8] [--trials 5] [--markdown TABLE.md] [--against TREE [--rounds 3]]
 
 Maps: the real samples (ScanNet scene0000_00 via `load_scannet`, Replica office4 via
 `load_replica`; found by `semloc.io.datasets.real_data_dir()`, rows skipped with a note when
@@ -26,6 +26,11 @@ a label-constrained RANSAC on centres on the same cases (2 same-label pairs per 
 4-DoF closed form about gravity, inliers: local centres within 0.5 m of a same-label global
 centre; its per-map label trees built inside its timing), as the ratio semloc / RANSAC.  Last,
 how time and memory grow with the buildings' size: the slope of a log-log fit.
+
+`--against TREE` instead times this checkout against another one (e.g. a `git worktree` of the
+commit before a change) map by map, the two in turn for `--rounds` rounds, and prints the
+median of the rounds' ratios: on a shared machine two runs at once slow each other down
+unevenly, and a single run of each is within the noise.
 
 `--profile MAP` instead prints where the time of 4 x `--trials` localizations of the largest
 view size goes on one map (cProfile, own CPU ms per localization by function; each compiled
@@ -266,14 +271,18 @@ def profile_map(name: str, view: int, trials: int, seed: int, points: int, top: 
     return "\n".join(lines)
 
 
-def run_child(name: str, args: argparse.Namespace) -> list[Row]:
-    """Measure one map in a fresh process pinned to one core; its rows."""
+def run_child(name: str, args: argparse.Namespace, src: str | None = None) -> list[Row]:
+    """Measure one map in a fresh process pinned to one core; its rows.  `src`: the folder
+    that process imports semloc from (default: as this one does)."""
     command = [sys.executable, __file__, "--worker", name, "--trials", str(args.trials)]
     command += ["--views", *map(str, args.views), "--seed", str(args.seed)]
     command += ["--points", str(args.points)]
     if args.cpu >= 0 and hasattr(os, "sched_setaffinity"):
         command = ["taskset", "-c", str(args.cpu), *command]
-    done = subprocess.run(command, capture_output=True, text=True, check=False)
+    env = None
+    if src is not None:
+        env = {**os.environ, "PYTHONPATH": os.pathsep.join([src, os.environ.get("PYTHONPATH", "")])}
+    done = subprocess.run(command, capture_output=True, text=True, check=False, env=env)
     if done.returncode != 0:
         print(f"{name}: failed\n{done.stderr[-2000:]}", file=sys.stderr)
         return []
@@ -282,6 +291,40 @@ def run_child(name: str, args: argparse.Namespace) -> list[Row]:
         cases = [Case(**case) for case in raw.pop("cases")]
         rows.append(Row(**raw, cases=cases))
     return rows
+
+
+def compare(names: list[str], args: argparse.Namespace) -> str:
+    """This checkout against the one at `args.against`, map by map: the two measured in turn,
+    `args.rounds` times, so that the slow and fast spells of a shared machine fall on both
+    (two runs at once, one per core, slow each other down unevenly); per round the median ms
+    of a localization and of a streaming update, and the median of the rounds' ratios."""
+    other = str(Path(args.against).resolve() / "src")
+    lines = [
+        f"`bench_speed.py --against {args.against}` ({args.rounds} rounds, {args.trials} "
+        "localizations per map and view in each; CPU ms, one core)",
+        "",
+        "| map | view | localization ms, this (per round) | other | this ÷ other | "
+        "streaming update ms, this | other | this ÷ other |",
+        "|---|---:|---|---|---:|---|---|---:|",
+    ]
+    for name in names:
+        rounds = [(run_child(name, args), run_child(name, args, other)) for _ in range(args.rounds)]
+        if not all(mine and theirs for mine, theirs in rounds):
+            continue
+        for v, view in enumerate(args.views):
+            cells = [str(view)]
+            for of in (lambda c: [c.ms], lambda c: c.update_ms):
+                mine, theirs = (
+                    [float(np.median([x for c in r[side][v].cases for x in of(c)] or [np.nan]))
+                     for r in rounds]
+                    for side in (0, 1)
+                )  # fmt: skip
+                ratio = float(np.median(np.array(mine) / np.array(theirs)))
+                cells += [" / ".join(f"{x:.1f}" for x in mine),
+                          " / ".join(f"{x:.1f}" for x in theirs), f"{ratio:.2f}"]  # fmt: skip
+            lines.append(f"| {name} | " + " | ".join(cells) + " |")
+        print(f"done {name}", file=sys.stderr)
+    return "\n".join(lines)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -371,6 +414,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--profile", metavar="MAP", help="instead: where the time goes on MAP (e.g. building-300)"
     )
+    parser.add_argument(
+        "--against",
+        metavar="TREE",
+        help="instead: time this checkout against another one (its root; its src/ is imported), "
+        "the two in turn map by map",
+    )
+    parser.add_argument("--rounds", type=int, default=3, help="rounds of --against")
     parser.add_argument("--worker", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     preset = QUICK if args.quick else FULL
@@ -387,6 +437,10 @@ def main(argv: list[str] | None = None) -> int:
     start = time.perf_counter()
     rows, notes = [], []
     real = [] if args.no_real else ["scannet", "replica"]
+    if args.against:
+        print(compare([*real, *(f"building-{n}" for n in args.sizes)], args))
+        print(f"run time {time.perf_counter() - start:.0f} s")
+        return 0
     for name in [*real, *(f"building-{n}" for n in args.sizes)]:
         found = run_child(name, args)
         if not found and not name.startswith("building-"):

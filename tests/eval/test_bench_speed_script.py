@@ -20,3 +20,21 @@ def test_profile_lists_the_kernels_per_localization():
     calls = {row.split(" | ")[0]: float(row.split(" | ")[1]) for row in rows}
     update = next(name for name in calls if "localizer.py" in name and "(update)" in name)
     assert calls[update] == 4.0  # one update per observed object
+
+
+def test_against_another_checkout_times_both_in_turn():
+    """`--against TREE` runs each map in this checkout and in TREE (here: this one again),
+    in turn, and prints per-round medians and their ratio."""
+    import argparse
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[2]
+    args = argparse.Namespace(
+        against=str(root), rounds=2, trials=1, views=[3], seed=0, points=60, cpu=-1
+    )
+    text = _script().compare(["building-60"], args)
+    row = next(line for line in text.splitlines() if line.startswith("| building-60 |"))
+    cells = [cell.strip() for cell in row.strip("|").split("|")]
+    assert cells[1] == "3" and len(cells[2].split(" / ")) == len(cells[3].split(" / ")) == 2
+    assert all(float(x) > 0 for x in cells[2].split(" / ") + cells[3].split(" / "))
+    assert float(cells[4]) > 0 and "2 rounds" in text
