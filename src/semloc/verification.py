@@ -155,6 +155,10 @@ def consensus_rows(
     """`consensus_indexed` of sets whose (global index, local index) rows come one set after
     the other in `pairs` (`sizes` rows each), as arrays: no per-set Python objects."""
     sizes = np.asarray(sizes, dtype=np.int64)
+    if not len(sizes):
+        return Consensuses(
+            np.zeros((0, 1), bool), np.zeros((0, 4, 4)), np.zeros(0, bool), np.zeros(0)
+        )
     owner = np.repeat(np.arange(len(sizes)), sizes)
     slot = np.arange(len(pairs)) - np.repeat(np.cumsum(sizes) - sizes, sizes)
     src, dst = np.zeros((2, len(sizes), max(sizes.max(initial=0), 1), 3))

@@ -36,6 +36,7 @@ from semloc.verification import (
     consensus,
     consensus_indexed,
     consensus_many,
+    consensus_rows,
 )
 
 UP = np.array([0.0, 0.0, 1.0])
@@ -130,6 +131,9 @@ def test_sets_given_by_index_pairs_answer_as_their_positions_do():
         1
     ].inliers[2]  # the wrong pair (global 9) is rejected
     assert consensus_indexed([], local_xyz, global_xyz, UP, UP, VerificationConfig()) == []
+    rows = consensus_rows(np.zeros((0, 2), np.int64), np.zeros(0, np.int64), local_xyz,
+                          global_xyz, UP, UP, VerificationConfig())  # fmt: skip
+    assert len(rows.inliers) == len(rows.poses) == len(rows.has_pose) == len(rows.residual) == 0
 
 
 def test_the_localizer_drops_a_wrong_pair_from_its_hypothesis():
