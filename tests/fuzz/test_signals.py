@@ -330,3 +330,62 @@ def test_an_interrupt_held_back_is_dropped_once_the_command_is_done():
     finally:
         signal.signal(signal.SIGINT, before)
     assert received == []
+
+
+def test_an_interrupt_waits_for_a_block_that_must_not_be_cut():
+    """Inside `interrupts_deferred` a signal does not raise; it raises a moment after the
+    block ends (nothing is blocked: processes started inside still get their signals)."""
+    from semloc.cli import Interrupted, _interrupts_raise
+    from semloc.io.native import interrupts_deferred
+
+    finished = False
+    with pytest.raises(Interrupted) as caught, _interrupts_raise(script=False):
+        with interrupts_deferred():
+            os.kill(os.getpid(), signal.SIGINT)
+            for _ in range(20):
+                time.sleep(0.005)
+            finished = True
+        for _ in range(200):
+            time.sleep(0.005)
+    assert finished and caught.value.signum == signal.SIGINT
+
+
+def test_an_interrupt_while_the_cluster_starts_closes_it(monkeypatch, tmp_path):
+    """SIGINT while the benchmark's Dask cluster is still starting: the start finishes, then
+    the interrupt stops the run, and the cluster and its client are closed (half-built, their
+    worker watchers crashed the interpreter at exit once), with no output written."""
+    import dask.distributed
+
+    from semloc.cli import Interrupted, _interrupts_raise
+    from semloc.eval import protocol, runner
+
+    closed = []
+
+    class StartingCluster:
+        def __init__(self, **kwargs):
+            os.kill(os.getpid(), signal.SIGINT)
+            for _ in range(20):  # still starting when the signal lands
+                time.sleep(0.005)
+
+        def close(self):
+            closed.append("cluster")
+
+    class Client:
+        def __init__(self, cluster):
+            pass
+
+        def submit(self, *args, **kwargs):
+            for _ in range(400):  # the interrupt lands here, once the start is done
+                time.sleep(0.005)
+            raise AssertionError("the interrupt did not stop the run")
+
+        def close(self):
+            closed.append("client")
+
+    monkeypatch.setattr(dask.distributed, "LocalCluster", StartingCluster)
+    monkeypatch.setattr(dask.distributed, "Client", Client)
+    config = protocol.BenchConfig.quick(size="tiny", keyframes=40, map_kinds=["cad"],
+                                        ablation_starts=0, real=False)  # fmt: skip
+    with pytest.raises(Interrupted), _interrupts_raise(script=False):
+        runner.run_benchmark(config, tmp_path / "out", workers=1, progress=False)
+    assert closed == ["client", "cluster"] and not (tmp_path / "out").exists()

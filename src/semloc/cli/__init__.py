@@ -29,6 +29,7 @@ from semloc.cli import simulation, localize, datasets, export, bench, descriptor
 
 # isort: on
 from semloc.display import printable
+from semloc.io.native import interrupts_wait
 from semloc.maps import MapError
 
 
@@ -41,8 +42,8 @@ class Interrupted(BaseException):
 
 
 def _raise_interrupted(signum: int, frame: FrameType | None) -> None:
-    if _inside_numba(frame):
-        _Resend.later(signum)  # raised in there it could crash the process: a moment later
+    if _inside_numba(frame) or interrupts_wait():
+        _Resend.later(signum)  # raised there it could crash or leave a half-built thing
         return
     raise Interrupted(signum)
 

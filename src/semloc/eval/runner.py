@@ -35,7 +35,7 @@ from semloc.eval.protocol import (
     start_keyframes,
 )  # fmt: skip
 from semloc.eval.report import write_outputs
-from semloc.io.native import staged_folder
+from semloc.io.native import interrupts_deferred, staged_folder
 
 _ONE_THREAD = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
 
@@ -147,20 +147,24 @@ def run_benchmark(
         raise ValueError(f"{out}: exists and is not a folder")
     for var in _ONE_THREAD:
         os.environ.setdefault(var, "1")
-    cluster = None
-    if scheduler:
-        try:
-            client = Client(scheduler, timeout=15)
-        except (OSError, TimeoutError, ValueError) as exc:
-            raise ValueError(f"cannot connect to the Dask scheduler {scheduler!r}: {exc}") from None
-    else:
-        n = workers or os.cpu_count() or 1
-        cluster = LocalCluster(
-            n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
-            silence_logs=logging.CRITICAL, preload=[__name__],
-        )  # fmt: skip
-        client = Client(cluster)
+    cluster = client = None
     try:
+        if scheduler:
+            try:
+                client = Client(scheduler, timeout=15)
+            except (OSError, TimeoutError, ValueError) as exc:
+                message = f"cannot connect to the Dask scheduler {scheduler!r}: {exc}"
+                raise ValueError(message) from None
+        else:
+            # an interrupt waits until the cluster is up: cut half-way, its worker processes
+            # and their watcher threads could not be closed (a crash at interpreter exit)
+            with interrupts_deferred():
+                cluster = LocalCluster(
+                    n_workers=workers or os.cpu_count() or 1, threads_per_worker=1,
+                    processes=True, dashboard_address=":0", silence_logs=logging.CRITICAL,
+                    preload=[__name__],
+                )  # fmt: skip
+                client = Client(cluster)
         first = 1000.0  # the simulations run before any chain
         sequences = [client.submit(_sequence_task, config, i, pure=False, priority=first)
                      for i in range(config.sequences)]  # fmt: skip
@@ -203,7 +207,8 @@ def run_benchmark(
         if config.real_walks:
             real = realwalks.run_real_walks(client, config, progress)
     finally:
-        client.close()
+        if client is not None:
+            client.close()
         if cluster is not None:
             cluster.close()
     rows.sort(key=lambda r: _order(r, config.methods))

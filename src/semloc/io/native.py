@@ -482,6 +482,26 @@ def _write_temporary(path: Path, payload: bytes) -> str:
     return tmp
 
 
+_DEFERRING = [0]  # blocks inside `interrupts_deferred` now (nested ones count)
+
+
+@contextmanager
+def interrupts_deferred() -> Iterator[None]:
+    """Ask the command's interrupt handler (`semloc.cli`) to let the block finish before it
+    raises.  Unlike `signals_held` nothing is blocked, so the processes started inside (they
+    inherit the signal mask) still end on SIGINT and SIGTERM."""
+    _DEFERRING[0] += 1
+    try:
+        yield
+    finally:
+        _DEFERRING[0] -= 1
+
+
+def interrupts_wait() -> bool:
+    """Whether an interrupt arriving now must wait (see `interrupts_deferred`)."""
+    return _DEFERRING[0] > 0
+
+
 @contextmanager
 def signals_held() -> Iterator[None]:
     """Hold SIGINT and SIGTERM (delivered when the block ends), so that a group of renames is
