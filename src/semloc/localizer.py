@@ -311,7 +311,7 @@ class Localizer:
             return []
         up = (self.local_up, self.global_map.up, self.config.verification)
         first = consensus_rows(sets.pairs, sets.sizes, local_xyz, self.global_map.positions, *up)
-        agree, owner = _rows_of_sets(first.inliers, sets.sizes), _owners(sets.sizes)
+        agree, owner = first.agreeing(sets.sizes), _owners(sets.sizes)
         kept, kept_owner = sets.pairs[agree], owner[agree]
         rejected, rejected_owner = sets.pairs[~agree], owner[~agree]
         kept_sizes = np.bincount(kept_owner, minlength=n)
@@ -331,7 +331,7 @@ class Localizer:
             settled[regrown] = second.has_pose
             poses[settled] = second.poses[second.has_pose]
             residual[settled] = second.residual[second.has_pose]
-            disagree = again[~_rows_of_sets(second.inliers, sizes)]
+            disagree = again[~second.agreeing(sizes)]
             disagree = disagree[settled[owner[disagree]]]
             rejected = np.concatenate([rejected, rows[disagree]])
             rejected_owner = np.concatenate([rejected_owner, owner[disagree]])
@@ -435,11 +435,6 @@ _PoseKey = tuple[bool, frozenset[tuple[int, int]]]  # (refined, pairs)
 def _owners(sizes: np.ndarray) -> np.ndarray:
     """The set of each row, for sets of `sizes` rows one after the other."""
     return np.repeat(np.arange(len(sizes)), sizes)
-
-
-def _rows_of_sets(padded: np.ndarray, sizes: np.ndarray) -> np.ndarray:
-    """A per-set padded (S, M) array as one value per row of the sets (`sizes` rows each)."""
-    return padded[np.arange(padded.shape[1]) < np.asarray(sizes)[:, None]]
 
 
 def _grown(kept, kept_owner, added, added_owner, grows) -> tuple[np.ndarray, ...]:

@@ -133,6 +133,11 @@ class Consensuses(NamedTuple):
     has_pose: np.ndarray  # (S,) bool
     residual: np.ndarray  # (S,), inf without a pose
 
+    def agreeing(self, sizes: np.ndarray) -> np.ndarray:
+        """Whether each pair is an inlier, one value per pair of the sets (`sizes` each, one
+        set after the other, as `consensus_rows` takes them)."""
+        return self.inliers[np.arange(self.inliers.shape[1]) < np.asarray(sizes)[:, None]]
+
     def listed(self, sizes: np.ndarray) -> list[Consensus]:
         """One `Consensus` per set (`sizes` pairs each)."""
         return [

@@ -300,17 +300,22 @@ def test_union_key_collisions_fall_back_to_exact_member_lists(monkeypatch):
         assert collided[pairs] == pytest.approx(score, abs=1e-9)
 
 
-def _replay_against_literal(g, labels, chosen, local, config):
+def _one_by_one(labels, chosen, local):
     """Local objects `chosen` (at `local`) detected one per update, with every same-label map
-    object as candidate: the clustering's sets and scores equal the literal rules' after each
-    update.  Returns the clustering and its final sets."""
-    fast = clustering(g, config)
-    literal = LiteralClustering(g, [f"g{i}" for i in range(len(g))], config)
+    object as candidate: per update, the arguments of `update`."""
     for step, c in enumerate(chosen):
         ids = [f"l{i}" for i in range(step + 1)]
-        detections = {step: np.flatnonzero(labels == labels[c])}
-        fast.update(local[: step + 1], ids, detections)
-        literal.update(local[: step + 1], ids, detections)
+        yield local[: step + 1], ids, {step: np.flatnonzero(labels == labels[c])}
+
+
+def _replay_against_literal(g, labels, chosen, local, config):
+    """Local objects detected one per update (`_one_by_one`): the clustering's sets and scores
+    equal the literal rules' after each update.  Returns the clustering and its final sets."""
+    fast = clustering(g, config)
+    literal = LiteralClustering(g, [f"g{i}" for i in range(len(g))], config)
+    for update in _one_by_one(labels, chosen, local):
+        fast.update(*update)
+        literal.update(*update)
         expected = {tuple(sorted(k)): v[0] for k, v in literal.sets.items()}
         got = pair_sets(fast)
         assert got.keys() == expected.keys()
@@ -391,11 +396,9 @@ def test_a_maps_sweep_order_serves_the_clustering(monkeypatch):
     config = ClusteringConfig(sets_per_object=2, protect_top=3)
     given_order = HierarchicalClustering(g, ids, config, sweep_order=world.sweep_order)
     own_order = HierarchicalClustering(g, ids, config)
-    for step, c in enumerate(chosen):
-        local_ids = [f"l{i}" for i in range(step + 1)]
-        detections = {step: np.flatnonzero(labels == labels[c])}
-        given_order.update(local[: step + 1], local_ids, detections)
-        own_order.update(local[: step + 1], local_ids, detections)
+    for update in _one_by_one(labels, chosen, local):
+        given_order.update(*update)
+        own_order.update(*update)
         assert pair_sets(given_order) == pair_sets(own_order)
     assert given_order._sweep_order() is world.sweep_order
     own, given = own_order._sweep_order(), world.sweep_order
@@ -556,11 +559,7 @@ def test_top_pairs_are_the_top_sets_as_arrays():
     """`top_pairs` gives the sets of `top` (same order, pairs ascending by global index, same
     scores) as arrays, for both orders."""
     g, labels, chosen, local = _long_strip()
-    ids = [f"g{i}" for i in range(len(g))]
-    clustering = HierarchicalClustering(g, ids, ClusteringConfig(sets_per_object=2))
-    for step, c in enumerate(chosen):
-        detections = {step: np.flatnonzero(labels == labels[c])}
-        clustering.update(local[: step + 1], [f"l{i}" for i in range(step + 1)], detections)
+    clustering, _ = _replay_against_literal(g, labels, chosen, local, ClusteringConfig())
     for largest_first in (False, True):
         sets = clustering.top(25, min_size=2, largest_first=largest_first)
         rows = clustering.top_pairs(25, min_size=2, largest_first=largest_first)
