@@ -18,7 +18,7 @@ import semloc
 PACKAGE = Path(semloc.__file__).parent
 CORE = {"maps", "pointsets", "transforms", "association", "clustering", "pose", "neighbours",
         "registration", "closed_form", "digests", "verification", "results", "decision", "localizer",
-        "confidence_model"}  # fmt: skip
+        "confidence_model", "_clustering_fast", "_verification_fast"}  # fmt: skip
 THIRD_PARTY_CORE = {"numpy", "scipy", "pydantic", "numba"}
 EXTRAS = ("open3d", "matplotlib", "dask", "distributed", "sklearn", "torch", "rerun")
 MAX_LOCAL_SEMLOC_IMPORTS = 10
@@ -75,6 +75,12 @@ def _check_imports(path: Path, allowed: set[str]) -> None:
 def test_core_imports_only_the_core():
     for name in CORE:
         _check_imports(PACKAGE / f"{name}.py", CORE)
+
+
+def test_the_top_level_is_the_core_alone():
+    """Applications (demo, pictures, recordings) live in `semloc.tools`, not beside the core."""
+    top = {path.stem for path in PACKAGE.glob("*.py")} - {"__init__", "__main__"}
+    assert top == CORE
 
 
 def test_open3d_is_imported_only_in_to_open3d():

@@ -6,14 +6,12 @@ l = semloc.load_map("local.json")
 r = semloc.localize(g, l)        # r.status, r.pose (4x4 T_global_local), r.hypotheses
 """
 
-from semloc import (
-    colors,  # label colours of pictures, exports, recordings (no plotting)
-    descriptors,  # registers the descriptor kinds (numpy only)
-)
+from semloc import descriptors  # registers the descriptor kinds (numpy only)
 from semloc.io import load_map, save_map
 from semloc.localizer import Localizer, LocalizerConfig, localize
 from semloc.maps import MapError, ObjectMap, SemanticObject
 from semloc.results import Hypothesis, Result, Step
+from semloc.tools import colors  # label colours of pictures, exports, recordings (no plotting)
 
 __version__ = "0.1.0"
 __all__ = [

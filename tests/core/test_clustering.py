@@ -8,17 +8,11 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from literal_clustering import LiteralClustering, pair_hash
 
+from semloc import _clustering_fast as kernels
 from semloc.clustering import (
     ClusteringConfig,
     HierarchicalClustering,
-    _candidate_keys,
-    _held,
     _kth_largest,
-    _renumbered,
-    _row_sizes,
-    _rows_of,
-    _stacked,
-    _window_starts,
     merge_metric,
 )
 from semloc.maps import ObjectMap, SemanticObject
@@ -288,12 +282,12 @@ def test_union_key_collisions_fall_back_to_exact_member_lists(monkeypatch):
     assert max(len(pairs) for pairs in expected) >= 3
     # every candidate's first key is 1, so the first key of a set is its size: sets of one
     # size collide, and only the second (independent) sum tells them apart
-    original = module._candidate_keys
+    original = module.candidate_keys
 
     def colliding(candidates):
         return np.ones(len(candidates), np.uint64), original(candidates)[1]
 
-    monkeypatch.setattr(module, "_candidate_keys", colliding)
+    monkeypatch.setattr(module, "candidate_keys", colliding)
     collided = final_sets()
     assert collided.keys() == expected.keys()
     for pairs, score in expected.items():
@@ -480,7 +474,7 @@ def _splitmix64_finaliser(x: int) -> int:
 @settings(max_examples=50, deadline=None)
 @given(st.lists(st.integers(0, 2**62 - 1), max_size=20))
 def test_candidate_keys_are_splitmix64_of_two_odd_and_even_counters(indices):
-    key, key2 = _candidate_keys(np.array(indices, dtype=np.int64))
+    key, key2 = kernels.candidate_keys(np.array(indices, dtype=np.int64))
     assert key.dtype == key2.dtype == np.uint64
     assert key.tolist() == [_splitmix64_finaliser(2 * i + 1) for i in indices]
     assert key2.tolist() == [_splitmix64_finaliser(2 * i + 2) for i in indices]
@@ -504,17 +498,19 @@ def test_pool_rows_stack_renumber_and_count_like_numpy(top_rows, bottom_rows):
     padded = [
         np.pad(m, ((0, 0), (0, width - m.shape[1])), constant_values=-1) for m in (top, bottom)
     ]
-    assert np.array_equal(_stacked(top, bottom), np.vstack(padded))
+    assert np.array_equal(kernels.stacked(top, bottom), np.vstack(padded))
     index = np.arange(10, dtype=np.int64)[::-1] * 3
-    assert np.array_equal(_renumbered(bottom, index), np.where(bottom >= 0, index[bottom], -1))
-    assert _row_sizes(bottom).tolist() == (bottom >= 0).sum(axis=1).tolist()
-    held = np.zeros(12, dtype=bool)
-    held[bottom[bottom >= 0]] = True
-    assert np.array_equal(_held(bottom, 12), held)
+    assert np.array_equal(
+        kernels.renumbered(bottom, index), np.where(bottom >= 0, index[bottom], -1)
+    )
+    assert kernels.row_sizes(bottom).tolist() == (bottom >= 0).sum(axis=1).tolist()
+    is_held = np.zeros(12, dtype=bool)
+    is_held[bottom[bottom >= 0]] = True
+    assert np.array_equal(kernels.held(bottom, 12), is_held)
     table = np.arange(30, dtype=float).reshape(10, 3)
     owner = np.arange(10) * 7 % 10  # candidate -> object row
-    which = np.flatnonzero(held)
-    assert np.array_equal(_rows_of(table, owner, which), table[owner[which]])
+    which = np.flatnonzero(is_held)
+    assert np.array_equal(kernels.rows_of(table, owner, which), table[owner[which]])
 
 
 @settings(max_examples=80, deadline=None)
@@ -544,7 +540,9 @@ def test_sweep_windows_start_where_a_binary_search_would(
     by_local = everyone[order][np.argsort(cand_l[everyone[order]], kind="stable")]
     starts = np.concatenate([[0], np.cumsum(np.bincount(cand_l, minlength=n_local))])
     sorted_x = global_xyz[cand_g[by_local], axis]
-    window = _window_starts(added, cand_g, cand_l, global_xyz, reach, axis, order, starts, sorted_x)
+    window = kernels.window_starts(
+        added, cand_g, cand_l, global_xyz, reach, axis, order, starts, sorted_x
+    )
     for i, x in enumerate(added):
         la = cand_l[x]
         for lb in range(n_local):

@@ -18,13 +18,13 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import semloc
-from semloc.display import DISPLAY_LENGTH, for_matplotlib, for_rich, printable, shorten
 from semloc.io import load_map, save_map, write_atomic, write_files
 from semloc.io.importers.scannet import read_segments
 from semloc.io.native import MAX_FILE_BYTES, MAX_JSON_BYTES, parse_json
 from semloc.io.ply import read_ply
 from semloc.localizer import Localizer, localize
 from semloc.maps import MAX_LABEL_LENGTH, MapError, ObjectMap, SemanticObject
+from semloc.tools.display import DISPLAY_LENGTH, for_matplotlib, for_rich, printable, shorten
 
 HOSTILE = st.one_of(
     st.none(), st.booleans(), st.text(max_size=4), st.integers(-(10**30), 10**30),

@@ -1,4 +1,4 @@
-"""The demo on a real scan (semloc.scandemo): localizes, writes its files, clear errors.
+"""The demo on a real scan (semloc.tools.scandemo): localizes, writes its files, clear errors.
 
 Needs the real samples (skips with a reason when absent); small images and few keyframes keep
 it short, the default settings are checked by running `semloc demo --scan` itself.
@@ -14,11 +14,11 @@ import numpy as np
 import pytest
 from rich.console import Console
 
-from semloc import scandemo
 from semloc.eval.datasets import real_data_dir, real_sample
 from semloc.io import write_atomic
 from semloc.maps import MapError
-from semloc.scandemo import ScanDemoConfig, resolve_scan, run_scan_demo
+from semloc.tools import scandemo
+from semloc.tools.scandemo import ScanDemoConfig, resolve_scan, run_scan_demo
 
 
 def test_scan2cad_demo_localizes_against_the_cad_map(tmp_path):

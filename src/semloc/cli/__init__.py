@@ -28,9 +28,9 @@ from semloc.cli.app import CliError, app
 from semloc.cli import simulation, localize, datasets, export, bench, descriptors, config  # noqa: F401, E402
 
 # isort: on
-from semloc.display import printable
 from semloc.io.native import interrupts_wait
 from semloc.maps import MapError
+from semloc.tools.display import printable
 
 
 class Interrupted(BaseException):

@@ -12,12 +12,12 @@ import typer
 from semloc.cli.app import app, choices, console, fail
 from semloc.cli.files import check_finite, check_output, read_pose
 from semloc.cli.options import DescribeOption, with_descriptors
-from semloc.display import for_rich
 from semloc.io import importers, load_map
 from semloc.io.importers import IMPORTERS
 from semloc.io.native import map_files, write_files
 from semloc.maps import MapError
 from semloc.sim.crop import crop_truth_to_dict, crop_with_truth
+from semloc.tools.display import for_rich
 
 ConvertKind = choices("ConvertKind", IMPORTERS)
 _SOURCE_HELP = "; ".join(f"{name}: {imp.source_help}" for name, imp in IMPORTERS.items())

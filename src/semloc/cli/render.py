@@ -1,6 +1,6 @@
 """Rich rendering of what the commands print: a Result, its ground-truth check, progress.
 
-User text (ids, labels, file names) goes through `semloc.display.for_rich`: shortened and with
+User text (ids, labels, file names) goes through `semloc.tools.display.for_rich`: shortened and with
 rich markup escaped."""
 
 from __future__ import annotations
@@ -14,11 +14,11 @@ from rich.markup import escape
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
-from semloc.demo import STATUS_STYLE
-from semloc.display import for_rich
 from semloc.eval.success import ROTATION_TOLERANCE_DEG, TRANSLATION_TOLERANCE_M
 from semloc.maps import ObjectMap
 from semloc.results import Result
+from semloc.tools.demo import STATUS_STYLE
+from semloc.tools.display import for_rich
 
 LONG_REPLAY = 10
 """Replays of at least this many updates show a progress bar (on a terminal)."""

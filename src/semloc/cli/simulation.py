@@ -21,14 +21,14 @@ from semloc.cli.options import (
     PathChoice,
     parse_resolution,
 )
-from semloc.demo import DemoConfig, run_demo
-from semloc.display import for_rich
 from semloc.io import load_map
 from semloc.io.native import staged_folder
-from semloc.scandemo import ScanDemoConfig, run_scan_demo
 from semloc.sim.export import write_sequence
 from semloc.sim.noise import DetectionNoise
 from semloc.sim.scenario import simulate_sequence
+from semloc.tools.demo import DemoConfig, run_demo
+from semloc.tools.display import for_rich
+from semloc.tools.scandemo import ScanDemoConfig, run_scan_demo
 
 
 @app.command()
@@ -216,7 +216,7 @@ def view(
     alone = local_map is None and pose is None
     role = "local" if alone and _looks_local(map_file, objmap.name) else "global"
     if png is not None:
-        from semloc.viz import map_figure, plot_localization, save_figure  # matplotlib
+        from semloc.tools.viz import map_figure, plot_localization, save_figure  # matplotlib
 
         heading = title or f"{map_file.name}: {len(objmap)} objects" + (
             f" ({status[:20]})" if status else ""
@@ -226,7 +226,7 @@ def view(
                           map_role=role)  # fmt: skip
         console.print(f"wrote {for_rich(save_figure(fig, png), None)}")
     if rrd is not None:
-        from semloc.viz3d import write_localization  # rerun
+        from semloc.tools.viz3d import write_localization  # rerun
 
         written = write_localization(rrd, objmap, local_map, pose, pairs, truth)
         shown = for_rich(written, None)

@@ -29,7 +29,7 @@ from semloc.eval.report import comparison_figure, summary_table
 from semloc.io import write_atomic
 from semloc.localizer import Localizer, LocalizerConfig
 from semloc.sim.realscan import load_real_scan, simulate_walk
-from semloc.viz import plot_scores, save_figure
+from semloc.tools.viz import plot_scores, save_figure
 
 SCENES = {
     "scene0000_00": ("scannet/scene0000_00", ("reconstruction",)),

@@ -19,9 +19,9 @@ import numpy as np
 import rerun as rr
 from scipy.spatial.transform import Rotation
 
-from semloc.colors import label_colors, rgb
 from semloc.maps import ObjectMap
 from semloc.results import Result
+from semloc.tools.colors import label_colors, rgb
 
 MAX_POINTS_PER_OBJECT = 400
 """Points kept per object (evenly strided), to keep recordings small."""

@@ -22,7 +22,6 @@ from pydantic import BaseModel, ConfigDict, Field
 from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
-from semloc.demo import DemoResult, _report, localize_sequence
 from semloc.eval.datasets import real_data_dir
 from semloc.io.native import save_map, staged_folder, write_atomic
 from semloc.maps import MapError
@@ -30,6 +29,7 @@ from semloc.sim.noise import DetectionNoise
 from semloc.sim.realscan import RealScan, load_real_scan, simulate_walk
 from semloc.sim.scenario import SimulatedSequence
 from semloc.sim.sensor import check_resolution
+from semloc.tools.demo import DemoResult, _report, localize_sequence
 from semloc.transforms import pose_error
 
 
@@ -128,7 +128,7 @@ def write_outputs(
     out: Path, kind: str, scan: RealScan, demo: DemoResult, keyframes: list[int], statuses: list
 ) -> list[Path]:
     """scores.png, map.png, scan.png, result.json, ground_truth.json, global.json, local.json."""
-    from semloc.viz import (  # matplotlib (the pictures)
+    from semloc.tools.viz import (  # matplotlib (the pictures)
         label_colors,
         map_figure,
         new_figure,

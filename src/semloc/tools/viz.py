@@ -1,9 +1,9 @@
 """Plots (matplotlib, Agg backend): top-down maps, localization results, score curves, worlds.
 
 Every `plot_*` function draws into a given `Axes` and returns it; `save_figure` writes a PNG
-atomically (`semloc.io.write_atomic`).  Colours come from `semloc.colors` (one per label,
+atomically (`semloc.io.write_atomic`).  Colours come from `semloc.tools.colors` (one per label,
 the same in every picture, export and recording); axes are in metres with equal aspect.  Labels,
-ids and titles are user text: shown shortened and with `$` escaped (`semloc.display`).
+ids and titles are user text: shown shortened and with `$` escaped (`semloc.tools.display`).
 """
 
 from __future__ import annotations
@@ -24,10 +24,10 @@ from matplotlib.figure import Figure  # noqa: E402
 from matplotlib.lines import Line2D  # noqa: E402
 from matplotlib.patches import Patch, Polygon  # noqa: E402
 
-from semloc.colors import CLASS_COLORS, label_colors  # noqa: E402, F401 (re-exported)
-from semloc.display import for_matplotlib  # noqa: E402
 from semloc.io import write_atomic  # noqa: E402
 from semloc.maps import ObjectMap  # noqa: E402
+from semloc.tools.colors import CLASS_COLORS, label_colors  # noqa: E402, F401 (re-exported)
+from semloc.tools.display import for_matplotlib  # noqa: E402
 
 if TYPE_CHECKING:
     from semloc.sim.world import World
@@ -35,7 +35,7 @@ if TYPE_CHECKING:
 LEGEND_LABELS = 30
 """Most labels listed in a legend (the rest are counted)."""
 TITLE_LENGTH = 160
-"""Longest title shown (user text: shortened and escaped, `semloc.display`)."""
+"""Longest title shown (user text: shortened and escaped, `semloc.tools.display`)."""
 
 
 def new_figure(width: float = 9.0, height: float = 7.0) -> tuple[Figure, Axes]:
