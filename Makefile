@@ -3,7 +3,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: install demo test test-install lint bench clean
+.PHONY: install demo test test-install lint bench docs-numbers clean
 
 install: $(STAMP)
 
@@ -32,6 +32,10 @@ lint: install
 
 bench: install
 	$(BIN)/python benchmarks/bench_localize.py
+
+# Rerun the benchmarks behind the README's (and docs') result tables and rewrite them in place.
+docs-numbers: install
+	MPLCONFIGDIR=$${TMPDIR:-/tmp}/semloc-mpl $(BIN)/python benchmarks/readme_tables.py
 
 clean:
 	rm -rf $(VENV) demo_out .pytest_cache

@@ -10,11 +10,13 @@ Prints, per number of observed objects: top-1 and top-10 success, how often the 
 claims right / wrong, and the coverage (the share of attempts `localized` and right).
 
     python benchmarks/accuracy_core.py [--trials 50] [--buildings 3] [--gamma 0.8] [--tolerance 0.4]
+        [--markdown TABLE.md]
 """
 
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 import numpy as np
 from rich.console import Console
@@ -23,6 +25,7 @@ from rich.table import Table
 
 import semloc
 from semloc.eval.success import first_correct_rank
+from semloc.io import write_atomic
 from semloc.sim.layouts import layout, observe
 
 
@@ -44,6 +47,7 @@ def main() -> None:
     parser.add_argument("--sizes", type=int, nargs="+", default=[3, 4, 5, 6, 8, 10])
     parser.add_argument("--gamma", type=float, default=0.8)
     parser.add_argument("--tolerance", type=float, default=0.4)
+    parser.add_argument("--markdown", type=Path, help="also write the table to this file")
     parser.add_argument(
         "--rank-by", default="evidence", choices=["evidence", "residual", "score", "fitness"]
     )
@@ -56,32 +60,45 @@ def main() -> None:
         distance_tolerance=args.tolerance,
         rank_by=args.rank_by,
     )
+    cells = table_rows(rows)
     table = Table(title=f"success at 15° / 0.5 m (γ={args.gamma}, ε={args.tolerance} m)")
-    columns = ("observed", "attempts", "top-1", "top-10", "localized", "localized & right",
-               "claims right / wrong", "coverage")  # fmt: skip
-    for column in columns:
+    for column in COLUMNS:
         table.add_column(column, justify="right")
-    pooled = []
-    for n, results in rows.items():
+    for row in cells:
+        table.add_row(*row)
+    Console(width=120).print(table)
+    if args.markdown is not None:
+        lines = ["| " + " | ".join(COLUMNS) + " |", "|" + "---:|" * len(COLUMNS)]
+        write_atomic(
+            args.markdown, "\n".join(lines + ["| " + " | ".join(r) + " |" for r in cells]) + "\n"
+        )
+
+
+COLUMNS = ("observed objects", "attempts", "top-1", "top-10", "localized", "claims right / wrong",
+           "precision", "coverage")  # fmt: skip
+
+
+def table_rows(rows: dict[int, list]) -> list[list[str]]:
+    """Per number of observed objects, then pooled over >= 5: the cells of `COLUMNS`."""
+    groups = [(str(n), results) for n, results in rows.items()]
+    pooled = [r for n, results in rows.items() if n >= 5 for r in results]
+    if pooled and len(groups) > 1:
+        groups.append(("≥ 5 (pooled)", pooled))
+    out = []
+    for name, results in groups:
         ranks = [r for r, _ in results]
-        localized = [r == 1 for r, s in results if s == "localized"]
-        if n >= 5:
-            pooled += results
-        table.add_row(
-            str(n),
+        claims = [r == 1 for r, s in results if s == "localized"]
+        out.append([
+            name,
             str(len(results)),
             f"{np.mean([r == 1 for r in ranks]):.0%}",
             f"{np.mean([r is not None for r in ranks]):.0%}",
-            f"{len(localized) / len(results):.0%}",
-            f"{np.mean(localized):.0%}" if localized else "-",
-            f"{sum(localized)} / {len(localized) - sum(localized)}",
-            f"{sum(localized) / len(results):.0%}",
-        )
-    Console(width=120).print(table)
-    if pooled:
-        top1 = np.mean([r == 1 for r, _ in pooled])
-        top10 = np.mean([r is not None for r, _ in pooled])
-        Console().print(f">= 5 observed objects: top-1 {top1:.0%}, top-10 {top10:.0%}")
+            f"{len(claims) / len(results):.0%}",
+            f"{sum(claims)} / {len(claims) - sum(claims)}",
+            f"{np.mean(claims):.1%}" if claims else "-",
+            f"{sum(claims) / len(results):.0%}",
+        ])  # fmt: skip
+    return out
 
 
 if __name__ == "__main__":

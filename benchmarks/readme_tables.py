@@ -1,0 +1,217 @@
+"""Rerun the benchmarks behind the README's result tables and rewrite those tables in place.
+
+Each table of README.md (and of a few docs pages) sits between `<!-- table: NAME -->` and `<!-- /table -->`; this script
+runs the benchmark that makes it (each benchmark once, also when it feeds two tables), takes the
+table from the benchmark's markdown output (some rows and columns of it) and writes it back
+between the markers with the command that reproduces it, so the README is current after every
+change without hand-editing.  Everything: about 25 minutes on 2 cores.
+
+    python benchmarks/readme_tables.py [--only real-layouts trust ...] [--dry-run]
+
+The real-layout tables need the real data samples (`SEMLOC_DATA` or `../shared/data/real`);
+without them those tables are left as they are and the script says so.
+"""
+
+from __future__ import annotations
+
+import argparse
+import re
+import subprocess
+import sys
+import tempfile
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+PYTHON = "python"  # as the README shows the commands; run with this interpreter
+
+
+@dataclass(frozen=True)
+class Job:
+    """A benchmark run: its command as a user types it (`{out}`: where it writes markdown), and
+    the markdown file it writes, relative to `{out}`'s folder."""
+
+    command: str
+    report: str = "table.md"
+
+    def shown(self) -> str:
+        """The command as the pages show it: without the markdown file it writes for us."""
+        return self.command.replace(" --markdown {out}", "").replace(
+            "--out {out}", "--out bench_full"
+        )
+
+
+@dataclass(frozen=True)
+class TableSpec:
+    """Which table of a job's report goes into the README, and which of its rows and columns."""
+
+    job: str
+    index: int  # the index-th markdown table of the report
+    keep_row: Callable[[dict[str, str]], bool] = lambda row: True
+    columns: tuple[str, ...] = ()  # headers to keep, in order (empty: all)
+    file: str = "README.md"  # the page that shows it, relative to the repository's root
+
+
+JOBS = {
+    "real": Job(
+        "python benchmarks/real_layouts.py --crops 100 --variants 20 --seed 0 --markdown {out}"
+    ),
+    "buildings": Job("python benchmarks/accuracy_core.py --trials 40 --markdown {out}"),
+    "speed": Job("PYTHONPATH=src python benchmarks/bench_speed.py --views 8 --markdown {out}"),
+    "bench": Job(
+        "semloc bench --methods semloc,clipper,random-walk,segmatch,fpfh-ransac,semloc+geometric,"
+        "semloc+voxnet --out {out}",
+        report="report.md",
+    ),
+}
+
+TABLES = {
+    "real-layouts": TableSpec(
+        "real",
+        0,
+        lambda r: r["observed objects"] == "all" or r["runs"] == "1",
+        ("check", "observed objects", "runs", "top-1", "top-10", "localized", "wrongly localized"),
+    ),
+    "buildings": TableSpec("buildings", 0),
+    "trust": TableSpec(
+        "real",
+        1,
+        lambda r: r["objects"] in {"all", ">= 5"},
+        (
+            "variant",
+            "objects",
+            "runs",
+            "top-1",
+            "top-10",
+            "claims right",
+            "claims wrong",
+            "precision",
+            "coverage",
+        ),
+    ),  # fmt: skip
+    "speed": TableSpec(
+        "speed",
+        0,
+        columns=(
+            "map",
+            "objects",
+            "map prepared once, ms",
+            "localization ms (median / p90 / max)",
+            "update ms (median / p90 / max)",
+            "peak MB",
+            "success",
+        ),
+    ),  # fmt: skip
+    "comparison": TableSpec("bench", 0),
+    "variants": TableSpec("real", 1, file="docs/trust.md"),
+    "crops": TableSpec("real", 0, file="docs/real_layouts.md"),
+    "recall": TableSpec("bench", 0, file="docs/benchmark.md"),
+    "claims": TableSpec("bench", 1, file="docs/benchmark.md"),
+}
+
+
+def markdown_tables(text: str) -> list[list[list[str]]]:
+    """The markdown tables of `text`, each as rows of cells (header first, no separator)."""
+    tables: list[list[list[str]]] = []
+    current: list[list[str]] = []
+    for line in [*text.splitlines(), ""]:
+        if line.startswith("|"):
+            cells = [c.strip() for c in line.strip().strip("|").split("|")]
+            if not all(re.fullmatch(r":?-+:?", c) for c in cells):
+                current.append(cells)
+        elif current:
+            tables.append(current)
+            current = []
+    return tables
+
+
+def select(table: list[list[str]], spec: TableSpec) -> list[list[str]]:
+    """The rows `spec` keeps (header always) and its columns, in its order."""
+    header, body = table[0], table[1:]
+    rows = [row for row in body if spec.keep_row(dict(zip(header, row)))]
+    if not spec.columns:
+        return [header, *rows]
+    missing = [c for c in spec.columns if c not in header]
+    if missing:
+        raise SystemExit(f"readme_tables: the report has no column {missing}")
+    index = [header.index(c) for c in spec.columns]
+    return [[row[i] for i in index] for row in [header, *rows]]
+
+
+def as_markdown(rows: list[list[str]]) -> str:
+    lines = ["| " + " | ".join(rows[0]) + " |", "|" + "---|" * len(rows[0])]
+    return "\n".join([*lines, *("| " + " | ".join(r) + " |" for r in rows[1:])])
+
+
+def replace_table(readme: str, name: str, body: str) -> str:
+    """`readme` with the text between the markers of table `name` replaced by `body`."""
+    pattern = re.compile(rf"(<!-- table: {re.escape(name)} -->\n).*?(<!-- /table -->)", re.S)
+    if not pattern.search(readme):
+        raise SystemExit(f"readme_tables: README has no markers for table {name!r}")
+    return pattern.sub(lambda m: m.group(1) + body + "\n" + m.group(2), readme, count=1)
+
+
+def run_job(job: Job, folder: Path) -> str | None:
+    """Run the job (from the repository root) and return its markdown report, or None when
+    it could not run (missing real data: exit status 2)."""
+    out = folder / "out" if job.report != "table.md" else folder / "table.md"
+    command = job.command.format(out=out)
+    command = command.replace("python ", f"{sys.executable} ", 1)
+    command = command.replace("semloc bench", f"{sys.executable} -m semloc bench", 1)
+    print(f"$ {job.shown()}", file=sys.stderr)
+    done = subprocess.run(command, shell=True, cwd=ROOT)
+    if done.returncode == 2:
+        return None
+    if done.returncode != 0:
+        raise SystemExit(f"readme_tables: {job.command} failed (exit {done.returncode})")
+    report = out / job.report if job.report != "table.md" else out
+    return report.read_text(encoding="utf-8")
+
+
+def rewritten(readme: str, names: list[str], reports: dict[str, str | None]) -> str:
+    for name in names:
+        spec = TABLES[name]
+        report = reports.get(spec.job)
+        if report is None:
+            print(
+                f"readme_tables: {name} left as it was (its benchmark did not run)", file=sys.stderr
+            )
+            continue
+        tables = markdown_tables(report)
+        if len(tables) <= spec.index:
+            raise SystemExit(f"readme_tables: the report of {spec.job} has no table {spec.index}")
+        body = f"`{JOBS[spec.job].shown()}`\n\n" + as_markdown(select(tables[spec.index], spec))
+        readme = replace_table(readme, name, body)
+    return readme
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--only", nargs="+", choices=sorted(TABLES), help="these tables only")
+    parser.add_argument("--root", type=Path, default=ROOT, help="the pages' repository root")
+    parser.add_argument("--dry-run", action="store_true", help="print, do not rewrite")
+    args = parser.parse_args(argv)
+    names = args.only or list(TABLES)
+    with tempfile.TemporaryDirectory() as tmp:
+        reports = {}
+        for job in dict.fromkeys(TABLES[n].job for n in names):
+            folder = Path(tmp) / job
+            folder.mkdir()
+            reports[job] = run_job(JOBS[job], folder)
+    for page in dict.fromkeys(TABLES[n].file for n in names):
+        path = args.root / page
+        mine = [n for n in names if TABLES[n].file == page]
+        text = rewritten(path.read_text(encoding="utf-8"), mine, reports)
+        if args.dry_run:
+            print(text)
+            continue
+        partial = path.with_name(f".{path.name}.partial")
+        partial.write_text(text, encoding="utf-8")
+        partial.replace(path)
+        print(f"rewrote {len(mine)} table(s) of {page}", file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
