@@ -59,6 +59,7 @@ JOBS = {
     ),
     "buildings": Job("python benchmarks/accuracy_core.py --trials 40 --markdown {out}"),
     "speed": Job("PYTHONPATH=src python benchmarks/bench_speed.py --views 8 --markdown {out}"),
+    "align": Job("PYTHONPATH=src python benchmarks/bench_align.py --trials 5 --markdown {out}"),
     "bench": Job(
         "semloc bench --methods semloc,clipper,random-walk,segmatch,fpfh-ransac,semloc+geometric,"
         "semloc+voxnet --out {out}",
@@ -106,6 +107,7 @@ TABLES = {
     "comparison": TableSpec("bench", 0),
     "variants": TableSpec("real", 1, file="docs/trust.md"),
     "crops": TableSpec("real", 0, file="docs/real_layouts.md"),
+    "align": TableSpec("align", 0, file="docs/alignment.md"),
     "recall": TableSpec("bench", 0, file="docs/benchmark.md"),
     "claims": TableSpec("bench", 1, file="docs/benchmark.md"),
 }

@@ -7,9 +7,12 @@ import sys
 from pathlib import Path
 from types import ModuleType
 
+import numpy as np
 import pytest
 
 from semloc.eval.datasets import real_sample
+from semloc.maps import ObjectMap, SemanticObject
+from semloc.transforms import yaw_pose as _yaw_pose
 
 
 def real_sample_or_skip(*parts: str) -> Path:
@@ -29,3 +32,27 @@ def benchmark_script(name: str) -> ModuleType:
     sys.modules[name] = module
     spec.loader.exec_module(module)
     return module
+
+
+# Two sessions of one hand-built room (alignment tests) -----------------------------------
+LABELS = ["chair", "table", "lamp", "sofa", "bin", "shelf", "plant", "tv"]
+T_A_B = _yaw_pose(2.1, [4.0, -7.5, 0.0])
+
+
+def room(n: int, seed: int = 3) -> ObjectMap:
+    """A hand-built irregular room of n objects (labels cycle, positions random, 1 m apart)."""
+    rng = np.random.default_rng(seed)
+    xyz: list[np.ndarray] = []
+    while len(xyz) < n:
+        p = np.append(rng.uniform(0, 4 + n / 4, 2), rng.uniform(0.2, 1.5))
+        if all(np.linalg.norm(p - q) > 1.0 for q in xyz):
+            xyz.append(p)
+    objects = [SemanticObject(f"a{i}", LABELS[i % len(LABELS)], p) for i, p in enumerate(xyz)]
+    return ObjectMap(objects, up=[0, 0, 1], name="A")
+
+
+def second_session(a: ObjectMap, keep: slice = slice(None)) -> ObjectMap:
+    """Objects of A (those in `keep`) in B's own frame, with B's own ids."""
+    to_b = np.linalg.inv(T_A_B)
+    objects = [o.transformed(to_b).replace(id=o.id.replace("a", "b")) for o in list(a)[keep]]
+    return ObjectMap(objects, up=[0, 0, 1], name="B")

@@ -7,6 +7,7 @@ r = semloc.localize(g, l)        # r.status, r.pose (4x4 T_global_local), r.hypo
 """
 
 from semloc import descriptors  # registers the descriptor kinds (numpy only)
+from semloc.alignment import AlignmentConfig, align
 from semloc.io import load_map, save_map
 from semloc.localizer import Localizer, LocalizerConfig, localize
 from semloc.maps import MapError, ObjectMap, SemanticObject
@@ -15,6 +16,7 @@ from semloc.tools import colors  # label colours of pictures, exports, recording
 
 __version__ = "0.1.0"
 __all__ = [
+    "AlignmentConfig",
     "Hypothesis",
     "Localizer",
     "LocalizerConfig",
@@ -24,6 +26,7 @@ __all__ = [
     "SemanticObject",
     "Step",
     "__version__",
+    "align",
     "colors",
     "descriptors",
     "load_map",

@@ -65,6 +65,12 @@ Where the paper is silent (see also DESIGN.md)
       h = 1.
     * When a re-detection moves a local object, the compatibility of its candidates is
       recomputed; sets that are no longer cliques are dropped and the others keep their score.
+    * Many objects at once (a whole second map, `semloc.align`): the candidates of one update
+      grow with its objects and their compatibility edges with its square, and every new set
+      may merge with every other, so the clustering itself does not bound that work.
+      `semloc.alignment` never gives it more than `whole_below` objects in one update: a
+      larger map is clustered in small seed views (the case the paper's rules are made for,
+      unchanged) and grown over the whole map by guided matching once a view has a pose.
 """
 
 from __future__ import annotations

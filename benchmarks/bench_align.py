@@ -1,0 +1,248 @@
+"""Map-to-map alignment (`semloc.align`): success, correspondences, time and memory by size.
+
+Second sessions are cut from a first map: the `n` objects nearest to a random object of it;
+the first map keeps `overlap` (uniform 30-100 %) of them and loses the others, those beyond a
+line across the second session's area (the first session did not get that far); the first map
+covers the second session's area and as far again around it (a building of identical rooms
+holds twins of everything beyond), all of them moved into a random frame of the second session
+(4-DoF about gravity; its origin within 3 m of its area, as where a robot started).  Variants: `clean`; `noisy` (centres and points shifted 0.1-0.3 m
+sideways, 5 % wrong labels); `moved` (a fifth of the shared objects moved 0.5-2 m with a new
+heading before the second session).  First maps: the real samples (ScanNet scene0000_00, Replica
+office4, 3RScan scene_1; with their points) and simulated buildings of 400 objects (64 box
+points per object) for the larger sessions.
+
+Success: the transform within 15° / 0.5 m, counted over the cases whose overlap holds at least
+5 unmoved objects.  Correspondences: precision and recall of the best hypothesis' pairs against
+the unmoved shared objects.  Times: CPU ms of `semloc.align` with the first map prepared once
+(a robot or server that holds it), one core; peak MB: tracemalloc's peak during one alignment.
+The CLIPPER-style baseline (`semloc.baselines.clipper`, B as one local map) runs on the same
+cases of the real samples (on the buildings its dense consistency graph of thousands of
+same-label candidates takes minutes per case).
+
+    PYTHONPATH=src python benchmarks/bench_align.py [--trials 5] [--sizes 15 30 60 150 300]
+        [--no-real] [--no-clipper] [--markdown TABLE.md]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+import tracemalloc
+from dataclasses import dataclass
+
+import numpy as np
+
+import semloc
+from semloc.baselines.clipper import ClipperBaseline
+from semloc.eval.datasets import real_data_dir
+from semloc.eval.success import is_success
+from semloc.eval.variants import variant_maps
+from semloc.localizer import Localizer
+from semloc.maps import ObjectMap
+from semloc.sim.layouts import layout
+from semloc.transforms import yaw_pose
+
+VARIANTS = ("clean", "noisy", "moved")
+MIN_SHARED = 5
+
+
+@dataclass
+class Case:
+    first: ObjectMap
+    second: ObjectMap
+    truth: np.ndarray  # T_first_second
+    pairs: set[tuple[str, str]]  # (first id, second id) of the unmoved shared objects
+
+
+@dataclass
+class Outcome:
+    source: str
+    size: int
+    variant: str
+    scored: bool  # the overlap holds >= MIN_SHARED unmoved objects
+    success: bool
+    precision: float
+    recall: float
+    ms: float
+    clipper_success: bool | None = None
+    clipper_ms: float | None = None
+
+
+def second_session(full: ObjectMap, n: int, variant: str, rng: np.random.Generator) -> Case:
+    """A second session of `n` objects of `full` in its own frame (see the module docstring)."""
+    centre = full.positions[rng.integers(len(full))]
+    near = np.argsort(np.linalg.norm(full.positions - centre, axis=1), kind="stable")[:n]
+    overlap = rng.uniform(0.3, 1.0)
+    side = full.positions[near, :2] @ _direction(rng)  # the first session did not get that far
+    beyond = near[np.argsort(side, kind="stable")[::-1][: round((1 - overlap) * len(near))]]
+    only_second = set(beyond.tolist())
+    # the first session covers the second one's area and as far again around it, not the whole
+    # building: the rest of a building of identical rooms would hold twins of every view
+    reach = 2.0 * np.linalg.norm(full.positions[near] - centre, axis=1).max()
+    covered = np.linalg.norm(full.positions - centre, axis=1) <= reach
+    first = full.with_objects(o for i, o in enumerate(full) if covered[i] and i not in only_second)
+    # the second session's frame starts within 3 m of its area, with any heading
+    origin = centre + np.append(rng.uniform(-3, 3, 2), -centre[2])
+    truth = yaw_pose(rng.uniform(-np.pi, np.pi), origin)
+    to_second = np.linalg.inv(truth)
+    labels = sorted(set(full.labels.tolist()))
+    objects, pairs = [], set()
+    for k, i in enumerate(near.tolist()):
+        obj = full[i]
+        moved = variant == "moved" and i not in only_second and rng.random() < 0.2
+        if moved:
+            step = np.append(_direction(rng) * rng.uniform(0.5, 2.0), 0.0)
+            spin = yaw_pose(rng.uniform(-np.pi, np.pi))
+            obj = obj.transformed(
+                yaw_pose(0.0, obj.position + step) @ spin @ yaw_pose(0.0, -obj.position)
+            )
+        if variant == "noisy":
+            obj = obj.transformed(
+                yaw_pose(0.0, np.append(_direction(rng) * rng.uniform(0.1, 0.3), 0))
+            )
+            if rng.random() < 0.05:
+                obj = obj.replace(label=str(rng.choice([x for x in labels if x != obj.label])))
+        obj = obj.transformed(to_second).replace(id=f"s{k}")
+        if i not in only_second and not moved:
+            pairs.add((full[i].id, obj.id))
+        objects.append(obj)
+    second = ObjectMap(objects, up=full.up, name="second")
+    return Case(first, second, truth, pairs)
+
+
+def _direction(rng: np.random.Generator) -> np.ndarray:
+    angle = rng.uniform(-np.pi, np.pi)
+    return np.array([np.cos(angle), np.sin(angle)])
+
+
+def run_case(source: str, case: Case, variant: str, clipper: bool) -> Outcome:
+    Localizer(case.first).prepare()
+    start = time.process_time()
+    result = semloc.align(case.first, case.second)
+    ms = (time.process_time() - start) * 1e3
+    found = set(result.hypotheses[0].pairs) if result.hypotheses else set()
+    right = len(found & case.pairs)
+    outcome = Outcome(
+        source, len(case.second), variant, len(case.pairs) >= MIN_SHARED,
+        result.pose is not None and is_success(result.pose, case.truth),
+        right / len(found) if found else 1.0, right / len(case.pairs) if case.pairs else 1.0, ms,
+    )  # fmt: skip
+    if clipper:
+        start = time.process_time()
+        answer = ClipperBaseline(case.first, local_up=case.second.up).update(list(case.second))
+        outcome.clipper_ms = (time.process_time() - start) * 1e3
+        outcome.clipper_success = answer.pose is not None and is_success(answer.pose, case.truth)
+    return outcome
+
+
+def peak_mb(case: Case) -> float:
+    tracemalloc.start()
+    semloc.align(case.first, case.second)
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    return peak / 2**20
+
+
+def first_maps(real: bool, seed: int) -> dict[str, ObjectMap]:
+    maps = {}
+    data = real_data_dir() if real else None
+    if data is not None:
+        maps.update(variant_maps(data))
+    for k in range(2):
+        maps[f"building-{k}"] = layout(400, seed=seed + k, points_per_object=64)
+    return maps
+
+
+def table(outcomes: list[Outcome], memory: dict[int, float]) -> str:
+    lines = [
+        "| objects | variant | cases | success | pairs precision / recall | median / p90 ms "
+        "| CLIPPER-style success | CLIPPER-style median ms | time ÷ CLIPPER | peak MB |",
+        "|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|",
+    ]
+    for size in sorted({o.size for o in outcomes}):
+        for variant in VARIANTS:
+            group = [o for o in outcomes if (o.size, o.variant) == (size, variant) and o.scored]
+            if not group:
+                continue
+            ms = [o.ms for o in group]
+            versus = [o for o in group if o.clipper_ms is not None]
+            ratio = "-"
+            clipper_success = clipper_ms = "-"
+            if versus:
+                mine = np.median([o.ms for o in versus])
+                theirs = np.median([o.clipper_ms for o in versus])
+                ratio = f"{mine / theirs:.2f}"
+                clipper_success = (
+                    f"{np.mean([o.clipper_success for o in versus]):.0%} ({len(versus)})"
+                )
+                clipper_ms = f"{theirs:.0f}"
+            lines.append(
+                f"| {size} | {variant} | {len(group)} | {np.mean([o.success for o in group]):.0%} | "
+                f"{np.mean([o.precision for o in group]):.0%} / {np.mean([o.recall for o in group]):.0%} | "
+                f"{np.median(ms):.0f} / {np.percentile(ms, 90):.0f} | {clipper_success} | "
+                f"{clipper_ms} | {ratio} | {memory.get(size, float('nan')):.1f} |"
+            )
+    return "\n".join(lines)
+
+
+def slope(outcomes: list[Outcome], key: str = "ms", above: int = 30) -> float:
+    """Log-log slope of the median `key` against the second map's size (sizes >= `above`)."""
+    sizes = sorted({o.size for o in outcomes if o.size >= above})
+    if len(sizes) < 2:
+        return float("nan")
+    medians = [np.median([getattr(o, key) for o in outcomes if o.size == s]) for s in sizes]
+    return float(np.polyfit(np.log(sizes), np.log(medians), 1)[0])
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--trials", type=int, default=5, help="cases per map, size and variant")
+    parser.add_argument("--sizes", type=int, nargs="+", default=[15, 30, 60, 150, 300])
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--no-real", action="store_true", help="simulated buildings only")
+    parser.add_argument("--no-clipper", action="store_true", help="semloc only")
+    parser.add_argument("--markdown", help="also write the table to this file")
+    args = parser.parse_args(argv)
+    if hasattr(os, "sched_setaffinity"):
+        os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})
+    start = time.perf_counter()
+    rng = np.random.default_rng(args.seed)
+    maps = first_maps(not args.no_real, args.seed)
+    warm = second_session(maps["building-0"], 20, "clean", np.random.default_rng(1))
+    semloc.align(warm.first, warm.second)  # loads the compiled code
+    outcomes, memory = [], {}
+    for size in args.sizes:
+        for source, full in maps.items():
+            if size > len(full):
+                continue
+            clipper = not args.no_clipper and not source.startswith("building")
+            for variant in VARIANTS:
+                for _ in range(args.trials):
+                    case = second_session(full, size, variant, rng)
+                    outcomes.append(run_case(source, case, variant, clipper))
+                    if size not in memory and source.startswith("building"):
+                        memory[size] = peak_mb(case)
+        print(f"done {size} objects", file=sys.stderr)
+    report = "\n\n".join(
+        [
+            "`PYTHONPATH=src python benchmarks/bench_align.py "
+            + " ".join(argv if argv is not None else sys.argv[1:])
+            + "` (success at 15° / 0.5 m over the cases whose overlap holds >= 5 unmoved objects)",
+            table(outcomes, memory),
+            f"log-log slope of the median time against the second map's size (>= 30 objects): "
+            f"{slope(outcomes):.2f}; cases not scored (overlap < 5 objects): "
+            f"{sum(not o.scored for o in outcomes)}; run time {time.perf_counter() - start:.0f} s",
+        ]
+    )
+    print(report)
+    if args.markdown:
+        from semloc.io import write_atomic
+
+        write_atomic(args.markdown, report + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,292 @@
+"""Map-to-map alignment: where a second object map B lies in a first map A.
+
+A second mapping session or a second robot brings a whole object map, every object at once.
+The Localizer is sized for a few new objects per update: the candidate pairs of one update grow
+with B's size and the compatibility edges among them with its square (see "Many objects at
+once" in `clustering.py`).  `align` bounds that work and keeps the paper's algorithm where it
+is cheap:
+
+1. **Seeds.**  A small B (at most `whole_below` objects) is one Localizer update with every
+   object: its hypotheses are the paper's algorithm's.  A larger B is localized in `views`
+   seed views: their centres are B's most distinctive objects (the fewest candidates in A: a
+   fridge anchors a view in the kitchen, where a chair fits every classroom), at least 3 m
+   apart, then spread by farthest-point sampling; each holds the `view_size` objects of B
+   nearest to its centre and is one Localizer update against A (clustering, verification,
+   pose recovery): a local map like a robot's, the case the Localizer is made for.
+2. **Growth by guided matching.**  Every distinct place of the seeds (the `per_view` best of
+   each view) places all of B in A's frame; each object of B is paired with the nearest object
+   of A it may be (the Localizer's candidates: labels, label map, descriptor gate), mutual
+   nearest within a radius, and the closed-form pose is refitted on the pairs; one pass per
+   radius of `match_radii`, wide to narrow.  In maps of repeated rooms a view fits several
+   places and the right one is rarely a view's best, but grown over B it pairs the most.
+3. **Decision.**  The grown places are ranked by their pairs (then centre residual) and merged
+   when they are the same place; each keeps the evidence features of the view that seeded it
+   with its grown pairs and residual, the shipped confidence model scores them against each
+   other and `decision.decide` gives the status, as for a localization; `localized` further
+   needs the best place to pair (1 + margin) times as many objects as any other place.
+
+Work: `views` localizations of `view_size` objects, then per seed place one pass over B's
+candidate pairs per radius: linear in B's size (and in the number of same-label objects of A).
+`pose_information` estimates the information matrix of the relative pose from the aligned
+pairs (a pose-graph edge).  Pure computation on numpy arrays.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field
+
+from semloc.association import CandidateIndex
+from semloc.decision import (
+    decide,
+    distinct,
+    local_anchor,
+    same_place,
+    score_confidence,
+    shipped_model,
+)
+from semloc.localizer import Localizer, LocalizerConfig
+from semloc.maps import ObjectMap
+from semloc.pose import align_positions
+from semloc.results import Hypothesis, Result, Step
+from semloc.transforms import centre_residual
+
+
+class AlignmentConfig(BaseModel):
+    """How a whole second map is aligned (see the module docstring)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    whole_below: int = Field(
+        24, ge=2, description="B with at most this many objects is one Localizer update."
+    )
+    views: int = Field(8, ge=1, description="Seed views of a larger B.")
+    view_size: int = Field(10, ge=3, description="Objects of B per seed view.")
+    per_view: int = Field(10, ge=1, description="Distinct places of each view that are tried.")
+    settled_pairs: int = Field(
+        8,
+        ge=3,
+        description="Views stop once the best grown place pairs this many objects and (1 + "
+        "margin)² times as many as any other place.",
+    )
+    match_radii: tuple[float, ...] = Field(
+        (2.0, 1.0, 0.6),
+        min_length=1,
+        description="Guided matching, one pass each: the farthest (m) a pair's centres may lie "
+        "apart (wide first: far from its view a seed's small rotation error moves B's objects "
+        "by metres).",
+    )
+
+
+def align(
+    a: ObjectMap,
+    b: ObjectMap,
+    config: LocalizerConfig | None = None,
+    alignment: AlignmentConfig | None = None,
+    **overrides: Any,
+) -> Result:
+    """Where B lies in A: a Result whose pose is T_A_B (p_A = R @ p_B + t), its pairs
+    (A id, B id) the correspondences, its status / confidence / reason as for `localize`."""
+    if not isinstance(a, ObjectMap) or not isinstance(b, ObjectMap):
+        raise TypeError("align needs two ObjectMaps")
+    return _Aligner(a, b, config, alignment or AlignmentConfig(), overrides).run()
+
+
+class _Aligner:
+    """One alignment of a larger B: seed views, growth, decision."""
+
+    def __init__(self, a, b, config, alignment: AlignmentConfig, overrides: dict) -> None:
+        self.localizer_args = (config, overrides)
+        probe = Localizer(a, config, local_up=b.up, **overrides)
+        self.config = probe.config
+        self.a, self.b, self.alignment = probe.global_map, b, alignment
+        index = CandidateIndex(self.a, self.config.association, probe.descriptor_gate)
+        candidates = [index.candidates(obj) for obj in b]
+        self.cand_b = np.repeat(np.arange(len(b)), [len(c) for c in candidates])
+        self.cand_a = np.concatenate([*candidates, np.zeros(0, dtype=int)]).astype(int)
+        self.b_xyz, self.a_xyz = b.positions, self.a.positions
+
+    def run(self) -> Result:
+        start = time.perf_counter()
+        timing = {"association": 0.0, "clustering": 0.0, "pose": 0.0, "growth": 0.0}
+        grown: list[Hypothesis] = []
+        tried = 0
+        for view in self._views():
+            seeds = self._seeds_of(view, timing)
+            tick = time.perf_counter()
+            for seed in seeds:
+                if not any(self._same_place(seed.pose, h.pose) for h in grown):
+                    tried += 1
+                    grown += [h for h in [self._grown(seed)] if h is not None]
+            timing["growth"] += (time.perf_counter() - tick) * 1e3
+            if self._settled(grown):
+                break
+        hypotheses = self._decided_places(grown)
+        status, reason = decide(hypotheses, self.config.decision, "residual")
+        if status == "localized":
+            status, reason = self._clearly_best(hypotheses)
+        if not hypotheses:
+            reason = "no view of the second map found a consistent set of 2 or more pairs"
+        timing["total"] = (time.perf_counter() - start) * 1e3
+        step = Step(step=0, n_local=len(self.b), n_sets=tried, ms=timing["total"],
+                    top_scores=[h.score for h in hypotheses][:10], status=status)  # fmt: skip
+        return Result.of(status, hypotheses[: self.config.top_k], [step], timing, reason)
+
+    def _views(self) -> list[np.ndarray]:
+        """B whole when it is small, else its seed views (see the module docstring)."""
+        if len(self.b) <= self.alignment.whole_below:
+            return [np.arange(len(self.b))]
+        rarity = np.bincount(self.cand_b, minlength=len(self.b))
+        rarity = np.where(rarity == 0, np.iinfo(np.int64).max, rarity)  # no candidate: last
+        return seed_views(self.b_xyz, self.alignment.views, self.alignment.view_size, rarity)
+
+    def _seeds_of(self, view: np.ndarray, timing: dict[str, float]) -> list[Hypothesis]:
+        """The distinct places (with a pose) of one view's localization, best first."""
+        config, overrides = self.localizer_args
+        localizer = Localizer(self.a, config, local_up=self.b.up, **overrides)
+        result = localizer.update([self.b[int(i)] for i in view])
+        assert result is not None
+        for stage in ("association", "clustering", "pose"):
+            timing[stage] += result.timing_ms.get(stage, 0.0)
+        return [h for h in result.hypotheses[: self.alignment.per_view] if h.pose is not None]
+
+    def _same_place(self, pose: np.ndarray, other: np.ndarray) -> bool:
+        return same_place(((), pose), ((), other), self.config.decision, local_anchor(self.b_xyz))
+
+    def _settled(self, grown: list[Hypothesis]) -> bool:
+        """Whether more views are not needed: the best grown place pairs at least
+        `settled_pairs` objects and (1 + margin)² times as many as any other place."""
+        if not grown:
+            return False
+        counts = sorted((len(h.pairs) for h in grown), reverse=True)
+        factor = (1.0 + self.config.decision.margin) ** 2
+        best = counts[0]
+        return best >= self.alignment.settled_pairs and all(best >= factor * c for c in counts[1:])
+
+    def _clearly_best(self, hypotheses: list[Hypothesis]) -> tuple[str, str]:
+        """`localized` only when no other place pairs nearly as many objects of B: in a
+        building of identical rooms a shifted pose pairs most of B too, and the confidence
+        model, fitted on a few objects, has not seen such rivals."""
+        best, factor = hypotheses[0], 1.0 + self.config.decision.margin
+        for rival in hypotheses[1:]:
+            if len(best.pairs) < factor * len(rival.pairs):
+                return "ambiguous", (
+                    f"a rival place pairs nearly as many objects: rank {rival.rank} with "
+                    f"{len(rival.pairs)} pairs against {len(best.pairs)}"
+                )
+        return "localized", ""
+
+    def _grown(self, seed: Hypothesis) -> Hypothesis | None:
+        """The seed's place grown over all of B by guided matching; None if it has < 2 pairs."""
+        pose = seed.pose
+        pairs = np.zeros((0, 2), dtype=int)
+        for radius in self.alignment.match_radii:
+            found = self._matches(pose, radius)
+            if len(found) < 2:
+                break
+            pairs = found
+            try:
+                pose = align_positions(
+                    self.b_xyz[pairs[:, 1]], self.a_xyz[pairs[:, 0]], self.b.up, self.a.up
+                )
+            except ValueError:  # under-determined: keep the last pose
+                break
+        if len(pairs) < 2:
+            return None
+        residual = centre_residual(pose, self.b_xyz[pairs[:, 1]], self.a_xyz[pairs[:, 0]])
+        features = None
+        if seed.features is not None:
+            features = {**seed.features, "pairs": float(len(pairs)), "residual": residual,
+                        "support": 0.0}  # fmt: skip
+        return Hypothesis(
+            rank=0,
+            score=float(len(pairs)),
+            pairs=[(str(self.a.ids[g]), str(self.b.ids[l])) for g, l in pairs],
+            pose=pose,
+            fitness=None,  # the seed view's point fitness says little about the grown place
+            residual=residual,
+            method=f"seed view ({seed.method}) + guided matching",
+            features=features,
+        )
+
+    def _matches(self, pose: np.ndarray, radius: float) -> np.ndarray:
+        """(A index, B index) pairs under `pose`: each object of B with the nearest object of A
+        it may be within `radius`, one to one: a pair is kept when it is the closest of both
+        its objects (mutual nearest candidates)."""
+        moved = self.b_xyz @ pose[:3, :3].T + pose[:3, 3]
+        distance = np.linalg.norm(moved[self.cand_b] - self.a_xyz[self.cand_a], axis=1)
+        near = np.flatnonzero(distance < radius)
+        order = near[np.argsort(distance[near], kind="stable")]
+        first_of_b = order[np.unique(self.cand_b[order], return_index=True)[1]]
+        first_of_b = first_of_b[np.argsort(distance[first_of_b], kind="stable")]
+        mutual = first_of_b[np.unique(self.cand_a[first_of_b], return_index=True)[1]]
+        pairs = np.stack([self.cand_a[mutual], self.cand_b[mutual]], axis=1)
+        return pairs[np.lexsort((pairs[:, 1], pairs[:, 0]))]
+
+    def _decided_places(self, grown: list[Hypothesis]) -> list[Hypothesis]:
+        """Distinct places, most pairs first (then the smaller residual), ranked 1, 2, ... and
+        scored by the confidence model against each other."""
+        ordered = sorted(grown, key=lambda h: (-len(h.pairs), h.residual or 0.0))
+        anchor = local_anchor(self.b_xyz)
+        places = ((h.pairs, h.pose) for h in ordered)
+        kept = [ordered[i] for i in distinct(places, len(ordered), self.config.decision, anchor)]
+        for position, h in enumerate(kept, 1):
+            h.rank = position
+        score_confidence(kept, shipped_model(), self.config.decision.rival_overlap)
+        return kept
+
+
+def seed_views(
+    xyz: np.ndarray, views: int, size: int, rarity: np.ndarray | None = None, spacing: float = 3.0
+) -> list[np.ndarray]:
+    """`views` neighbourhoods of the points `xyz` (indices), each the `size` points nearest to
+    its centre.  Centres are the rarest points first (`rarity`: e.g. how many map objects each
+    may be; a rare object anchors a view in a distinctive place), at least `spacing` apart, then
+    farthest-point sampling for the rest."""
+    xyz = np.asarray(xyz, dtype=float).reshape(-1, 3)
+    if len(xyz) == 0:
+        return []
+    rarity = np.zeros(len(xyz)) if rarity is None else np.asarray(rarity, dtype=float)
+    centres: list[int] = []
+    nearest = np.full(len(xyz), np.inf)
+    for i in np.lexsort((np.arange(len(xyz)), rarity)):  # rarest first, stable
+        if len(centres) == min(views, len(xyz)):
+            break
+        if nearest[i] >= spacing:
+            centres.append(int(i))
+            nearest = np.minimum(nearest, np.linalg.norm(xyz - xyz[i], axis=1))
+    while len(centres) < min(views, len(xyz)):
+        centres.append(int(np.argmax(nearest)))
+        nearest = np.minimum(nearest, np.linalg.norm(xyz - xyz[centres[-1]], axis=1))
+    size = min(size, len(xyz))
+    return [
+        np.sort(np.argsort(np.linalg.norm(xyz - xyz[c], axis=1), kind="stable")[:size])
+        for c in centres
+    ]
+
+
+def pose_information(
+    pose: np.ndarray, local_xyz: np.ndarray, global_xyz: np.ndarray, floor: float = 0.01
+) -> np.ndarray:
+    """The 6x6 information matrix of `pose` (T_global_local) from its aligned pairs, in the
+    order (x, y, z, rotation about x, y, z) of a right perturbation exp(δ) of the pose: the
+    Gauss-Newton normal matrix J^T J / σ² of the centre residuals, σ² their mean squared
+    residual per axis (at least `floor` m, so that a perfect fit is not infinitely sure)."""
+    R, t = pose[:3, :3], pose[:3, 3]
+    local_xyz = np.asarray(local_xyz, dtype=float).reshape(-1, 3)
+    global_xyz = np.asarray(global_xyz, dtype=float).reshape(-1, 3)
+    residual = local_xyz @ R.T + t - global_xyz
+    sigma2 = max(float(np.mean(residual**2)), floor**2)
+    information = np.zeros((6, 6))
+    for p in local_xyz:
+        # d(R (p + δt + δθ × p)) = R δt - R [p]x δθ
+        J = np.hstack([R, -R @ _skew(p)])
+        information += J.T @ J
+    return information / sigma2
+
+
+def _skew(v: np.ndarray) -> np.ndarray:
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])

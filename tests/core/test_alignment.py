@@ -1,0 +1,121 @@
+"""Map-to-map alignment (semloc.align): the transform, every correspondence, the merged map,
+the pose-graph edge, and a second map that shares nothing."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from helpers import T_A_B, room, second_session
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import semloc
+from semloc.alignment import AlignmentConfig, pose_information, seed_views
+from semloc.io.g2o import edge_line, parse_edge
+from semloc.maps import ObjectMap, SemanticObject
+from semloc.tools.merge import merged_map
+from semloc.transforms import pose_error
+
+
+@pytest.mark.parametrize("n", [12, 40])  # one update with every object; seed views and growth
+def test_two_sessions_of_one_room_give_the_transform_and_every_correspondence(n):
+    a = room(n)
+    b = second_session(a)
+    result = semloc.align(a, b)
+    assert result.status == "localized" and result.reason == ""
+    rotation, translation = pose_error(result.pose, T_A_B)
+    assert rotation < 1e-6 and translation < 1e-6
+    assert sorted(result.hypotheses[0].pairs) == sorted((o.id, o.id.replace("a", "b")) for o in a)
+
+
+def test_a_partial_overlap_matches_only_the_shared_objects():
+    a = room(50)
+    b_objects = list(second_session(a, slice(20, 50)))
+    rng = np.random.default_rng(0)
+    extra = [SemanticObject(f"new{i}", "bed", rng.uniform(-30, -20, 3)) for i in range(5)]
+    b = ObjectMap([*b_objects, *extra], up=[0, 0, 1], name="B")
+    result = semloc.align(a, b, alignment=AlignmentConfig(whole_below=10))
+    assert result.status == "localized"
+    assert pose_error(result.pose, T_A_B)[1] < 1e-6
+    assert sorted(result.hypotheses[0].pairs) == sorted((f"a{i}", f"b{i}") for i in range(20, 50))
+
+
+def test_a_second_map_that_shares_nothing_fails_with_a_reason():
+    a = room(30)
+    others = [o.replace(label=f"other-{o.label}") for o in second_session(a)]
+    result = semloc.align(a, ObjectMap(others, up=[0, 0, 1]))
+    assert result.status == "failed" and result.pose is None
+    assert "view" in result.reason or "candidates" in result.reason
+
+
+def test_the_merged_map_has_each_object_once_with_its_provenance():
+    a = room(30)
+    b = ObjectMap(
+        [*second_session(a, slice(10, 30)), SemanticObject("a3", "bed", [50.0, 50.0, 0.5])],
+        up=[0, 0, 1],
+    )  # "a3" in B is another object than A's a3
+    result = semloc.align(a, b)
+    merged = merged_map(a, b.transformed(result.pose), result.hypotheses[0].pairs)
+    provenance = {o.id: o.extra["provenance"] for o in merged}
+    assert len(merged) == 30 + 1
+    assert provenance["a15"] == {"from": "both", "ids": ["a15", "b15"]}
+    assert provenance["a2"] == {"from": "A", "ids": ["a2"]}
+    assert provenance["B:a3"] == {"from": "B", "ids": ["a3"]}
+    np.testing.assert_allclose(merged.get("a15").position, a.get("a15").position, atol=1e-9)
+    np.testing.assert_allclose(
+        merged.get("B:a3").position, T_A_B[:3, :3] @ [50, 50, 0.5] + T_A_B[:3, 3]
+    )
+
+
+def test_fused_points_are_united_and_the_centre_re_estimated():
+    a = ObjectMap([SemanticObject("x", "chair", points=np.zeros((4, 3)))])
+    b = ObjectMap([SemanticObject("y", "chair", points=np.ones((4, 3)))])
+    fused = merged_map(a, b, [("x", "y")]).get("x")
+    assert len(fused.points) == 8
+    np.testing.assert_allclose(fused.position, [0.5, 0.5, 0.5])
+
+
+def test_the_g2o_edge_parses_back_to_the_transform_and_its_information():
+    a = room(20)
+    b = second_session(a)
+    pose = semloc.align(a, b).pose
+    local, glob = b.positions, a.positions
+    information = pose_information(pose, local, glob)
+    id_a, id_b, parsed, parsed_information = parse_edge(edge_line(pose, information, 3, 7))
+    assert (id_a, id_b) == (3, 7)
+    np.testing.assert_allclose(parsed, pose, atol=1e-7)
+    scale = np.array([1, 1, 1, 2, 2, 2.0])
+    np.testing.assert_allclose(parsed_information, information * np.outer(scale, scale), rtol=1e-7)
+    with pytest.raises(ValueError):
+        parse_edge("VERTEX_SE3:QUAT 0 0 0 0 0 0 0 1")
+
+
+def test_the_information_grows_with_the_pairs_and_is_symmetric_positive_definite():
+    a = room(20)
+    few = pose_information(np.eye(4), a.positions[:5], a.positions[:5])
+    many = pose_information(np.eye(4), a.positions, a.positions)
+    assert np.allclose(many, many.T) and np.linalg.eigvalsh(many).min() > 0
+    assert np.all(np.diag(many) > np.diag(few))
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    n=st.integers(1, 60),
+    views=st.integers(1, 10),
+    size=st.integers(3, 15),
+    seed=st.integers(0, 1000),
+)
+def test_seed_views_are_neighbourhoods_of_distinct_centres(n, views, size, seed):
+    xyz = np.random.default_rng(seed).uniform(-10, 10, (n, 3))
+    found = seed_views(xyz, views, size)
+    assert len(found) == min(views, n)
+    for view in found:
+        assert len(view) == min(size, n) and len(set(view.tolist())) == len(view)
+        outside = np.setdiff1d(np.arange(n), view)
+        # some member is the centre: no point outside the view is nearer to it than a member
+        assert any(
+            len(outside) == 0
+            or np.linalg.norm(xyz[view] - xyz[c], axis=1).max()
+            <= np.linalg.norm(xyz[outside] - xyz[c], axis=1).min()
+            for c in view
+        )
