@@ -8,7 +8,7 @@ from typing import Annotated
 import typer
 
 from semloc.baselines import DEFAULT_METHODS, VARIANTS
-from semloc.cli.app import app, console, fail
+from semloc.cli.app import MAX_SEED, app, console, fail
 from semloc.cli.extras import need
 from semloc.eval.protocol import BenchConfig
 from semloc.eval.report import claims_table, summary_table
@@ -36,7 +36,10 @@ def bench(
             min=1, max=512, help="Worker processes of the local cluster (default: all cores)."
         ),
     ] = None,
-    seed: Annotated[int, typer.Option(help="Seed of the worlds, start keyframes and methods.")] = 0,
+    seed: Annotated[
+        int,
+        typer.Option(min=0, max=MAX_SEED, help="Seed of the worlds, start keyframes and methods."),
+    ] = 0,
     methods: Annotated[
         str,
         typer.Option(

@@ -9,7 +9,7 @@ from typing import Annotated
 import numpy as np
 import typer
 
-from semloc.cli.app import app, choices, console, fail
+from semloc.cli.app import MAX_SEED, app, choices, console, fail
 from semloc.cli.files import check_finite, check_output, read_pose
 from semloc.cli.options import DescribeOption, with_descriptors
 from semloc.io import importers, load_map
@@ -54,7 +54,10 @@ def convert(
         bool, typer.Option(help="replica, 3rscan: keep unannotated/placeholder objects.")
     ] = False,
     voxel: Annotated[
-        float, typer.Option(help="Voxel edge (m) for downsampling object points; 0 keeps all.")
+        float,
+        typer.Option(
+            min=0, max=100, help="Voxel edge (m) for downsampling object points; 0 keeps all."
+        ),
     ] = 0.05,
     shapenet: Annotated[
         Path | None, typer.Option(help="scan2cad: ShapeNet root (default: ./shapenet nearby).")
@@ -70,7 +73,9 @@ def convert(
         Path | None,
         typer.Option(help="scan2cad: where to write the scan-derived map (default OUT.scan.json)."),
     ] = None,
-    seed: Annotated[int, typer.Option(help="Seed for sampled surface points.")] = 0,
+    seed: Annotated[
+        int, typer.Option(min=0, max=MAX_SEED, help="Seed for sampled surface points.")
+    ] = 0,
     descriptor: DescribeOption = None,
 ) -> None:
     """Convert a dataset scene into a semloc map (the formats: see KIND).
@@ -130,7 +135,9 @@ def crop(
             'file with a 4x4 T_global_local (a list of 4 rows, or {"T_global_local": ...}).'
         ),
     ] = "random",
-    seed: Annotated[int, typer.Option(help="Seed of the random transform.")] = 0,
+    seed: Annotated[
+        int, typer.Option(min=0, max=MAX_SEED, help="Seed of the random transform.")
+    ] = 0,
     recentre: Annotated[
         bool, typer.Option(help="Re-fit each object's centre and box to its visible points.")
     ] = False,
