@@ -44,14 +44,21 @@ def convert(
     label_map: Annotated[
         Path | None,
         typer.Option(
-            help="scannet: JSON {raw: label} or scannetv2-labels.combined.tsv mapping raw labels."
+            help="scannet: a JSON file {raw: label}, or ScanNet's label table (.tsv), mapping "
+            "raw labels."
         ),
     ] = None,
     include_structure: Annotated[
-        bool, typer.Option(help="Keep walls, floors and ceilings (left out by default).")
+        bool,
+        typer.Option(
+            "--include-structure", help="Keep walls, floors and ceilings (left out by default)."
+        ),
     ] = False,
     keep_unlabeled: Annotated[
-        bool, typer.Option(help="replica, 3rscan: keep unannotated/placeholder objects.")
+        bool,
+        typer.Option(
+            "--keep-unlabeled", help="replica, 3rscan: keep unannotated and placeholder objects."
+        ),
     ] = False,
     voxel: Annotated[
         float,
@@ -139,7 +146,10 @@ def crop(
         int, typer.Option(min=0, max=MAX_SEED, help="Seed of the random transform.")
     ] = 0,
     recentre: Annotated[
-        bool, typer.Option(help="Re-fit each object's centre and box to its visible points.")
+        bool,
+        typer.Option(
+            "--recentre", help="Re-fit each object's centre and box to its visible points."
+        ),
     ] = False,
     descriptor: DescribeOption = None,
 ) -> None:

@@ -6,6 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Annotated
 
+import numpy as np
 import typer
 from pydantic import ValidationError
 from rich.table import Table
@@ -21,8 +22,14 @@ from semloc.cli.options import (
     PathChoice,
     parse_resolution,
 )
+from semloc.eval.success import (
+    ROTATION_TOLERANCE_DEG,
+    TRANSLATION_TOLERANCE_M,
+    is_success,
+)
 from semloc.io import load_map
 from semloc.io.native import staged_folder
+from semloc.maps import ObjectMap
 from semloc.sim.export import write_sequence
 from semloc.sim.noise import DetectionNoise
 from semloc.sim.scenario import simulate_sequence
@@ -30,6 +37,7 @@ from semloc.sim.world import MAX_ROOMS
 from semloc.tools.demo import DemoConfig, run_demo
 from semloc.tools.display import for_rich
 from semloc.tools.scandemo import ScanDemoConfig, run_scan_demo
+from semloc.transforms import pose_error
 
 
 @app.command()
@@ -119,7 +127,10 @@ def simulate(
         bool, typer.Option(help="Also write the local map after every keyframe.")
     ] = True,
     perfect: Annotated[
-        bool, typer.Option(help="Perfect detections (no misses, confusions or mask errors).")
+        bool,
+        typer.Option(
+            "--perfect", help="Perfect detections (no misses, confusions or mask errors)."
+        ),
     ] = False,
     drift: Annotated[
         float, typer.Option(min=0, max=1, help="Odometry drift in metres per metre travelled.")
@@ -220,12 +231,12 @@ def view(
     if png is not None:
         from semloc.tools.viz import map_figure, plot_localization, save_figure  # matplotlib
 
-        heading = title or f"{map_file.name}: {len(objmap)} objects" + (
-            f" ({status[:20]})" if status else ""
-        )
+        heading = title or _heading(map_file, objmap, answer, truth)
+        rivals = answer.hypotheses[1:] if status == "ambiguous" else ()
         fig, ax = map_figure(objmap.positions[:, :2])
         plot_localization(ax, objmap, local_map, pose, pairs, true_pose=truth, title=heading,
-                          map_role=role)  # fmt: skip
+                          map_role=role, rivals=rivals, names=True,
+                          zoom=local_map is not None or bool(rivals))  # fmt: skip
         console.print(f"wrote {for_rich(save_figure(fig, png), None)}")
     if rrd is not None:
         from semloc.tools.viz3d import write_localization  # rerun
@@ -233,6 +244,22 @@ def view(
         written = write_localization(rrd, objmap, local_map, pose, pairs, truth)
         shown = for_rich(written, None)
         console.print(f"wrote {shown} (open with: rerun {shown})")
+
+
+def _heading(path: Path, objmap: ObjectMap, answer: ResultFile, truth: np.ndarray | None) -> str:
+    """The picture's title: the map, the answer's status and, with the truth, the pose error
+    and the paper's success at 15° / 0.5 m."""
+    heading = f"{path.name}: {len(objmap)} objects"
+    if answer.status:
+        heading += f" ({answer.status})"
+    if answer.pose is not None and truth is not None:
+        rotation, translation = pose_error(answer.pose, truth)
+        verdict = "success" if is_success(answer.pose, truth) else "failure"
+        heading += (
+            f"\nerror {rotation:.2f}°, {translation:.3f} m: {verdict} at "
+            f"{ROTATION_TOLERANCE_DEG:g}° / {TRANSLATION_TOLERANCE_M:g} m"
+        )
+    return heading
 
 
 def _looks_local(path: Path, name: str) -> bool:
