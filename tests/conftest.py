@@ -1,6 +1,9 @@
 """Shared test set-up: the tests folder on `sys.path` (for the helper modules below) and the
 fixtures several test packages use.
 
+numba compiles into a folder named after a hash of the package's sources (`numba_cache.py`:
+numba's own cache check misses changes in other modules a cached kernel calls).
+
 Helper modules: `format_fixtures.py` writes small dataset files in each importer's format;
 `helpers.py` holds small functions (real-data lookup that skips with a reason).  Yaw rotations
 and poses come from `semloc.transforms` (`yaw_rotation`, `yaw_pose`, `rigid`).
@@ -14,6 +17,10 @@ from pathlib import Path
 import pytest
 
 sys.path.insert(0, str(Path(__file__).parent))
+
+from numba_cache import use_fresh_cache  # noqa: E402
+
+NUMBA_CACHE = use_fresh_cache()  # before anything imports semloc (and so numba)
 
 from helpers import real_sample_or_skip  # noqa: E402
 

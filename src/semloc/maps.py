@@ -444,12 +444,22 @@ def _rgb(color: Any) -> np.ndarray:
 
 
 def unit_vector(value: Any, what: str = "up") -> np.ndarray:
-    """`value` (3 finite numbers, not all zero) scaled to length 1 without overflow."""
-    vector = _as_vector(value, 3, what, limit=np.finfo(float).max)
-    largest = np.abs(vector).max()
-    if largest < 1e-12:
+    """`value` (3 finite numbers within ±`MAX_COORDINATE`, not all zero) scaled to length 1.
+
+    A direction with larger entries is refused rather than rescaled: its length overflows
+    to infinity in plain arithmetic (1e308² = inf), the mark of a damaged file."""
+    vector = _numbers(value, what, "3")
+    if vector.shape != (3,):
+        raise MapError(f"{what} must have shape (3,), got {vector.shape}")
+    if not np.all(np.isfinite(vector)):
+        raise MapError(f"{what} has non-finite values")
+    if np.abs(vector).max() > MAX_COORDINATE:
+        raise MapError(
+            f"{what} {_brief(vector.tolist())} is too large to normalise (its length overflows); "
+            f"give a direction with entries within ±{MAX_COORDINATE:g}, e.g. [0, 0, 1]"
+        )
+    if np.abs(vector).max() < 1e-12:
         raise MapError(f"{what} must be a non-zero vector")
-    vector = vector / largest  # now the norm cannot overflow or underflow
     return vector / np.linalg.norm(vector)
 
 

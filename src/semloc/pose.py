@@ -126,7 +126,9 @@ class PoseConfig(BaseModel):
         description="Centres spread less than this (m; horizontally in 4-DoF, off their best line "
         "in 6-DoF) are treated as degenerate and resolved by the search when points exist.",
     )
-    seed: int = Field(0, description="Seed of the per-object point subsampling.")
+    seed: int = Field(
+        0, ge=0, le=2**32 - 1, description="Seed of the per-object point subsampling."
+    )
 
 
 @dataclass(frozen=True)

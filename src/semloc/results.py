@@ -82,7 +82,8 @@ class Result:
     """The answer after an update: status, best pose, ranked hypotheses and per-step records.
 
     `reason` says why an answer is `ambiguous` or `failed` (empty when `localized`); the pose
-    of an `ambiguous` result is the best candidate's, not a trusted answer."""
+    of an `ambiguous` result is the best candidate's, not a trusted answer: `pose_is_answer`
+    says which (the JSON carries it too)."""
 
     status: Status
     pose: np.ndarray | None
@@ -108,9 +109,23 @@ class Result:
     def best(self) -> Hypothesis | None:
         return self.hypotheses[0] if self.hypotheses else None
 
+    @property
+    def pose_is_answer(self) -> bool:
+        """Whether `pose` is a trusted answer (`localized`), not only the best candidate's."""
+        return self.status == "localized" and self.pose is not None
+
+    @property
+    def confidence(self) -> float | None:
+        """The calibrated probability that the best hypothesis is right (None without one)."""
+        return None if self.best is None else self.best.confidence
+
     def to_dict(self) -> dict[str, Any]:
+        confidence = self.confidence
         return {
             "status": self.status,
+            "reason": self.reason,
+            "confidence": None if confidence is None else round(confidence, 6),
+            "pose_is_answer": self.pose_is_answer,
             "pose": None if self.pose is None else np.round(self.pose, 9).tolist(),
             "hypotheses": [h.to_dict() for h in self.hypotheses],
             "steps": [s.to_dict() for s in self.steps],

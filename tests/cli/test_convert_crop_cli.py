@@ -104,7 +104,7 @@ def test_convert_mismatched_counts_exits_2(tmp_path, capsys):
     [
         (["convert", "3rscan", "{d}", "--shapenet", "x"], "--shapenet does not apply to 3rscan"),
         (["convert", "3rscan", "{d}", "--labels", "klingon"], "labels must be one of"),
-        (["convert", "3rscan", "{d}", "--voxel", "-1"], "voxel must be >= 0"),
+        (["convert", "3rscan", "{d}", "--voxel", "-1"], "--voxel"),
         (["convert", "blender", "{d}"], "blender"),
     ],
 )

@@ -119,15 +119,16 @@ def test_a_set_containing_the_other_is_not_merged():
 
 
 def test_incompatible_pair_blocks_the_whole_merge():
-    # {a,b} and {c} where h(a,c) fails although h(b,c) is perfect
+    # {a,b} and {c}: h(a,c) passes but h(b,c) fails, and that one pair blocks the merge
     g = [[0, 0, 0], [2, 0, 0], [4, 0, 0]]
     local = [[0, 0, 0], [2, 0, 0], [4.0, 1.9, 0]]
     hc = clustering(g)
     feed(hc, local, {0: [0], 1: [1], 2: [2]})
-    d_ac = np.hypot(4, 1.9)
-    assert merge_metric(4.0, d_ac) > 0.8 or True  # documented geometry
-    assert merge_metric(2.0, np.hypot(2, 1.9)) < 0.8  # h(b, c) fails
-    assert ((0, 0), (1, 1), (2, 2)) not in pair_sets(hc)
+    assert merge_metric(4.0, np.hypot(4, 1.9)) > 0.8  # h(a, c) = 0.90 passes
+    assert merge_metric(2.0, np.hypot(2, 1.9)) < 0.8  # h(b, c) = 0.72 fails
+    sets = pair_sets(hc)
+    assert ((0, 0), (2, 2)) in sets  # a and c alone do merge
+    assert ((0, 0), (1, 1), (2, 2)) not in sets
 
 
 def test_top_k_pruning_keeps_the_best_sets():

@@ -452,7 +452,7 @@ CONVERT_CASES: list[Case] = [
                 "-o",
                 str(f / "out.json"),
             ],
-            [],
+            ["gravity_dir"],
         ),
     ),
 ]

@@ -67,10 +67,22 @@ def test_map_schema_fields_hostile_values(tmp_path_factory, where, value, index,
 
 @QUIET
 @given(st.recursive(HOSTILE, lambda c: st.lists(c, max_size=3) | st.dictionaries(st.text(max_size=3), c, max_size=3), max_leaves=12))  # fmt: skip
-def test_parse_json_refuses_only_with_value_errors(document):
-    text = json.dumps(document)
-    parsed = parse_json(text)
-    assert json.dumps(parsed, sort_keys=True) is not None
+def test_parse_json_reads_back_what_json_writes(document):
+    """Every document `json.dumps` writes (with these values) is read back equal, except that
+    integers of more than 18 characters become floats (the reader's rule)."""
+    parsed = parse_json(json.dumps(document))
+    assert json.dumps(parsed) == json.dumps(_as_read(document))
+
+
+def _as_read(value):
+    """`value` as `parse_json` returns it: long integers as floats, the rest unchanged."""
+    if isinstance(value, list):
+        return [_as_read(v) for v in value]
+    if isinstance(value, dict):
+        return {k: _as_read(v) for k, v in value.items()}
+    if isinstance(value, int) and not isinstance(value, bool) and len(str(value)) > 18:
+        return float(value)
+    return value
 
 
 def test_parse_json_limits():
@@ -176,9 +188,22 @@ def test_object_limits_and_strict_types(change, message):
         SemanticObject(**{"id": "a", "label": "chair", "position": [0, 0, 0], **change})
 
 
-def test_up_is_normalised_without_overflow():
-    up = ObjectMap([], up=[1e308, 1e308, 0]).up
-    assert np.allclose(up, [2**-0.5, 2**-0.5, 0])
+def test_up_whose_length_overflows_is_refused():
+    """[1e308, 1e308, 0] has an infinite length in plain arithmetic: a damaged file, refused."""
+    with pytest.raises(MapError, match=r"up .* too large to normalise"):
+        ObjectMap([], up=[1e308, 1e308, 0])
+    assert np.allclose(ObjectMap([], up=[1e6, 1e6, 0]).up, [2**-0.5, 2**-0.5, 0])
+
+
+@given(st.lists(st.floats(allow_nan=False), min_size=3, max_size=3))
+def test_up_is_a_unit_vector_or_refused(up):
+    """Any three numbers: a finite unit vector, or one MapError naming `up`."""
+    try:
+        unit = ObjectMap([], up=up).up
+    except MapError as exc:
+        assert str(exc).startswith("up ")
+        return
+    assert np.all(np.isfinite(unit)) and abs(np.linalg.norm(unit) - 1) < 1e-12
 
 
 def test_files_over_the_size_limits_are_refused_before_reading(tmp_path):
@@ -201,13 +226,15 @@ def test_user_text_is_shortened_printable_and_escaped():
     assert shown.encode("utf-8") and shown.isprintable() and "\x1b" not in shown
 
 
-def test_huge_gravity_converts_to_a_unit_up(tmp_path):
-    """Replica `gravity_dir` [1e308, 1e308, 0] is normalised without overflow (not [-0,-0,-0])."""
+def test_huge_gravity_is_refused_in_one_line(tmp_path, capsys):
+    """Replica `gravity_dir` [1e308, 1e308, 0]: exit 2, one line naming the file and the key."""
     from semloc.cli import main
 
     scene = write_replica(tmp_path / "replica", gravity=(1e308, 1e308, 0.0))
-    assert main(["convert", "replica", str(scene), "-o", str(tmp_path / "m.json")]) == 0
-    assert np.allclose(load_map(tmp_path / "m.json").up, [-(0.5**0.5), -(0.5**0.5), 0], atol=1e-6)
+    assert main(["convert", "replica", str(scene), "-o", str(tmp_path / "m.json")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "'gravity_dir'" in err and str(scene) in err, err
+    assert not (tmp_path / "m.json").exists()
 
 
 def test_object_count_limit():

@@ -46,11 +46,9 @@ ACCEPTED = (
     "markup-id",
     "mathtext-label",
     "score-1e30",
-    "up-1e308",
     "npz-unreferenced-huge",
     "view-mathtext-title",
     "view-surrogate-title",
-    "convert-replica-gravity",
 )
 
 

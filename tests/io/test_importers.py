@@ -241,7 +241,9 @@ def test_replica_up_is_minus_gravity(tmp_path):
         (lambda d: d.pop("objects"), "missing key 'objects'"),
         (lambda d: d["objects"][1].pop("oriented_bbox"), r"objects\[1\]: missing key 'orient"),
         (lambda d: d["objects"][0]["oriented_bbox"]["abb"].pop("sizes"), "lacks 'sizes'"),
-        (lambda d: d.update(gravity_dir=[0, 0]), "'gravity_dir' must be 3 finite"),
+        (lambda d: d.update(gravity_dir=[0, 0]), r"'gravity_dir' must have shape \(3,\)"),
+        (lambda d: d.update(gravity_dir=[0, 0, 0]), "'gravity_dir' must be a non-zero vector"),
+        (lambda d: d.update(gravity_dir=[1e308, 1e308, 0]), "'gravity_dir' .* too large"),
     ],
 )
 def test_replica_bad_file(tmp_path, edit, message):

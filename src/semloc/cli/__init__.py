@@ -10,6 +10,7 @@ stderr and exit status 2, so that bad input never ends in a traceback.
 from __future__ import annotations
 
 import os
+import re
 import signal
 import sys
 import threading
@@ -168,7 +169,7 @@ def main(argv: list[str] | None = None) -> int:
     except Exception as exc:
         # click (vendored by typer) usage errors: one line, status 2 like click's own
         if hasattr(exc, "format_message") and hasattr(exc, "exit_code"):
-            return _error(exc.format_message())
+            return _error(_usage_message(exc))
         cause = _interrupt_behind(exc)
         if cause is not None:  # e.g. an extension module's import turned it into ImportError
             print("semloc: interrupted", file=sys.stderr)
@@ -177,6 +178,19 @@ def main(argv: list[str] | None = None) -> int:
     if code == 130:  # typer turns a KeyboardInterrupt it sees into Exit(130)
         print("semloc: interrupted", file=sys.stderr)
     return code if isinstance(code, int) else 0
+
+
+def _usage_message(exc: Exception) -> str:
+    """click's message for a usage error, except for an option of several numbers given the
+    wrong count or a non-number (`--center 1 2`): that says how many it needs."""
+    message = exc.format_message()
+    param, name = getattr(exc, "param", None), getattr(exc, "option_name", None)
+    if param is not None and getattr(param, "nargs", 1) > 1 and param.opts:
+        return f"Invalid value for '{param.opts[0]}': needs {param.nargs} numbers"
+    count = re.fullmatch(r"Option '.*' requires (\d+) arguments\.", message)
+    if name and count:  # too few values at the end of the command line
+        return f"Invalid value for '{name}': needs {count.group(1)} numbers"
+    return message
 
 
 def _interrupt_behind(exc: BaseException) -> Interrupted | None:

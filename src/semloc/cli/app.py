@@ -28,6 +28,10 @@ console = Console()
 err_console = Console(stderr=True)
 
 
+MAX_SEED = 2**32 - 1
+"""Seeds are 0 ..= this (numpy's seeding takes no negative numbers)."""
+
+
 class CliError(Exception):
     """A problem with the user's input that is reported as one line and exit status 2."""
 

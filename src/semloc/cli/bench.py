@@ -8,7 +8,7 @@ from typing import Annotated
 import typer
 
 from semloc.baselines import DEFAULT_METHODS, VARIANTS
-from semloc.cli.app import app, console, fail
+from semloc.cli.app import MAX_SEED, app, console, fail
 from semloc.cli.extras import need
 from semloc.eval.protocol import BenchConfig
 from semloc.eval.report import claims_table, summary_table
@@ -18,7 +18,10 @@ from semloc.eval.runner import run_benchmark
 @app.command()
 def bench(
     quick: Annotated[
-        bool, typer.Option(help="Small but meaningful subset (2 sequences x 3 starts): minutes.")
+        bool,
+        typer.Option(
+            "--quick", help="Small but meaningful subset (2 sequences x 3 starts): minutes."
+        ),
     ] = False,
     out: Annotated[
         Path, typer.Option(help="Folder for results.csv, hypotheses.csv, the PNGs and report.md.")
@@ -36,14 +39,17 @@ def bench(
             min=1, max=512, help="Worker processes of the local cluster (default: all cores)."
         ),
     ] = None,
-    seed: Annotated[int, typer.Option(help="Seed of the worlds, start keyframes and methods.")] = 0,
+    seed: Annotated[
+        int,
+        typer.Option(min=0, max=MAX_SEED, help="Seed of the worlds, start keyframes and methods."),
+    ] = 0,
     methods: Annotated[
-        str,
+        str | None,
         typer.Option(
-            help=f"Comma-separated methods to compare: {','.join(DEFAULT_METHODS)}; opt-in: "
-            f"{','.join(VARIANTS)} (semloc with the shape-descriptor gate)."
+            help=f"Methods to compare, separated by commas (default: all of {', '.join(DEFAULT_METHODS)}); "
+            f"opt-in: {', '.join(VARIANTS)} (semloc with the shape-descriptor gate)."
         ),
-    ] = ",".join(DEFAULT_METHODS),
+    ] = None,
     sequences: Annotated[
         int | None,
         typer.Option(
@@ -58,8 +64,9 @@ def bench(
     real_walks: Annotated[
         bool,
         typer.Option(
+            "--real-walks",
             help="Also the protocol on camera walks through the real scans (ScanNet "
-            "scene0000_00, Scan2CAD scene0470_00): real_walks.csv, .png, .md."
+            "scene0000_00, Scan2CAD scene0470_00): real_walks.csv, .png, .md.",
         ),
     ] = False,
 ) -> None:
@@ -70,6 +77,7 @@ def bench(
     dynamic global maps, plus ablations over gamma and the local objects.
     """
     need("bench", "bench", "sim")
+    methods = ",".join(DEFAULT_METHODS) if methods is None else methods
     chosen = [m.strip() for m in methods.split(",") if m.strip()]
     known = DEFAULT_METHODS + VARIANTS
     unknown = [m for m in chosen if m not in known]

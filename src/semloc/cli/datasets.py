@@ -9,7 +9,7 @@ from typing import Annotated
 import numpy as np
 import typer
 
-from semloc.cli.app import app, choices, console, fail
+from semloc.cli.app import MAX_SEED, app, choices, console, fail
 from semloc.cli.files import check_finite, check_output, read_pose
 from semloc.cli.options import DescribeOption, with_descriptors
 from semloc.io import importers, load_map
@@ -44,17 +44,27 @@ def convert(
     label_map: Annotated[
         Path | None,
         typer.Option(
-            help="scannet: JSON {raw: label} or scannetv2-labels.combined.tsv mapping raw labels."
+            help="scannet: a JSON file {raw: label}, or ScanNet's label table (.tsv), mapping "
+            "raw labels."
         ),
     ] = None,
     include_structure: Annotated[
-        bool, typer.Option(help="Keep walls, floors and ceilings (left out by default).")
+        bool,
+        typer.Option(
+            "--include-structure", help="Keep walls, floors and ceilings (left out by default)."
+        ),
     ] = False,
     keep_unlabeled: Annotated[
-        bool, typer.Option(help="replica, 3rscan: keep unannotated/placeholder objects.")
+        bool,
+        typer.Option(
+            "--keep-unlabeled", help="replica, 3rscan: keep unannotated and placeholder objects."
+        ),
     ] = False,
     voxel: Annotated[
-        float, typer.Option(help="Voxel edge (m) for downsampling object points; 0 keeps all.")
+        float,
+        typer.Option(
+            min=0, max=100, help="Voxel edge (m) for downsampling object points; 0 keeps all."
+        ),
     ] = 0.05,
     shapenet: Annotated[
         Path | None, typer.Option(help="scan2cad: ShapeNet root (default: ./shapenet nearby).")
@@ -70,7 +80,9 @@ def convert(
         Path | None,
         typer.Option(help="scan2cad: where to write the scan-derived map (default OUT.scan.json)."),
     ] = None,
-    seed: Annotated[int, typer.Option(help="Seed for sampled surface points.")] = 0,
+    seed: Annotated[
+        int, typer.Option(min=0, max=MAX_SEED, help="Seed for sampled surface points.")
+    ] = 0,
     descriptor: DescribeOption = None,
 ) -> None:
     """Convert a dataset scene into a semloc map (the formats: see KIND).
@@ -130,9 +142,14 @@ def crop(
             'file with a 4x4 T_global_local (a list of 4 rows, or {"T_global_local": ...}).'
         ),
     ] = "random",
-    seed: Annotated[int, typer.Option(help="Seed of the random transform.")] = 0,
+    seed: Annotated[
+        int, typer.Option(min=0, max=MAX_SEED, help="Seed of the random transform.")
+    ] = 0,
     recentre: Annotated[
-        bool, typer.Option(help="Re-fit each object's centre and box to its visible points.")
+        bool,
+        typer.Option(
+            "--recentre", help="Re-fit each object's centre and box to its visible points."
+        ),
     ] = False,
     descriptor: DescribeOption = None,
 ) -> None:

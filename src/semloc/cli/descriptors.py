@@ -9,7 +9,7 @@ import numpy as np
 import typer
 
 from semloc.association import DESCRIBERS
-from semloc.cli.app import app, choices, console
+from semloc.cli.app import MAX_SEED, app, choices, console
 from semloc.cli.extras import need
 from semloc.descriptors.voxnet import WEIGHTS_FILE, load_weights
 from semloc.eval.descriptors.evaluate import EvalConfig, print_report, run_evaluation, write_report
@@ -24,14 +24,17 @@ def train_descriptor(
         "voxnet_weights.npz"
     ),
     seed: Annotated[
-        int, typer.Option(help="Seed of the data, the initialisation and batches.")
+        int,
+        typer.Option(min=0, max=MAX_SEED, help="Seed of the data, the initialisation and batches."),
     ] = 0,
-    epochs: Annotated[int, typer.Option(min=1, help="Training epochs.")] = 6,
-    views: Annotated[int, typer.Option(min=6, help="Partial views per training instance.")] = 48,
+    epochs: Annotated[int, typer.Option(min=1, max=1000, help="Training epochs.")] = 6,
+    views: Annotated[
+        int, typer.Option(min=6, max=10_000, help="Partial views per training instance.")
+    ] = 48,
     full_views: Annotated[
-        int, typer.Option(min=2, help="Whole-surface (CAD-style) views per instance.")
+        int, typer.Option(min=2, max=10_000, help="Whole-surface (CAD-style) views per instance.")
     ] = 12,
-    batches: Annotated[int, typer.Option(min=1, help="Batches per epoch.")] = 30,
+    batches: Annotated[int, typer.Option(min=1, max=100_000, help="Batches per epoch.")] = 30,
     fixture: Annotated[
         Path | None,
         typer.Option(help="Also write test grids + torch embeddings (.npz) for the numpy test."),
@@ -67,16 +70,22 @@ def descriptors_eval(
     out: Annotated[
         Path | None, typer.Option(help="Folder for descriptors_eval.json and figures.")
     ] = None,
-    seed: Annotated[int, typer.Option(help="Seed of the evaluation views.")] = 1,
-    views: Annotated[int, typer.Option(min=1, help="Partial views per instance.")] = 20,
+    seed: Annotated[
+        int, typer.Option(min=0, max=MAX_SEED, help="Seed of the evaluation views.")
+    ] = 1,
+    views: Annotated[int, typer.Option(min=1, max=10_000, help="Partial views per instance.")] = 20,
     sequences: Annotated[
-        int, typer.Option(min=0, help="Simulated sequences for calibration and the gate effect.")
+        int,
+        typer.Option(
+            min=0, max=1000, help="Simulated sequences for calibration and the gate effect."
+        ),
     ] = 3,
     attempts: Annotated[
-        int, typer.Option(min=1, help="Relocalization attempts per sequence and map kind.")
+        int,
+        typer.Option(min=1, max=10_000, help="Relocalization attempts per sequence and map kind."),
     ] = 8,
     window: Annotated[
-        int, typer.Option(min=2, help="Keyframes fused into the local map of an attempt.")
+        int, typer.Option(min=2, max=1000, help="Keyframes fused into the local map of an attempt.")
     ] = 6,
 ) -> None:
     """Retrieval (top-1/top-5) on held-out styles, the Scan2CAD check, δ and the gate's effect."""

@@ -62,7 +62,7 @@ def export(
     global_map = load_map(map_file)
     placed = None
     if local is not None:
-        pose = read_result(result)[0] if result is not None else None
+        pose = read_result(result).pose if result is not None else None
         if pose is None:
             fail("--local needs a --result with a pose to place the local objects")
         placed = load_map(local).transformed(pose)

@@ -4,6 +4,8 @@ outputs and numeric options before any work is done."""
 from __future__ import annotations
 
 import math
+import reprlib
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -11,7 +13,9 @@ import yaml
 
 from semloc.cli.app import fail
 from semloc.io import read_json, read_regular
-from semloc.io.native import MAX_JSON_BYTES
+from semloc.io.native import MAX_JSON_BYTES, document_kind
+from semloc.maps import MAX_COORDINATE
+from semloc.results import STATUSES
 from semloc.transforms import as_pose
 
 YAML_SUFFIXES = (".yaml", ".yml")
@@ -43,38 +47,99 @@ def _read_yaml(path: Path) -> object:
         raise  # unreachable: fail() raises
 
 
-def pose_of(path: Path, value: object) -> np.ndarray:
-    """A 4x4 pose read from `path`, or one line naming the file and the problem."""
+def pose_of(path: Path, value: object, what: str = "pose") -> np.ndarray:
+    """A 4x4 pose read from `path` (translation within the maps' coordinate limit), or one line
+    naming the file, the key and the problem."""
     try:
-        return as_pose(value)
+        pose = as_pose(value, what)
     except ValueError as exc:
         fail(f"{path}: {exc}")
         raise  # unreachable: fail() raises
+    if np.abs(pose[:3, 3]).max() > MAX_COORDINATE:
+        fail(f"{path}: {what} has a translation beyond ±{MAX_COORDINATE:g} m (the input limit)")
+    return pose
 
 
 def read_pose(path: Path, what: str | None = None) -> np.ndarray:
-    """The 4x4 `T_global_local` of a file holding it (a list of 4 rows, or under that key)."""
+    """The 4x4 `T_global_local` of a file holding it (a list of 4 rows, or under that key).
+
+    A file without that key gets one line naming the key and what the file looks like
+    (a map, a result: `semloc.io.native.document_kind`)."""
     data = read_json(path, what=what or "")
+    if isinstance(data, dict) and "T_global_local" not in data:
+        kind = document_kind(data) or "an object without it"
+        usage = f" ({what})" if what else ""
+        fail(f"{path}: no 'T_global_local' key: this is {kind}{usage}")
     if isinstance(data, dict):
-        data = data.get("T_global_local")
+        return pose_of(path, data["T_global_local"], "T_global_local")
     return pose_of(path, data)
 
 
-def read_result(path: Path) -> tuple[np.ndarray | None, list[tuple[str, str]], str | None]:
-    """Pose, best pairs and status of a result file (or the true pose of a ground_truth.json)."""
+@dataclass(frozen=True)
+class ResultFile:
+    """What `view` and `export` use of a result file: the pose, the status and each ranked
+    hypothesis's pose and pairs (a ground-truth file gives only a pose)."""
+
+    pose: np.ndarray | None
+    status: str | None = None
+    hypotheses: tuple[tuple[np.ndarray | None, list[tuple[str, str]]], ...] = ()
+
+    @property
+    def pairs(self) -> list[tuple[str, str]]:
+        """(global id, local id) pairs of the best hypothesis."""
+        return self.hypotheses[0][1] if self.hypotheses else []
+
+
+def read_result(path: Path) -> ResultFile:
+    """A result file (`localize --format json`, or a ground-truth file), every field checked:
+    a field of the wrong type is one line naming the file, the field and what it must be."""
     data = read_json(path)
     if not isinstance(data, dict) or not ("pose" in data or "T_global_local" in data):
-        fail(f"{path}: not a localization result (no 'pose') nor a ground truth file")
-    raw = data.get("pose", data.get("T_global_local"))
-    pose = None if raw is None else pose_of(path, raw)
-    pairs: list[tuple[str, str]] = []
-    hypotheses = data.get("hypotheses") or []
-    if isinstance(hypotheses, list) and hypotheses and isinstance(hypotheses[0], dict):
-        for pair in hypotheses[0].get("pairs", []):
-            if isinstance(pair, dict) and "global" in pair and "local" in pair:
-                pairs.append((str(pair["global"]), str(pair["local"])))
-    status = data.get("status") if isinstance(data.get("status"), str) else None
-    return pose, pairs, status
+        kind = document_kind(data)
+        seems = f" (this is {kind})" if kind else ""
+        fail(f"{path}: not a localization result (no 'pose') nor a ground truth file{seems}")
+    key = "pose" if "pose" in data else "T_global_local"
+    pose = None if data[key] is None else pose_of(path, data[key], key)
+    status = data.get("status")
+    if status is not None and status not in STATUSES:
+        fail(f"{path}: 'status' must be one of {', '.join(STATUSES)}, got {_brief(status)}")
+    hypotheses = _list_field(path, data.get("hypotheses"), "hypotheses")
+    return ResultFile(
+        pose, status, tuple(_hypothesis(path, h, i) for i, h in enumerate(hypotheses))
+    )
+
+
+def _hypothesis(
+    path: Path, value: object, index: int
+) -> tuple[np.ndarray | None, list[tuple[str, str]]]:
+    where = f"hypotheses[{index}]"
+    if not isinstance(value, dict):
+        fail(f"{path}: '{where}' must be an object, got {_brief(value)}")
+    raw = value.get("pose")
+    pose = None if raw is None else pose_of(path, raw, f"{where}.pose")
+    pairs = []
+    for j, pair in enumerate(_list_field(path, value.get("pairs"), f"{where}.pairs")):
+        ids = (pair.get("global"), pair.get("local")) if isinstance(pair, dict) else (None, None)
+        if not all(isinstance(i, (str, int)) and not isinstance(i, bool) for i in ids):
+            fail(f"{path}: '{where}.pairs[{j}]' must be {PAIR_SHAPE}, got {_brief(pair)}")
+        pairs.append((str(ids[0]), str(ids[1])))
+    return pose, pairs
+
+
+PAIR_SHAPE = '{"global": ID, "local": ID}'
+
+
+def _list_field(path: Path, value: object, where: str) -> list:
+    """`value` if a list (None: empty), else one line naming the field."""
+    if value is None:
+        return []
+    if not isinstance(value, list):
+        fail(f"{path}: '{where}' must be a list, got {_brief(value)}")
+    return value
+
+
+def _brief(value: object) -> str:
+    return reprlib.repr(value)[:60]
 
 
 def check_output(path: Path, option: str = "--output") -> Path:

@@ -26,6 +26,7 @@ from semloc.eval.success import ground_truth_report
 from semloc.io import load_map, write_atomic
 from semloc.localizer import LocalizerConfig
 from semloc.localizer import localize as run_localize
+from semloc.tools.warmup import warm_up
 
 DescriptorKind = choices("DescriptorKind", DESCRIBERS)
 DEFAULTS = LocalizerConfig()
@@ -115,11 +116,12 @@ def localize(
         fail(f"invalid settings: {first_error(exc)}")
     truth = read_pose(gt, "--gt takes a file with T_global_local") if gt is not None else None
     global_objects, local_objects = load_map(global_map), load_map(local_map)
+    warm = warm_up(lambda text: err_console.print(f"{text}…", style="dim"))
     with replay_progress(err_console, local_objects) as progress:
         result = run_localize(global_objects, local_objects, cfg, progress=progress)
     report = None if truth is None else ground_truth_report(result.pose, result.hypotheses, truth)
     if output_format is OutputFormat.json:
-        document = result.to_dict()
+        document = {**result.to_dict(), "warm_up_ms": round(warm.seconds * 1000, 3)}
         if report is not None:
             document["ground_truth"] = report
         text = json.dumps(document, indent=1, allow_nan=False) + "\n"
@@ -129,7 +131,7 @@ def localize(
             write_atomic(output, text)
         return
     target = console if output is None else Console(record=True, width=120, file=io.StringIO())
-    print_result(result, target)
+    print_result(result, target, warm)
     if report is not None:
         print_ground_truth(report, target)
     if output is not None:

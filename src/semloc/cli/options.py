@@ -23,7 +23,7 @@ DescribeOption = Annotated[
     DescriptorKind | None,
     typer.Option(
         "--descriptor",
-        help="Store shape descriptors of this kind for objects with points (semloc.descriptors).",
+        help="Store shape descriptors of this kind for objects with points.",
     ),
 ]
 

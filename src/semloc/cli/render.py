@@ -9,6 +9,7 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 
 import numpy as np
+from rich import box
 from rich.console import Console
 from rich.markup import escape
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
@@ -19,13 +20,15 @@ from semloc.maps import ObjectMap
 from semloc.results import Result
 from semloc.tools.demo import STATUS_STYLE
 from semloc.tools.display import for_rich
+from semloc.tools.warmup import WarmUp
 
 LONG_REPLAY = 10
 """Replays of at least this many updates show a progress bar (on a terminal)."""
 
 
-def print_result(result: Result, out: Console) -> None:
-    """Status line, pose, top hypotheses and timing of a Result."""
+def print_result(result: Result, out: Console, warm: WarmUp | None = None) -> None:
+    """Status line, pose, top hypotheses and timing of a Result (and of the warm-up before
+    it, which loaded the compiled code: `semloc.tools.warmup`)."""
     out.print(f"status: [bold {STATUS_STYLE[result.status]}]{result.status}[/]")
     best = result.best
     if best is not None and best.confidence is not None:
@@ -43,11 +46,12 @@ def print_result(result: Result, out: Console) -> None:
     if result.pose is not None:
         for row in result.pose:
             out.print("  " + "  ".join(f"{v:9.4f}" for v in row))
-    table = Table(title="hypotheses (best first)")
-    for column, width in (("rank", 4), ("score", 7), ("pairs", 5), ("fitness", 7),
-                          ("conf.", 5), ("yaw°", 6), ("t (m)", 17)):  # fmt: skip
+    table = Table(title="hypotheses (best first)", box=box.SIMPLE_HEAD, padding=(0, 1))
+    for column, width in (("rank", 4), ("score", 5), ("pairs", 5), ("fit", 4),
+                          ("conf.", 5), ("yaw°", 6), ("t (m)", 14)):  # fmt: skip
         table.add_column(column, justify="right", no_wrap=True, min_width=width)
-    table.add_column("associations local→global", no_wrap=True, overflow="ellipsis")
+    # the last column wraps between pairs on narrow terminals rather than being cut
+    table.add_column("associations local→global", min_width=16, overflow="fold")
     for h in result.hypotheses:
         yaw = translation = "-"
         if h.pose is not None:
@@ -61,9 +65,19 @@ def print_result(result: Result, out: Console) -> None:
                       yaw, translation, escape(shown))  # fmt: skip
     if result.hypotheses:
         out.print(table)
-    steps = len(result.steps)
+    out.print(timing_line(result, warm))
+
+
+def timing_line(result: Result, warm: WarmUp | None = None) -> str:
+    """`N updates: T ms in all, M ms per update (median)`, and the warm-up apart."""
+    times = [step.ms for step in result.steps]
     total = result.timing_ms.get("total", 0.0)
-    out.print(f"{steps} update(s), {total:.1f} ms in all")
+    line = f"{len(times)} update{'' if len(times) == 1 else 's'}: {total:.1f} ms in all"
+    if times:
+        line += f", {float(np.median(times)):.1f} ms per update (median)"
+    if warm is not None:
+        line += f"; before them, {warm.describe()}"
+    return line
 
 
 def print_ground_truth(report: dict, out: Console) -> None:

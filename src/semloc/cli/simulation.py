@@ -6,13 +6,14 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Annotated
 
+import numpy as np
 import typer
 from pydantic import ValidationError
 from rich.table import Table
 
-from semloc.cli.app import app, console, fail, first_error
+from semloc.cli.app import MAX_SEED, app, console, fail, first_error
 from semloc.cli.extras import need
-from semloc.cli.files import check_finite, check_output, read_pose, read_result
+from semloc.cli.files import ResultFile, check_finite, check_output, read_pose, read_result
 from semloc.cli.options import (
     RESOLUTION_HELP,
     SIZE_HELP,
@@ -21,14 +22,22 @@ from semloc.cli.options import (
     PathChoice,
     parse_resolution,
 )
+from semloc.eval.success import (
+    ROTATION_TOLERANCE_DEG,
+    TRANSLATION_TOLERANCE_M,
+    is_success,
+)
 from semloc.io import load_map
 from semloc.io.native import staged_folder
+from semloc.maps import ObjectMap
 from semloc.sim.export import write_sequence
 from semloc.sim.noise import DetectionNoise
 from semloc.sim.scenario import simulate_sequence
+from semloc.sim.world import MAX_ROOMS
 from semloc.tools.demo import DemoConfig, run_demo
 from semloc.tools.display import for_rich
 from semloc.tools.scandemo import ScanDemoConfig, run_scan_demo
+from semloc.transforms import pose_error
 
 
 @app.command()
@@ -36,7 +45,7 @@ def demo(
     out: Annotated[
         Path, typer.Option(help="Folder for scores.png, map.png, world.png, result.json, maps.")
     ] = Path("demo_out"),
-    seed: Annotated[int, typer.Option(help="World and noise seed.")] = 0,
+    seed: Annotated[int, typer.Option(min=0, max=MAX_SEED, help="World and noise seed.")] = 0,
     size: Annotated[str, typer.Option(help=SIZE_HELP)] = "small",
     map_kind: Annotated[
         MapKindChoice | None,
@@ -51,7 +60,7 @@ def demo(
     keyframes: Annotated[
         int | None, typer.Option(min=2, max=2000, help="Number of keyframes (40; --scan: 60).")
     ] = None,
-    rooms: Annotated[int, typer.Option(min=1, help="Rooms the walk visits.")] = 2,
+    rooms: Annotated[int, typer.Option(min=1, max=MAX_ROOMS, help="Rooms the walk visits.")] = 2,
     resolution: Annotated[str, typer.Option(help=RESOLUTION_HELP)] = "240x180",
     gamma: Annotated[float, typer.Option(help="Merge threshold of the clustering.")] = 0.8,
     drift: Annotated[
@@ -106,25 +115,28 @@ def demo(
 @app.command()
 def simulate(
     out: Annotated[Path, typer.Argument(help="Folder to write (created if missing).")],
-    seed: Annotated[int, typer.Option(help="World and noise seed.")] = 0,
+    seed: Annotated[int, typer.Option(min=0, max=MAX_SEED, help="World and noise seed.")] = 0,
     size: Annotated[str, typer.Option(help=SIZE_HELP)] = "small",
     path: Annotated[
         PathChoice, typer.Option(help="Camera path: walk through rooms, or orbit in one room.")
     ] = PathChoice["walk"],
     keyframes: Annotated[int, typer.Option(min=1, max=5000, help="Number of keyframes.")] = 40,
-    rooms: Annotated[int, typer.Option(min=1, help="Rooms the walk visits.")] = 2,
+    rooms: Annotated[int, typer.Option(min=1, max=MAX_ROOMS, help="Rooms the walk visits.")] = 2,
     resolution: Annotated[str, typer.Option(help=RESOLUTION_HELP)] = "240x180",
     snapshots: Annotated[
         bool, typer.Option(help="Also write the local map after every keyframe.")
     ] = True,
     perfect: Annotated[
-        bool, typer.Option(help="Perfect detections (no misses, confusions or mask errors).")
+        bool,
+        typer.Option(
+            "--perfect", help="Perfect detections (no misses, confusions or mask errors)."
+        ),
     ] = False,
     drift: Annotated[
-        float, typer.Option(min=0, help="Odometry drift in metres per metre travelled.")
+        float, typer.Option(min=0, max=1, help="Odometry drift in metres per metre travelled.")
     ] = 0.0,
     drift_yaw: Annotated[
-        float, typer.Option(min=0, help="Odometry heading drift in degrees per metre.")
+        float, typer.Option(min=0, max=90, help="Odometry heading drift in degrees per metre.")
     ] = 0.0,
     descriptor: DescribeOption = None,
 ) -> None:
@@ -208,7 +220,8 @@ def view(
     if rrd is not None:
         need("view --rrd", "viz", modules=("rerun",))
     objmap = load_map(map_file)
-    pose, pairs, status = read_result(result) if result is not None else (None, [], None)
+    answer = read_result(result) if result is not None else ResultFile(None)
+    pose, pairs, status = answer.pose, answer.pairs, answer.status
     truth = read_pose(gt, "--gt takes a file with T_global_local") if gt is not None else None
     local_map = load_map(local) if local is not None else None
     if local_map is not None and pose is None and truth is None:
@@ -218,12 +231,12 @@ def view(
     if png is not None:
         from semloc.tools.viz import map_figure, plot_localization, save_figure  # matplotlib
 
-        heading = title or f"{map_file.name}: {len(objmap)} objects" + (
-            f" ({status[:20]})" if status else ""
-        )
+        heading = title or _heading(map_file, objmap, answer, truth)
+        rivals = answer.hypotheses[1:] if status == "ambiguous" else ()
         fig, ax = map_figure(objmap.positions[:, :2])
         plot_localization(ax, objmap, local_map, pose, pairs, true_pose=truth, title=heading,
-                          map_role=role)  # fmt: skip
+                          map_role=role, rivals=rivals, names=True,
+                          zoom=local_map is not None or bool(rivals))  # fmt: skip
         console.print(f"wrote {for_rich(save_figure(fig, png), None)}")
     if rrd is not None:
         from semloc.tools.viz3d import write_localization  # rerun
@@ -231,6 +244,22 @@ def view(
         written = write_localization(rrd, objmap, local_map, pose, pairs, truth)
         shown = for_rich(written, None)
         console.print(f"wrote {shown} (open with: rerun {shown})")
+
+
+def _heading(path: Path, objmap: ObjectMap, answer: ResultFile, truth: np.ndarray | None) -> str:
+    """The picture's title: the map, the answer's status and, with the truth, the pose error
+    and the paper's success at 15° / 0.5 m."""
+    heading = f"{path.name}: {len(objmap)} objects"
+    if answer.status:
+        heading += f" ({answer.status})"
+    if answer.pose is not None and truth is not None:
+        rotation, translation = pose_error(answer.pose, truth)
+        verdict = "success" if is_success(answer.pose, truth) else "failure"
+        heading += (
+            f"\nerror {rotation:.2f}°, {translation:.3f} m: {verdict} at "
+            f"{ROTATION_TOLERANCE_DEG:g}° / {TRANSLATION_TOLERANCE_M:g} m"
+        )
+    return heading
 
 
 def _looks_local(path: Path, name: str) -> bool:

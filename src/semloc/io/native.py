@@ -55,11 +55,61 @@ MAX_FILE_BYTES = 2**30
 def load_map(path: str | os.PathLike[str]) -> ObjectMap:
     """Read a native map file (and its `points_file`); raise `MapError` on any problem."""
     path = Path(path)
-    document = read_json(path)
+    try:
+        document = read_json(path)
+    except MapError as exc:
+        hint = BINARY_HINTS.get(path.suffix.lower(), "") if path.is_file() else ""
+        raise MapError(f"{exc}{hint}") from None
     try:
         return map_from_dict(document, base_dir=path.parent)
     except MapError as exc:
-        raise MapError(f"{path}: {exc}") from None
+        kind = document_kind(document)
+        hint = "" if kind in (None, "a semloc map") else f" ({kind}: {KIND_HINTS[kind]})"
+        raise MapError(f"{path}: {exc}{hint}") from None
+
+
+BINARY_HINTS = {
+    ".npz": "; a .npz holds point arrays (a map's points_file): the map is the JSON that names "
+    "it, and `semloc convert` writes maps from datasets",
+    ".npy": "; a .npy holds an array, not a map: `semloc convert` writes maps from datasets",
+    ".ply": "; a .ply is a mesh or point cloud, not a map: `semloc convert` writes maps from "
+    "datasets",
+}
+"""What to tell someone who gave a binary file where a map goes, by its suffix."""
+
+KIND_HINTS = {
+    "a localization result": "give it to view or export with --result",
+    "a ground-truth file": "give it with --gt",
+    "a ScanNet aggregation file": "make a map first with `semloc convert scannet`",
+    "a Scan2CAD annotation": "make a map first with `semloc convert scan2cad`",
+    "a Replica annotation": "make a map first with `semloc convert replica`",
+    "a settings file": "give it with --config",
+}
+"""What to do with a JSON file that is not a map, by `document_kind`."""
+
+
+def document_kind(document: Any) -> str | None:
+    """What a parsed JSON document looks like: "a semloc map", one of `KIND_HINTS`, or None."""
+    if isinstance(document, list) and document and isinstance(document[0], dict):
+        document = document[0]  # Scan2CAD's full_annotations.json is a list of scans
+    if not isinstance(document, dict):
+        return None
+    keys = set(document)
+    if document.get("format") == FORMAT:
+        return "a semloc map"
+    if "hypotheses" in keys or {"status", "pose"} <= keys:
+        return "a localization result"
+    if "T_global_local" in keys:
+        return "a ground-truth file"
+    if "segGroups" in keys:
+        return "a ScanNet aggregation file"
+    if "aligned_models" in keys:
+        return "a Scan2CAD annotation"
+    if "objects" in keys and ("classes" in keys or "gravity_dir" in keys):
+        return "a Replica annotation"
+    if keys & {"association", "clustering", "pose", "decision", "gamma", "delta", "top_k"}:
+        return "a settings file"
+    return None
 
 
 def check_regular(path: str | os.PathLike[str], limit: int = MAX_FILE_BYTES, what: str = "") -> int:

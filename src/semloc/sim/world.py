@@ -25,6 +25,8 @@ ROOM_KINDS = ("classroom", "meeting", "office", "bedroom", "kitchen", "living", 
 WALL_HEIGHT = 2.6
 WALL_THICKNESS = 0.1
 DOOR_WIDTH = 1.0
+MAX_ROOMS = 200
+"""Most rooms of a generated world."""
 
 
 def yaw_pose(x: float, y: float, yaw: float, z: float = 0.0) -> np.ndarray:
@@ -219,8 +221,8 @@ def _room_count(size: str | int) -> int:
                 f"unknown world size {size!r}; use one of {list(SIZES)} or a room count"
             )
         return SIZES[size]
-    if not 1 <= int(size) <= 200:
-        raise ValueError(f"number of rooms must be between 1 and 200, got {size}")
+    if not 1 <= int(size) <= MAX_ROOMS:
+        raise ValueError(f"number of rooms must be between 1 and {MAX_ROOMS}, got {size}")
     return int(size)
 
 

@@ -35,6 +35,7 @@ from semloc.sim.scenario import SimulatedSequence, simulate_sequence
 from semloc.sim.sensor import check_resolution
 from semloc.sim.trajectory import PATHS
 from semloc.tools.display import for_rich
+from semloc.tools.warmup import warm_up
 from semloc.transforms import pose_error
 
 STATUS_STYLE = {"localized": "green", "ambiguous": "yellow", "failed": "red"}
@@ -128,6 +129,7 @@ def localize_sequence(
     localizer = Localizer(seq.global_maps[kind], LocalizerConfig(gamma=gamma), local_up=(0, 0, 1))
     result = Result(status="failed", pose=None, hypotheses=[])
     keyframes, statuses = [], []
+    warm_up(lambda text: console.print(f"[dim]{text}…[/]"))  # not inside the timed updates
     table = _table()
     with Live(table, console=console, refresh_per_second=8, vertical_overflow="visible"):
         for kf in seq.keyframes:

@@ -36,6 +36,13 @@ LEGEND_LABELS = 30
 """Most labels listed in a legend (the rest are counted)."""
 TITLE_LENGTH = 160
 """Longest title shown (user text: shortened and escaped, `semloc.tools.display`)."""
+NAME_LENGTH = 18
+"""Longest object label written beside an object."""
+ZOOM_MARGIN = 2.5
+"""Metres of the map shown around the placed local objects (and rival places) when zoomed."""
+RIVALS = 3
+"""Most rival hypotheses drawn beside the best one of an ambiguous answer."""
+RIVAL_COLOR = "darkorange"
 
 
 def new_figure(width: float = 9.0, height: float = 7.0) -> tuple[Figure, Axes]:
@@ -79,11 +86,13 @@ def plot_objects(
     points: bool = True,
     marker: str = "o",
     ids: bool = False,
+    names: bool = False,
 ) -> Axes:
     """Draw a map's objects from above: oriented boxes where known, points, and centres.
 
     `T` (4x4) moves the objects first (e.g. local objects placed by an estimated pose);
-    `hollow` draws outlines only (used for local objects over a global map).
+    `hollow` draws outlines only (used for local objects over a global map); `names` writes
+    each object's label beside it (those outside the axes' limits are not drawn).
     """
     if T is not None:
         objmap = objmap.transformed(T)
@@ -115,10 +124,11 @@ def plot_objects(
             alpha=0.9,
             zorder=4 if not hollow else 6,
         )
-        if ids:
+        if ids or names:
+            text = " ".join(t for t, on in ((obj.label, names), (obj.id, ids)) if on)
             ax.annotate(
-                for_matplotlib(obj.id, 16), obj.position[:2], fontsize=6, xytext=(3, 3),
-                textcoords="offset points",
+                for_matplotlib(text, NAME_LENGTH), obj.position[:2], fontsize=6, xytext=(3, 3),
+                textcoords="offset points", color="#222", zorder=7, annotation_clip=True,
             )  # fmt: skip
     return ax
 
@@ -139,8 +149,9 @@ def _finish_map_axes(
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
     ax.grid(True, lw=0.3, alpha=0.5)
-    if title:
-        ax.set_title(for_matplotlib(title, TITLE_LENGTH), fontsize=11)
+    if title:  # one line at a time: a line break is kept, other control characters shown
+        lines = (for_matplotlib(line, TITLE_LENGTH) for line in title.split("\n"))
+        ax.set_title("\n".join(lines), fontsize=11)
 
 
 def plot_localization(
@@ -153,16 +164,22 @@ def plot_localization(
     true_pose: np.ndarray | None = None,
     title: str = "",
     map_role: str = "global",
+    rivals: Sequence[tuple[np.ndarray | None, Sequence[tuple[str, str]]]] = (),
+    names: bool = False,
+    zoom: bool = False,
 ) -> Axes:
     """Global map, local objects placed by `pose`, association lines (global centre to local).
 
     With `true_pose`, the local objects' true places are drawn as small grey crosses and the
     true local frame in grey.  `map_role` names the first map's objects in the legend
-    ("global object", or "local object" when a local map is drawn on its own).
+    ("global object", or "local object" when a local map is drawn on its own).  `rivals`
+    (pose, pairs) of other hypotheses (an ambiguous answer's) are drawn in orange, up to
+    `RIVALS`; `names` writes the labels beside the map's objects; `zoom` limits the view to
+    the placed local objects, their true places and the rivals, with `ZOOM_MARGIN` around.
     """
     labels = list(global_map.labels) + ([] if local_map is None else list(local_map.labels))
     colors = label_colors(labels)
-    plot_objects(ax, global_map, colors)
+    plot_objects(ax, global_map, colors, names=names)
     extra: list[Any] = [
         Line2D([], [], ls="none", marker="o", mfc="#999", mec="#999", label=f"{map_role} object")
     ]
@@ -204,8 +221,51 @@ def plot_localization(
         _draw_frame(ax, true_pose, "local frame (true)", color="#555")
     if pose is not None:
         _draw_frame(ax, pose, "local frame (estimated)")
+    shown = _plot_rivals(ax, global_map, local_map, rivals[:RIVALS], extra)
     _finish_map_axes(ax, colors, extra, title)
+    if zoom:
+        places = [local_map.transformed(T).positions for T in (pose, true_pose)
+                  if T is not None and local_map is not None] + shown  # fmt: skip
+        _zoom(ax, np.concatenate(places)[:, :2] if places else np.zeros((0, 2)))
     return ax
+
+
+def _plot_rivals(
+    ax: Axes,
+    global_map: ObjectMap,
+    local_map: ObjectMap | None,
+    rivals: Sequence[tuple[np.ndarray | None, Sequence[tuple[str, str]]]],
+    extra: list[Any],
+) -> list[np.ndarray]:
+    """Each rival's place: the local objects placed by its pose (or, without a local map,
+    its global objects ringed) and its frame labelled by rank; returns the points drawn."""
+    drawn = []
+    for rank, (pose, pairs) in enumerate(rivals, start=2):
+        if local_map is not None and len(local_map) and pose is not None:
+            xy = local_map.transformed(pose).positions
+            ax.scatter(xy[:, 0], xy[:, 1], marker="s", s=30, facecolors="none",
+                       edgecolors=RIVAL_COLOR, lw=1.2, zorder=6)  # fmt: skip
+        else:
+            xy = np.array([global_map.get(g).position for g, _ in pairs if g in global_map])
+            xy = xy.reshape(-1, 3)
+            ax.scatter(xy[:, 0], xy[:, 1], s=90, facecolors="none", edgecolors=RIVAL_COLOR,
+                       lw=1.2, ls="--", zorder=6)  # fmt: skip
+        if pose is not None:
+            _draw_frame(ax, pose, f"rival (rank {rank})", color=RIVAL_COLOR)
+        drawn.append(xy)
+    if rivals:
+        extra.append(Line2D([], [], ls="none", marker="s", mfc="none", mec=RIVAL_COLOR,
+                            label="rival place (another hypothesis)"))  # fmt: skip
+    return drawn
+
+
+def _zoom(ax: Axes, xy: np.ndarray) -> None:
+    """Limit the view to the points `xy` with `ZOOM_MARGIN` around (unchanged without any)."""
+    if not len(xy):
+        return
+    low, high = xy.min(axis=0) - ZOOM_MARGIN, xy.max(axis=0) + ZOOM_MARGIN
+    ax.set_xlim(low[0], high[0])
+    ax.set_ylim(low[1], high[1])
 
 
 def _draw_frame(ax: Axes, T: np.ndarray, label: str, color: str = "crimson") -> None:

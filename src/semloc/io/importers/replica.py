@@ -19,7 +19,7 @@ from semloc.io.geometry import quaternion_matrix, sample_box_surface
 from semloc.io.importers.base import Importer, Maps
 from semloc.io.labels import is_structural, is_unlabeled
 from semloc.io.native import read_json
-from semloc.maps import MapError, ObjectMap, SemanticObject
+from semloc.maps import MapError, ObjectMap, SemanticObject, unit_vector
 
 
 def load_replica(
@@ -77,12 +77,9 @@ def _up(document: dict[str, Any], path: Path) -> np.ndarray | None:
     if gravity is None:
         return None
     try:
-        vector = -np.asarray(gravity, dtype=float)
-    except (TypeError, ValueError):
-        raise MapError(f"{path}: 'gravity_dir' must be 3 numbers") from None
-    if vector.shape != (3,) or not np.all(np.isfinite(vector)) or np.linalg.norm(vector) < 1e-9:
-        raise MapError(f"{path}: 'gravity_dir' must be 3 finite numbers, not all zero")
-    return vector
+        return -unit_vector(gravity, "'gravity_dir'")
+    except MapError as exc:
+        raise MapError(f"{path}: {exc}") from None
 
 
 def _class_name(raw: Any, where: str) -> str:

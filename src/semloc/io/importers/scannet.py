@@ -77,8 +77,11 @@ def load_scannet(
 def scene_files(scene: str | os.PathLike[str]) -> dict[str, Any]:
     """Locate the aggregation, segments, mesh and (optional) label mesh of a scene."""
     path = Path(scene)
-    if path.is_file():
+    if path.is_file() and path.name.endswith(".aggregation.json"):
         folder, aggregation = path.parent, path
+    elif path.is_file():  # another file of the scene (its mesh, segments...): its folder
+        folder = path.parent
+        aggregation = _one(folder, f"{scene_name(path.name)}*.aggregation.json", path)
     elif path.is_dir():
         folder = path
         found = sorted(folder.glob("*.aggregation.json"))
@@ -87,7 +90,7 @@ def scene_files(scene: str | os.PathLike[str]) -> dict[str, Any]:
         aggregation = found[0]
     else:
         raise MapError(f"{path}: no such file or folder")
-    name = aggregation.name.split(".")[0].removesuffix("_vh_clean")
+    name = scene_name(aggregation.name)
     return {
         "name": name,
         "aggregation": aggregation,
@@ -97,8 +100,20 @@ def scene_files(scene: str | os.PathLike[str]) -> dict[str, Any]:
     }
 
 
-def _one(folder: Path, pattern: str) -> Path:
+def scene_name(file_name: str) -> str:
+    """The scene a ScanNet file belongs to: `scene0000_00` of `scene0000_00_vh_clean_2.ply`,
+    `scene0000_00.aggregation.json` or `scene0000_00_vh_clean.aggregation.json`."""
+    stem = file_name.split(".")[0]
+    return stem.removesuffix("_vh_clean_2").removesuffix("_vh_clean")
+
+
+def _one(folder: Path, pattern: str, given: Path | None = None) -> Path:
     found = sorted(folder.glob(pattern))
+    if not found and given is not None:
+        raise MapError(
+            f"{given}: no {pattern} beside it (scannet takes the scene folder or its "
+            ".aggregation.json)"
+        )
     if not found:
         raise MapError(f"{folder}: missing {pattern}")
     return found[0]
