@@ -29,6 +29,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from semloc.association import AssociationConfig, CandidateIndex, Describer
+from semloc.changes import Changes, ChangesConfig, explain
 from semloc.clustering import ClusteringConfig, HierarchicalClustering, SetPairs
 from semloc.decision import (
     DecisionConfig,
@@ -56,6 +57,7 @@ _COMPONENTS: dict[str, type[BaseModel]] = {
     "pose": PoseConfig,
     "verification": VerificationConfig,
     "decision": DecisionConfig,
+    "changes": ChangesConfig,
 }
 
 
@@ -70,6 +72,7 @@ class LocalizerConfig(BaseModel):
     pose: PoseConfig = Field(default_factory=PoseConfig)
     verification: VerificationConfig = Field(default_factory=VerificationConfig)
     decision: DecisionConfig = Field(default_factory=DecisionConfig)
+    changes: ChangesConfig = Field(default_factory=ChangesConfig)
     top_k: int = Field(10, ge=1, description="How many distinct hypotheses are reported.")
     screened_sets: int = Field(
         60, ge=1, description="Association sets screened by closed-form pose for hypotheses."
@@ -241,7 +244,18 @@ class Localizer:
         )
         if status is None:
             return None
-        return Result.of(status, hypotheses, self._steps, self._timing, reason)
+        return Result.of(
+            status, hypotheses, self._steps, self._timing, reason, self._changes(hypotheses)
+        )
+
+    def _changes(self, hypotheses: list[Hypothesis]) -> Changes:
+        """What the best hypothesis says changed (`semloc.changes`); nothing without a pose."""
+        if not hypotheses or hypotheses[0].pose is None:
+            return Changes()
+        candidates = {oid: self._candidates_of[i] for oid, i in self._local_index.items()}
+        best = hypotheses[0]
+        return explain(self.global_map, list(self._local.values()), best.pose, best.pairs,
+                       candidates, self.config.changes)  # fmt: skip
 
     def _why_no_sets(self) -> str:
         """Why no association set has 2 pairs: too few objects, or too few with candidates."""

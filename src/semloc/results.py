@@ -11,6 +11,8 @@ from typing import Any, Literal
 
 import numpy as np
 
+from semloc.changes import Changes
+
 Status = Literal["localized", "ambiguous", "failed"]
 STATUSES: tuple[Status, ...] = ("localized", "ambiguous", "failed")
 
@@ -91,6 +93,7 @@ class Result:
     steps: list[Step] = field(default_factory=list)
     timing_ms: dict[str, float] = field(default_factory=dict)
     reason: str = ""
+    changes: Changes = field(default_factory=Changes)  # what the best hypothesis implies
 
     @classmethod
     def of(
@@ -100,10 +103,12 @@ class Result:
         steps: list[Step],
         timing_ms: dict,
         reason: str = "",
+        changes: Changes | None = None,
     ) -> Result:
         """The result of an update: the pose is the best hypothesis's unless `failed`."""
         pose = hypotheses[0].pose if hypotheses and status != "failed" else None
-        return cls(status, pose, hypotheses, list(steps), dict(timing_ms), reason)
+        changes = changes or Changes()
+        return cls(status, pose, hypotheses, list(steps), dict(timing_ms), reason, changes)
 
     @property
     def best(self) -> Hypothesis | None:
@@ -130,4 +135,5 @@ class Result:
             "hypotheses": [h.to_dict() for h in self.hypotheses],
             "steps": [s.to_dict() for s in self.steps],
             "timing_ms": {k: round(v, 3) for k, v in self.timing_ms.items()},
+            "changes": self.changes.to_dict(),
         }

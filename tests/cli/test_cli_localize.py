@@ -33,8 +33,9 @@ def test_json_output_follows_the_contract(maps, capsys):
     assert main(["localize", str(folder / "global.json"), str(folder / "local.json"),
                  "--format", "json"]) == 0  # fmt: skip
     out = json.loads(capsys.readouterr().out)
-    assert {"status", "pose", "hypotheses", "steps", "timing_ms"} <= set(out)
+    assert {"status", "pose", "hypotheses", "steps", "timing_ms", "changes"} <= set(out)
     assert out["pose_is_answer"] is True and out["reason"] == "" and out["confidence"] > 0.5
+    assert out["changes"] == {"moved": [], "new": [], "missing": []}
     assert out["status"] == "localized"
     np.testing.assert_allclose(np.array(out["pose"]), obs.T_global_local, atol=0.1)
     first = out["hypotheses"][0]

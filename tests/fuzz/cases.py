@@ -69,6 +69,7 @@ def _map_commands(bad: Path, good: Path) -> list[list[str]]:
         ["view", str(bad), "-o", str(out) + ".png"],
         ["crop", str(bad), "--center", "0", "0", "0", "--radius", "5", "-o", str(out) + ".json"],
         ["align", str(good), str(bad), "-o", str(out) + ".json", "--g2o", str(out) + ".g2o"],
+        ["update-map", str(good), str(bad), "-o", str(out) + ".json"],
     ]
 
 
@@ -83,7 +84,7 @@ def map_case(name: str, make: Callable[[Path], Path]) -> list[Case]:
 
         return setup
 
-    return [Case(f"{name}-{i}", setup_for(i)) for i in range(5)]
+    return [Case(f"{name}-{i}", setup_for(i)) for i in range(6)]
 
 
 def _doc(change: Callable[[dict], None]) -> Callable[[Path], Path]:

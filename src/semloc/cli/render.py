@@ -15,6 +15,7 @@ from rich.markup import escape
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
+from semloc.changes import Changes
 from semloc.eval.success import ROTATION_TOLERANCE_DEG, TRANSLATION_TOLERANCE_M
 from semloc.maps import ObjectMap
 from semloc.results import Result
@@ -65,6 +66,7 @@ def print_result(result: Result, out: Console, warm: WarmUp | None = None) -> No
                       yaw, translation, escape(shown))  # fmt: skip
     if result.hypotheses:
         out.print(table)
+    print_changes(result.changes, out)
     out.print(timing_line(result, warm))
 
 
@@ -78,6 +80,18 @@ def timing_line(result: Result, warm: WarmUp | None = None) -> str:
     if warm is not None:
         line += f"; before them, {warm.describe()}"
     return line
+
+
+def print_changes(changes: Changes, out: Console) -> None:
+    """What the best hypothesis says changed in the map (nothing printed when nothing did)."""
+    if not (changes.moved or changes.new or changes.missing):
+        return
+    moved = ", ".join(f"{for_rich(m.global_id, 24)} (local {for_rich(m.local_id, 24)}, "
+                      f"{m.offset_m:.2f} m)" for m in changes.moved)  # fmt: skip
+    for name, text in (("moved", moved), ("new", ", ".join(for_rich(i, 24) for i in changes.new)),
+                       ("missing", ", ".join(for_rich(i, 24) for i in changes.missing))):  # fmt: skip
+        if text:
+            out.print(f"changes, {name}: {text}")
 
 
 def print_ground_truth(report: dict, out: Console) -> None:

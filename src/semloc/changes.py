@@ -1,0 +1,189 @@
+"""What changed since the map was made: every local object explained under a hypothesis' pose.
+
+Under the pose T_global_local of a hypothesis each local object is
+
+    matched   one of the hypothesis' pairs, or a map object it may be (the Localizer's
+              candidates) lies within `match_radius` of where the pose puts it, or failing
+              that a map object of another label does (the same object under another name:
+              a detector's label is not a change of the world);
+    moved     nothing it may be is at its place, but the map holds an object it may be
+              elsewhere (within `max_offset`) that no other local object explains, of a similar
+              size where both have boxes (`size_ratio`), whose old place was in view (an
+              observed local point within `source_radius`): the same instance, moved by
+              `offset_m` (the nearest such object is taken);
+    new       nothing in the map explains it.
+
+A map object that nobody matched or moved is `missing` when the place where it stood was
+observed: some observed local point lies within `observed_radius` of that place.  That is the
+bound: a local map holds the points of the objects seen, not the free space seen, so only a
+place right beside observed surfaces counts as seen, and objects without points (centres only)
+vouch for nothing; objects farther away are not reported, since nothing says whether they are
+still there.  Greedy and one to
+one, nearest first, so that a moved object and a new one of the same class are not both
+explained by one map object.  Pure computation on numpy arrays.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field
+from scipy.spatial import cKDTree
+
+from semloc.maps import ObjectMap, SemanticObject
+
+
+class ChangesConfig(BaseModel):
+    """When a local object is matched, moved or new, and a map object missing."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    match_radius: float = Field(
+        0.5, gt=0, description="A map object it may be within this (m) of its place: matched."
+    )
+    max_offset: float = Field(
+        3.0, gt=0, description="Farthest (m) an object may have moved to be reported as moved."
+    )
+    size_ratio: float = Field(
+        1.5, ge=1, description="Boxes of a moved object and its map object differ at most this."
+    )
+    source_radius: float = Field(
+        1.5,
+        gt=0,
+        description="A moved object's old place must lie this near (m) to an "
+        "observed local point: its absence there was seen.",
+    )
+    observed_radius: float = Field(
+        0.5,
+        gt=0,
+        description="A map object's place counts as observed within this (m) of a "
+        "local point: then an unmatched map object there is missing.",
+    )
+
+
+@dataclass(frozen=True)
+class Moved:
+    global_id: str
+    local_id: str
+    offset_m: float
+
+
+@dataclass(frozen=True)
+class Changes:
+    """The changes one hypothesis implies (empty when nothing changed)."""
+
+    moved: list[Moved] = field(default_factory=list)
+    new: list[str] = field(default_factory=list)  # local ids
+    missing: list[str] = field(default_factory=list)  # global ids
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "moved": [
+                {"global": m.global_id, "local": m.local_id, "offset_m": round(m.offset_m, 6)}
+                for m in self.moved
+            ],
+            "new": list(self.new),
+            "missing": list(self.missing),
+        }
+
+
+def explain(
+    global_map: ObjectMap,
+    local_objects: Sequence[SemanticObject],
+    pose: np.ndarray,
+    pairs: Sequence[tuple[str, str]],
+    candidates: Mapping[str, np.ndarray],
+    config: ChangesConfig | None = None,
+) -> Changes:
+    """The changes under `pose` (T_global_local) with the hypothesis' `pairs` (global id,
+    local id); `candidates[local id]` are the indices of the map objects it may be."""
+    config = config or ChangesConfig()
+    R, t = pose[:3, :3], pose[:3, 3]
+    placed = {o.id: R @ o.position + t for o in local_objects}
+    index = {gid: i for i, gid in enumerate(global_map.ids.tolist())}
+    used = {index[g] for g, _ in pairs if g in index}
+    explained = {l for _, l in pairs}
+    xyz = global_map.positions
+    rest = [o for o in local_objects if o.id not in explained]
+    _match_nearby(rest, placed, candidates, xyz, used, explained, config.match_radius)
+    _relabelled(rest, placed, xyz, used, explained, config.match_radius)
+    gap = _gap_to_observed(global_map, local_objects, pose,
+                           max(config.source_radius, config.observed_radius))  # fmt: skip
+    unseen = set(np.flatnonzero(gap > config.source_radius).tolist())
+    moved, new = _moved_or_new(
+        [o for o in rest if o.id not in explained], placed, candidates, global_map,
+        used | unseen, config,
+    )  # fmt: skip
+    missing = [str(global_map.ids[g]) for g in np.flatnonzero(gap <= config.observed_radius)
+               if g not in used]  # fmt: skip
+    return Changes(moved, new, missing)
+
+
+def _match_nearby(rest, placed, candidates, xyz, used, explained, radius) -> None:
+    """Local objects with a free map object they may be within `radius`: matched (nearest
+    first over all of them)."""
+    found = []
+    for obj in rest:
+        for g in np.asarray(candidates.get(obj.id, ()), dtype=int):
+            distance = float(np.linalg.norm(xyz[g] - placed[obj.id]))
+            if distance < radius:
+                found.append((distance, obj.id, int(g)))
+    for _, local_id, g in sorted(found):
+        if local_id not in explained and g not in used:
+            explained.add(local_id)
+            used.add(g)
+
+
+def _relabelled(rest, placed, xyz, used, explained, radius) -> None:
+    """Local objects standing where an unexplained map object of another label stands: the
+    same object under another name (a detector's label), matched, not moved or new."""
+    for obj in rest:
+        if obj.id in explained:
+            continue
+        distance = np.linalg.norm(xyz - placed[obj.id], axis=1)
+        free = [g for g in np.flatnonzero(distance < radius).tolist() if g not in used]
+        if free:
+            explained.add(obj.id)
+            used.add(min(free, key=lambda g: distance[g]))
+
+
+def _moved_or_new(rest, placed, candidates, global_map, used, config) -> tuple[list, list]:
+    xyz, found = global_map.positions, []
+    for obj in rest:
+        for g in np.asarray(candidates.get(obj.id, ()), dtype=int):
+            offset = float(np.linalg.norm(xyz[g] - placed[obj.id]))
+            if offset <= config.max_offset and _similar_size(obj, global_map[int(g)], config):
+                found.append((offset, obj.id, int(g)))
+    moved: dict[str, Moved] = {}
+    for offset, local_id, g in sorted(found):
+        if local_id not in moved and g not in used:
+            used.add(g)
+            moved[local_id] = Moved(str(global_map.ids[g]), local_id, offset)
+    new = [o.id for o in rest if o.id not in moved]
+    return sorted(moved.values(), key=lambda m: m.local_id), new
+
+
+def _similar_size(local: SemanticObject, mapped: SemanticObject, config: ChangesConfig) -> bool:
+    if local.size is None or mapped.size is None:
+        return True
+    a, b = np.sort(local.size), np.sort(mapped.size)
+    return bool(np.all(np.maximum(a, b) <= config.size_ratio * np.maximum(np.minimum(a, b), 0.05)))
+
+
+def _gap_to_observed(global_map, local_objects, pose, reach: float) -> np.ndarray:
+    """Per map object: the distance from its place to the nearest observed local point (inf
+    beyond `reach`, and for all when no local object has points)."""
+    gap = np.full(len(global_map), np.inf)
+    clouds = [o.points for o in local_objects if o.points is not None and len(o.points)]
+    if not clouds:
+        return gap
+    observed = np.vstack(clouds) @ pose[:3, :3].T + pose[:3, 3]
+    xyz = global_map.positions
+    low, high = observed.min(axis=0) - reach, observed.max(axis=0) + reach
+    near = np.flatnonzero(np.all((xyz >= low) & (xyz <= high), axis=1))
+    if len(near):
+        gap[near] = cKDTree(observed).query(xyz[near], distance_upper_bound=reach)[0]
+    return gap

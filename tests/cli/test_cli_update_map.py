@@ -1,0 +1,66 @@
+"""`semloc update-map`: moved objects moved, new ones added, missing ones flagged; all or none."""
+
+from __future__ import annotations
+
+import numpy as np
+from test_changes_fixtures import T, cube, room, seen_from_t  # noqa: F401
+
+import semloc
+from semloc.cli import main
+from semloc.maps import ObjectMap, SemanticObject
+from semloc.transforms import yaw_pose
+
+
+def write_scene(folder):
+    g = room()
+    objects = list(g)
+    objects[4] = objects[4].transformed(yaw_pose(0.0, [1.2, -0.9, 0.0]))  # lamp moved 1.5 m
+    objects[5] = SemanticObject("g9", "bed", points=cube([4.5, 1.0, 0.4], seed=9))  # new
+    # the plant (g5) is gone; a bin stands right beside its place
+    objects.append(SemanticObject("g11", "bin", points=cube([4.0, 3.8, 0.6], seed=11)))
+    semloc.save_map(g, folder / "global.json")
+    semloc.save_map(ObjectMap(seen_from_t(objects), up=[0, 0, 1]), folder / "local.json")
+    return g
+
+
+def test_update_map_applies_every_change(tmp_path, capsys):
+    g = write_scene(tmp_path)
+    out = tmp_path / "updated.json"
+    assert main(["update-map", str(tmp_path / "global.json"), str(tmp_path / "local.json"),
+                 "-o", str(out)]) == 0  # fmt: skip
+    text = capsys.readouterr().out
+    assert "changes, moved: g4" in text and "changes, new: l9, l11" in text
+    updated = semloc.load_map(out)
+    lamp = updated.get("g4")
+    np.testing.assert_allclose(lamp.position, g.get("g4").position + [1.2, -0.9, 0.0], atol=0.05)
+    assert lamp.extra["moved_m"] > 1.4
+    assert updated.get("l9").label == "bed" and updated.get("l9").extra["new"] is True
+    assert updated.get("g5").extra.get("missing") is True  # the plant beside the seen bin
+    assert len(updated) == len(g) + 2  # the bed and the second bin; nothing deleted
+
+
+def test_update_map_from_a_saved_result_gives_the_same_map(tmp_path):
+    write_scene(tmp_path)
+    result = tmp_path / "result.json"
+    assert main(["localize", str(tmp_path / "global.json"), str(tmp_path / "local.json"),
+                 "--format", "json", "-o", str(result)]) == 0  # fmt: skip
+    for name, extra in (("a.json", []), ("b.json", ["--result", str(result)])):
+        assert main(["update-map", str(tmp_path / "global.json"), str(tmp_path / "local.json"),
+                     "-o", str(tmp_path / name), *extra]) == 0  # fmt: skip
+    a, b = semloc.load_map(tmp_path / "a.json"), semloc.load_map(tmp_path / "b.json")
+    assert [(o.id, o.label, sorted(o.extra)) for o in a] == [
+        (o.id, o.label, sorted(o.extra)) for o in b
+    ]
+    np.testing.assert_allclose(a.positions, b.positions, atol=1e-5)
+
+
+def test_a_bad_result_file_is_one_line_and_nothing_is_written(tmp_path, capsys):
+    write_scene(tmp_path)
+    bad = tmp_path / "bad.json"
+    bad.write_text('{"status": "localized", "pose": 3, "hypotheses": []}')
+    out = tmp_path / "updated.json"
+    assert main(["update-map", str(tmp_path / "global.json"), str(tmp_path / "local.json"),
+                 "-o", str(out), "--result", str(bad)]) == 2  # fmt: skip
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("semloc: error:") and "pose" in err and "\n" not in err
+    assert not out.exists()

@@ -1,0 +1,69 @@
+"""What changed (semloc.changes): matched, moved, new and missing objects under a pose."""
+
+from __future__ import annotations
+
+import numpy as np
+from test_changes_fixtures import T, cube, room, seen_from_t
+
+import semloc
+from semloc.changes import Changes, explain
+from semloc.maps import ObjectMap, SemanticObject
+from semloc.transforms import yaw_pose
+
+
+def candidates_of(global_map: ObjectMap, local: list[SemanticObject]) -> dict[str, np.ndarray]:
+    return {o.id: np.flatnonzero(global_map.labels == o.label) for o in local}
+
+
+def test_an_unchanged_view_has_no_changes():
+    g = room()
+    local = seen_from_t(list(g)[:6])
+    pairs = [(f"g{i}", f"l{i}") for i in range(4)]  # two more are matched by their place
+    changes = explain(g, local, T, pairs, candidates_of(g, local))
+    assert changes == Changes()
+
+
+def test_a_moved_a_new_and_a_missing_object_are_named():
+    g = room()
+    objects = list(g)[:6]
+    objects[4] = objects[4].transformed(yaw_pose(0.0, [1.2, -0.9, 0.0]))  # the lamp moved 1.5 m
+    objects[5] = SemanticObject("g9", "bed", points=cube([4.5, 1.0, 0.4], seed=9))  # new
+    # the map's plant (g5, at [4.5, 4.2]) is gone, and the sofa (g3) stands right beside it
+    objects.append(SemanticObject("g10", "bin", points=cube([4.0, 3.8, 0.6], seed=10)))
+    local = seen_from_t(objects)
+    pairs = [(f"g{i}", f"l{i}") for i in range(4)]
+    changes = explain(g, local, T, pairs, candidates_of(g, local))
+    assert [(m.global_id, m.local_id) for m in changes.moved] == [("g4", "l4")]
+    assert abs(changes.moved[0].offset_m - 1.5) < 0.05
+    # the map's only bin (g7) stood where nothing was in view: a bin seen elsewhere is new
+    assert changes.new == ["l9", "l10"]
+    assert changes.missing == ["g5"]
+
+
+def test_an_object_farther_than_max_offset_is_new_not_moved():
+    g = room()
+    objects = [*list(g)[:4], SemanticObject("g10", "bin", points=cube([14.0, 9.0, 0.6], seed=10))]
+    local = seen_from_t(objects)
+    changes = explain(g, local, T, [(f"g{i}", f"l{i}") for i in range(4)], candidates_of(g, local))
+    assert changes.moved == [] and changes.new == ["l10"]
+
+
+def test_objects_without_points_vouch_for_no_missing_object():
+    g = room()
+    local = [o.replace(points=None) for o in seen_from_t(list(g)[:4])]
+    changes = explain(g, local, T, [(f"g{i}", f"l{i}") for i in range(4)], candidates_of(g, local))
+    assert changes.missing == []
+
+
+def test_localize_reports_the_changes_of_its_answer():
+    g = room()
+    objects = list(g)[:5]
+    objects[4] = objects[4].transformed(yaw_pose(0.0, [1.2, -0.9, 0.0]))
+    local = ObjectMap(seen_from_t(objects), up=[0, 0, 1])
+    result = semloc.localize(g, local)
+    assert result.status != "failed"
+    assert [(m.global_id, m.local_id) for m in result.changes.moved] == [("g4", "l4")]
+    assert result.to_dict()["changes"]["moved"][0]["global"] == "g4"
+    assert (
+        semloc.localize(g, ObjectMap(seen_from_t(list(g)[:5]), up=[0, 0, 1])).changes == Changes()
+    )
