@@ -81,6 +81,7 @@ VALIDATED_ELSEWHERE = {
     ("localize", "gamma"), ("localize", "delta"), ("localize", "tolerance"),
     ("localize", "descriptor_delta"), ("localize", "top_k"),  # LocalizerConfig (pydantic)
     ("demo", "gamma"),  # DemoConfig (pydantic)
+    ("align", "gamma"),  # LocalizerConfig (pydantic)
     ("crop", "radius"), ("crop", "center"),  # positive / finite checks of the command
 }  # fmt: skip
 """Numeric options whose range a settings model or the command checks (tested below)."""

@@ -67,3 +67,11 @@ def test_bad_input_is_one_line_and_exit_2(sessions, capsys):
     )
     assert "different files" in capsys.readouterr().err
     assert not (out / "same.json").exists()
+
+
+def test_align_settings_are_checked_in_one_line(sessions, capsys):
+    out = sessions
+    for value in ("5", "-1", "nan"):
+        assert main(["align", str(out / "a.json"), str(out / "b.json"), "--gamma", value]) == 2
+        err = capsys.readouterr().err.strip()
+        assert err.startswith("semloc: error:") and "gamma" in err and "\n" not in err
