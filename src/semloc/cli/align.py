@@ -60,7 +60,11 @@ def align(
         Path | None, typer.Option(help="Settings file, JSON or .yaml (as for `localize`).")
     ] = None,
     accept_ambiguous: Annotated[
-        bool, typer.Option(help="Also write the outputs of an `ambiguous` answer's best place.")
+        bool,
+        typer.Option(
+            "--accept-ambiguous",
+            help="Also write the outputs of an `ambiguous` answer's best place.",
+        ),
     ] = False,
 ) -> None:
     """Align map B into map A: the transform T_A_B, the correspondences, and B in A's frame."""

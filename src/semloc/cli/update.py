@@ -39,7 +39,11 @@ def update_map(
         typer.Option("--result", help="Use this saved answer (`localize --format json`)."),
     ] = None,
     accept_ambiguous: Annotated[
-        bool, typer.Option(help="Also apply the changes of an `ambiguous` answer's best place.")
+        bool,
+        typer.Option(
+            "--accept-ambiguous",
+            help="Also apply the changes of an `ambiguous` answer's best place.",
+        ),
     ] = False,
 ) -> None:
     """Write GLOBAL with the changes LOCAL shows applied: moved, new, missing objects."""
