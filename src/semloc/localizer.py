@@ -48,6 +48,7 @@ from semloc.decision import (
 from semloc.maps import MapError, ObjectMap, SemanticObject, unit_vector
 from semloc.pose import PoseConfig, PoseEstimate, cached_cloud, estimate_pose
 from semloc.results import Hypothesis, Result, Status, Step
+from semloc.semantics import pair_weight
 from semloc.transforms import centre_residual
 from semloc.verification import (
     Evidence,
@@ -398,13 +399,13 @@ class Localizer:
         )
 
     def _semantic_weight(self, pairs: list[tuple[int, int]]) -> float:
-        """The summed semantic similarity of (global index, local index) pairs."""
+        """The summed evidence weight (`semantics.pair_weight`) of (global, local) index pairs."""
         total = 0.0
         for g, l in pairs:
             candidates = self._candidates_of.get(l, np.zeros(0, dtype=int))
             at = int(np.searchsorted(candidates, g))
             found = at < len(candidates) and candidates[at] == g
-            total += float(self._similarity_of[l][at]) if found else 1.0
+            total += float(pair_weight(self._similarity_of[l][at])) if found else 1.0
         return total
 
     def label_report(self) -> dict[str, LabelResolution]:

@@ -305,13 +305,15 @@ class ObjectMap(Sequence[SemanticObject]):
         sizes: Any = None,
         rotations: Any = None,
         seen: Sequence[int] | None = None,
+        embeddings: Sequence[Any] | None = None,
         up: Any = None,
         name: str = "",
     ) -> ObjectMap:
         """Build a map from parallel arrays (one row per object); optional columns may be None."""
         positions = _numbers(positions, "positions", "an N x 3 array of")
         columns = {"ids": ids, "labels": labels, "points": points, "descriptors": descriptors,
-                   "sizes": sizes, "rotations": rotations, "seen": seen}  # fmt: skip
+                   "sizes": sizes, "rotations": rotations, "seen": seen,
+                   "embeddings": embeddings}  # fmt: skip
         for what, column in columns.items():
             if column is not None and (
                 isinstance(column, (str, bytes)) or not hasattr(column, "__len__")
@@ -335,6 +337,7 @@ class ObjectMap(Sequence[SemanticObject]):
                 points=None if points is None else points[i],
                 descriptor=None if descriptors is None else descriptors[i],
                 seen=0 if seen is None else seen[i],
+                embedding=None if embeddings is None else embeddings[i],
             )
             for i in range(n)
         ]

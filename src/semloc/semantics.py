@@ -169,6 +169,14 @@ def similarity(a: str, b: str) -> float:
     return relation(a, b)[1]
 
 
+def pair_weight(similarity: np.ndarray | float) -> np.ndarray:
+    """How much a candidate pair of this semantic similarity counts in a hypothesis' evidence:
+    1 for an exact match, halfway between 1 and its similarity otherwise (a synonym 0.95, a
+    parent class 0.85, a confusable class 0.75), so names a detector spells differently cost
+    little while an exact match still outweighs a parent class, which outweighs a confusable."""
+    return 0.5 + 0.5 * np.asarray(similarity, dtype=float)
+
+
 def embedding_similarity(cosine: np.ndarray | float) -> np.ndarray:
     """Cosine similarities of unit embeddings mapped onto [0, 1] (see `EMBEDDING_FLOOR`)."""
     span = EMBEDDING_FULL - EMBEDDING_FLOOR

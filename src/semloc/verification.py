@@ -312,12 +312,12 @@ class Evidence:
     support: int  # pairs found by the pose (guided matching), not by the clustering
     conflicts: int  # local objects left with no map object they could be anywhere near
     n_local: int  # local objects in all
-    weight: float | None = None  # the inlier pairs' summed semantic similarity (None: all 1)
+    weight: float | None = None  # the inlier pairs' summed semantic weight (None: all 1)
 
     def features(self) -> dict[str, float]:
         """The named features of the confidence model (`semloc.decision.FEATURES`); `pairs`
-        counts each pair by its semantic similarity, so an exact match outweighs a parent
-        class and a parent class outweighs a confusable one."""
+        counts each pair by its semantic weight (`semloc.semantics.pair_weight`): an exact
+        match outweighs a parent class, which outweighs a confusable one."""
         pairs = self.pairs if self.weight is None else min(self.weight, self.pairs)
         return {
             "pairs": float(min(pairs, 12)),

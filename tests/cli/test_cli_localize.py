@@ -8,10 +8,14 @@ import sys
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from rich.console import Console
 
 import semloc
 from semloc.cli import main
+from semloc.cli.app import CliError
+from semloc.cli.files import read_label_map
 from semloc.cli.render import print_result
 from semloc.results import Hypothesis, Result
 from semloc.sim.layouts import layout, observe
@@ -297,3 +301,25 @@ def test_localize_bad_label_map_is_one_line_exit_2(tmp_path, capsys, content):
     bad.write_text(content)
     assert main(["localize", str(g), str(l), "--label-map", str(bad)]) == 2
     assert len(capsys.readouterr().err.strip().splitlines()) == 1
+
+
+_JSON = st.recursive(
+    st.none() | st.booleans() | st.integers() | st.text(max_size=8),
+    lambda inner: (
+        st.lists(inner, max_size=4) | st.dictionaries(st.text(max_size=8), inner, max_size=4)
+    ),
+    max_leaves=10,
+)
+
+
+@settings(max_examples=60, deadline=None)
+@given(document=_JSON)
+def test_label_map_files_are_a_mapping_of_strings_or_one_error(tmp_path_factory, document):
+    path = tmp_path_factory.mktemp("lm") / "m.json"
+    path.write_text(json.dumps(document))
+    try:
+        mapping = read_label_map(path)
+    except CliError:
+        return
+    assert all(isinstance(k, str) and k.strip() and isinstance(v, str) and v.strip()
+               for k, v in mapping.items())  # fmt: skip
