@@ -63,7 +63,7 @@ def normalise(label: str) -> str:
         for qualifier in QUALIFIERS:
             if text.startswith(qualifier) and len(text) > len(qualifier):
                 text, changed = text[len(qualifier) :].strip(), True
-    return text
+    return text or label.strip().lower()  # a label of separators only stays itself
 
 
 def singular(text: str) -> str:

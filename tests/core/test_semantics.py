@@ -70,7 +70,10 @@ def test_levels_are_ordered_exact_synonym_parent_similar_unrelated():
     assert levels[0] == EXACT and levels[3] == SIMILAR and levels[4] == 0.0
 
 
-@given(st.sampled_from(NAMES + KNOWN + ["zorblax", "x"]), st.sampled_from(NAMES + KNOWN))
+LABELS_OR_TEXT = st.one_of(st.sampled_from(NAMES + KNOWN), st.text(min_size=1, max_size=12))
+
+
+@given(LABELS_OR_TEXT, LABELS_OR_TEXT)
 def test_similarity_is_symmetric_and_in_the_unit_interval(a, b):
     assert similarity(a, b) == similarity(b, a)
     assert 0.0 <= similarity(a, b) <= 1.0
@@ -85,6 +88,7 @@ def test_equal_normalised_labels_are_exact(text):
 @given(st.text(alphabet="abcXYZ _-/", min_size=1, max_size=20))
 def test_normalise_is_idempotent(text):
     assert normalise(normalise(text)) == normalise(text)
+    assert similarity("___", "--") == 0.0
 
 
 def test_embedding_calibration_is_monotone_and_clipped():
