@@ -18,7 +18,8 @@ import semloc
 PACKAGE = Path(semloc.__file__).parent
 CORE = {"maps", "pointsets", "transforms", "association", "clustering", "pose", "neighbours",
         "registration", "closed_form", "digests", "verification", "results", "decision", "localizer",
-        "confidence_model", "_clustering_fast", "_verification_fast", "alignment", "changes"}  # fmt: skip
+        "confidence_model", "_clustering_fast", "_verification_fast", "alignment", "changes",
+        "semantics"}  # fmt: skip
 THIRD_PARTY_CORE = {"numpy", "scipy", "pydantic", "numba"}
 EXTRAS = ("open3d", "matplotlib", "dask", "distributed", "sklearn", "torch", "rerun")
 MAX_LOCAL_SEMLOC_IMPORTS = 10

@@ -1,9 +1,12 @@
 """Candidate (singleton) associations between local and global objects (paper Sec. III-B, init).
 
-A local object may be associated with a global object when their labels agree (compared after
-an optional label map of synonyms, case- and space-insensitive) and, when both carry shape
-descriptors of the same length, the descriptor distance is below `delta`.  Every candidate
-becomes a singleton association set with score 0.  With `descriptor` set, the Localizer
+A local object may be associated with a global object when their labels are alike enough: a
+semantic similarity (`semloc.semantics`: exact, synonym, parent / child class, confusable
+classes; or calibrated embedding cosine) of at least `min_similarity` and within
+`similarity_margin` of the object's best match (labels compared after an optional label map,
+which wins: a mapped label matches by equality only) and, when both carry shape descriptors of
+the same length, the descriptor distance is below `delta`.  Every candidate becomes a singleton
+association set with score 0; its similarity weighs the pair in the evidence of a hypothesis.  With `descriptor` set, the Localizer
 computes descriptors of that kind for objects with points (semloc.descriptors) and the bound is
 `descriptor_delta`, by default the kind's calibrated δ.
 
@@ -15,13 +18,16 @@ built, and a user may pass a describer of their own.
 from __future__ import annotations
 
 import weakref
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from semloc.maps import ObjectMap, SemanticObject
+from semloc.semantics import embedding_similarity, relation
+from semloc.semantics import similarity as semantic_similarity
 
 
 class Describer(Protocol):
@@ -49,6 +55,21 @@ class AssociationConfig(BaseModel):
     label_map: dict[str, str] = Field(
         default_factory=dict,
         description="Synonyms mapped onto one label before comparing, e.g. {'sofa': 'couch'}.",
+    )
+    min_similarity: float = Field(
+        0.5,
+        ge=0,
+        le=1,
+        description="Least semantic similarity of a candidate pair (semloc.semantics: exact 1, "
+        "synonym 0.9, parent / child class 0.7, confusable classes 0.5; embeddings: calibrated "
+        "cosine); 1: equal normalised labels only.",
+    )
+    similarity_margin: float = Field(
+        0.3,
+        ge=0,
+        le=1,
+        description="A local object's candidates are within this margin of its most similar map "
+        "object (an exact match keeps parent / child classes, not merely confusable ones).",
     )
     use_descriptors: bool = Field(
         True, description="Gate candidates by descriptor distance when both objects have one."
@@ -96,12 +117,24 @@ def canonical_label(label: str, label_map: dict[str, str]) -> str:
     return mapped.strip().lower()
 
 
-class CandidateIndex:
-    """Global objects grouped by label, ready to answer "which global objects may this be?".
+@dataclass(frozen=True)
+class LabelResolution:
+    """How one local label was read against the map's labels (the `labels` report)."""
 
-    Built in time linear in the map, once per map and label map (`label_groups`): labels are
-    canonicalised once per distinct label, and the descriptors of each label group are
-    stacked per length, so a query is one vectorised distance computation over the group.
+    resolved: str  # exact | synonym | parent | child | similar | embedding | unmatched
+    map_labels: tuple[str, ...]  # the map labels its objects may be, most similar first
+
+
+class CandidateIndex:
+    """The map's objects ready to answer "which global objects may this one be, how surely?".
+
+    Built once per map and label map: the map's labels are grouped once (`label_groups`), and
+    each distinct local label's similarity to every map object is computed once
+    (`semloc.semantics`), then reused.  A local object's candidates are the map objects whose
+    semantic similarity is at least `min_similarity` and within `similarity_margin` of its
+    best one, gated by descriptor distance where both carry comparable descriptors.  With an
+    embedding on both objects the similarity is that of the embeddings (calibrated cosine).
+    A local label that `label_map` maps is compared by equality only (the map wins).
     """
 
     def __init__(
@@ -111,8 +144,11 @@ class CandidateIndex:
         self._label_map = {k.strip().lower(): v for k, v in config.label_map.items()}
         self._by_label = label_groups(global_map, self._label_map)
         self._map = global_map
-        self._stacks: dict[tuple[str, int], tuple[np.ndarray, np.ndarray]] = {}
+        self._stacks: dict[tuple[int, ...], tuple[np.ndarray, np.ndarray]] = {}
         self._gate = config.delta if gate is None else gate
+        self._of_label = _SIMILARITIES.setdefault(global_map, {}).setdefault(
+            tuple(sorted(self._label_map.items())), {}
+        )  # local label -> similarity per map object, shared by the indexes of one map
 
     @property
     def labels(self) -> set[str]:
@@ -120,30 +156,120 @@ class CandidateIndex:
 
     def candidates(self, obj: SemanticObject) -> np.ndarray:
         """Indices of the global objects that `obj` may be associated with (sorted)."""
-        label = canonical_label(obj.label, self._label_map)
-        indices = self._by_label.get(label, np.zeros(0, dtype=int))
-        if not self.config.use_descriptors or obj.descriptor is None or len(indices) == 0:
-            return indices
-        local = np.asarray(obj.descriptor, dtype=float)
-        with_same, stack = self._stack(label, local.shape)
-        ok = np.ones(len(indices), dtype=bool)  # without a comparable descriptor: allowed
-        if len(with_same):
-            distance = np.linalg.norm(stack - local.ravel(), axis=1)
-            ok[np.searchsorted(indices, with_same[distance >= self._gate])] = False
-        return indices[ok]
+        return self.weighted(obj)[0]
 
-    def _stack(self, label: str, shape: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray]:
-        """The group's objects whose descriptor has `shape`, and those descriptors stacked."""
-        key = (label, shape)
-        if key not in self._stacks:
-            indices = self._by_label[label]
-            described = [(i, self._map[i].descriptor) for i in indices.tolist()]
-            kept = [(i, d) for i, d in described if d is not None and d.shape == shape]
-            rows = [i for i, _ in kept]
-            stack = np.array([np.ravel(d) for _, d in kept], dtype=float)
+    def weighted(self, obj: SemanticObject) -> tuple[np.ndarray, np.ndarray]:
+        """The candidates of `obj` (sorted global indices) and their semantic similarity."""
+        similarity = self._similarities(obj)
+        indices = self._kept(similarity)
+        if self.config.use_descriptors and obj.descriptor is not None and len(indices):
+            indices = indices[self._descriptor_ok(indices, np.asarray(obj.descriptor, float))]
+        return indices, similarity[indices]
+
+    def resolution(self, label: str, objects: Sequence[SemanticObject] = ()) -> LabelResolution:
+        """How `label` is read against the map (`objects`: the local objects of that label;
+        with embeddings their candidates' labels are reported)."""
+        embedded = [o for o in objects if self._embedding_scores(o) is not None]
+        if embedded:
+            found = {i for o in embedded for i in self.candidates(o).tolist()}
+            names = sorted({str(self._map.labels[i]) for i in found})
+            return LabelResolution("embedding" if names else "unmatched", tuple(names))
+        similarity = self.label_similarity(label)
+        kept = self._kept(similarity)
+        best: dict[str, float] = {}
+        for i in kept.tolist():
+            name = str(self._map.labels[i])
+            best[name] = max(best.get(name, 0.0), float(similarity[i]))
+        if not best:
+            return LabelResolution("unmatched", ())
+        names = sorted(best, key=lambda n: (-best[n], n))
+        if self._user_mapped(label):
+            return LabelResolution("exact", tuple(names))
+        kind = relation(canonical_label(label, self._label_map), self._mapped(names[0]))[0]
+        return LabelResolution(kind, tuple(names))
+
+    def label_similarity(self, label: str) -> np.ndarray:
+        """The similarity of `label` to each map object's label (read-only, cached)."""
+        if label not in self._of_label:
+            local = canonical_label(label, self._label_map)
+            exact_only = self._user_mapped(label)
+            similarity = np.zeros(len(self._map))
+            for name, group in self._by_label.items():
+                value = 1.0 if local == name else semantic_similarity(local, name)
+                if exact_only and value < 1.0:
+                    value = 0.0
+                similarity[group] = value
+            similarity.flags.writeable = False
+            self._of_label[label] = similarity
+        return self._of_label[label]
+
+    def _user_mapped(self, label: str) -> bool:
+        return label in self.config.label_map or label.strip().lower() in self._label_map
+
+    def _mapped(self, map_label: str) -> str:
+        return canonical_label(map_label, self._label_map)
+
+    def _similarities(self, obj: SemanticObject) -> np.ndarray:
+        similarity = self.label_similarity(obj.label)
+        scores = self._embedding_scores(obj)
+        if scores is None:
+            return similarity
+        similarity = similarity.copy()
+        similarity[scores[0]] = scores[1]
+        return similarity
+
+    def _embedding_scores(self, obj: SemanticObject) -> tuple[np.ndarray, np.ndarray] | None:
+        """(map objects with a comparable embedding, calibrated similarity) or None."""
+        rows, stack = self._map.embeddings
+        if obj.embedding is None or not len(rows) or self._user_mapped(obj.label):
+            return None
+        if stack.shape[1] != len(obj.embedding):
+            return None
+        return rows, embedding_similarity(stack @ obj.embedding)
+
+    def _kept(self, similarity: np.ndarray) -> np.ndarray:
+        if not len(similarity):
+            return np.zeros(0, dtype=int)
+        floor = max(self.config.min_similarity, similarity.max() - self.config.similarity_margin)
+        return np.flatnonzero(similarity >= max(floor, 1e-12))
+
+    def _descriptor_ok(self, indices: np.ndarray, local: np.ndarray) -> np.ndarray:
+        """Which candidates pass the descriptor gate (without a comparable one: allowed)."""
+        rows, stack = self._stack(local.shape)
+        ok = np.ones(len(indices), dtype=bool)
+        if not len(rows):
+            return ok
+        at = np.minimum(np.searchsorted(rows, indices), len(rows) - 1)
+        described = rows[at] == indices
+        distance = np.linalg.norm(stack[at[described]] - local.ravel(), axis=1)
+        ok[np.flatnonzero(described)[distance >= self._gate]] = False
+        return ok
+
+    def _stack(self, shape: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray]:
+        """The map objects whose descriptor has `shape` (sorted), and those descriptors."""
+        if shape not in self._stacks:
+            kept = [(i, o.descriptor) for i, o in enumerate(self._map)
+                    if o.descriptor is not None and o.descriptor.shape == shape]  # fmt: skip
+            rows = np.array([i for i, _ in kept], dtype=int)
             width = int(np.prod(shape))
-            self._stacks[key] = (np.array(rows, dtype=int), stack.reshape(len(rows), width))
-        return self._stacks[key]
+            stack = np.array([np.ravel(d) for _, d in kept], dtype=float).reshape(len(rows), width)
+            self._stacks[shape] = (rows, stack)
+        return self._stacks[shape]
+
+
+def label_report(
+    index: CandidateIndex, local_map: Iterable[SemanticObject]
+) -> dict[str, LabelResolution]:
+    """How every label of `local_map` was read against the map of `index` (sorted by label)."""
+    by_label: dict[str, list[SemanticObject]] = {}
+    for obj in local_map:
+        by_label.setdefault(obj.label, []).append(obj)
+    return {label: index.resolution(label, objs) for label, objs in sorted(by_label.items())}
+
+
+_SIMILARITIES: weakref.WeakKeyDictionary[ObjectMap, dict[tuple, dict[str, np.ndarray]]] = (
+    weakref.WeakKeyDictionary()
+)
 
 
 _LABEL_GROUPS: weakref.WeakKeyDictionary[ObjectMap, dict[tuple, dict[str, np.ndarray]]] = (

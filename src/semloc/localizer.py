@@ -28,7 +28,13 @@ from typing import Any
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-from semloc.association import AssociationConfig, CandidateIndex, Describer
+from semloc.association import (
+    AssociationConfig,
+    CandidateIndex,
+    Describer,
+    LabelResolution,
+    label_report,
+)
 from semloc.changes import Changes, ChangesConfig, explain
 from semloc.clustering import ClusteringConfig, HierarchicalClustering, SetPairs
 from semloc.decision import (
@@ -43,6 +49,7 @@ from semloc.decision import (
 from semloc.maps import MapError, ObjectMap, SemanticObject, unit_vector
 from semloc.pose import PoseConfig, PoseEstimate, cached_cloud, estimate_pose
 from semloc.results import Hypothesis, Result, Status, Step
+from semloc.semantics import pair_weight
 from semloc.transforms import centre_residual
 from semloc.verification import (
     Evidence,
@@ -163,6 +170,7 @@ class Localizer:
         self._local: dict[str, SemanticObject] = {}
         self._local_index: dict[str, int] = {}
         self._candidates_of: dict[int, np.ndarray] = {}  # local index -> global indices
+        self._similarity_of: dict[int, np.ndarray] = {}  # local index -> their similarity
         self._support = MapSupport(
             [], global_map.positions, config.verification, axis=global_map.sweep_order.axis
         )
@@ -289,7 +297,7 @@ class Localizer:
                     k: v for k, v in self._poses.items() if all(l != index for _, l in k[1])
                 }
             self._local[obj.id] = obj
-            detections[index] = self._candidates.candidates(obj)
+            detections[index], self._similarity_of[index] = self._candidates.weighted(obj)
             self._candidates_of[index] = detections[index]
             self._support.assign(index, detections[index])
         return detections
@@ -388,6 +396,7 @@ class Localizer:
             features = Evidence(
                 len(verified.pairs), len(verified.rejected), residual, estimate.fitness,
                 verified.support, verified.conflicts, len(local_xyz),
+                self._semantic_weight(verified.pairs),
             ).features()  # fmt: skip
         ids = self.global_map.ids
         return Hypothesis(
@@ -402,6 +411,20 @@ class Localizer:
             features=features,
             rejected=[(str(ids[g]), local_objects[l].id) for g, l in verified.rejected],
         )
+
+    def _semantic_weight(self, pairs: list[tuple[int, int]]) -> float:
+        """The summed evidence weight (`semantics.pair_weight`) of (global, local) index pairs."""
+        total = 0.0
+        for g, l in pairs:
+            candidates = self._candidates_of.get(l, np.zeros(0, dtype=int))
+            at = int(np.searchsorted(candidates, g))
+            found = at < len(candidates) and candidates[at] == g
+            total += float(pair_weight(self._similarity_of[l][at])) if found else 1.0
+        return total
+
+    def label_report(self) -> dict[str, LabelResolution]:
+        """How each label of the local objects so far was read against the map's labels."""
+        return label_report(self._candidates, self._local.values())
 
     def _recover(
         self, pairs: list[tuple[int, int]], refine: bool, previous: dict, matched: tuple

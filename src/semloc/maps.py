@@ -46,6 +46,8 @@ MAX_COORDINATE = 1e6
 and sum of the pipeline finite and precise."""
 MAX_DESCRIPTOR_LENGTH = 4096
 """Most entries of a shape descriptor."""
+MAX_EMBEDDING_LENGTH = 8192
+"""Most entries of a semantic embedding."""
 MAX_SEEN = 2**31 - 1
 """Largest keyframe index `seen`."""
 
@@ -119,6 +121,22 @@ def _as_rotation(value: Any) -> np.ndarray:
     return array
 
 
+def _as_embedding(value: Any) -> np.ndarray:
+    """A non-empty vector of finite numbers, not all zero, scaled to unit length."""
+    array = _numbers(value, "embedding", "a vector of").ravel()
+    if not 0 < array.size <= MAX_EMBEDDING_LENGTH:
+        raise MapError(
+            f"embedding must be a non-empty vector of at most {MAX_EMBEDDING_LENGTH} numbers"
+        )
+    if not np.all(np.isfinite(array)):
+        raise MapError("embedding must be a vector of finite numbers")
+    largest = np.abs(array).max()
+    if largest < 1e-30:
+        raise MapError("embedding is a zero vector (it has no direction)")
+    array = array / largest  # the norm cannot overflow or underflow now
+    return array / np.linalg.norm(array)
+
+
 def _text(value: Any, what: str, limit: int, blank: bool = False) -> str:
     if not isinstance(value, str) or not (value if blank else value.strip()):
         raise MapError(f"{what} must be a non-empty string, got {_brief(value)}")
@@ -134,6 +152,9 @@ def _text(value: Any, what: str, limit: int, blank: bool = False) -> str:
 @dataclass(frozen=True, eq=False)
 class SemanticObject:
     """One object: id, semantic label and centre, with optional box, points and descriptor.
+
+    `embedding` is an optional semantic feature vector (e.g. CLIP features), any dimension,
+    scaled to unit length on construction; objects of one map must agree on its dimension.
 
     `position` defaults to the centre (mean) of `points`; `points` may be an N x 3 array-like
     or a point cloud object with a `.points` attribute (e.g. `open3d.geometry.PointCloud`).
@@ -151,6 +172,7 @@ class SemanticObject:
     seen: int = 0
     score: float | None = None
     extra: dict[str, Any] = field(default_factory=dict)
+    embedding: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         set_ = object.__setattr__
@@ -190,6 +212,8 @@ class SemanticObject:
             if not np.all(np.isfinite(descriptor)):
                 raise MapError("descriptor must be a vector of finite numbers")
             set_(self, "descriptor", descriptor)
+        if self.embedding is not None:
+            set_(self, "embedding", _as_embedding(self.embedding))
         if isinstance(self.seen, bool) or not isinstance(self.seen, (int, np.integer)):
             raise MapError(f"seen must be an integer, got {_brief(self.seen)}")
         if not 0 <= self.seen <= MAX_SEEN:
@@ -256,10 +280,18 @@ class ObjectMap(Sequence[SemanticObject]):
         self.name = str(name)
         self.extra: dict[str, Any] = dict(extra or {})
         self._index: dict[str, int] = {}
+        dimension: tuple[str, int] | None = None  # of the first embedding: (object id, length)
         for i, obj in enumerate(self._objects):
             if obj.id in self._index:
                 raise MapError(f"object '{obj.id}': duplicate id")
             self._index[obj.id] = i
+            if obj.embedding is not None:
+                dimension = dimension or (obj.id, len(obj.embedding))
+                if len(obj.embedding) != dimension[1]:
+                    raise MapError(
+                        f"object '{obj.id}': embedding has {len(obj.embedding)} entries, object "
+                        f"'{dimension[0]}' of the same map has {dimension[1]}"
+                    )
 
     @classmethod
     def from_arrays(
@@ -273,13 +305,15 @@ class ObjectMap(Sequence[SemanticObject]):
         sizes: Any = None,
         rotations: Any = None,
         seen: Sequence[int] | None = None,
+        embeddings: Sequence[Any] | None = None,
         up: Any = None,
         name: str = "",
     ) -> ObjectMap:
         """Build a map from parallel arrays (one row per object); optional columns may be None."""
         positions = _numbers(positions, "positions", "an N x 3 array of")
         columns = {"ids": ids, "labels": labels, "points": points, "descriptors": descriptors,
-                   "sizes": sizes, "rotations": rotations, "seen": seen}  # fmt: skip
+                   "sizes": sizes, "rotations": rotations, "seen": seen,
+                   "embeddings": embeddings}  # fmt: skip
         for what, column in columns.items():
             if column is not None and (
                 isinstance(column, (str, bytes)) or not hasattr(column, "__len__")
@@ -303,6 +337,7 @@ class ObjectMap(Sequence[SemanticObject]):
                 points=None if points is None else points[i],
                 descriptor=None if descriptors is None else descriptors[i],
                 seen=0 if seen is None else seen[i],
+                embedding=None if embeddings is None else embeddings[i],
             )
             for i in range(n)
         ]
@@ -383,6 +418,14 @@ class ObjectMap(Sequence[SemanticObject]):
     @property
     def descriptors(self) -> list[np.ndarray | None]:
         return [o.descriptor for o in self._objects]
+
+    @cached_property
+    def embeddings(self) -> tuple[np.ndarray, np.ndarray]:
+        """(indices of the objects with an embedding, their unit embeddings stacked (M, D))."""
+        rows = [i for i, o in enumerate(self._objects) if o.embedding is not None]
+        if not rows:
+            return np.zeros(0, dtype=int), np.zeros((0, 0))
+        return np.array(rows), np.stack([self._objects[i].embedding for i in rows])
 
     # Derived maps ----------------------------------------------------------------------------
     def with_objects(self, objects: Iterable[SemanticObject]) -> ObjectMap:

@@ -312,11 +312,15 @@ class Evidence:
     support: int  # pairs found by the pose (guided matching), not by the clustering
     conflicts: int  # local objects left with no map object they could be anywhere near
     n_local: int  # local objects in all
+    weight: float | None = None  # the inlier pairs' summed semantic weight (None: all 1)
 
     def features(self) -> dict[str, float]:
-        """The named features of the confidence model (`semloc.decision.FEATURES`)."""
+        """The named features of the confidence model (`semloc.decision.FEATURES`); `pairs`
+        counts each pair by its semantic weight (`semloc.semantics.pair_weight`): an exact
+        match outweighs a parent class, which outweighs a confusable one."""
+        pairs = self.pairs if self.weight is None else min(self.weight, self.pairs)
         return {
-            "pairs": float(min(self.pairs, 12)),
+            "pairs": float(min(pairs, 12)),
             "rejected_share": self.rejected / max(self.pairs + self.rejected, 1),
             "residual": float(min(self.residual, 1.0)),
             "fitness": float(self.fitness),

@@ -8,10 +8,14 @@ import sys
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from rich.console import Console
 
 import semloc
 from semloc.cli import main
+from semloc.cli.app import CliError
+from semloc.cli.files import read_label_map
 from semloc.cli.render import print_result
 from semloc.results import Hypothesis, Result
 from semloc.sim.layouts import layout, observe
@@ -33,7 +37,7 @@ def test_json_output_follows_the_contract(maps, capsys):
     assert main(["localize", str(folder / "global.json"), str(folder / "local.json"),
                  "--format", "json"]) == 0  # fmt: skip
     out = json.loads(capsys.readouterr().out)
-    assert {"status", "pose", "hypotheses", "steps", "timing_ms", "changes"} <= set(out)
+    assert {"status", "pose", "hypotheses", "steps", "timing_ms", "changes", "labels"} <= set(out)
     assert out["pose_is_answer"] is True and out["reason"] == "" and out["confidence"] > 0.5
     assert out["changes"] == {"moved": [], "new": [], "missing": []}
     assert out["status"] == "localized"
@@ -243,3 +247,81 @@ def test_progress_only_for_long_replays_on_a_terminal():
         callback(5, 30)
     assert calls == [(i, 12) for i in range(1, 13)]
     assert "replaying updates" in terminal.file.getvalue()
+
+
+def _vocabulary_maps(tmp_path):
+    rng = np.random.default_rng(0)
+    labels = ["armchair", "couch", "refrigerator", "coffee table", "television", "pillow", "lamp"]
+    objects = [semloc.SemanticObject(str(i), lb, p)
+               for i, (lb, p) in enumerate(zip(labels, rng.uniform(0, 6, (7, 3))))]  # fmt: skip
+    names = {"armchair": "chair", "couch": "sofa", "refrigerator": "fridge", "lamp": "zorblax"}
+    global_map = semloc.ObjectMap(objects)
+    local = global_map.with_objects(o.replace(label=names.get(o.label, o.label)) for o in objects)
+    semloc.save_map(global_map, tmp_path / "g.json")
+    semloc.save_map(local, tmp_path / "l.json")
+    return tmp_path / "g.json", tmp_path / "l.json"
+
+
+def test_localize_reports_how_labels_were_read(tmp_path, capsys):
+    g, l = _vocabulary_maps(tmp_path)
+    assert main(["localize", str(g), str(l), "--format", "json"]) == 0
+    captured = capsys.readouterr()
+    assert json.loads(captured.out)["labels"] == {
+        "chair": {"resolved": "child", "map_labels": ["armchair", "couch"]},
+        "coffee table": {"resolved": "exact", "map_labels": ["coffee table"]},
+        "fridge": {"resolved": "synonym", "map_labels": ["refrigerator"]},
+        "pillow": {"resolved": "exact", "map_labels": ["pillow"]},
+        "sofa": {"resolved": "synonym", "map_labels": ["couch"]},
+        "television": {"resolved": "exact", "map_labels": ["television"]},
+        "zorblax": {"resolved": "unmatched", "map_labels": []},
+    }
+    err = " ".join(captured.err.split())
+    assert 'local label "zorblax" matches no map label' in err
+    assert '{"zorblax": "<map label>"}' in err
+
+
+def test_localize_label_map_option_json_and_yaml(tmp_path, capsys):
+    g, l = _vocabulary_maps(tmp_path)
+    (tmp_path / "m.json").write_text('{"zorblax": "lamp"}')
+    (tmp_path / "m.yaml").write_text("zorblax: lamp\n")
+    for name in ("m.json", "m.yaml"):
+        args = ["localize", str(g), str(l), "--format", "json", "--label-map", str(tmp_path / name)]
+        assert main(args) == 0
+        captured = capsys.readouterr()
+        labels = json.loads(captured.out)["labels"]
+        assert labels["zorblax"] == {"resolved": "exact", "map_labels": ["lamp"]}
+        assert "warning" not in captured.err
+    assert main(["localize", str(g), str(l)]) == 0
+    text = capsys.readouterr().out
+    assert "labels (local → map)" in text and "unmatched" in text
+
+
+@pytest.mark.parametrize("content", ['["x"]', '{"a": ""}', "a: [1"])
+def test_localize_bad_label_map_is_one_line_exit_2(tmp_path, capsys, content):
+    g, l = _vocabulary_maps(tmp_path)
+    bad = tmp_path / ("bad.yaml" if content.startswith("a:") else "bad.json")
+    bad.write_text(content)
+    assert main(["localize", str(g), str(l), "--label-map", str(bad)]) == 2
+    assert len(capsys.readouterr().err.strip().splitlines()) == 1
+
+
+_JSON = st.recursive(
+    st.none() | st.booleans() | st.integers() | st.text(max_size=8),
+    lambda inner: (
+        st.lists(inner, max_size=4) | st.dictionaries(st.text(max_size=8), inner, max_size=4)
+    ),
+    max_leaves=10,
+)
+
+
+@settings(max_examples=60, deadline=None)
+@given(document=_JSON)
+def test_label_map_files_are_a_mapping_of_strings_or_one_error(tmp_path_factory, document):
+    path = tmp_path_factory.mktemp("lm") / "m.json"
+    path.write_text(json.dumps(document))
+    try:
+        mapping = read_label_map(path)
+    except CliError:
+        return
+    assert all(isinstance(k, str) and k.strip() and isinstance(v, str) and v.strip()
+               for k, v in mapping.items())  # fmt: skip

@@ -31,7 +31,8 @@ HOSTILE = st.one_of(
     st.floats(allow_nan=False, allow_infinity=False), st.just(1e308), st.just([]),
     st.lists(st.floats(-1e308, 1e308), max_size=4),
 )  # fmt: skip
-FIELDS = ["id", "label", "position", "size", "rotation", "points", "descriptor", "seen", "score"]
+FIELDS = ["id", "label", "position", "size", "rotation", "points", "descriptor", "seen", "score",
+          "embedding"]  # fmt: skip
 TOP = ["format", "version", "name", "up", "objects", "points_file"]
 QUIET = settings(max_examples=60, deadline=None, suppress_health_check=list(HealthCheck))
 

@@ -92,7 +92,7 @@ class ClipperBaseline(ObjectBaseline):
 
     def __init__(self, global_map, config: ClipperConfig | None = None, local_up=None) -> None:
         super().__init__(global_map, config, local_up)
-        self._index = CandidateIndex(global_map, AssociationConfig())
+        self._index = CandidateIndex(global_map, AssociationConfig(min_similarity=1.0))
 
     def _groups(self, local: list[SemanticObject]) -> list[Group]:
         cfg = self.config

@@ -31,6 +31,17 @@ def read_config(path: Path | None) -> dict:
     return data
 
 
+def read_label_map(path: Path) -> dict[str, str]:
+    """A `--label-map` file: an object (JSON, or YAML for .yaml/.yml) of label -> label."""
+    data = _read_yaml(path) if path.suffix.lower() in YAML_SUFFIXES else read_json(path)
+    if not isinstance(data, dict) or not all(
+        isinstance(k, str) and k.strip() and isinstance(v, str) and v.strip()
+        for k, v in data.items()
+    ):
+        fail(f"{path}: a label map must be an object of non-empty strings (local -> map label)")
+    return dict(data)
+
+
 def _read_yaml(path: Path) -> object:
     try:
         text = read_regular(path, MAX_JSON_BYTES).decode("utf-8")

@@ -2,7 +2,9 @@
 
 With `--gt` (a file holding the true `T_global_local`, as `semloc crop` writes) it also
 prints the pose error and the paper's success at 15° / 0.5 m, and adds `ground_truth` to the
-JSON output.  Long replays show a progress bar on stderr when it is a terminal.
+JSON output.  It reports how each local label was read against the map's labels (exact,
+synonym, parent / child class, similar, embedding or unmatched: a table, or `labels` in the
+JSON); an unmatched label is a warning on stderr, never an error.  Long replays show a progress bar on stderr when it is a terminal.
 """
 
 from __future__ import annotations
@@ -18,10 +20,17 @@ import typer
 from pydantic import ValidationError
 from rich.console import Console
 
-from semloc.association import DESCRIBERS
+from semloc.association import DESCRIBERS, CandidateIndex, label_report
 from semloc.cli.app import app, choices, console, err_console, fail, first_error, with_default
-from semloc.cli.files import check_finite, check_output, read_config, read_pose
-from semloc.cli.render import print_ground_truth, print_result, replay_progress
+from semloc.cli.files import check_finite, check_output, read_config, read_label_map, read_pose
+from semloc.cli.render import (
+    labels_json,
+    print_ground_truth,
+    print_labels,
+    print_result,
+    replay_progress,
+    warn_unmatched,
+)
 from semloc.eval.success import ground_truth_report
 from semloc.io import load_map, write_atomic
 from semloc.localizer import LocalizerConfig
@@ -79,6 +88,14 @@ def localize(
         float | None,
         typer.Option(help="Gate bound with --descriptor (default: the kind's calibrated δ)."),
     ] = None,
+    label_map: Annotated[
+        Path | None,
+        typer.Option(
+            "--label-map",
+            help="Labels mapped before comparing, JSON or .yaml: an object {local or map label: "
+            'label}, e.g. {"sofa": "couch"}; it wins over the shipped taxonomy.',
+        ),
+    ] = None,
     config: Annotated[
         Path | None,
         typer.Option(
@@ -110,6 +127,8 @@ def localize(
                  descriptor=None if descriptor is None else descriptor.value,
                  descriptor_delta=descriptor_delta)  # fmt: skip
     settings.update({key: value for key, value in given.items() if value is not None})
+    if label_map is not None:
+        settings["label_map"] = read_label_map(label_map)
     try:
         cfg = LocalizerConfig(**settings)
     except ValidationError as exc:
@@ -120,8 +139,11 @@ def localize(
     with replay_progress(err_console, local_objects) as progress:
         result = run_localize(global_objects, local_objects, cfg, progress=progress)
     report = None if truth is None else ground_truth_report(result.pose, result.hypotheses, truth)
+    labels = label_report(CandidateIndex(global_objects, cfg.association), local_objects)
+    warn_unmatched(labels, err_console)
     if output_format is OutputFormat.json:
         document = {**result.to_dict(), "warm_up_ms": round(warm.seconds * 1000, 3)}
+        document["labels"] = labels_json(labels)
         if report is not None:
             document["ground_truth"] = report
         text = json.dumps(document, indent=1, allow_nan=False) + "\n"
@@ -132,6 +154,7 @@ def localize(
         return
     target = console if output is None else Console(record=True, width=120, file=io.StringIO())
     print_result(result, target, warm)
+    print_labels(labels, target)
     if report is not None:
         print_ground_truth(report, target)
     if output is not None:

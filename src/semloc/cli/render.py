@@ -5,6 +5,7 @@ rich markup escaped."""
 
 from __future__ import annotations
 
+import json
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 
@@ -15,6 +16,7 @@ from rich.markup import escape
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
+from semloc.association import LabelResolution
 from semloc.changes import Changes
 from semloc.eval.success import ROTATION_TOLERANCE_DEG, TRANSLATION_TOLERANCE_M
 from semloc.maps import ObjectMap
@@ -92,6 +94,41 @@ def print_changes(changes: Changes, out: Console) -> None:
                        ("missing", ", ".join(for_rich(i, 24) for i in changes.missing))):  # fmt: skip
         if text:
             out.print(f"changes, {name}: {text}")
+
+
+def print_labels(report: dict[str, LabelResolution], out: Console) -> None:
+    """How each local label was read against the map's labels, one row per label."""
+    table = Table(title="labels (local → map)")
+    table.add_column("local label", no_wrap=True)
+    table.add_column("resolved", no_wrap=True)
+    table.add_column("map labels", overflow="ellipsis")
+    for label, found in report.items():
+        style = "yellow" if found.resolved == "unmatched" else ""
+        shown = ", ".join(for_rich(x, 24) for x in found.map_labels[:6])
+        shown += " …" if len(found.map_labels) > 6 else ""
+        table.add_row(for_rich(label, 32), f"[{style}]{found.resolved}[/]" if style else
+                      found.resolved, shown or "-")  # fmt: skip
+    if report:
+        out.print(table)
+
+
+def labels_json(report: dict[str, LabelResolution]) -> dict[str, dict]:
+    """The `labels` object of the JSON output."""
+    return {label: {"resolved": found.resolved, "map_labels": list(found.map_labels)}
+            for label, found in report.items()}  # fmt: skip
+
+
+def warn_unmatched(report: dict[str, LabelResolution], out: Console) -> None:
+    """One warning line per local label that matches no map label."""
+    for label, found in report.items():
+        if found.resolved == "unmatched":
+            entry = escape(json.dumps({label: "<map label>"}))
+            out.print(
+                f"[bold yellow]warning:[/] local label {escape(json.dumps(label))} matches no "
+                f"map label (its objects have no candidates); add a label map entry such as "
+                f"{entry} (--label-map FILE)",
+                soft_wrap=True,
+            )
 
 
 def print_ground_truth(report: dict, out: Console) -> None:

@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from semloc.maps import (
+    MAX_EMBEDDING_LENGTH,
     MAX_ID_LENGTH,
     MAX_OBJECTS,
     MAX_POINTS_PER_MAP,
@@ -43,8 +44,11 @@ FORMAT = "semloc-map"
 VERSION = 1
 _OBJECT_KEYS = {
     "id", "label", "position", "size", "rotation", "points", "descriptor", "seen", "score",
+    "embedding",
 }  # fmt: skip
 _TOP_KEYS = {"format", "version", "name", "up", "objects", "points_file"}
+EMBEDDING_MEMBER = "embedding:"
+"""An `.npz` member named `embedding:<object id>` holds that object's embedding (a vector)."""
 MAX_JSON_BYTES = 256 * 2**20
 """Largest JSON file read (maps, settings, results, dataset annotations): 256 MiB."""
 MAX_FILE_BYTES = 2**30
@@ -221,6 +225,10 @@ def map_from_dict(document: Any, base_dir: Path | None = None) -> ObjectMap:
         raise MapError(f"{len(raw_objects):,} objects, more than the limit of {MAX_OBJECTS:,}")
     wanted = {
         str(raw.get("id")) for raw in raw_objects if isinstance(raw, dict) and "points" not in raw
+    } | {
+        EMBEDDING_MEMBER + str(raw.get("id"))
+        for raw in raw_objects
+        if isinstance(raw, dict) and "embedding" not in raw
     }
     external = _read_points_file(document.get("points_file"), base_dir, wanted)
     objects = [_object_from_dict(raw, i, external) for i, raw in enumerate(raw_objects)]
@@ -259,6 +267,7 @@ def _object_from_dict(raw: Any, index: int, external: dict[str, np.ndarray]) -> 
         seen=raw.get("seen", 0),
         score=raw.get("score"),
         extra={k: v for k, v in raw.items() if k not in _OBJECT_KEYS},
+        embedding=raw.get("embedding", external.get(EMBEDDING_MEMBER + str(object_id))),
     )
 
 
@@ -277,7 +286,10 @@ def _read_points_file(name: Any, base_dir: Path | None, wanted: set[str]) -> dic
             for object_id in sorted(wanted & set(members)):
                 info = archive.getinfo(members[object_id])
                 with archive.open(info) as handle:
-                    total += _npy_shape(handle, object_id, info.file_size)[0]
+                    if object_id.startswith(EMBEDDING_MEMBER):
+                        _embedding_shape(handle, object_id, info.file_size)
+                    else:
+                        total += _npy_shape(handle, object_id, info.file_size)[0]
                 if total > MAX_POINTS_PER_MAP:
                     raise MapError(f"more than {MAX_POINTS_PER_MAP:,} points in all")
                 with archive.open(members[object_id]) as handle:
@@ -308,6 +320,17 @@ def _points_path(name: Any, base_dir: Path) -> Path:
     if not inside:
         raise MapError(f"points_file {name!r:.80} leads outside the map's folder")
     return path
+
+
+def _embedding_shape(handle: Any, member: str, available: int) -> None:
+    """Check an embedding member's header: a float vector of at most MAX_EMBEDDING_LENGTH."""
+    shape, dtype = npy_header(handle, available)
+    object_id = member.removeprefix(EMBEDDING_MEMBER)
+    if len(shape) != 1 or not 0 < shape[0] <= MAX_EMBEDDING_LENGTH or dtype.kind not in "iuf":
+        raise MapError(
+            f"object '{object_id}': embedding must be a vector of at most "
+            f"{MAX_EMBEDDING_LENGTH} numbers, got {dtype} {shape}"
+        )
 
 
 def _npy_shape(handle: Any, object_id: str, available: int) -> tuple[int, ...]:
@@ -385,6 +408,8 @@ def _object_to_dict(obj: SemanticObject, inline_points: bool) -> dict[str, Any]:
         out["points"] = _list(obj.points)
     if obj.descriptor is not None:
         out["descriptor"] = _list(obj.descriptor)
+    if obj.embedding is not None:
+        out["embedding"] = np.asarray(obj.embedding, dtype=float).tolist()
     out["seen"] = obj.seen
     if obj.score is not None:
         out["score"] = obj.score
