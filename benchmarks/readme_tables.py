@@ -59,6 +59,9 @@ JOBS = {
     ),
     "buildings": Job("python benchmarks/accuracy_core.py --trials 40 --markdown {out}"),
     "speed": Job("PYTHONPATH=src python benchmarks/bench_speed.py --views 8 --markdown {out}"),
+    "vocab": Job(
+        "PYTHONPATH=src python benchmarks/vocabulary.py --views 20 --buildings 2 --markdown {out}"
+    ),
     "align": Job("PYTHONPATH=src python benchmarks/bench_align.py --trials 5 --markdown {out}"),
     "bench": Job(
         "semloc bench --methods semloc,clipper,random-walk,segmatch,fpfh-ransac,semloc+geometric,"
@@ -109,6 +112,12 @@ TABLES = {
     "variants": TableSpec("real", 1, file="docs/trust.md"),
     "crops": TableSpec("real", 0, file="docs/real_layouts.md"),
     "align": TableSpec("align", 0, file="docs/alignment.md"),
+    "vocabulary": TableSpec(
+        "vocab",
+        0,
+        lambda r: r["source"] == "all" and r["cases"] in {"clean", "noisy", "dynamic", "all"},
+    ),
+    "vocabulary-all": TableSpec("vocab", 0, file="docs/vocabulary.md"),
     "recall": TableSpec("bench", 0, file="docs/benchmark.md"),
     "claims": TableSpec("bench", 1, file="docs/benchmark.md"),
 }

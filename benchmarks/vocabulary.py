@@ -4,7 +4,7 @@
         [--views 20] [--buildings 2] [--seed 0] [--markdown TABLE.md]
 
 Cases: the real-layout variants of `semloc.eval.variants` (ScanNet scene0000_00, Replica
-office4, 3RScan scene_1; skipped without the data) and simulated buildings
+office4, 3RScan scene_1, and the Scan2CAD scan map of scene0470_00; skipped without the data) and simulated buildings
 (`semloc.sim.layouts.layout`, 150 objects); clean, noisy and dynamic; 3, 5 and 8 observed
 objects; `--views` views per cell.  Each case is localized four times:
 
@@ -42,6 +42,7 @@ from semloc.eval.variants import (
     make_case,
     variant_maps,
 )
+from semloc.io.importers.scan2cad import load_scan2cad
 from semloc.maps import ObjectMap
 from semloc.semantics import taxonomy
 from semloc.sim.layouts import layout
@@ -125,6 +126,7 @@ def sources(buildings: int) -> dict[str, ObjectMap]:
     data = real_data_dir()
     if data is not None:
         maps.update(variant_maps(data))
+        maps["Scan2CAD"] = load_scan2cad(data / "scan2cad" / "scene0470_00").scan
     else:
         print("real data not found (set SEMLOC_DATA): simulated buildings only", file=sys.stderr)
     for b in range(buildings):
@@ -219,7 +221,9 @@ def main() -> None:
     )
     print(text)
     if args.markdown is not None:
-        args.markdown.write_text(text + "\n")
+        from semloc.io import write_atomic
+
+        write_atomic(args.markdown, text + "\n")
 
 
 if __name__ == "__main__":
