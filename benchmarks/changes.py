@@ -22,39 +22,26 @@ import numpy as np
 
 from semloc.eval.datasets import real_data_dir
 from semloc.eval.success import is_success
-from semloc.eval.variants import OBJECT_COUNTS, VARIANTS, changed_world, noisy_view, variant_maps
-from semloc.io.geometry import up_basis
+from semloc.eval.variants import OBJECT_COUNTS, VARIANTS, make_case, variant_maps
 from semloc.localizer import localize
 from semloc.maps import ObjectMap
-from semloc.sim.crop import crop_with_truth
 
 MOVED_M = 0.05  # a world object this far from its prior place moved
 
 
 def case(full: ObjectMap, variant: str, k: int, rng: np.random.Generator):
     """(prior, local view, T_global_local, true moved pairs, true new local ids)."""
-    prior, world = full, full
-    if variant == "dynamic":
-        prior, world = changed_world(full, rng)
-    up = np.array([0.0, 0.0, 1.0]) if full.up is None else full.up
-    height = float(np.median(world.positions @ up))
-    anchor = world.positions[rng.integers(len(world))]
-    center = anchor + up_basis(up)[:, :2] @ rng.uniform(-1, 1, 2)
-    center = center + up * (height - up @ center)
-    distances = np.sort(np.linalg.norm(world.positions - center, axis=1))
-    radius = float(distances[min(k, len(distances)) - 1]) + 1e-6
-    local, truth = crop_with_truth(world, center, radius, "random", int(rng.integers(2**31)))
-    if variant == "noisy":
-        local = noisy_view(local, full, center, radius, truth.T_global_local, rng)
+    made = make_case(full, variant, k, rng)
     moved, new = set(), set()
-    for global_id, local_id in truth.pairs:
-        if global_id not in prior:
+    for global_id, local_id in made.pairs:
+        if global_id not in made.prior:
             new.add(local_id)
         elif (
-            np.linalg.norm(world.get(global_id).position - prior.get(global_id).position) > MOVED_M
+            np.linalg.norm(made.world.get(global_id).position - made.prior.get(global_id).position)
+            > MOVED_M
         ):
             moved.add((global_id, local_id))
-    return prior, local, truth.T_global_local, moved, new
+    return made.prior, made.local, made.truth, moved, new
 
 
 def run(data, views: int, seed: int) -> list[dict]:

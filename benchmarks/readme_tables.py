@@ -62,6 +62,7 @@ JOBS = {
     "vocab": Job(
         "PYTHONPATH=src python benchmarks/vocabulary.py --views 20 --buildings 2 --markdown {out}"
     ),
+    "changes": Job("python benchmarks/changes.py --views 10 --markdown {out}"),
     "align": Job("PYTHONPATH=src python benchmarks/bench_align.py --trials 5 --markdown {out}"),
     "bench": Job(
         "semloc bench --methods semloc,clipper,random-walk,segmatch,fpfh-ransac,semloc+geometric,"
@@ -114,6 +115,7 @@ TABLES = {
     "variants": TableSpec("real", 1, file="docs/trust.md"),
     "crops": TableSpec("real", 0, file="docs/real_layouts.md"),
     "align": TableSpec("align", 0, file="docs/alignment.md"),
+    "changes": TableSpec("changes", 0, file="docs/trust.md"),
     "vocabulary": TableSpec(
         "vocab",
         0,

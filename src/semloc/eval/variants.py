@@ -18,7 +18,7 @@ whether it is right, and same-place duplicates in the top-10.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -56,6 +56,8 @@ class Case:
     prior: ObjectMap
     local: ObjectMap
     truth: np.ndarray  # T_global_local
+    world: ObjectMap | None = None  # the world the view was taken in (objects moved)
+    pairs: list[tuple[str, str]] = field(default_factory=list)  # (world id, local id)
 
 
 def make_case(full: ObjectMap, variant: str, k: int, rng: np.random.Generator) -> Case:
@@ -73,7 +75,7 @@ def make_case(full: ObjectMap, variant: str, k: int, rng: np.random.Generator) -
     local, truth = crop_with_truth(world, center, radius, "random", int(rng.integers(2**31)))
     if variant == "noisy":
         local = noisy_view(local, full, center, radius, truth.T_global_local, rng)
-    return Case(prior, local, truth.T_global_local)
+    return Case(prior, local, truth.T_global_local, world, list(truth.pairs))
 
 
 def changed_world(full: ObjectMap, rng: np.random.Generator) -> tuple[ObjectMap, ObjectMap]:
