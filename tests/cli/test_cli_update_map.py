@@ -64,3 +64,56 @@ def test_a_bad_result_file_is_one_line_and_nothing_is_written(tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert err.startswith("semloc: error:") and "pose" in err and "\n" not in err
     assert not out.exists()
+
+
+def test_view_draws_an_arrow_per_moved_object(tmp_path, capsys):
+    write_scene(tmp_path)
+    result = tmp_path / "result.json"
+    assert main(["localize", str(tmp_path / "global.json"), str(tmp_path / "local.json"),
+                 "--format", "json", "-o", str(result)]) == 0  # fmt: skip
+    png = tmp_path / "map.png"
+    assert main(["view", str(tmp_path / "global.json"), "--result", str(result), "--local",
+                 str(tmp_path / "local.json"), "-o", str(png)]) == 0  # fmt: skip
+    assert png.stat().st_size > 0
+
+    from semloc.cli.files import read_result
+    from semloc.tools.viz import map_figure, plot_localization
+
+    answer = read_result(result)
+    assert answer.moved == (("g4", "l4"),)
+    g, local = semloc.load_map(tmp_path / "global.json"), semloc.load_map(tmp_path / "local.json")
+    _, ax = map_figure(g.positions[:, :2])
+    plot_localization(ax, g, local, answer.pose, answer.pairs, moved=answer.moved)
+    from matplotlib.colors import to_rgba
+
+    from semloc.tools.viz import MOVED_COLOR
+
+    arrows = [t for t in ax.texts if getattr(t, "arrow_patch", None) is not None
+              and np.allclose(t.arrow_patch.get_edgecolor(), to_rgba(MOVED_COLOR))]  # fmt: skip
+    assert len(arrows) == 1
+    start, end = np.array(arrows[0].xyann), np.array(arrows[0].xy)
+    np.testing.assert_allclose(start, g.get("g4").position[:2], atol=1e-6)
+    assert np.linalg.norm(end - start) > 1.4  # to where the lamp was seen, 1.5 m away
+
+
+def test_a_bad_moved_entry_in_a_result_file_is_one_line(tmp_path, capsys):
+    write_scene(tmp_path)
+    bad = tmp_path / "bad.json"
+    bad.write_text('{"status": "localized", "pose": null, "hypotheses": [], '
+                   '"changes": {"moved": [{"global": "g4"}], "new": [], "missing": []}}')  # fmt: skip
+    assert main(["view", str(tmp_path / "global.json"), "--result", str(bad),
+                 "-o", str(tmp_path / "x.png")]) == 2  # fmt: skip
+    err = capsys.readouterr().err.strip()
+    assert "changes.moved[0]" in err and "\n" not in err
+
+
+def test_the_rerun_recording_gets_the_moved_arrows(tmp_path):
+    from semloc.tools.viz3d import _moved_arrows, write_localization
+
+    g = write_scene(tmp_path)
+    local = semloc.load_map(tmp_path / "local.json")
+    starts, vectors = _moved_arrows(g, local.transformed(T), [("g4", "l4"), ("g0", "nobody")])
+    np.testing.assert_allclose(starts, [g.get("g4").position])
+    np.testing.assert_allclose(vectors, [[1.2, -0.9, 0.0]], atol=1e-6)
+    path = write_localization(tmp_path / "s.rrd", g, local, T, [], moved=[("g4", "l4")])
+    assert path.stat().st_size > 0

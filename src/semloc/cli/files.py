@@ -94,6 +94,7 @@ class ResultFile:
     pose: np.ndarray | None
     status: str | None = None
     hypotheses: tuple[tuple[np.ndarray | None, list[tuple[str, str]]], ...] = ()
+    moved: tuple[tuple[str, str], ...] = ()  # (global id, local id) of `changes.moved`
 
     @property
     def pairs(self) -> list[tuple[str, str]]:
@@ -116,8 +117,28 @@ def read_result(path: Path) -> ResultFile:
         fail(f"{path}: 'status' must be one of {', '.join(STATUSES)}, got {_brief(status)}")
     hypotheses = _list_field(path, data.get("hypotheses"), "hypotheses")
     return ResultFile(
-        pose, status, tuple(_hypothesis(path, h, i) for i, h in enumerate(hypotheses))
+        pose,
+        status,
+        tuple(_hypothesis(path, h, i) for i, h in enumerate(hypotheses)),
+        _moved(path, data.get("changes")),
     )
+
+
+def _moved(path: Path, changes: object) -> tuple[tuple[str, str], ...]:
+    """The (global id, local id) pairs of a result's `changes.moved` (none without changes)."""
+    if changes is None:
+        return ()
+    if not isinstance(changes, dict):
+        fail(f"{path}: 'changes' must be an object, got {_brief(changes)}")
+    moved = []
+    for j, entry in enumerate(_list_field(path, changes.get("moved"), "changes.moved")):
+        ids = (entry.get("global"), entry.get("local")) if isinstance(entry, dict) else (None,)
+        if len(ids) != 2 or not all(
+            isinstance(i, (str, int)) and not isinstance(i, bool) for i in ids
+        ):
+            fail(f"{path}: 'changes.moved[{j}]' must be {MOVED_SHAPE}, got {_brief(entry)}")
+        moved.append((str(ids[0]), str(ids[1])))
+    return tuple(moved)
 
 
 def _hypothesis(
@@ -138,6 +159,7 @@ def _hypothesis(
 
 
 PAIR_SHAPE = '{"global": ID, "local": ID}'
+MOVED_SHAPE = '{"global": ID, "local": ID, "offset_m": NUMBER}'
 
 
 def _list_field(path: Path, value: object, where: str) -> list:

@@ -235,13 +235,13 @@ def view(
         rivals = answer.hypotheses[1:] if status == "ambiguous" else ()
         fig, ax = map_figure(objmap.positions[:, :2])
         plot_localization(ax, objmap, local_map, pose, pairs, true_pose=truth, title=heading,
-                          map_role=role, rivals=rivals, names=True,
+                          map_role=role, rivals=rivals, names=True, moved=answer.moved,
                           zoom=local_map is not None or bool(rivals))  # fmt: skip
         console.print(f"wrote {for_rich(save_figure(fig, png), None)}")
     if rrd is not None:
         from semloc.tools.viz3d import write_localization  # rerun
 
-        written = write_localization(rrd, objmap, local_map, pose, pairs, truth)
+        written = write_localization(rrd, objmap, local_map, pose, pairs, truth, answer.moved)
         shown = for_rich(written, None)
         console.print(f"wrote {shown} (open with: rerun {shown})")
 

@@ -167,6 +167,7 @@ def plot_localization(
     rivals: Sequence[tuple[np.ndarray | None, Sequence[tuple[str, str]]]] = (),
     names: bool = False,
     zoom: bool = False,
+    moved: Sequence[tuple[str, str]] = (),
 ) -> Axes:
     """Global map, local objects placed by `pose`, association lines (global centre to local).
 
@@ -176,6 +177,8 @@ def plot_localization(
     (pose, pairs) of other hypotheses (an ambiguous answer's) are drawn in orange, up to
     `RIVALS`; `names` writes the labels beside the map's objects; `zoom` limits the view to
     the placed local objects, their true places and the rivals, with `ZOOM_MARGIN` around.
+    `moved` (global id, local id) pairs of objects that moved since the map was made
+    (`Result.changes`) are arrows from the map's place to the observed one.
     """
     labels = list(global_map.labels) + ([] if local_map is None else list(local_map.labels))
     colors = label_colors(labels)
@@ -211,6 +214,8 @@ def plot_localization(
         extra.append(
             Line2D([], [], ls="none", marker="o", mfc="none", mec="k", ms=9, label="associated")
         )
+    if moved and local_map is not None and pose is not None:
+        _plot_moved(ax, global_map, local_map.transformed(pose), moved, extra)
     if true_pose is not None and local_map is not None and len(local_map):
         truth = local_map.transformed(true_pose).positions
         ax.scatter(truth[:, 0], truth[:, 1], marker="x", s=22, color="#555", lw=1, zorder=6)
@@ -257,6 +262,19 @@ def _plot_rivals(
         extra.append(Line2D([], [], ls="none", marker="s", mfc="none", mec=RIVAL_COLOR,
                             label="rival place (another hypothesis)"))  # fmt: skip
     return drawn
+
+
+MOVED_COLOR = "#1f77b4"
+
+
+def _plot_moved(ax: Axes, global_map: ObjectMap, placed: ObjectMap, moved, extra: list) -> None:
+    """An arrow per moved object, from its place in the map to where it was observed."""
+    for gid, lid in moved:
+        if gid in global_map and lid in placed:
+            a, b = global_map.get(gid).position, placed.get(lid).position
+            ax.annotate("", xy=(b[0], b[1]), xytext=(a[0], a[1]), zorder=7,
+                        arrowprops=dict(arrowstyle="->", color=MOVED_COLOR, lw=1.8))  # fmt: skip
+    extra.append(Line2D([], [], color=MOVED_COLOR, lw=1.8, label="moved since the map (→ now)"))
 
 
 def _zoom(ax: Axes, xy: np.ndarray) -> None:

@@ -102,6 +102,24 @@ class Recording:
                         rr.LineStrips3D(strips, colors=[[20, 20, 20]], radii=0.015),
                         static=static)  # fmt: skip
 
+    def log_moved(
+        self, global_map: ObjectMap, placed: ObjectMap, moved: Sequence[tuple[str, str]]
+    ) -> None:
+        """Arrows from each moved object's place in the map to where it was observed."""
+        starts, vectors = _moved_arrows(global_map, placed, moved)
+        if starts:
+            self.stream.log("world/moved", rr.Arrows3D(origins=starts, vectors=vectors,
+                            colors=[[31, 119, 180]], radii=0.03), static=True)  # fmt: skip
+
+
+def _moved_arrows(global_map, placed, moved):
+    starts, vectors = [], []
+    for g, l in moved:
+        if g in global_map and l in placed:
+            starts.append(global_map.get(g).position)
+            vectors.append(placed.get(l).position - global_map.get(g).position)
+    return starts, vectors
+
 
 def write_localization(
     path: str | os.PathLike[str],
@@ -110,8 +128,10 @@ def write_localization(
     pose: np.ndarray | None = None,
     pairs: Sequence[tuple[str, str]] = (),
     true_pose: np.ndarray | None = None,
+    moved: Sequence[tuple[str, str]] = (),
 ) -> Path:
-    """A recording of `global_map`, `local_map` placed by `pose` (and `true_pose`), the pairs."""
+    """A recording of `global_map`, `local_map` placed by `pose` (and `true_pose`), the pairs,
+    and arrows from the map's place of each `moved` object to where it was observed."""
     labels = [*global_map.labels, *([] if local_map is None else local_map.labels)]
     colors = label_colors(labels)
     recording = Recording(path)
@@ -120,6 +140,7 @@ def write_localization(
         placed = local_map.transformed(pose)
         recording.log_map("local_estimated", placed, colors, LOCAL_SHADE)
         recording.log_associations(global_map, placed, pairs)
+        recording.log_moved(global_map, placed, moved)
     if local_map is not None and true_pose is not None:
         recording.log_map("local_true", local_map.transformed(true_pose), colors, 0.3)
     return recording.close()
