@@ -99,9 +99,8 @@ class _Aligner:
     """One alignment of a larger B: seed views, growth, decision."""
 
     def __init__(self, a, b, config, alignment: AlignmentConfig, overrides: dict) -> None:
-        self.localizer_args = (config, overrides)
         probe = Localizer(a, config, local_up=b.up, **overrides)
-        self.config = probe.config
+        self.config, self.prior = probe.config, a  # each view's Localizer describes `a` itself
         self.a, self.b, self.alignment = probe.global_map, b, alignment
         index = CandidateIndex(self.a, self.config.association, probe.descriptor_gate)
         candidates = [index.candidates(obj) for obj in b]
@@ -145,8 +144,7 @@ class _Aligner:
 
     def _seeds_of(self, view: np.ndarray, timing: dict[str, float]) -> list[Hypothesis]:
         """The distinct places (with a pose) of one view's localization, best first."""
-        config, overrides = self.localizer_args
-        localizer = Localizer(self.a, config, local_up=self.b.up, **overrides)
+        localizer = Localizer(self.prior, self.config, local_up=self.b.up)
         result = localizer.update([self.b[int(i)] for i in view])
         assert result is not None
         for stage in ("association", "clustering", "pose"):

@@ -6,9 +6,9 @@ classes; or calibrated embedding cosine) of at least `min_similarity` and within
 `similarity_margin` of the object's best match (labels compared after an optional label map,
 which wins: a mapped label matches by equality only) and, when both carry shape descriptors of
 the same length, the descriptor distance is below `delta`.  Every candidate becomes a singleton
-association set with score 0; its similarity weighs the pair in the evidence of a hypothesis.  With `descriptor` set, the Localizer
-computes descriptors of that kind for objects with points (semloc.descriptors) and the bound is
-`descriptor_delta`, by default the kind's calibrated δ.
+association set with score 0; its similarity weighs the pair in the evidence of a hypothesis.
+With `descriptor` set, the Localizer computes descriptors of that kind for objects with points
+(semloc.descriptors) and the bound is `descriptor_delta`, by default the kind's calibrated δ.
 
 Descriptor kinds are a registry (`DESCRIBERS`, name -> `Describer`) that `semloc.descriptors`
 fills when semloc is imported; the Localizer resolves its describer and gate once, when it is

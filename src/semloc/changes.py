@@ -126,16 +126,23 @@ def explain(
     return Changes(moved, new, missing)
 
 
+def _candidate_distances(rest, placed, candidates, xyz) -> list[tuple[float, str, int]]:
+    """(distance, local id, map index) from each placed local object to each map object it
+    may be, nearest first."""
+    found = []
+    for obj in rest:
+        indices = np.asarray(candidates.get(obj.id, ()), dtype=int)
+        distances = np.linalg.norm(xyz[indices] - placed[obj.id], axis=1)
+        found += [(float(d), obj.id, int(g)) for d, g in zip(distances, indices)]
+    return sorted(found)
+
+
 def _match_nearby(rest, placed, candidates, xyz, used, explained, radius) -> None:
     """Local objects with a free map object they may be within `radius`: matched (nearest
     first over all of them)."""
-    found = []
-    for obj in rest:
-        for g in np.asarray(candidates.get(obj.id, ()), dtype=int):
-            distance = float(np.linalg.norm(xyz[g] - placed[obj.id]))
-            if distance < radius:
-                found.append((distance, obj.id, int(g)))
-    for _, local_id, g in sorted(found):
+    for distance, local_id, g in _candidate_distances(rest, placed, candidates, xyz):
+        if distance >= radius:
+            break
         if local_id not in explained and g not in used:
             explained.add(local_id)
             used.add(g)
@@ -155,15 +162,13 @@ def _relabelled(rest, placed, xyz, used, explained, radius) -> None:
 
 
 def _moved_or_new(rest, placed, candidates, global_map, used, config) -> tuple[list, list]:
-    xyz, found = global_map.positions, []
-    for obj in rest:
-        for g in np.asarray(candidates.get(obj.id, ()), dtype=int):
-            offset = float(np.linalg.norm(xyz[g] - placed[obj.id]))
-            if offset <= config.max_offset and _similar_size(obj, global_map[int(g)], config):
-                found.append((offset, obj.id, int(g)))
+    by_id = {o.id: o for o in rest}
     moved: dict[str, Moved] = {}
-    for offset, local_id, g in sorted(found):
-        if local_id not in moved and g not in used:
+    for offset, local_id, g in _candidate_distances(rest, placed, candidates, global_map.positions):
+        if offset > config.max_offset:
+            break
+        if (local_id not in moved and g not in used
+                and _similar_size(by_id[local_id], global_map[g], config)):  # fmt: skip
             used.add(g)
             moved[local_id] = Moved(str(global_map.ids[g]), local_id, offset)
     new = [o.id for o in rest if o.id not in moved]

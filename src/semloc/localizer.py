@@ -256,14 +256,14 @@ class Localizer:
             status, hypotheses, self._steps, self._timing, reason, self._changes(hypotheses)
         )
 
-    def _changes(self, hypotheses: list[Hypothesis]) -> Changes:
-        """What the best hypothesis says changed (`semloc.changes`); nothing without a pose."""
+    def _changes(self, hypotheses: list[Hypothesis]) -> Callable[[], Changes] | None:
+        """What the best hypothesis says changed (`semloc.changes`), computed when first read:
+        the local objects and their candidates are taken now (later updates replace them)."""
         if not hypotheses or hypotheses[0].pose is None:
-            return Changes()
+            return None
         candidates = {oid: self._candidates_of[i] for oid, i in self._local_index.items()}
-        best = hypotheses[0]
-        return explain(self.global_map, list(self._local.values()), best.pose, best.pairs,
-                       candidates, self.config.changes)  # fmt: skip
+        local, best, config = list(self._local.values()), hypotheses[0], self.config.changes
+        return lambda: explain(self.global_map, local, best.pose, best.pairs, candidates, config)
 
     def _why_no_sets(self) -> str:
         """Why no association set has 2 pairs: too few objects, or too few with candidates."""

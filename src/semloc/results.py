@@ -6,7 +6,9 @@ JSON output see one model.  `Status` is the decision's vocabulary (see `decision
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import Any, Literal
 
 import numpy as np
@@ -93,7 +95,8 @@ class Result:
     steps: list[Step] = field(default_factory=list)
     timing_ms: dict[str, float] = field(default_factory=dict)
     reason: str = ""
-    changes: Changes = field(default_factory=Changes)  # what the best hypothesis implies
+    explain: Callable[[], Changes] | None = field(default=None, repr=False, compare=False)
+    """Computes `changes` on first use (streaming updates whose changes nobody reads skip it)."""
 
     @classmethod
     def of(
@@ -103,12 +106,17 @@ class Result:
         steps: list[Step],
         timing_ms: dict,
         reason: str = "",
-        changes: Changes | None = None,
+        explain: Callable[[], Changes] | None = None,
     ) -> Result:
         """The result of an update: the pose is the best hypothesis's unless `failed`."""
         pose = hypotheses[0].pose if hypotheses and status != "failed" else None
-        changes = changes or Changes()
-        return cls(status, pose, hypotheses, list(steps), dict(timing_ms), reason, changes)
+        return cls(status, pose, hypotheses, list(steps), dict(timing_ms), reason, explain)
+
+    @cached_property
+    def changes(self) -> Changes:
+        """What the best hypothesis implies changed since the map was made (`semloc.changes`;
+        empty without an explanation)."""
+        return Changes() if self.explain is None else self.explain()
 
     @property
     def best(self) -> Hypothesis | None:

@@ -67,3 +67,16 @@ def test_localize_reports_the_changes_of_its_answer():
     assert (
         semloc.localize(g, ObjectMap(seen_from_t(list(g)[:5]), up=[0, 0, 1])).changes == Changes()
     )
+
+
+def test_a_result_explains_the_local_map_of_its_own_update():
+    """`Result.changes` is computed when first read, from the objects of its update: a later
+    update (here a new bed) does not leak into an earlier result."""
+    g = room()
+    objects = list(g)
+    objects[4] = objects[4].transformed(yaw_pose(0.0, [1.2, -0.9, 0.0]))
+    localizer = semloc.Localizer(g, local_up=[0, 0, 1])
+    first = localizer.update(seen_from_t(objects))
+    later = localizer.update(seen_from_t([SemanticObject("g9", "bed", points=cube([4.5, 1, 0.4]))]))
+    assert [m.local_id for m in first.changes.moved] == ["l4"] and first.changes.new == []
+    assert later.changes.new == ["l9"]

@@ -20,13 +20,12 @@ import typer
 from semloc.association import CandidateIndex
 from semloc.changes import Changes, Moved, explain
 from semloc.cli.app import app, console
-from semloc.cli.files import check_output
+from semloc.cli.files import check_output, read_result
 from semloc.cli.render import print_changes
 from semloc.io import load_map
-from semloc.io.native import map_files, read_json, write_files
+from semloc.io.native import map_files, write_files
 from semloc.localizer import LocalizerConfig, localize
-from semloc.maps import MapError, ObjectMap, SemanticObject
-from semloc.transforms import as_pose
+from semloc.maps import ObjectMap, SemanticObject
 
 
 @app.command("update-map")
@@ -51,11 +50,11 @@ def update_map(
     prior, local = load_map(global_map), load_map(local_map)
     if result_file is None:
         result = localize(prior, local)
-        status, pose, pairs, changes = result.status, result.pose, result.best, result.changes
-        pairs = [] if pairs is None else pairs.pairs
+        status, pose, changes = result.status, result.pose, result.changes
     else:
-        status, pose, pairs = _saved_answer(result_file)
-        changes = _explained(prior, local, pose, pairs) if pose is not None else Changes()
+        saved = read_result(result_file)
+        status, pose = saved.status, saved.pose
+        changes = Changes() if pose is None else _explained(prior, local, pose, saved.pairs)
     if pose is None or not (status == "localized" or (accept_ambiguous and status == "ambiguous")):
         console.print(f"not localized (status {status}): no map written")
         raise typer.Exit(0)
@@ -97,26 +96,6 @@ def _moved(obj: SemanticObject, observed: SemanticObject, change: Moved) -> Sema
         points=points,
         extra={**obj.extra, "moved_from": obj.position.tolist(), "moved_m": change.offset_m},
     )
-
-
-def _saved_answer(path: Path) -> tuple[str, np.ndarray | None, list[tuple[str, str]]]:
-    document = read_json(path, "result")
-    if not isinstance(document, dict) or "status" not in document:
-        raise MapError(
-            f"{path}: not a result file (no 'status'; write one with localize --format json)"
-        )
-    try:
-        pose = None if document.get("pose") is None else as_pose(document["pose"], f"{path}: pose")
-    except ValueError as exc:
-        raise MapError(str(exc)) from None
-    hypotheses = document.get("hypotheses") or []
-    pairs = []
-    if hypotheses and isinstance(hypotheses[0], dict):
-        for pair in hypotheses[0].get("pairs") or []:
-            if not isinstance(pair, dict) or not {"global", "local"} <= set(pair):
-                raise MapError(f"{path}: hypotheses[0].pairs holds an entry that is not a pair")
-            pairs.append((str(pair["global"]), str(pair["local"])))
-    return str(document["status"]), pose, pairs
 
 
 def _explained(prior: ObjectMap, local: ObjectMap, pose, pairs) -> Changes:
