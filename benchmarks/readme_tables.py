@@ -62,7 +62,7 @@ JOBS = {
     "vocab": Job(
         "PYTHONPATH=src python benchmarks/vocabulary.py --views 20 --buildings 2 --markdown {out}"
     ),
-    "changes": Job("python benchmarks/changes.py --views 10 --markdown {out}"),
+    "changes": Job("python benchmarks/changes.py --views 40 --markdown {out}"),
     "align": Job("PYTHONPATH=src python benchmarks/bench_align.py --trials 5 --markdown {out}"),
     "bench": Job(
         "semloc bench --methods semloc,clipper,random-walk,segmatch,fpfh-ransac,semloc+geometric,"

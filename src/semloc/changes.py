@@ -4,13 +4,14 @@ Under the pose T_global_local of a hypothesis each local object is
 
     matched   one of the hypothesis' pairs, or a map object it may be (the Localizer's
               candidates) lies within `match_radius` of where the pose puts it, or failing
-              that a map object of another label does (the same object under another name:
-              a detector's label is not a change of the world);
+              that a map object of another label and a similar size does (the same object
+              under another name: a detector's label is not a change of the world);
     moved     nothing it may be is at its place, but the map holds an object it may be
               elsewhere (within `max_offset`) that no other local object explains, of a similar
               size where both have boxes (`size_ratio`), whose old place was in view (an
               observed local point within `source_radius`): the same instance, moved by
-              `offset_m` (the nearest such object is taken);
+              `offset_m` (of several such objects, the one whose box agrees best, then the
+              nearest: a moved chair is more likely the chair of its own size than the next);
     new       nothing in the map explains it.
 
 A map object that nobody matched or moved is `missing` when the place where it stood was
@@ -18,9 +19,9 @@ observed: some observed local point lies within `observed_radius` of that place.
 bound: a local map holds the points of the objects seen, not the free space seen, so only a
 place right beside observed surfaces counts as seen, and objects without points (centres only)
 vouch for nothing; objects farther away are not reported, since nothing says whether they are
-still there.  Greedy and one to
-one, nearest first, so that a moved object and a new one of the same class are not both
-explained by one map object.  Pure computation on numpy arrays.
+still there.  Greedy and one to one (matches nearest first, moved objects by box agreement,
+then nearest), so that a moved object and a new one of the same class are not both explained
+by one map object.  Pure computation on numpy arrays.
 """
 
 from __future__ import annotations
@@ -113,7 +114,7 @@ def explain(
     xyz = global_map.positions
     rest = [o for o in local_objects if o.id not in explained]
     _match_nearby(rest, placed, candidates, xyz, used, explained, config.match_radius)
-    _relabelled(rest, placed, xyz, used, explained, config.match_radius)
+    _relabelled(rest, placed, global_map, used, explained, config)
     gap = _gap_to_observed(global_map, local_objects, pose,
                            max(config.source_radius, config.observed_radius))  # fmt: skip
     unseen = set(np.flatnonzero(gap > config.source_radius).tolist())
@@ -148,14 +149,16 @@ def _match_nearby(rest, placed, candidates, xyz, used, explained, radius) -> Non
             used.add(g)
 
 
-def _relabelled(rest, placed, xyz, used, explained, radius) -> None:
-    """Local objects standing where an unexplained map object of another label stands: the
-    same object under another name (a detector's label), matched, not moved or new."""
+def _relabelled(rest, placed, global_map, used, explained, config: ChangesConfig) -> None:
+    """Local objects standing where an unexplained map object of another label and a similar
+    size stands: the same object under another name (a detector's label), matched, not moved
+    or new (a moved chair that lands beside a table is not the table)."""
     for obj in rest:
         if obj.id in explained:
             continue
-        distance = np.linalg.norm(xyz - placed[obj.id], axis=1)
-        free = [g for g in np.flatnonzero(distance < radius).tolist() if g not in used]
+        distance = np.linalg.norm(global_map.positions - placed[obj.id], axis=1)
+        free = [g for g in np.flatnonzero(distance < config.match_radius).tolist()
+                if g not in used and _similar_size(obj, global_map[g], config)]  # fmt: skip
         if free:
             explained.add(obj.id)
             used.add(min(free, key=lambda g: distance[g]))
@@ -164,15 +167,29 @@ def _relabelled(rest, placed, xyz, used, explained, radius) -> None:
 def _moved_or_new(rest, placed, candidates, global_map, used, config) -> tuple[list, list]:
     by_id = {o.id: o for o in rest}
     moved: dict[str, Moved] = {}
-    for offset, local_id, g in _candidate_distances(rest, placed, candidates, global_map.positions):
-        if offset > config.max_offset:
-            break
+    reachable = [f for f in _candidate_distances(rest, placed, candidates, global_map.positions)
+                 if f[0] <= config.max_offset]  # fmt: skip
+    reachable.sort(key=lambda f: (_size_mismatch(by_id[f[1]], global_map[f[2]]), f[0]))
+    for offset, local_id, g in reachable:
         if (local_id not in moved and g not in used
                 and _similar_size(by_id[local_id], global_map[g], config)):  # fmt: skip
             used.add(g)
             moved[local_id] = Moved(str(global_map.ids[g]), local_id, offset)
     new = [o.id for o in rest if o.id not in moved]
     return sorted(moved.values(), key=lambda m: m.local_id), new
+
+
+SIZE_STEP = 0.1
+"""Box mismatches (largest log-ratio of the sorted extents) are compared in steps of this
+(about 10 %): boxes that agree within a step are equally good sources, the nearest wins."""
+
+
+def _size_mismatch(local: SemanticObject, mapped: SemanticObject) -> int:
+    """How far apart two boxes are, in `SIZE_STEP`s (0 when either has no box)."""
+    if local.size is None or mapped.size is None:
+        return 0
+    a, b = np.maximum(np.sort(local.size), 0.05), np.maximum(np.sort(mapped.size), 0.05)
+    return int(round(float(np.max(np.abs(np.log(a / b)))) / SIZE_STEP))
 
 
 def _similar_size(local: SemanticObject, mapped: SemanticObject, config: ChangesConfig) -> bool:

@@ -80,3 +80,45 @@ def test_a_result_explains_the_local_map_of_its_own_update():
     later = localizer.update(seen_from_t([SemanticObject("g9", "bed", points=cube([4.5, 1, 0.4]))]))
     assert [m.local_id for m in first.changes.moved] == ["l4"] and first.changes.new == []
     assert later.changes.new == ["l9"]
+
+
+def _with_chairs(chairs: dict[str, tuple[list[float], float]]) -> ObjectMap:
+    """The room without its chair, plus chairs {id: (centre, box edge)}."""
+    others = [o for o in room() if o.label != "chair"]
+    extra = [SemanticObject(i, "chair", points=cube(c, half=e / 2, seed=7), size=[e, e, e])
+             for i, (c, e) in chairs.items()]  # fmt: skip
+    return ObjectMap([*others, *extra], up=[0, 0, 1])
+
+
+def test_a_moved_object_comes_from_the_map_object_of_its_own_size_not_the_nearest():
+    g = _with_chairs({"g_small": ([1.0, 3.0, 0.5], 0.40), "g_large": ([2.6, 3.4, 0.5], 0.54)})
+    moved = SemanticObject("g_small", "chair", points=cube([2.2, 2.7, 0.5], half=0.2, seed=8),
+                           size=[0.4, 0.4, 0.4])  # fmt: skip
+    local = seen_from_t([*list(g)[:4], moved])
+    pairs = [(o.id, o.id.replace("g", "l")) for o in list(g)[:4]]
+    changes = explain(g, local, T, pairs, candidates_of(g, local))
+    # the large chair is 0.8 m away, the small one 1.2 m: the box decides (ratio 1.35 < 1.5,
+    # so both could be the source)
+    assert [(m.global_id, m.local_id) for m in changes.moved] == [("g_small", "l_small")]
+    offset = np.linalg.norm(moved.position - g.get("g_small").position)
+    assert abs(changes.moved[0].offset_m - offset) < 1e-6
+
+
+def test_a_moved_object_beside_another_kind_of_object_is_not_taken_for_it():
+    """A chair that now stands where the map has a (much larger) table is moved, not the table
+    under another name; an object of the same size there would be (a detector's label)."""
+    g = _with_chairs({"g_chair": ([2.0, 1.5, 0.5], 0.4)})
+    table = next(o for o in g if o.label == "table").replace(size=[1.6, 0.9, 0.8])
+    g = g.with_objects([table if o.id == table.id else o for o in g])
+    at_table = table.position + [0.3, 0.0, 0.0]
+    chair = SemanticObject("g_chair", "chair", points=cube(at_table, half=0.2, seed=8),
+                           size=[0.4, 0.4, 0.4])  # fmt: skip
+    rest = [o for o in g if o.label in ("lamp", "sofa", "bin")]
+    local = seen_from_t([*rest, chair])
+    pairs = [(o.id, o.id.replace("g", "l")) for o in rest]
+    changes = explain(g, local, T, pairs, candidates_of(g, local))
+    assert [(m.global_id, m.local_id) for m in changes.moved] == [("g_chair", "l_chair")]
+    relabelled = chair.replace(label="bin", size=[1.6, 0.9, 0.8])  # the table, named 'bin'
+    local = seen_from_t([*rest, relabelled])
+    changes = explain(g, local, T, pairs, candidates_of(g, local))
+    assert changes.moved == [] and changes.new == []
