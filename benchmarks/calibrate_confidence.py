@@ -2,7 +2,8 @@
 
     PYTHONPATH=src python benchmarks/calibrate_confidence.py [--sequences 3] [--starts 4]
         [--seed 1] [--layouts 100-105] [--layout-views 6] [--observed 10-15]
-        [--observed-trials 10] [--precision 0.995] [--write] [--figure docs/img/reliability.png]
+        [--observed-trials 10] [--precision 0.995] [--real-views 20] [--vocabulary-views 6]
+        [--write] [--figure docs/img/reliability.png]
 
 Collects every hypothesis of three kinds of simulated attempts (`semloc.eval.calibration`;
 never the real layouts, which stay held out): the protocol's semloc attempts on sequences of
@@ -14,6 +15,15 @@ operating point for `--precision` of the claims, prints the model and a reliabil
 (predicted confidence vs observed share right) on the fitting attempts and on held-out
 simulated attempts (protocol seed 0, buildings 200-201 and 20-21), and with `--write` replaces
 `src/semloc/confidence_model.py`.
+
+Then the check on held-out attempts that look like real use, never fitted on: the real-layout
+variants (`--real-views` views per sample, variant and object count, drawn with seed 1: other
+views than `benchmarks/real_layouts.py`'s; needs `SEMLOC_DATA`) and vocabulary shift (views of
+buildings 300-301 whose local objects carry a COCO / LVIS-style detector's names,
+`benchmarks/vocabulary.py`'s renaming).  Per kind and object count (< 5, >= 5): answers,
+top-1, claims right / wrong at the operating point, their precision, coverage (share of the
+answers claimed and right), and the best coverage any single threshold would give there at
+99 % precision (what the confidence can separate on that kind alone).
 """
 
 from __future__ import annotations
@@ -28,16 +38,23 @@ import numpy as np
 
 from semloc.decision import MODEL_MODULE
 from semloc.eval.calibration import (
+    LAYOUT_POINTS,
+    best_coverage,
     best_of_answers,
+    claims,
     collect,
     collect_layouts,
     collect_observations,
+    collect_variants,
     confidences,
     fit,
     reliability,
 )
+from semloc.eval.datasets import real_data_dir
 from semloc.eval.protocol import BenchConfig
+from semloc.eval.variants import variant_maps
 from semloc.io import write_atomic
+from semloc.sim.layouts import layout
 
 
 def reliability_table(name: str, samples, model) -> str:
@@ -65,6 +82,46 @@ def claims_line(name: str, samples, model) -> str:
     right = sum(s.right for s in claims)
     answers = len({s.answer for s in samples})
     return f"  {name}: {right} right, {len(claims) - right} wrong claims of {answers} answers"
+
+
+def real_use(real_views: int, vocabulary_views: int) -> list:
+    """The held-out attempts that look like real use (see the module docstring)."""
+    from vocabulary import rename  # benchmarks/vocabulary.py, beside this script
+
+    samples = []
+    data = real_data_dir()
+    if real_views and data is not None:
+        samples += collect_variants(variant_maps(data), real_views, 1, "real")
+    elif real_views:
+        print("real data not found (set SEMLOC_DATA): no real-layout check", file=sys.stderr)
+    if vocabulary_views:
+        buildings = {b: layout(150, seed=b, points_per_object=LAYOUT_POINTS) for b in (300, 301)}
+        samples += collect_variants(buildings, vocabulary_views, 1, "vocabulary", rename,
+                                    first_answer=len(samples) and samples[-1].answer + 1)  # fmt: skip
+    return samples
+
+
+def real_use_table(samples, model, precision: float = 0.99) -> str:
+    """Per kind and object count: answers, top-1, claims at the operating point, coverage and
+    the best coverage at `precision` (see the module docstring)."""
+    lines = ["| attempts | objects | answers | top-1 | claims right / wrong | precision | coverage "
+             f"| best coverage at {precision:.0%} |", "|---|---|---|---|---|---|---|---|"]  # fmt: skip
+    for kind in dict.fromkeys(s.map_kind for s in samples):
+        for name, fits in (("< 5", lambda n: n < 5), (">= 5", lambda n: n >= 5)):
+            group = [s for s in samples if s.map_kind == kind and fits(s.objects)]
+            answers = len({s.answer for s in group})
+            if not answers:
+                continue
+            top1 = sum(s.right for s, _ in best_of_answers(group, model))
+            claimed = claims(group, model, model.min_confidence)
+            right = sum(s.right for s in claimed)
+            share = f"{right / len(claimed):.1%}" if claimed else "-"
+            lines.append(
+                f"| {kind} | {name} | {answers} | {top1 / answers:.1%} | {right} / "
+                f"{len(claimed) - right} | {share} | {right / answers:.1%} | "
+                f"{best_coverage(group, model, precision):.1%} |"
+            )
+    return "\n".join(lines)
 
 
 def figure(path: Path, sets) -> None:
@@ -124,6 +181,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--observed-trials", type=int, default=10)
     parser.add_argument("--holdout-sequences", type=int, default=2)
     parser.add_argument("--precision", type=float, default=0.995)
+    parser.add_argument("--real-views", type=int, default=20, help="held-out real-layout views")
+    parser.add_argument("--vocabulary-views", type=int, default=6,
+                        help="held-out vocabulary-shift views")  # fmt: skip
     parser.add_argument("--write", action="store_true", help=f"replace {MODEL_MODULE}")
     parser.add_argument("--figure", type=Path, help="also draw the reliability diagram (PNG)")
     args = parser.parse_args(argv)
@@ -139,6 +199,10 @@ def main(argv: list[str] | None = None) -> int:
     print(reliability_table("held-out simulated attempts", holdout, model))
     for kind in sorted({s.map_kind for s in holdout}):
         print(claims_line(kind, [s for s in holdout if s.map_kind == kind], model))
+    real = real_use(args.real_views, args.vocabulary_views)
+    if real:
+        print("\nheld-out attempts that look like real use:\n")
+        print(real_use_table(real, model))
     if args.figure is not None:
         figure(args.figure, [("fitting attempts", samples, model),
                              ("held-out attempts", holdout, model)])  # fmt: skip

@@ -122,3 +122,33 @@ def test_a_moved_object_beside_another_kind_of_object_is_not_taken_for_it():
     local = seen_from_t([*rest, relabelled])
     changes = explain(g, local, T, pairs, candidates_of(g, local))
     assert changes.moved == [] and changes.new == []
+
+
+def test_three_matched_objects_beat_two_matched_and_two_moved():
+    """Two places fit the view's chair and table; at one the lamp is where the map has it too
+    (the bin is new), at the other the lamp and the bin would both have moved 1 m.  Moved
+    objects are neither pairs nor support: the place with three matched objects wins, and the
+    other keeps its two pairs."""
+    here = {"chair": [0, 0, 0.5], "table": [3, 0, 0.4], "lamp": [3, 2.5, 0.8]}
+    there = {"chair": [20, 0, 0.5], "table": [23, 0, 0.4], "lamp": [23.8, 3.1, 0.8],
+             "bin": [19.4, 3.0, 0.5]}  # fmt: skip
+    g = ObjectMap(
+        [SemanticObject(f"a_{k}", k, points=cube(p, seed=i)) for i, (k, p) in enumerate(here.items())]
+        + [SemanticObject(f"b_{k}", k, points=cube(p, seed=i)) for i, (k, p) in enumerate(there.items())],
+        up=[0, 0, 1],
+    )  # fmt: skip
+    seen = [
+        SemanticObject(f"g_{k}", k, points=cube(p, seed=i)) for i, (k, p) in enumerate(here.items())
+    ]
+    seen.append(SemanticObject("g_bin", "bin", points=cube([0, 2.2, 0.3], seed=9)))
+    result = semloc.localize(g, ObjectMap(seen_from_t(seen), up=[0, 0, 1]))
+    best, other = result.hypotheses[:2]
+    assert sorted(best.pairs) == [
+        ("a_chair", "l_chair"),
+        ("a_lamp", "l_lamp"),
+        ("a_table", "l_table"),
+    ]
+    assert np.allclose(best.pose, T, atol=0.05)
+    assert sorted(other.pairs) == [("b_chair", "l_chair"), ("b_table", "l_table")]
+    assert other.features["support"] == 0
+    assert result.changes.new == ["l_bin"] and result.changes.moved == []

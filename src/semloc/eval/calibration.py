@@ -16,7 +16,7 @@ claimed (>= 3 pairs, fitness >= 0.3) are right at least `precision` of the time.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -33,8 +33,9 @@ from semloc.decision import (
 )
 from semloc.eval.protocol import BenchConfig, _targets, simulate, start_keyframes
 from semloc.eval.success import is_success
-from semloc.eval.variants import VARIANTS, make_case
+from semloc.eval.variants import OBJECT_COUNTS, VARIANTS, make_case
 from semloc.localizer import Localizer, localize
+from semloc.maps import ObjectMap
 from semloc.results import Result
 from semloc.sim.layouts import layout, observe
 
@@ -55,6 +56,7 @@ class Sample:
     features: dict[str, float]
     right: bool
     matches: frozenset[tuple[str, str]] = frozenset()  # its pairs (global id, local id)
+    objects: int = 0  # local objects of the answer
 
 
 def collect(config: BenchConfig, first_answer: int = 0) -> list[Sample]:
@@ -92,6 +94,7 @@ def samples_of(result: Result, truth: np.ndarray, answer: int, kind: str) -> lis
             h.features,
             is_success(h.pose, truth),
             frozenset(h.pairs),
+            result.steps[-1].n_local if result.steps else 0,
         )  # fmt: skip
         for h in result.hypotheses
         if h.features is not None
@@ -115,6 +118,31 @@ def collect_layouts(
                     case = make_case(full, variant, k, rng)
                     result = localize(case.prior, case.local)
                     samples += samples_of(result, case.truth, answer, f"layout-{variant}")
+                    answer += 1
+    return samples
+
+
+def collect_variants(
+    maps: Mapping[str, ObjectMap], views: int, seed: int, kind: str,
+    rename: Callable[[ObjectMap], ObjectMap] | None = None, counts: Sequence[int] = OBJECT_COUNTS,
+    first_answer: int = 0,
+) -> list[Sample]:  # fmt: skip
+    """Views of `maps` (e.g. the real samples: `eval.variants.variant_maps`) in the clean /
+    noisy / dynamic variants, `views` per map, variant and object count, drawn with `seed`
+    (the real-layout benchmarks draw theirs with seed 0: another seed gives other views); with
+    `rename`, the local objects are renamed first (a detector's vocabulary).  Kinds
+    `{kind}-{variant}`."""
+    samples: list[Sample] = []
+    answer = first_answer
+    for m, full in enumerate(maps.values()):
+        for v, variant in enumerate(VARIANTS):
+            for k in counts:
+                rng = np.random.default_rng([seed, m, v, k])
+                for _ in range(views):
+                    case = make_case(full, variant, k, rng)
+                    local = case.local if rename is None else rename(case.local)
+                    result = localize(case.prior, local)
+                    samples += samples_of(result, case.truth, answer, f"{kind}-{variant}")
                     answer += 1
     return samples
 
@@ -252,6 +280,33 @@ def best_of_answers(samples: list[Sample], model: ConfidenceModel) -> list[tuple
         if s.answer not in best or e > best[s.answer][0]:
             best[s.answer] = (e, s, float(c))
     return [(s, c) for _, s, c in best.values()]
+
+
+def claims(samples: list[Sample], model: ConfidenceModel, threshold: float) -> list[Sample]:
+    """The best hypotheses of the answers of `samples` that would be claimed at `threshold`
+    (>= min_pairs, >= min_fitness)."""
+    gate = DecisionConfig(min_confidence=0.5)
+    return [s for s, c in best_of_answers(samples, model) if c >= threshold
+            and s.pairs >= gate.min_pairs and s.fitness >= gate.min_fitness]  # fmt: skip
+
+
+def best_coverage(samples: list[Sample], model: ConfidenceModel, precision: float) -> float:
+    """The largest share of the answers of `samples` that any one confidence threshold claims
+    right while its claims stay right at least `precision` of the time: what the model's
+    confidence could give on these attempts alone (a bound, not an operating point)."""
+    gate = DecisionConfig(min_confidence=0.5)
+    ordered = sorted(
+        ((c, s.right) for s, c in best_of_answers(samples, model)
+         if s.pairs >= gate.min_pairs and s.fitness >= gate.min_fitness),
+        key=lambda x: -x[0],
+    )  # fmt: skip
+    best, right = 0, 0
+    for n, (_, ok) in enumerate(ordered, 1):
+        right += ok
+        if right / n >= precision:
+            best = right
+    answers = len({s.answer for s in samples})
+    return best / answers if answers else 0.0
 
 
 def operating_point(samples: list[Sample], model: ConfidenceModel, precision: float) -> float:
