@@ -119,6 +119,19 @@ def test_no_hypotheses_fail_with_the_reason():
 
 
 @pytest.mark.parametrize("make", [sure, bare], ids=["confidence", "dominance"])
+def test_failed_until_some_hypothesis_has_two_pairs(make):
+    """A baseline's hypothesis may carry a pose (FPFH-RANSAC's) with fewer than 2 pairs: still
+    no association set with 2 or more pairs."""
+    config = DecisionConfig(min_pairs=2)
+    fewer = [make(config, 1), make(config, 0)]
+    assert decide(fewer, config, "score") == ("failed", "no association set with 2 or more pairs")
+    assert decide([make(config, 2)], config, "score") == ("localized", "")
+    status, reason = decide([*fewer, make(config, 2)], config, "score")
+    assert status == "ambiguous"
+    assert reason == "too few pairs: the best hypothesis has 1 agreeing pairs, 2 needed"
+
+
+@pytest.mark.parametrize("make", [sure, bare], ids=["confidence", "dominance"])
 @pytest.mark.parametrize("config", CONFIGS, ids=IDS)
 def test_a_best_without_a_pose_is_ambiguous(config, make):
     best = make(config)
