@@ -332,7 +332,7 @@ def score_confidence(
 
 def decide(hypotheses: Sequence[Hypothesis], config: DecisionConfig, rank_by: RankBy) -> Decision:
     """The status of ranked hypotheses (best first) and its reason; see the module docstring."""
-    if not hypotheses:
+    if not any(len(h.pairs) >= 2 for h in hypotheses):  # (a baseline's pose may have fewer)
         return Decision("failed", "no association set with 2 or more pairs")
     best = hypotheses[0]
     if best.pose is None:

@@ -1,4 +1,6 @@
-"""Every baseline localizes an easy, noise-free case: a transformed crop of the global map."""
+"""Every baseline localizes an easy, noise-free case (a transformed crop of the global map) and
+says so (`localized`); says `ambiguous` where the map repeats itself and `failed` on a view
+with nothing in common with the map (the decision is `semloc.decision`'s, ranked by score)."""
 
 from __future__ import annotations
 
@@ -13,9 +15,11 @@ from semloc.baselines import (
 )  # fmt: skip
 from semloc.baselines.base import consistency_groups
 from semloc.baselines.clipper import ClipperConfig, dense_cluster
+from semloc.baselines.fpfh import FpfhConfig
 from semloc.eval.success import first_correct_rank, is_success
 from semloc.localizer import Result
 from semloc.maps import ObjectMap, SemanticObject
+from semloc.transforms import pose_error, yaw_pose
 
 
 @pytest.fixture(scope="module")
@@ -55,6 +59,66 @@ def test_baseline_localizes_easy_case(easy, cls):
     assert first_correct_rank(result.hypotheses, T) == 1
     assert is_success(result.pose, T)
     assert result.steps[-1].n_local == len(local)
+    assert (result.status, result.reason) == ("localized", "")  # one clear place
+    assert result.steps[-1].status == "localized"
+
+
+def _blob(seed: int, centre, half) -> np.ndarray:
+    return np.asarray(centre) + np.random.default_rng(seed).uniform(-1, 1, (80, 3)) * half
+
+
+@pytest.fixture(scope="module")
+def ring():
+    """12 objects on a circle, labels chair / table / sofa in turn, each object (points too) the
+    one before turned by 30 deg: the map looks the same turned by 90 deg, so a view of 5
+    neighbours fits 4 places exactly (no mirror fit: the labels run the other way there)."""
+    shapes = {"chair": _blob(1, [4.0, 0, 0.45], [0.25, 0.2, 0.4]),
+              "table": _blob(2, [4.0, 0, 0.4], [0.4, 0.3, 0.35]),
+              "sofa": _blob(3, [4.0, 0, 0.4], [0.3, 0.8, 0.4])}  # fmt: skip
+    objects = []
+    for i in range(12):
+        label = ("chair", "table", "sofa")[i % 3]
+        turn = yaw_pose(2 * np.pi * i / 12)[:3, :3]
+        objects.append(SemanticObject(f"g{i}", label, points=shapes[label] @ turn.T))
+    gmap = ObjectMap(objects, up=[0, 0, 1])
+    inverse = np.linalg.inv(yaw_pose(0.4, [1.0, -2.0, 0.0]))
+    view = [o.transformed(inverse).replace(id=f"l{k}", seen=k) for k, o in enumerate(objects[:5])]
+    # nothing in common: labels the map lacks, flat slabs unlike its shapes, in a line
+    alien = [SemanticObject(f"l{k}", "piano", points=_blob(10 + k, [k * 1.7, (k % 2) * 1.1, 0.5],
+                                                           [0.6, 0.1, 0.2]), seen=k)
+             for k in range(5)]  # fmt: skip
+    return gmap, ObjectMap(view, up=[0, 0, 1]), ObjectMap(alien, up=[0, 0, 1])
+
+
+def _ring_method(cls, gmap):
+    # FPFH registers the `retrieve` sub-maps most like the view; the default 6 all lie around one
+    # of the 4 places, so it would see no rival at all
+    config = FpfhConfig(retrieve=60) if cls is FpfhRansacBaseline else None
+    return cls(gmap, config, local_up=[0, 0, 1])
+
+
+@pytest.mark.parametrize(
+    "cls", [ClipperBaseline, RandomWalkBaseline, SegMatchBaseline, FpfhRansacBaseline]
+)
+def test_baseline_is_ambiguous_where_the_map_repeats_itself(ring, cls):
+    gmap, view, _ = ring
+    result = _ring_method(cls, gmap).update(view)
+    assert result.status == "ambiguous" and not result.pose_is_answer
+    assert result.reason.startswith("a rival place within the margin (rank ")
+    assert result.reason.endswith(", score)")  # the baselines rank by their score
+    exact = [h for h in result.hypotheses if len(h.pairs) == 5 and h.residual < 0.01]
+    assert len(exact) >= 2  # the rival is a real second place, not a poor fit
+    assert pose_error(exact[0].pose, exact[1].pose)[0] == pytest.approx(90.0, abs=0.5)
+
+
+@pytest.mark.parametrize(
+    "cls", [ClipperBaseline, RandomWalkBaseline, SegMatchBaseline, FpfhRansacBaseline]
+)
+def test_baseline_fails_on_a_view_with_nothing_in_common(ring, cls):
+    gmap, _, alien = ring
+    result = _ring_method(cls, gmap).update(alien)
+    assert (result.status, result.reason) == ("failed", "no association set with 2 or more pairs")
+    assert result.pose is None and result.steps[-1].status == "failed"
 
 
 def test_dense_cluster_finds_the_clique():

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 from test_changes_fixtures import T, cube, room, seen_from_t  # noqa: F401
 
@@ -37,6 +39,27 @@ def test_update_map_applies_every_change(tmp_path, capsys):
     assert updated.get("l9").label == "bed" and updated.get("l9").extra["new"] is True
     assert updated.get("g5").extra.get("missing") is True  # the plant beside the seen bin
     assert len(updated) == len(g) + 2  # the bed and the second bin; nothing deleted
+
+
+def test_the_updated_map_localizes_the_same_view_with_every_object_matched(tmp_path):
+    """Round trip: after `update-map` the moved lamp stands where it was seen and the bed and
+    the bin are in the map, so the view is explained without a change (the plant stays flagged
+    missing: it is still gone, and flagged objects are kept)."""
+    g = write_scene(tmp_path)
+    updated, result = tmp_path / "updated.json", tmp_path / "result.json"
+    assert main(["update-map", str(tmp_path / "global.json"), str(tmp_path / "local.json"),
+                 "-o", str(updated)]) == 0  # fmt: skip
+    assert main(["localize", str(updated), str(tmp_path / "local.json"), "--format", "json",
+                 "-o", str(result)]) == 0  # fmt: skip
+    answer = json.loads(result.read_text())
+    assert answer["status"] == "localized"
+    np.testing.assert_allclose(answer["pose"], T, atol=1e-3)
+    assert answer["changes"]["moved"] == [] and answer["changes"]["new"] == []
+    pairs = {p["local"]: p["global"] for p in answer["hypotheses"][0]["pairs"]}
+    local = semloc.load_map(tmp_path / "local.json")
+    assert sorted(pairs) == sorted(local.ids.tolist())  # every local object matched
+    assert pairs["l4"] == "g4" and pairs["l9"] == "l9" and pairs["l11"] == "l11"
+    assert len(semloc.load_map(updated)) == len(g) + 2
 
 
 def test_update_map_from_a_saved_result_gives_the_same_map(tmp_path):

@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from test_changes_fixtures import T, cube, room, seen_from_t
 
 import semloc
-from semloc.changes import Changes, explain
+from semloc.changes import Changes, Moved, explain
 from semloc.maps import ObjectMap, SemanticObject
-from semloc.transforms import yaw_pose
+from semloc.transforms import pose_error, yaw_pose
 
 
 def candidates_of(global_map: ObjectMap, local: list[SemanticObject]) -> dict[str, np.ndarray]:
@@ -152,3 +153,30 @@ def test_three_matched_objects_beat_two_matched_and_two_moved():
     assert sorted(other.pairs) == [("b_chair", "l_chair"), ("b_table", "l_table")]
     assert other.features["support"] == 0
     assert result.changes.new == ["l_bin"] and result.changes.moved == []
+
+
+def test_a_moved_object_is_named_with_its_offset_and_is_no_pair():
+    """The lamp moved 1.5 m: reported `moved` (1.5 m) and not taken as support for the pose."""
+    g = room()
+    objects = list(g)[:6]
+    objects[4] = objects[4].transformed(yaw_pose(0.0, [1.2, -0.9, 0.0]))
+    result = semloc.localize(g, ObjectMap(seen_from_t(objects), up=[0, 0, 1]))
+    assert pose_error(result.pose, T)[0] < 0.1 and pose_error(result.pose, T)[1] < 0.01
+    assert result.changes.moved == [Moved("g4", "l4", result.changes.moved[0].offset_m)]
+    assert abs(result.changes.moved[0].offset_m - 1.5) < 0.01
+    assert result.changes.new == [] and result.changes.missing == []
+    assert "l4" not in {l for _, l in result.best.pairs}
+    assert sorted(result.best.pairs) == [(f"g{i}", f"l{i}") for i in (0, 1, 2, 3, 5)]
+    moved = result.to_dict()["changes"]["moved"]
+    assert moved == [{"global": "g4", "local": "l4", "offset_m": pytest.approx(1.5, abs=0.01)}]
+
+
+def test_a_spurious_detection_is_new_and_no_pair():
+    """A bed where the map has none (and no bed anywhere): `new`, not matched, not moved."""
+    g = room()
+    spurious = SemanticObject("g9", "bed", points=cube([4.5, 1.0, 0.4], seed=9))
+    result = semloc.localize(g, ObjectMap(seen_from_t([*list(g)[:5], spurious]), up=[0, 0, 1]))
+    assert pose_error(result.pose, T)[0] < 0.1 and pose_error(result.pose, T)[1] < 0.01
+    assert result.changes == Changes(new=["l9"])
+    assert "l9" not in {l for _, l in result.best.pairs}
+    assert result.to_dict()["changes"] == {"moved": [], "new": ["l9"], "missing": []}

@@ -1,0 +1,593 @@
+"""Every rule of the decision (`semloc.decision`), each just inside and just outside its threshold.
+
+The hypotheses are built by hand with the confidence, evidence, residual, fitness and score each
+case needs, and the thresholds are read from `DecisionConfig` (the default one and a second one
+with every threshold moved), so that the tests hold whatever the shipped confidence model's
+coefficients or features are.  A case "at t + EPS" or "at t - EPS" sits a hair beside the
+threshold t on either side; each asserts the status and the key part of the reason.
+
+Rules, in the order `decide` applies them: no hypotheses; the best's pose; `min_pairs`;
+`min_fitness`; then either the confidence (`_by_confidence`: `min_confidence`, a rival place
+whose centres fit nearly as well, a rival within `RIVAL_LOGIT_GAP` of the evidence named as the
+reason) or, without a confidence (the baselines), dominance over every rival (`_dominates`, per
+`rank_by`).  Rivals are other places sharing less than `rival_overlap` of the pairs
+(`is_rival`, `_different`); `same_place` / `distinct` say which candidates are one place.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import assume, given, settings
+from hypothesis import strategies as st
+
+from semloc.decision import (
+    RIVAL_LOGIT_GAP,
+    DecisionConfig,
+    _different,
+    _dominates,
+    decide,
+    distinct,
+    is_rival,
+    same_place,
+)
+from semloc.results import Hypothesis
+from semloc.transforms import yaw_pose
+
+EPS = 1e-9
+CONFIGS = [
+    DecisionConfig(),
+    DecisionConfig(
+        min_pairs=4,
+        min_fitness=0.55,
+        min_confidence=0.8,
+        margin=1.0,
+        residual_floor=0.05,
+        rival_overlap=0.75,
+        distinct_rotation_deg=5.0,
+        distinct_translation=0.5,
+    ),
+]
+IDS = ["default", "moved"]
+HERE = yaw_pose(0.0)
+ELSEWHERE = yaw_pose(2.0, [-6.0, 3.0, 0.0])
+
+
+def pairs(n: int, start: int = 0) -> list[tuple[str, str]]:
+    """n pairs of local objects l0.. with map objects g{start}.. (other `start`: another place)."""
+    return [(f"g{start + i}", f"l{i}") for i in range(n)]
+
+
+def shared(best: list, n: int, k: int) -> list[tuple[str, str]]:
+    """n pairs of which the first k are `best`'s (the others match the rest elsewhere)."""
+    return best[:k] + [(f"x{i}", f"l{i}") for i in range(k, n)]
+
+
+def sure(config: DecisionConfig, n: int | None = None, **fields) -> Hypothesis:
+    """A best hypothesis that passes every rule of `config` with room to spare."""
+    values = dict(
+        score=10.0,
+        fitness=max(config.min_fitness, 0.9),
+        residual=0.05,
+        confidence=min(config.min_confidence + 0.05, 1.0),
+        evidence=3.0,
+    )
+    values |= fields
+    n = config.min_pairs + 1 if n is None else n
+    return Hypothesis(1, values.pop("score"), pairs(n), HERE, **values)
+
+
+def bare(config: DecisionConfig, n: int | None = None, **fields) -> Hypothesis:
+    """A best hypothesis without a confidence (as the baselines make), otherwise `sure`."""
+    return sure(config, n, **({"confidence": None, "evidence": None} | fields))
+
+
+def rival(
+    best: Hypothesis, rank: int = 2, n: int | None = None, k: int = 0, **fields
+) -> Hypothesis:
+    """Another place (sharing k of `best`'s pairs), by default as good as `best` in every term."""
+    n = len(best.pairs) if n is None else n
+    values = dict(
+        score=best.score,
+        fitness=best.fitness,
+        residual=best.residual,
+        confidence=best.confidence,
+        evidence=best.evidence,
+    )
+    values |= fields
+    return Hypothesis(rank, values.pop("score"), shared(best.pairs, n, k), ELSEWHERE, **values)
+
+
+def threshold(best_residual: float | None, config: DecisionConfig) -> float:
+    """The residual above which a rival with as many pairs is dominated."""
+    return (1.0 + config.margin) * (best_residual or 0.0) + config.residual_floor
+
+
+def first_variant_share(n: int, config: DecisionConfig) -> int:
+    """The fewest shared pairs of n that make another hypothesis a variant, not a rival."""
+    return math.ceil(config.rival_overlap * n - 1e-12)
+
+
+# no hypotheses, no pose ----------------------------------------------------------------------
+def test_no_hypotheses_fail_with_the_reason():
+    assert decide([], DecisionConfig(), "evidence") == (
+        "failed",
+        "no association set with 2 or more pairs",
+    )
+
+
+@pytest.mark.parametrize("make", [sure, bare], ids=["confidence", "dominance"])
+def test_failed_until_some_hypothesis_has_two_pairs(make):
+    """A baseline's hypothesis may carry a pose (FPFH-RANSAC's) with fewer than 2 pairs: still
+    no association set with 2 or more pairs."""
+    config = DecisionConfig(min_pairs=2)
+    fewer = [make(config, 1), make(config, 0)]
+    assert decide(fewer, config, "score") == ("failed", "no association set with 2 or more pairs")
+    assert decide([make(config, 2)], config, "score") == ("localized", "")
+    status, reason = decide([*fewer, make(config, 2)], config, "score")
+    assert status == "ambiguous"
+    assert reason == "too few pairs: the best hypothesis has 1 agreeing pairs, 2 needed"
+
+
+@pytest.mark.parametrize("make", [sure, bare], ids=["confidence", "dominance"])
+@pytest.mark.parametrize("config", CONFIGS, ids=IDS)
+def test_a_best_without_a_pose_is_ambiguous(config, make):
+    best = make(config)
+    assert decide([best], config, "evidence") == ("localized", "")
+    best.pose = None
+    status, reason = decide([best], config, "evidence")
+    assert status == "ambiguous" and "pose is under-determined" in reason
+
+
+# min_pairs -----------------------------------------------------------------------------------
+@pytest.mark.parametrize("make", [sure, bare], ids=["confidence", "dominance"])
+@pytest.mark.parametrize("config", CONFIGS, ids=IDS)
+def test_min_pairs_just_inside_and_outside(config, make):
+    n = config.min_pairs
+    assert decide([make(config, n)], config, "evidence") == ("localized", "")
+    status, reason = decide([make(config, n - 1)], config, "evidence")
+    assert status == "ambiguous"
+    assert reason == (f"too few pairs: the best hypothesis has {n - 1} agreeing pairs, {n} needed")
+
+
+def test_min_pairs_comes_before_the_confidence():
+    config = DecisionConfig(min_pairs=5)
+    best = sure(config, 4, confidence=1.0)
+    assert decide([best], config, "evidence").reason.startswith("too few pairs: ")
+
+
+# min_fitness ---------------------------------------------------------------------------------
+@pytest.mark.parametrize("make", [sure, bare], ids=["confidence", "dominance"])
+@pytest.mark.parametrize("config", CONFIGS, ids=IDS)
+def test_min_fitness_just_inside_and_outside(config, make):
+    f = config.min_fitness
+    assert decide([make(config, fitness=f)], config, "evidence") == ("localized", "")
+    assert decide([make(config, fitness=f + EPS)], config, "evidence") == ("localized", "")
+    status, reason = decide([make(config, fitness=f - EPS)], config, "evidence")
+    assert status == "ambiguous" and reason.startswith("low fitness: ")
+    assert reason.endswith(f"{f:.2f} needed")
+
+
+def test_fitness_is_not_checked_without_one_or_when_off():
+    config = DecisionConfig(min_fitness=0.5)
+    assert decide([sure(config, fitness=None)], config, "evidence") == ("localized", "")
+    off = DecisionConfig(min_fitness=0.0)
+    assert decide([sure(off, fitness=0.0)], off, "evidence") == ("localized", "")
+
+
+def test_min_fitness_comes_before_the_confidence():
+    config = DecisionConfig(min_fitness=0.5)
+    low = sure(config, fitness=0.2, confidence=1.0)
+    assert decide([low], config, "evidence").reason == (
+        "low fitness: 0.20 of the local points land on the map, 0.50 needed"
+    )
+
+
+# min_confidence ------------------------------------------------------------------------------
+@pytest.mark.parametrize("config", CONFIGS, ids=IDS)
+def test_min_confidence_just_inside_and_outside(config):
+    c = config.min_confidence
+    assert decide([sure(config, confidence=c)], config, "evidence") == ("localized", "")
+    status, reason = decide([sure(config, confidence=c - EPS)], config, "evidence")
+    assert status == "ambiguous"
+    assert reason == f"low confidence: {c - EPS:.2f} < {c:.2f}"
+
+
+def test_a_low_confidence_is_not_rescued_by_dominance():
+    """With a confidence, dominance over the rivals does not make the answer: there are none."""
+    config = DecisionConfig(min_confidence=0.9)
+    alone = sure(config, confidence=0.5, score=100.0)
+    assert decide([alone], config, "score") == ("ambiguous", "low confidence: 0.50 < 0.90")
+
+
+def test_a_missing_confidence_is_the_dominance_path_not_a_low_confidence():
+    config = DecisionConfig(min_confidence=0.9)
+    assert decide([bare(config)], config, "evidence") == ("localized", "")
+
+
+# the confidence path: a rival place whose centres fit nearly as well ----------------------
+@pytest.mark.parametrize("config", CONFIGS, ids=IDS)
+def test_a_sure_best_with_a_rival_whose_centres_fit_nearly_as_well_is_ambiguous(config):
+    best = sure(config, residual=0.1)
+    limit = threshold(best.residual, config)
+    status, reason = decide([best, rival(best, residual=limit - EPS)], config, "evidence")
+    assert status == "ambiguous"
+    assert reason.startswith(
+        "a rival place within the margin: rank 2 fits the centres nearly "
+        f"as well ({len(best.pairs)} pairs, residual "
+    )
+    assert decide([best, rival(best, residual=limit + EPS)], config, "evidence") == (
+        "localized",
+        "",
+    )
+
+
+@pytest.mark.parametrize("config", CONFIGS, ids=IDS)
+def test_the_confidence_paths_rival_rule_is_judged_by_pairs_then_residual(config):
+    best = sure(config, residual=0.1)
+    n = len(best.pairs)
+    close = threshold(best.residual, config) / 2  # would be a rival with as many pairs
+    fewer = rival(best, n=n - 1, residual=close)
+    assert decide([best, fewer], config, "evidence") == ("localized", "")
+    assert decide([best, rival(best, residual=None)], config, "evidence") == ("localized", "")
+    assert decide([best, rival(best, residual=close)], config, "evidence")[0] == "ambiguous"
+    # a best without a residual counts as 0: a rival within the floor still ties
+    exact = sure(config, residual=None)
+    tie = rival(exact, residual=config.residual_floor - EPS)
+    assert decide([exact, tie], config, "evidence")[0] == "ambiguous"
+    apart = rival(exact, residual=config.residual_floor + EPS)
+    assert decide([exact, apart], config, "evidence") == ("localized", "")
+
+
+@pytest.mark.parametrize("config", CONFIGS, ids=IDS)
+def test_the_confidence_paths_rival_must_be_another_place(config):
+    best = sure(config, n=4, residual=0.1)
+    k = first_variant_share(4, config)
+    close = dict(residual=best.residual, evidence=best.evidence + 1.0)
+    variant = rival(best, k=k, **close)  # shares enough of the pairs: the same answer
+    assert decide([best, variant], config, "evidence") == ("localized", "")
+    other = rival(best, k=k - 1, **close)
+    status, reason = decide([best, other], config, "evidence")
+    assert status == "ambiguous" and "rank 2 fits the centres nearly as well" in reason
+
+
+def test_the_first_close_rival_is_named():
+    config = DecisionConfig()
+    best = sure(config, residual=0.1)
+    far = rival(best, 2, residual=threshold(0.1, config) + 0.5)
+    near = rival(best, 3, residual=0.1)
+    status, reason = decide([best, far, near], config, "evidence")
+    assert status == "ambiguous"
+    assert reason.startswith("a rival place within the margin: rank 3 fits the centres")
+
+
+# the confidence path: a rival within RIVAL_LOGIT_GAP is named as the reason --------------
+@pytest.mark.parametrize("config", CONFIGS, ids=IDS)
+def test_a_rival_within_the_logit_gap_is_named(config):
+    c = config.min_confidence - 0.1
+    best = sure(config, confidence=c, evidence=1.0)
+    at = best.evidence - RIVAL_LOGIT_GAP
+    status, reason = decide([best, rival(best, evidence=at + EPS)], config, "evidence")
+    assert status == "ambiguous"
+    assert reason == (
+        f"a rival place within the margin: rank 2 has nearly the same evidence "
+        f"(confidence {c:.2f} < {config.min_confidence:.2f})"
+    )
+    status, reason = decide([best, rival(best, evidence=at - EPS)], config, "evidence")
+    assert status == "ambiguous"
+    assert reason == f"low confidence: {c:.2f} < {config.min_confidence:.2f}"
+
+
+@pytest.mark.parametrize("config", CONFIGS, ids=IDS)
+def test_a_variant_within_the_logit_gap_is_not_named(config):
+    best = sure(config, n=4, confidence=config.min_confidence - 0.1, evidence=1.0)
+    k = first_variant_share(4, config)
+    variant = rival(best, k=k, evidence=best.evidence)
+    assert decide([best, variant], config, "evidence")[1].startswith("low confidence: ")
+    other = rival(best, k=k - 1, evidence=best.evidence)
+    assert decide([best, other], config, "evidence")[1].startswith("a rival place within the")
+
+
+def test_the_named_rival_is_judged_by_the_share_of_the_bests_pairs():
+    """`is_rival(best, other)`: a smaller set sharing one of the best's four pairs is a rival
+    here (1 < 0.5 x 4), though it shares half of its own pairs (no rival by `_different`)."""
+    config = DecisionConfig(rival_overlap=0.5)
+    best = sure(config, n=4, confidence=config.min_confidence - 0.1, evidence=1.0)
+    small = Hypothesis(2, 1.0, best.pairs[:1] + [("x9", "l9")], ELSEWHERE, evidence=1.0)
+    assert "rank 2 has nearly the same evidence" in decide([best, small], config, "evidence")[1]
+
+
+def test_without_evidence_no_rival_is_named():
+    config = DecisionConfig()
+    best = sure(config, confidence=config.min_confidence - 0.1, evidence=None)
+    other = rival(best, evidence=5.0)
+    assert decide([best, other], config, "evidence")[1].startswith("low confidence: ")
+    best.evidence, other.evidence = 1.0, None
+    assert decide([best, other], config, "evidence")[1].startswith("low confidence: ")
+
+
+# the dominance path (no confidence): _dominates per rank_by ------------------------------
+def dominance_reason(rank: int, rank_by: str) -> str:
+    return f"a rival place within the margin (rank {rank}, {rank_by})"
+
+
+@pytest.mark.parametrize("config", CONFIGS, ids=IDS)
+def test_score_dominance_just_inside_and_outside(config):
+    best = bare(config, score=3.0)
+    at = best.score / (1.0 + config.margin)
+    assert _dominates(best, rival(best, score=at - EPS), "score", config)
+    assert not _dominates(best, rival(best, score=at + EPS), "score", config)
+    assert decide([best, rival(best, score=at - EPS)], config, "score") == ("localized", "")
+    assert decide([best, rival(best, score=at + EPS)], config, "score") == (
+        "ambiguous",
+        dominance_reason(2, "score"),
+    )
+
+
+@pytest.mark.parametrize("config", CONFIGS, ids=IDS)
+def test_fitness_dominance_just_inside_and_outside(config):
+    best = bare(config, fitness=0.9)
+    at = best.fitness / (1.0 + config.margin)
+    assert decide([best, rival(best, fitness=at - EPS)], config, "fitness") == ("localized", "")
+    assert decide([best, rival(best, fitness=at + EPS)], config, "fitness") == (
+        "ambiguous",
+        dominance_reason(2, "fitness"),
+    )
+    # no fitness counts as 0: a rival without one is dominated, a best without one is not
+    assert decide([best, rival(best, fitness=None)], config, "fitness") == ("localized", "")
+    unmeasured = bare(config, fitness=None)
+    assert decide([unmeasured, rival(unmeasured, fitness=EPS)], config, "fitness")[0] == (
+        "ambiguous"
+    )
+
+
+@pytest.mark.parametrize("rank_by", ["residual", "evidence"])
+@pytest.mark.parametrize("config", CONFIGS, ids=IDS)
+def test_residual_dominance_just_inside_and_outside(config, rank_by):
+    """rank_by residual (and evidence, for hypotheses without a confidence): more pairs, or as
+    many and a residual above (1 + margin) x the best's + residual_floor."""
+    best = bare(config, residual=0.1)
+    limit = threshold(best.residual, config)
+    assert decide([best, rival(best, residual=limit + EPS)], config, rank_by) == ("localized", "")
+    assert decide([best, rival(best, residual=limit - EPS)], config, rank_by) == (
+        "ambiguous",
+        dominance_reason(2, rank_by),
+    )
+    n = len(best.pairs)
+    assert decide([best, rival(best, n=n - 1, residual=0.0)], config, rank_by) == ("localized", "")
+    assert decide([best, rival(best, residual=None)], config, rank_by) == ("localized", "")
+    exact = bare(config, residual=None)  # counts as 0
+    assert (
+        decide([exact, rival(exact, residual=config.residual_floor - EPS)], config, rank_by)[0]
+        == "ambiguous"
+    )
+    assert (
+        decide([exact, rival(exact, residual=config.residual_floor + EPS)], config, rank_by)[0]
+        == "localized"
+    )
+
+
+@pytest.mark.parametrize("rank_by", ["score", "fitness", "residual", "evidence"])
+def test_dominates_is_not_fooled_by_the_other_terms(rank_by):
+    """Each ranking is judged in its own terms only: a rival as good in that term and far worse
+    in the others is not dominated."""
+    config = DecisionConfig()
+    best = bare(config, score=5.0, fitness=0.9, residual=0.1)
+    worse = dict(score=0.1, fitness=0.01, residual=5.0)
+    term = {"score": "score", "fitness": "fitness"}.get(rank_by, "residual")
+    tie = rival(best, **(worse | {term: getattr(best, term)}))
+    assert not _dominates(best, tie, rank_by, config)
+    assert _dominates(best, rival(best, **worse), rank_by, config)
+
+
+@pytest.mark.parametrize("rank_by", ["score", "fitness", "residual", "evidence"])
+def test_every_rival_must_be_dominated(rank_by):
+    config = DecisionConfig()
+    best = bare(config, score=5.0, fitness=0.9, residual=0.1)
+    beaten = rival(best, 2, score=0.1, fitness=0.01, residual=5.0)
+    close = rival(best, 3)
+    assert decide([best, beaten], config, rank_by) == ("localized", "")
+    assert decide([best, beaten, close], config, rank_by) == (
+        "ambiguous",
+        dominance_reason(3, rank_by),
+    )
+
+
+@pytest.mark.parametrize("rank_by", ["score", "fitness", "residual"])
+@pytest.mark.parametrize("config", CONFIGS, ids=IDS)
+def test_a_variant_of_the_best_needs_no_dominating(config, rank_by):
+    """`_different`: a rival shares less than `rival_overlap` of the smaller one's pairs."""
+    best = bare(config, n=4)
+    k = first_variant_share(4, config)
+    assert decide([best, rival(best, k=k)], config, rank_by) == ("localized", "")
+    assert decide([best, rival(best, k=k - 1)], config, rank_by)[0] == "ambiguous"
+    if rank_by == "residual":
+        return  # fewer pairs are dominated in its terms anyway
+    # the smaller one's share decides: 2 pairs sharing one of the best's 4
+    small = Hypothesis(
+        2,
+        best.score,
+        best.pairs[:1] + [("x9", "l9")],
+        ELSEWHERE,
+        fitness=best.fitness,
+        residual=best.residual,
+    )
+    expected = "localized" if config.rival_overlap * 2 <= 1 else "ambiguous"
+    assert decide([best, small], config, rank_by)[0] == expected
+
+
+# is_rival / _different -----------------------------------------------------------------------
+PAIR_SETS = st.sets(st.tuples(st.sampled_from("abcdefgh"), st.sampled_from("1234")), max_size=8)
+
+
+def test_is_rival_just_inside_and_outside():
+    four = pairs(4)
+    for overlap in (0.25, 0.5, 0.75, 1.0):
+        k = first_variant_share(4, DecisionConfig(rival_overlap=overlap))
+        assert is_rival(four, shared(four, 4, k - 1), overlap)
+        assert not is_rival(four, shared(four, 4, k), overlap)
+
+
+@settings(max_examples=200, deadline=None)
+@given(a=PAIR_SETS, b=PAIR_SETS, overlap=st.floats(0, 1))
+def test_is_rival_limits_and_symmetry(a, b, overlap):
+    a, b = sorted(a), sorted(b)
+    assert not is_rival(a, b, 0.0)  # overlap 0: nothing is a rival
+    assert not is_rival(a, a, overlap)  # never its own rival
+    assert is_rival(a, b, 1.0) == (bool(a) and not set(a) <= set(b))  # 1: all of it shared
+    if a and not set(a) & set(b) and overlap > 0:
+        assert is_rival(a, b, overlap)  # nothing shared
+    if len(a) == len(b):
+        assert is_rival(a, b, overlap) == is_rival(b, a, overlap)
+    if is_rival(a, b, overlap):  # monotone in the overlap
+        assert is_rival(a, b, min(1.0, overlap + 0.1))
+    one, other = Hypothesis(1, 1.0, a, HERE), Hypothesis(2, 1.0, b, HERE)
+    assert _different(one, other, overlap) == _different(other, one, overlap)
+    assert _different(one, other, overlap) == (is_rival(a, b, overlap) and is_rival(b, a, overlap))
+
+
+# same_place / distinct -----------------------------------------------------------------------
+@pytest.mark.parametrize("config", CONFIGS, ids=IDS)
+def test_same_place_just_inside_and_outside(config):
+    deg, metres = config.distinct_rotation_deg, config.distinct_translation
+    here = ((), HERE)
+
+    def at(theta_deg: float, shift: float) -> tuple:
+        return ((), yaw_pose(np.radians(theta_deg), [shift, 0.0, 0.0]))
+
+    assert same_place(at(deg - 1e-6, 0.0), here, config)
+    assert not same_place(at(deg + 1e-6, 0.0), here, config)
+    assert same_place(at(0.0, metres - EPS), here, config)
+    assert not same_place(at(0.0, metres + EPS), here, config)
+    assert not same_place(((), None), here, config) and not same_place(here, ((), None), config)
+
+
+def test_same_place_by_pairs():
+    config = DecisionConfig()
+    four = pairs(4)
+    assert same_place((four[:2], ELSEWHERE), (four, HERE), config)  # a subset: the same answer
+    assert same_place((four[:2], None), (four, None), config)
+    assert not same_place((shared(four, 2, 1), ELSEWHERE), (four, HERE), config)
+    assert not same_place(([], ELSEWHERE), (four, HERE), config)  # no pairs: the pose decides
+    assert same_place((shared(four, 2, 1), HERE), (four, HERE), config)  # the pose does
+
+
+def test_same_place_compares_translations_at_the_anchor():
+    config = DecisionConfig(distinct_translation=0.3)
+    a, b = ((), yaw_pose(0.0)), ((), yaw_pose(np.radians(1.0)))
+    assert same_place(a, b, config, np.zeros(3))
+    assert not same_place(a, b, config, np.array([30.0, 0.0, 0.0]))  # 0.52 m apart there
+
+
+ANGLES = st.floats(-math.pi, math.pi)
+SHIFTS = st.tuples(*[st.floats(-20, 20)] * 3)
+
+
+@settings(max_examples=150, deadline=None)
+@given(
+    theta=ANGLES,
+    t=SHIFTS,
+    d_theta=st.floats(-0.4, 0.4),
+    dt=st.tuples(*[st.floats(-1, 1)] * 3),
+    anchor=SHIFTS,
+    s_theta=ANGLES,
+    s_t=SHIFTS,
+)
+def test_same_place_does_not_depend_on_the_local_frames_origin(
+    theta, t, d_theta, dt, anchor, s_theta, s_t
+):
+    """Re-expressing the local frame by S (x = S x') turns poses P into P S and the anchor p into
+    S^-1 p: the verdict stays the same."""
+    config = DecisionConfig()
+    a = yaw_pose(theta, t)
+    b = yaw_pose(theta + d_theta, np.add(t, dt))
+    p = np.asarray(anchor)
+    shift = np.linalg.norm((a - b) @ np.append(p, 1.0))
+    assume(abs(abs(np.degrees(d_theta)) - config.distinct_rotation_deg) > 1e-6)
+    assume(abs(shift - config.distinct_translation) > 1e-6)
+    s = yaw_pose(s_theta, s_t)
+    moved = (np.linalg.inv(s) @ np.append(p, 1.0))[:3]
+    assert same_place(((), a), ((), b), config, p) == same_place(
+        ((), a @ s), ((), b @ s), config, moved
+    )
+
+
+@settings(max_examples=100, deadline=None)
+@given(
+    places=st.lists(
+        st.tuples(
+            st.sets(st.sampled_from(pairs(4) + pairs(4, start=10)), max_size=4),
+            st.one_of(st.none(), st.tuples(st.floats(-0.4, 0.4), st.floats(-0.6, 0.6))),
+        ),
+        max_size=8,
+    ),
+    top_k=st.integers(1, 8),
+    anchored=st.booleans(),
+)
+def test_distinct_is_a_greedy_walk_by_same_place(places, top_k, anchored):
+    """`distinct` (batched) picks exactly what a walk testing `same_place` against every earlier
+    pick picks."""
+    config = DecisionConfig()
+    anchor = np.array([3.0, -1.0, 0.5]) if anchored else None
+    made = [(sorted(p), None if q is None else yaw_pose(q[0], [q[1], 0.0, 0.0])) for p, q in places]
+    expected: list[int] = []
+    for i, place in enumerate(made):
+        if len(expected) == top_k:
+            break
+        if not any(same_place(place, made[j], config, anchor) for j in expected):
+            expected.append(i)
+    assert distinct(iter(made), top_k, config, anchor) == expected
+
+
+def test_distinct_just_inside_and_outside_and_stops_at_top_k():
+    config = DecisionConfig()
+    deg, metres = config.distinct_rotation_deg, config.distinct_translation
+    places = [
+        (pairs(3), HERE),
+        (pairs(2), ELSEWHERE),  # a subset of the first: skipped
+        ([], yaw_pose(np.radians(deg - 1e-6))),  # the same place: skipped
+        ([], yaw_pose(0.0, [metres - EPS, 0, 0])),  # the same place: skipped
+        ([], yaw_pose(np.radians(deg + 1e-6))),  # another place
+        ([], yaw_pose(0.0, [metres + EPS, 0, 0])),  # another place
+        (pairs(3, start=5), None),  # another place
+    ]
+    assert distinct(places, 10, config) == [0, 4, 5, 6]
+    consumed = []
+
+    def lazily():
+        for i, place in enumerate(places):
+            consumed.append(i)
+            yield place
+
+    assert distinct(lazily(), 2, config) == [0, 4]
+    assert consumed == [0, 1, 2, 3, 4]  # nothing computed beyond the last pick
+
+
+# decide never says localized for less than it needs ---------------------------------------
+@settings(max_examples=200, deadline=None)
+@given(
+    n=st.integers(2, 6),
+    fitness=st.one_of(st.none(), st.floats(0, 1)),
+    confidence=st.one_of(st.none(), st.floats(0, 1)),
+    rival_residual=st.one_of(st.none(), st.floats(0, 1)),
+    rank_by=st.sampled_from(["evidence", "residual", "score", "fitness"]),
+)
+def test_localized_only_when_every_rule_holds(n, fitness, confidence, rival_residual, rank_by):
+    config = CONFIGS[1]
+    best = Hypothesis(
+        1, 3.0, pairs(n), HERE, fitness=fitness, residual=0.1, confidence=confidence, evidence=2.0
+    )
+    other = rival(best, n=n, residual=rival_residual, evidence=-5.0)
+    status, reason = decide([best, other], config, rank_by)
+    assert (status == "localized") == (reason == "")
+    if status == "localized":
+        assert n >= config.min_pairs
+        assert fitness is None or fitness >= config.min_fitness
+        assert confidence is None or confidence >= config.min_confidence
+        assert confidence is not None or rank_by != "score"  # the rival's score ties
+        if confidence is None and rank_by == "fitness":
+            assert fitness is None  # 0 against 0 dominates; a fitness ties
+        else:  # the confidence path and the residual ranking judge the residual
+            assert rival_residual is None or rival_residual > threshold(0.1, config)
