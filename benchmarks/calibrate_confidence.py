@@ -3,7 +3,7 @@
     PYTHONPATH=src python benchmarks/calibrate_confidence.py [--sequences 3] [--starts 4]
         [--seed 1] [--layouts 100-105] [--layout-views 6] [--observed 10-15]
         [--observed-trials 10] [--precision 0.995] [--real-views 20] [--vocabulary-views 6]
-        [--write] [--figure docs/img/reliability.png]
+        [--write] [--figure docs/img/reliability.png] [--markdown TABLE.md]
 
 Collects every hypothesis of three kinds of simulated attempts (`semloc.eval.calibration`;
 never the real layouts, which stay held out): the protocol's semloc attempts on sequences of
@@ -186,6 +186,7 @@ def main(argv: list[str] | None = None) -> int:
                         help="held-out vocabulary-shift views")  # fmt: skip
     parser.add_argument("--write", action="store_true", help=f"replace {MODEL_MODULE}")
     parser.add_argument("--figure", type=Path, help="also draw the reliability diagram (PNG)")
+    parser.add_argument("--markdown", type=Path, help="also write the real-use table here")
     args = parser.parse_args(argv)
     samples, data = gather(args.sequences, args.starts, args.seed, args.layouts,
                            args.layout_views, args.observed, args.observed_trials)  # fmt: skip
@@ -203,6 +204,8 @@ def main(argv: list[str] | None = None) -> int:
     if real:
         print("\nheld-out attempts that look like real use:\n")
         print(real_use_table(real, model))
+        if args.markdown is not None:
+            write_atomic(args.markdown, real_use_table(real, model) + "\n")
     if args.figure is not None:
         figure(args.figure, [("fitting attempts", samples, model),
                              ("held-out attempts", holdout, model)])  # fmt: skip

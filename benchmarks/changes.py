@@ -7,7 +7,8 @@ dynamic variant 10 % of the map's objects are deleted from the prior map (a view
 variant's spurious detection is `new` too.  Where the
 best pose is right (15° / 0.5 m), the report's `moved` pairs and `new` ids are compared with
 the truth: precision and recall.  On the clean and noisy variants nothing moved: the share of
-right answers without any `moved` report.  Also top-1 and the `localized` claims, per variant.
+right answers without any `moved` report.  Also top-1 and the `localized` claims, per variant,
+and top-1 / top-10 of the dynamic views by how many of their objects are unchanged.
 
     SEMLOC_DATA=/path/to/shared/data/real PYTHONPATH=src python benchmarks/changes.py \\
         [--views 20] [--seed 0] [--markdown TABLE.md]
@@ -55,9 +56,11 @@ def run(data, views: int, seed: int) -> list[dict]:
                     prior, local, truth, moved, new = case(full, variant, k, rng)
                     result = localize(prior, local)
                     right = result.pose is not None and is_success(result.pose, truth)
+                    top10 = any(is_success(h.pose, truth) for h in result.hypotheses[:10])
                     found_moved = {(m.global_id, m.local_id) for m in result.changes.moved}
                     rows.append(dict(
-                        layout=name, variant=variant, k=k, right=right,
+                        layout=name, variant=variant, k=k, right=right, top10=top10,
+                        unchanged=len(local) - len(moved) - len(new),
                         claimed=result.status == "localized", moved=moved, new=new,
                         found_moved=found_moved, found_new=set(result.changes.new),
                     ))  # fmt: skip
@@ -94,6 +97,22 @@ def table(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
+def unchanged_table(rows: list[dict]) -> str:
+    """Dynamic views by how many of their objects are unchanged (neither moved nor new): what
+    a place is found from."""
+    lines = ["| objects | unchanged objects in view | views | top-1 | top-10 |",
+             "|---:|---:|---:|---:|---:|"]  # fmt: skip
+    dynamic = [r for r in rows if r["variant"] == "dynamic"]
+    for k in OBJECT_COUNTS:
+        for u in sorted({r["unchanged"] for r in dynamic if r["k"] == k}):
+            group = [r for r in dynamic if r["k"] == k and r["unchanged"] == u]
+            lines.append(
+                f"| {k} | {u} | {len(group)} | {np.mean([r['right'] for r in group]):.0%} | "
+                f"{np.mean([r['top10'] for r in group]):.0%} |"
+            )
+    return "\n".join(lines)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--views", type=int, default=20, help="views per sample, variant, size")
@@ -105,7 +124,8 @@ def main(argv: list[str] | None = None) -> int:
         print("real data not found: set SEMLOC_DATA (see ../shared/data/real)", file=sys.stderr)
         return 2
     start = time.perf_counter()
-    text = table(run(data, args.views, args.seed))
+    rows = run(data, args.views, args.seed)
+    text = table(rows) + "\n\nDynamic views by unchanged objects:\n\n" + unchanged_table(rows)
     text += f"\n\nrun time {time.perf_counter() - start:.0f} s"
     print(text)
     if args.markdown:

@@ -63,6 +63,10 @@ JOBS = {
         "PYTHONPATH=src python benchmarks/vocabulary.py --views 20 --buildings 2 --markdown {out}"
     ),
     "changes": Job("python benchmarks/changes.py --views 40 --markdown {out}"),
+    "calibration": Job(
+        "PYTHONPATH=src python benchmarks/calibrate_confidence.py --sequences 3 --starts 4 "
+        "--holdout-sequences 2 --markdown {out}"
+    ),
     "align": Job("PYTHONPATH=src python benchmarks/bench_align.py --trials 5 --markdown {out}"),
     "bench": Job(
         "semloc bench --methods semloc,clipper,random-walk,segmatch,fpfh-ransac,semloc+geometric,"
@@ -116,6 +120,23 @@ TABLES = {
     "crops": TableSpec("real", 0, file="docs/real_layouts.md"),
     "align": TableSpec("align", 0, file="docs/alignment.md"),
     "changes": TableSpec("changes", 0, file="docs/trust.md"),
+    "real-use": TableSpec("calibration", 0, file="docs/trust.md"),
+    "unchanged": TableSpec("changes", 1, file="docs/trust.md"),
+    "changes-summary": TableSpec(
+        "changes",
+        0,
+        lambda r: r["objects"] == "all",
+        (
+            "variant",
+            "views",
+            "top-1",
+            "moved precision",
+            "moved recall",
+            "new precision",
+            "new recall",
+            "right answers without a false `moved`",
+        ),
+    ),  # fmt: skip
     "vocabulary": TableSpec(
         "vocab",
         0,
