@@ -83,6 +83,9 @@ class Changes:
     moved: list[Moved] = field(default_factory=list)
     new: list[str] = field(default_factory=list)  # local ids
     missing: list[str] = field(default_factory=list)  # global ids
+    matched: list[str] = field(default_factory=list, compare=False)
+    """Map objects seen where the map has them (global ids): no change, so not in `to_dict`;
+    `semloc update-map` clears their `missing` flag."""
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -122,9 +125,10 @@ def explain(
         [o for o in rest if o.id not in explained], placed, candidates, global_map,
         used | unseen, config,
     )  # fmt: skip
+    sources = {index[m.global_id] for m in moved}  # not missing: seen elsewhere
     missing = [str(global_map.ids[g]) for g in np.flatnonzero(gap <= config.observed_radius)
-               if g not in used]  # fmt: skip
-    return Changes(moved, new, missing)
+               if g not in used and g not in sources]  # fmt: skip
+    return Changes(moved, new, missing, sorted(str(global_map.ids[g]) for g in used))
 
 
 def _candidate_distances(rest, placed, candidates, xyz) -> list[tuple[float, str, int]]:

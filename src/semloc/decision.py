@@ -143,7 +143,7 @@ class DecisionConfig(BaseModel):
     margin: float = Field(
         0.5,
         ge=0,
-        description="Dominance factor over every rival: residual (m) at least (1 + margin) x "
+        description="Dominance factor over every rival: residual (m) more than (1 + margin) x "
         "the best's plus residual_floor, or score / fitness at most 1 / (1 + margin) of it.",
     )
     residual_floor: float = Field(

@@ -140,3 +140,19 @@ def test_the_rerun_recording_gets_the_moved_arrows(tmp_path):
     np.testing.assert_allclose(vectors, [[1.2, -0.9, 0.0]], atol=1e-6)
     path = write_localization(tmp_path / "s.rrd", g, local, T, [], moved=[("g4", "l4")])
     assert path.stat().st_size > 0
+
+
+def test_a_flagged_object_seen_again_loses_its_flag(tmp_path):
+    """The plant was flagged missing; a later view sees it where it stood: the next update
+    clears the flag (and keeps the others' fields)."""
+    g = write_scene(tmp_path)
+    updated = tmp_path / "updated.json"
+    assert main(["update-map", str(tmp_path / "global.json"), str(tmp_path / "local.json"),
+                 "-o", str(updated)]) == 0  # fmt: skip
+    assert semloc.load_map(updated).get("g5").extra.get("missing") is True
+    semloc.save_map(ObjectMap(seen_from_t(list(g)[:6]), up=[0, 0, 1]), tmp_path / "again.json")
+    later = tmp_path / "later.json"
+    assert main(["update-map", str(updated), str(tmp_path / "again.json"), "-o", str(later)]) == 0
+    plant = semloc.load_map(later).get("g5")
+    assert "missing" not in plant.extra
+    assert semloc.load_map(later).get("l9").extra["new"] is True

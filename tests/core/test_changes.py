@@ -180,3 +180,16 @@ def test_a_spurious_detection_is_new_and_no_pair():
     assert result.changes == Changes(new=["l9"])
     assert "l9" not in {l for _, l in result.best.pairs}
     assert result.to_dict()["changes"] == {"moved": [], "new": ["l9"], "missing": []}
+
+
+def test_a_moved_object_whose_old_place_was_seen_is_moved_not_missing():
+    g = room()
+    objects = list(g)[:6]
+    objects[4] = objects[4].transformed(yaw_pose(0.0, [1.2, -0.9, 0.0]))  # g4 moved 1.5 m
+    objects.append(SemanticObject("g9", "bed", points=cube([1.5, 3.4, 0.9], half=0.3, seed=9)))
+    local = seen_from_t(objects)
+    pairs = [(f"g{i}", f"l{i}") for i in range(4)]
+    changes = explain(g, local, T, pairs, candidates_of(g, local))
+    assert [m.global_id for m in changes.moved] == ["g4"]
+    assert "g4" not in changes.missing  # its place was seen empty: it is the moved one
+    assert set(changes.matched) >= {"g0", "g1", "g2", "g3"}

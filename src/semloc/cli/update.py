@@ -4,7 +4,8 @@ LOCAL is localized in GLOBAL (or the answer is read from `--result`, a JSON file
 `semloc localize --format json`); the best hypothesis' changes (`semloc.changes`) are applied:
 a moved object is put where it was observed (its points shifted with it, its other fields
 kept), a new object is added in the global frame (its id prefixed `new:` when taken), a missing
-one is flagged `"missing": true` (kept: one look is no proof that it is gone).  Every change is
+one is flagged `"missing": true` (kept: one look is no proof that it is gone; the flag goes
+when a later view sees the object again, where it was or moved).  Every change is
 listed; the new map is written all or nothing.  Nothing is written when the answer is not
 `localized` (unless `--accept-ambiguous`).
 """
@@ -72,12 +73,15 @@ def applied(prior: ObjectMap, local: ObjectMap, pose: np.ndarray, changes: Chang
     seen = {o.id: o.transformed(pose) for o in local}
     moved = {m.global_id: m for m in changes.moved}
     missing = set(changes.missing)
+    found = set(changes.matched) | set(moved)
     objects = []
     for obj in prior:
         if obj.id in moved:
             obj = _moved(obj, seen[moved[obj.id].local_id], moved[obj.id])
         if obj.id in missing:
             obj = obj.replace(extra={**obj.extra, "missing": True})
+        elif obj.id in found and "missing" in obj.extra:  # flagged before, seen again
+            obj = obj.replace(extra={k: v for k, v in obj.extra.items() if k != "missing"})
         objects.append(obj)
     taken = {o.id for o in objects}
     for local_id in changes.new:
