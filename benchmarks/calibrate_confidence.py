@@ -23,7 +23,7 @@ buildings 300-301 whose local objects carry a COCO / LVIS-style detector's names
 `benchmarks/vocabulary.py`'s renaming).  Per kind and object count (< 5, >= 5): answers,
 top-1, claims right / wrong at the operating point, their precision, coverage (share of the
 answers claimed and right), and the best coverage any single threshold would give there at
-99 % precision (what the confidence can separate on that kind alone).
+99 % precision, with that threshold (what the confidence can separate on that kind alone).
 """
 
 from __future__ import annotations
@@ -39,8 +39,8 @@ import numpy as np
 from semloc.decision import MODEL_MODULE
 from semloc.eval.calibration import (
     LAYOUT_POINTS,
-    best_coverage,
     best_of_answers,
+    best_operating_point,
     claims,
     collect,
     collect_layouts,
@@ -105,7 +105,7 @@ def real_use_table(samples, model, precision: float = 0.99) -> str:
     """Per kind and object count: answers, top-1, claims at the operating point, coverage and
     the best coverage at `precision` (see the module docstring)."""
     lines = ["| attempts | objects | answers | top-1 | claims right / wrong | precision | coverage "
-             f"| best coverage at {precision:.0%} |", "|---|---|---|---|---|---|---|---|"]  # fmt: skip
+             f"| best coverage at {precision:.0%} (threshold) |", "|---|---|---|---|---|---|---|---|"]  # fmt: skip
     for kind in dict.fromkeys(s.map_kind for s in samples):
         for name, fits in (("< 5", lambda n: n < 5), (">= 5", lambda n: n >= 5)):
             group = [s for s in samples if s.map_kind == kind and fits(s.objects)]
@@ -116,10 +116,11 @@ def real_use_table(samples, model, precision: float = 0.99) -> str:
             claimed = claims(group, model, model.min_confidence)
             right = sum(s.right for s in claimed)
             share = f"{right / len(claimed):.1%}" if claimed else "-"
+            threshold, best = best_operating_point(group, model, precision)
             lines.append(
                 f"| {kind} | {name} | {answers} | {top1 / answers:.1%} | {right} / "
                 f"{len(claimed) - right} | {share} | {right / answers:.1%} | "
-                f"{best_coverage(group, model, precision):.1%} |"
+                f"{best:.1%} ({threshold:.2f}) |"
             )
     return "\n".join(lines)
 

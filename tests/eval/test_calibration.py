@@ -9,6 +9,7 @@ import pytest
 from semloc.decision import FEATURES, shipped_model
 from semloc.eval.calibration import (
     Sample,
+    best_operating_point,
     collect_observations,
     confidences,
     fit,
@@ -76,3 +77,18 @@ def test_only_real_rivals_enter_the_fit():
     assert confidence_of_first(variant) == pytest.approx(alone)
     assert confidence_of_first(other) < alone - 0.1
     assert alone == pytest.approx(model.confidence(model.evidence(SURE), None))
+
+
+def test_the_best_operating_point_is_the_threshold_with_the_most_right_claims():
+    model = shipped_model()
+    middle = SURE | {"pairs": 4.0, "fitness": 0.7}
+    conf = {name: model.confidence(model.evidence(f), None)
+            for name, f in (("sure", SURE), ("middle", middle), ("weak", WEAK))}  # fmt: skip
+    samples = (_answers("a", [True] * 98, SURE, 0) + _answers("a", [False], middle, 100)
+               + _answers("a", [True] * 20, WEAK, 200))  # fmt: skip
+    # at 99 %: down to the weak answers, 118 right of 119 claims (the wrong one passed)
+    threshold, coverage = best_operating_point(samples, model, 0.99)
+    assert threshold == pytest.approx(conf["weak"]) and coverage == pytest.approx(118 / 119)
+    # at 99.5 % the wrong claim cannot be passed: the sure answers alone
+    threshold, coverage = best_operating_point(samples, model, 0.995)
+    assert threshold == pytest.approx(conf["sure"]) and coverage == pytest.approx(98 / 119)

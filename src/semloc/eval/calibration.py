@@ -290,23 +290,26 @@ def claims(samples: list[Sample], model: ConfidenceModel, threshold: float) -> l
             and s.pairs >= gate.min_pairs and s.fitness >= gate.min_fitness]  # fmt: skip
 
 
-def best_coverage(samples: list[Sample], model: ConfidenceModel, precision: float) -> float:
-    """The largest share of the answers of `samples` that any one confidence threshold claims
-    right while its claims stay right at least `precision` of the time: what the model's
-    confidence could give on these attempts alone (a bound, not an operating point)."""
+def best_operating_point(
+    samples: list[Sample], model: ConfidenceModel, precision: float
+) -> tuple[float, float]:
+    """(threshold, coverage): the confidence threshold that claims the largest share of the
+    answers of `samples` right while its claims stay right at least `precision` of the time,
+    and that share (1.0, 0.0 when none does): what this confidence could give on these
+    attempts alone, e.g. as `min_confidence` for a user who knows the world is static."""
     gate = DecisionConfig(min_confidence=0.5)
     ordered = sorted(
         ((c, s.right) for s, c in best_of_answers(samples, model)
          if s.pairs >= gate.min_pairs and s.fitness >= gate.min_fitness),
         key=lambda x: -x[0],
     )  # fmt: skip
-    best, right = 0, 0
-    for n, (_, ok) in enumerate(ordered, 1):
+    best, threshold, right = 0, 1.0, 0
+    for n, (c, ok) in enumerate(ordered, 1):
         right += ok
-        if right / n >= precision:
-            best = right
+        if right / n >= precision and right > best:
+            best, threshold = right, c
     answers = len({s.answer for s in samples})
-    return best / answers if answers else 0.0
+    return threshold, best / answers if answers else 0.0
 
 
 def operating_point(samples: list[Sample], model: ConfidenceModel, precision: float) -> float:
