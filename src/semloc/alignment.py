@@ -44,7 +44,6 @@ from semloc.decision import (
     decide,
     distinct,
     local_anchor,
-    same_place,
     score_confidence,
     shipped_model,
 )
@@ -64,13 +63,30 @@ class AlignmentConfig(BaseModel):
         24, ge=2, description="B with at most this many objects is one Localizer update."
     )
     views: int = Field(8, ge=1, description="Seed views of a larger B.")
+    rare_views: int | None = Field(
+        2,
+        ge=0,
+        description="How many views are centred on B's rarest objects; the others spread over "
+        "B (farthest points) so that some fall where A overlaps it (None: all on rare ones).",
+    )
     view_size: int = Field(10, ge=3, description="Objects of B per seed view.")
     per_view: int = Field(10, ge=1, description="Distinct places of each view that are tried.")
     settled_pairs: int = Field(
         8,
         ge=3,
-        description="Views stop once the best grown place pairs this many objects and (1 + "
-        "margin)² times as many as any other place.",
+        description="Views stop once the best grown place scores this many pairs, (1 + "
+        "margin)² times as much as any other place, and `confirmations` views found it.",
+    )
+    fit_radius: float = Field(
+        0.3,
+        gt=0,
+        description="A grown place's score: each pair counts 1 - (d / fit_radius)² (d: the "
+        "distance (m) of its centres under the place's pose), nothing beyond.",
+    )
+    confirmations: int = Field(
+        2,
+        ge=1,
+        description="Views stop early only once this many views have found the best place.",
     )
     match_radii: tuple[float, ...] = Field(
         (2.0, 1.0, 0.6),
@@ -107,21 +123,32 @@ class _Aligner:
         self.cand_b = np.repeat(np.arange(len(b)), [len(c) for c in candidates])
         self.cand_a = np.concatenate([*candidates, np.zeros(0, dtype=int)]).astype(int)
         self.b_xyz, self.a_xyz = b.positions, self.a.positions
+        # the centres of every candidate pair, gathered once for the guided matching
+        self.cand_b_xyz, self.cand_a_xyz = self.b_xyz[self.cand_b], self.a_xyz[self.cand_a]
 
     def run(self) -> Result:
         start = time.perf_counter()
         timing = {"association": 0.0, "clustering": 0.0, "pose": 0.0, "growth": 0.0}
         grown: list[Hypothesis] = []
+        votes: list[set[int]] = []  # the views that found each grown place
         tried = 0
-        for view in self._views():
+        for number, view in enumerate(self._views()):
             seeds = self._seeds_of(view, timing)
             tick = time.perf_counter()
             for seed in seeds:
-                if not any(self._same_place(seed.pose, h.pose) for h in grown):
+                known = self._place_of(seed.pose, grown)
+                if known is None:
                     tried += 1
-                    grown += [h for h in [self._grown(seed)] if h is not None]
+                    place = self._grown(seed)
+                    known = None if place is None else self._place_of(place.pose, grown)
+                    if place is not None and known is None:
+                        grown.append(place)
+                        votes.append(set())
+                        known = len(grown) - 1
+                if known is not None:
+                    votes[known].add(number)
             timing["growth"] += (time.perf_counter() - tick) * 1e3
-            if self._settled(grown):
+            if self._settled(grown, votes):
                 break
         hypotheses = self._decided_places(grown)
         status, reason = decide(hypotheses, self.config.decision, "residual")
@@ -140,7 +167,8 @@ class _Aligner:
             return [np.arange(len(self.b))]
         rarity = np.bincount(self.cand_b, minlength=len(self.b))
         rarity = np.where(rarity == 0, np.iinfo(np.int64).max, rarity)  # no candidate: last
-        return seed_views(self.b_xyz, self.alignment.views, self.alignment.view_size, rarity)
+        return seed_views(self.b_xyz, self.alignment.views, self.alignment.view_size, rarity,
+                          rare=self.alignment.rare_views)  # fmt: skip
 
     def _seeds_of(self, view: np.ndarray, timing: dict[str, float]) -> list[Hypothesis]:
         """The distinct places (with a pose) of one view's localization, best first."""
@@ -151,29 +179,46 @@ class _Aligner:
             timing[stage] += result.timing_ms.get(stage, 0.0)
         return [h for h in result.hypotheses[: self.alignment.per_view] if h.pose is not None]
 
-    def _same_place(self, pose: np.ndarray, other: np.ndarray) -> bool:
-        return same_place(((), pose), ((), other), self.config.decision, local_anchor(self.b_xyz))
+    def _place_of(self, pose: np.ndarray, grown: list[Hypothesis]) -> int | None:
+        """The index of the first grown place at `pose`, or None: `same_place`'s pose test
+        (rotation and translation at B's centroid), on all grown places at once."""
+        if not grown:
+            return None
+        poses = np.stack([h.pose for h in grown])
+        point = np.append(local_anchor(self.b_xyz), 1.0)
+        shift = np.linalg.norm((poses - pose) @ point, axis=1)
+        cos = (np.einsum("ij,kij->k", pose[:3, :3], poses[:, :3, :3]) - 1.0) / 2.0
+        angle = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+        decision = self.config.decision
+        same = (angle < decision.distinct_rotation_deg) & (shift < decision.distinct_translation)
+        return int(np.argmax(same)) if same.any() else None
 
-    def _settled(self, grown: list[Hypothesis]) -> bool:
-        """Whether more views are not needed: the best grown place pairs at least
-        `settled_pairs` objects and (1 + margin)² times as many as any other place."""
+    def _settled(self, grown: list[Hypothesis], votes: list[set[int]]) -> bool:
+        """Whether more views are not needed: the best grown place scores at least
+        `settled_pairs`, (1 + margin)² times as much as any other place, and was found by
+        `confirmations` views (a view centred where A lacks B's objects finds only the
+        twins of a repeated room)."""
         if not grown:
             return False
-        counts = sorted((len(h.pairs) for h in grown), reverse=True)
-        factor = (1.0 + self.config.decision.margin) ** 2
-        best = counts[0]
-        return best >= self.alignment.settled_pairs and all(best >= factor * c for c in counts[1:])
+        order = sorted(range(len(grown)), key=lambda i: -grown[i].score)
+        best, factor = grown[order[0]].score, (1.0 + self.config.decision.margin) ** 2
+        return (
+            best >= self.alignment.settled_pairs
+            and len(votes[order[0]]) >= self.alignment.confirmations
+            and all(best >= factor * grown[i].score for i in order[1:])
+        )
 
     def _clearly_best(self, hypotheses: list[Hypothesis]) -> tuple[str, str]:
-        """`localized` only when no other place pairs nearly as many objects of B: in a
-        building of identical rooms a shifted pose pairs most of B too, and the confidence
+        """`localized` only when no other place scores nearly as many agreeing pairs of B: in
+        a building of identical rooms a shifted pose pairs most of B too, and the confidence
         model, fitted on a few objects, has not seen such rivals."""
         best, factor = hypotheses[0], 1.0 + self.config.decision.margin
         for rival in hypotheses[1:]:
-            if len(best.pairs) < factor * len(rival.pairs):
+            if best.score < factor * rival.score:
                 return "ambiguous", (
-                    f"a rival place pairs nearly as many objects: rank {rival.rank} with "
-                    f"{len(rival.pairs)} pairs against {len(best.pairs)}"
+                    f"a rival place fits nearly as many objects: rank {rival.rank} scores "
+                    f"{rival.score:.1f} agreeing pairs ({len(rival.pairs)} pairs) against "
+                    f"{best.score:.1f} ({len(best.pairs)})"
                 )
         return "localized", ""
 
@@ -195,13 +240,13 @@ class _Aligner:
         if len(pairs) < 2:
             return None
         residual = centre_residual(pose, self.b_xyz[pairs[:, 1]], self.a_xyz[pairs[:, 0]])
+        score = self._score(pose, pairs)
         features = None
-        if seed.features is not None:
-            features = {**seed.features, "pairs": float(len(pairs)), "residual": residual,
-                        "support": 0.0}  # fmt: skip
+        if seed.features is not None:  # the agreeing pairs count as the pairs
+            features = {**seed.features, "pairs": score, "residual": residual, "support": 0.0}
         return Hypothesis(
             rank=0,
-            score=float(len(pairs)),
+            score=score,
             pairs=[(str(self.a.ids[g]), str(self.b.ids[l])) for g, l in pairs],
             pose=pose,
             fitness=None,  # the seed view's point fitness says little about the grown place
@@ -210,24 +255,34 @@ class _Aligner:
             features=features,
         )
 
+    def _score(self, pose: np.ndarray, pairs: np.ndarray) -> float:
+        """The agreeing pairs: each pair counts 1 - (d / fit_radius)², nothing beyond (d: the
+        distance of its centres under `pose`).  A place of a repeated room pairs B's objects
+        with twins a few decimetres off, the right place with the same objects: a count of
+        pairs alone prefers the twin room when it holds more of B's objects than A's
+        session saw."""
+        moved = self.b_xyz[pairs[:, 1]] @ pose[:3, :3].T + pose[:3, 3]
+        distance = np.linalg.norm(moved - self.a_xyz[pairs[:, 0]], axis=1)
+        return float(np.sum(np.clip(1.0 - (distance / self.alignment.fit_radius) ** 2, 0.0, None)))
+
     def _matches(self, pose: np.ndarray, radius: float) -> np.ndarray:
         """(A index, B index) pairs under `pose`: each object of B with the nearest object of A
         it may be within `radius`, one to one: a pair is kept when it is the closest of both
         its objects (mutual nearest candidates)."""
-        moved = self.b_xyz @ pose[:3, :3].T + pose[:3, 3]
-        distance = np.linalg.norm(moved[self.cand_b] - self.a_xyz[self.cand_a], axis=1)
-        near = np.flatnonzero(distance < radius)
-        order = near[np.argsort(distance[near], kind="stable")]
+        offset = self.cand_b_xyz @ pose[:3, :3].T + (pose[:3, 3] - self.cand_a_xyz)
+        squared = np.einsum("ij,ij->i", offset, offset)
+        near = np.flatnonzero(squared < radius**2)
+        order = near[np.argsort(squared[near], kind="stable")]
         first_of_b = order[np.unique(self.cand_b[order], return_index=True)[1]]
-        first_of_b = first_of_b[np.argsort(distance[first_of_b], kind="stable")]
+        first_of_b = first_of_b[np.argsort(squared[first_of_b], kind="stable")]
         mutual = first_of_b[np.unique(self.cand_a[first_of_b], return_index=True)[1]]
         pairs = np.stack([self.cand_a[mutual], self.cand_b[mutual]], axis=1)
         return pairs[np.lexsort((pairs[:, 1], pairs[:, 0]))]
 
     def _decided_places(self, grown: list[Hypothesis]) -> list[Hypothesis]:
-        """Distinct places, most pairs first (then the smaller residual), ranked 1, 2, ... and
-        scored by the confidence model against each other."""
-        ordered = sorted(grown, key=lambda h: (-len(h.pairs), h.residual or 0.0))
+        """Distinct places, the highest score first (then the smaller residual), ranked 1, 2,
+        ... and scored by the confidence model against each other."""
+        ordered = sorted(grown, key=lambda h: (-h.score, h.residual or 0.0))
         anchor = local_anchor(self.b_xyz)
         places = ((h.pairs, h.pose) for h in ordered)
         kept = [ordered[i] for i in distinct(places, len(ordered), self.config.decision, anchor)]
@@ -238,7 +293,12 @@ class _Aligner:
 
 
 def seed_views(
-    xyz: np.ndarray, views: int, size: int, rarity: np.ndarray | None = None, spacing: float = 3.0
+    xyz: np.ndarray,
+    views: int,
+    size: int,
+    rarity: np.ndarray | None = None,
+    spacing: float = 3.0,
+    rare: int | None = None,
 ) -> list[np.ndarray]:
     """`views` neighbourhoods of the points `xyz` (indices), each the `size` points nearest to
     its centre.  Centres are the rarest points first (`rarity`: e.g. how many map objects each
@@ -251,7 +311,7 @@ def seed_views(
     centres: list[int] = []
     nearest = np.full(len(xyz), np.inf)
     for i in np.lexsort((np.arange(len(xyz)), rarity)):  # rarest first, stable
-        if len(centres) == min(views, len(xyz)):
+        if len(centres) == min(views if rare is None else rare, len(xyz)):
             break
         if nearest[i] >= spacing:
             centres.append(int(i))
