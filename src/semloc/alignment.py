@@ -7,23 +7,34 @@ once" in `clustering.py`).  `align` bounds that work and keeps the paper's algor
 is cheap:
 
 1. **Seeds.**  A small B (at most `whole_below` objects) is one Localizer update with every
-   object: its hypotheses are the paper's algorithm's.  A larger B is localized in `views`
-   seed views: their centres are B's most distinctive objects (the fewest candidates in A: a
-   fridge anchors a view in the kitchen, where a chair fits every classroom), at least 3 m
-   apart, then spread by farthest-point sampling; each holds the `view_size` objects of B
-   nearest to its centre and is one Localizer update against A (clustering, verification,
-   pose recovery): a local map like a robot's, the case the Localizer is made for.
+   object: its hypotheses are the paper's algorithm's.  A larger B is localized in up to
+   `views` seed views: the first `rare_views` are centred on B's most distinctive objects (the
+   fewest candidates in A: a fridge anchors a view in the kitchen, where a chair fits every
+   classroom), at least 3 m apart, the others spread over B by farthest-point sampling (where
+   A overlaps only part of B, views centred on rare objects alone may all fall outside it: an
+   object A lacks has one candidate fewer, so it looks rarer); each holds the `view_size`
+   objects of B nearest to its centre and is one Localizer update against A (clustering,
+   verification, pose recovery): a local map like a robot's, the case the Localizer is made
+   for.
 2. **Growth by guided matching.**  Every distinct place of the seeds (the `per_view` best of
    each view) places all of B in A's frame; each object of B is paired with the nearest object
    of A it may be (the Localizer's candidates: labels, label map, descriptor gate), mutual
-   nearest within a radius, and the closed-form pose is refitted on the pairs; one pass per
-   radius of `match_radii`, wide to narrow.  In maps of repeated rooms a view fits several
-   places and the right one is rarely a view's best, but grown over B it pairs the most.
-3. **Decision.**  The grown places are ranked by their pairs (then centre residual) and merged
+   nearest within a radius, and the pose is refitted on the pairs (closed form, robust:
+   `refits` rounds weighted by each pair's distance); one pass per radius of `match_radii`,
+   wide to narrow.  In maps of repeated rooms a view fits several places and the right one is
+   rarely a view's best, but grown over B it fits the most.
+3. **Score.**  A grown place scores its agreeing pairs: each pair counts 1 - (d / fit_radius)²
+   by the distance d of its centres, nothing beyond.  Not the number of pairs: a place
+   shifted into a twin room pairs B's objects with twins a few decimetres off, and it pairs
+   more of them than the right place where A's session saw less of B than the twin room holds.
+4. **Decision.**  The grown places are ranked by their score (then centre residual) and merged
    when they are the same place; each keeps the evidence features of the view that seeded it
-   with its grown pairs and residual, the shipped confidence model scores them against each
-   other and `decision.decide` gives the status, as for a localization; `localized` further
-   needs the best place to pair (1 + margin) times as many objects as any other place.
+   with its score as its pairs and its grown residual, the shipped confidence model scores
+   them against each other and `decision.decide` gives the status, as for a localization;
+   `localized` further needs the best place to score (1 + margin) times as much as any other
+   place.  Where two places fit B equally (identical rooms) the answer is `ambiguous`.
+   Views stop early once the best place scores `settled_pairs`, (1 + margin)² times as much
+   as any other, and `confirmations` views have found it.
 
 Work: `views` localizations of `view_size` objects, then per seed place one pass over B's
 candidate pairs per radius: linear in B's size (and in the number of same-label objects of A).
@@ -87,6 +98,9 @@ class AlignmentConfig(BaseModel):
         2,
         ge=1,
         description="Views stop early only once this many views have found the best place.",
+    )
+    refits: int = Field(
+        3, ge=1, description="Rounds of the robust refit after each guided-matching pass."
     )
     match_radii: tuple[float, ...] = Field(
         (2.0, 1.0, 0.6),
@@ -232,9 +246,7 @@ class _Aligner:
                 break
             pairs = found
             try:
-                pose = align_positions(
-                    self.b_xyz[pairs[:, 1]], self.a_xyz[pairs[:, 0]], self.b.up, self.a.up
-                )
+                pose = self._refit(pose, pairs, radius)
             except ValueError:  # under-determined: keep the last pose
                 break
         if len(pairs) < 2:
@@ -254,6 +266,19 @@ class _Aligner:
             method=f"seed view ({seed.method}) + guided matching",
             features=features,
         )
+
+    def _refit(self, pose: np.ndarray, pairs: np.ndarray, radius: float) -> np.ndarray:
+        """The closed-form pose of `pairs`, robust: `refits` rounds of weighted least squares,
+        each pair weighted (1 - (d / radius)²)² by its distance d under the previous pose (one
+        wrong pair among ten noisy ones turns a plain fit by degrees)."""
+        local, other = self.b_xyz[pairs[:, 1]], self.a_xyz[pairs[:, 0]]
+        for _ in range(self.alignment.refits):
+            distance = np.linalg.norm(local @ pose[:3, :3].T + pose[:3, 3] - other, axis=1)
+            weights = np.clip(1.0 - (distance / radius) ** 2, 0.0, None) ** 2
+            if np.count_nonzero(weights) < 2:
+                break
+            pose = align_positions(local, other, self.b.up, self.a.up, weights)
+        return pose
 
     def _score(self, pose: np.ndarray, pairs: np.ndarray) -> float:
         """The agreeing pairs: each pair counts 1 - (d / fit_radius)², nothing beyond (d: the
