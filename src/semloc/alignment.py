@@ -83,9 +83,9 @@ class AlignmentConfig(BaseModel):
     view_size: int = Field(10, ge=3, description="Objects of B per seed view.")
     per_view: int = Field(10, ge=1, description="Distinct places of each view that are tried.")
     settled_pairs: int = Field(
-        8,
+        6,
         ge=3,
-        description="Views stop once the best grown place scores this many pairs, (1 + "
+        description="Views stop once the best grown place scores this many agreeing pairs, (1 + "
         "margin)² times as much as any other place, and `confirmations` views found it.",
     )
     fit_radius: float = Field(
