@@ -7,7 +7,9 @@ once" in `clustering.py`).  `align` bounds that work and keeps the paper's algor
 is cheap:
 
 1. **Seeds.**  A small B (at most `whole_below` objects) is one Localizer update with every
-   object: its hypotheses are the paper's algorithm's.  A larger B is localized in up to
+   object: its answer is the paper's algorithm's (status, places, poses, confidence, whose
+   evidence is made for a few objects), each place's pairs completed by guided matching
+   under its pose (step 2's narrowest radius).  A larger B is localized in up to
    `views` seed views: the first `rare_views` are centred on B's most distinctive objects (the
    fewest candidates in A: a fridge anchors a view in the kitchen, where a chair fits every
    classroom), at least 3 m apart, the others spread over B by farthest-point sampling (where
@@ -141,6 +143,8 @@ class _Aligner:
         self.cand_b_xyz, self.cand_a_xyz = self.b_xyz[self.cand_b], self.a_xyz[self.cand_a]
 
     def run(self) -> Result:
+        if len(self.b) <= self.alignment.whole_below:
+            return self._whole()
         start = time.perf_counter()
         timing = {"association": 0.0, "clustering": 0.0, "pose": 0.0, "growth": 0.0}
         grown: list[Hypothesis] = []
@@ -175,10 +179,28 @@ class _Aligner:
                     top_scores=[h.score for h in hypotheses][:10], status=status)  # fmt: skip
         return Result.of(status, hypotheses[: self.config.top_k], [step], timing, reason)
 
+    def _whole(self) -> Result:
+        """A small B as one Localizer update: its answer (status, places, poses, confidence),
+        each place's pairs completed by guided matching under its pose."""
+        localizer = Localizer(self.prior, self.config, local_up=self.b.up)
+        result = localizer.update(list(self.b))
+        assert result is not None
+        tick = time.perf_counter()
+        for h in result.hypotheses:
+            if h.pose is not None:
+                h.pairs = self._completed(h.pairs, h.pose)
+        result.timing_ms["growth"] = (time.perf_counter() - tick) * 1e3
+        return result
+
+    def _completed(self, pairs: list[tuple[str, str]], pose: np.ndarray) -> list[tuple[str, str]]:
+        """`pairs` and the guided matches under `pose` (narrowest radius) of objects they miss."""
+        a_done, b_done = {g for g, _ in pairs}, {l for _, l in pairs}
+        found = self._matches(pose, self.alignment.match_radii[-1])
+        extra = [(str(self.a.ids[g]), str(self.b.ids[l])) for g, l in found]
+        return [*pairs, *((g, l) for g, l in extra if g not in a_done and l not in b_done)]
+
     def _views(self) -> list[np.ndarray]:
-        """B whole when it is small, else its seed views (see the module docstring)."""
-        if len(self.b) <= self.alignment.whole_below:
-            return [np.arange(len(self.b))]
+        """B's seed views (see the module docstring)."""
         rarity = np.bincount(self.cand_b, minlength=len(self.b))
         rarity = np.where(rarity == 0, np.iinfo(np.int64).max, rarity)  # no candidate: last
         return seed_views(self.b_xyz, self.alignment.views, self.alignment.view_size, rarity,
