@@ -12,6 +12,7 @@ from hypothesis import strategies as st
 import semloc
 from semloc.alignment import AlignmentConfig, pose_information, seed_views
 from semloc.io.g2o import edge_line, parse_edge
+from semloc.localizer import Localizer
 from semloc.maps import ObjectMap, SemanticObject
 from semloc.tools.merge import merged_map
 from semloc.transforms import pose_error, yaw_pose
@@ -112,6 +113,26 @@ def test_one_moved_object_among_exact_ones_barely_turns_the_pose():
     result = semloc.align(a, ObjectMap(objects, up=[0, 0, 1]))
     rotation, translation = pose_error(result.pose, T_A_B)
     assert rotation < 0.15 and translation < 0.03  # a plain least-squares fit: 1.5° / 0.28 m
+
+
+def test_a_small_second_map_gets_the_localizers_answer_with_its_pairs_completed():
+    a = room(30)
+    b = noisy_session(ObjectMap(list(a)[:12], up=[0, 0, 1]), seed=2)
+    result = semloc.align(a, b)
+    own = Localizer(a, local_up=b.up).update(list(b))
+    assert result.status == own.status and result.confidence == own.confidence
+    np.testing.assert_array_equal(result.pose, own.pose)
+    assert set(own.hypotheses[0].pairs) <= set(result.hypotheses[0].pairs)
+    assert sorted(result.hypotheses[0].pairs) == sorted((f"a{i}", f"b{i}") for i in range(12))
+
+
+def test_views_beyond_the_rare_ones_spread_by_farthest_points():
+    xyz = np.array([[0.0, 0, 0], [1, 0, 0], [2, 0, 0], [10, 0, 0], [20, 0, 0]])
+    rarity = np.array([5, 1, 0, 3, 4])  # the rarest is index 2
+    centres = [view[0] for view in seed_views(xyz, 3, 1, rarity, rare=1)]
+    assert centres == [2, 4, 3]  # then the farthest from it, then the farthest from both
+    all_rare = [view[0] for view in seed_views(xyz, 3, 1, rarity)]
+    assert all_rare == [2, 3, 4]  # by rarity, at least 3 m apart
 
 
 def test_the_merged_map_has_each_object_once_with_its_provenance():
