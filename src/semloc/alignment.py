@@ -349,8 +349,9 @@ def seed_views(
 ) -> list[np.ndarray]:
     """`views` neighbourhoods of the points `xyz` (indices), each the `size` points nearest to
     its centre.  Centres are the rarest points first (`rarity`: e.g. how many map objects each
-    may be; a rare object anchors a view in a distinctive place), at least `spacing` apart, then
-    farthest-point sampling for the rest."""
+    may be; a rare object anchors a view in a distinctive place), at least `spacing` apart, at
+    most `rare` of them (None: as many as there are), then farthest-point sampling for the
+    rest."""
     xyz = np.asarray(xyz, dtype=float).reshape(-1, 3)
     if len(xyz) == 0:
         return []
