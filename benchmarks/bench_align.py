@@ -12,7 +12,9 @@ office4, 3RScan scene_1; with their points) and simulated buildings of 400 objec
 points per object) for the larger sessions.
 
 Success: the transform within 15° / 0.5 m, counted over the cases whose overlap holds at least
-5 unmoved objects.  Correspondences: precision and recall of the best hypothesis' pairs against
+5 unmoved objects; the pose is the best place's whatever the status.  The status apart:
+`localized` (the share answered as sure), `wrong` (the share answered `localized` at a wrong
+pose: a false answer) and `ambiguous` (the share held back as not sure, right pose or not).  Correspondences: precision and recall of the best hypothesis' pairs against
 the unmoved shared objects.  Times: CPU ms of `semloc.align` with the first map prepared once
 (a robot or server that holds it), one core; peak MB: tracemalloc's peak during one alignment.
 The CLIPPER-style baseline (`semloc.baselines.clipper`, B as one local map) runs on the same
@@ -63,6 +65,7 @@ class Outcome:
     variant: str
     scored: bool  # the overlap holds >= MIN_SHARED unmoved objects
     success: bool
+    status: str
     precision: float
     recall: float
     ms: float
@@ -126,7 +129,7 @@ def run_case(source: str, case: Case, variant: str, clipper: bool) -> Outcome:
     right = len(found & case.pairs)
     outcome = Outcome(
         source, len(case.second), variant, len(case.pairs) >= MIN_SHARED,
-        result.pose is not None and is_success(result.pose, case.truth),
+        result.pose is not None and is_success(result.pose, case.truth), result.status,
         right / len(found) if found else 1.0, right / len(case.pairs) if case.pairs else 1.0, ms,
     )  # fmt: skip
     if clipper:
@@ -157,9 +160,10 @@ def first_maps(real: bool, seed: int) -> dict[str, ObjectMap]:
 
 def table(outcomes: list[Outcome], memory: dict[int, float]) -> str:
     lines = [
-        "| objects | variant | cases | success | pairs precision / recall | median / p90 ms "
+        "| objects | variant | cases | success | localized / wrong / ambiguous "
+        "| pairs precision / recall | median / p90 ms "
         "| CLIPPER-style success | CLIPPER-style median ms | time ÷ CLIPPER | peak MB |",
-        "|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|",
+        "|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for size in sorted({o.size for o in outcomes}):
         for variant in VARIANTS:
@@ -180,11 +184,20 @@ def table(outcomes: list[Outcome], memory: dict[int, float]) -> str:
                 clipper_ms = f"{theirs:.0f}"
             lines.append(
                 f"| {size} | {variant} | {len(group)} | {np.mean([o.success for o in group]):.0%} | "
+                f"{_statuses(group)} | "
                 f"{np.mean([o.precision for o in group]):.0%} / {np.mean([o.recall for o in group]):.0%} | "
                 f"{np.median(ms):.0f} / {np.percentile(ms, 90):.0f} | {clipper_success} | "
                 f"{clipper_ms} | {ratio} | {memory.get(size, float('nan')):.1f} |"
             )
     return "\n".join(lines)
+
+
+def _statuses(group: list[Outcome]) -> str:
+    """The shares answered `localized`, `localized` at a wrong pose, and `ambiguous`."""
+    localized = [o.status == "localized" for o in group]
+    wrong = [o.status == "localized" and not o.success for o in group]
+    ambiguous = [o.status == "ambiguous" for o in group]
+    return f"{np.mean(localized):.0%} / {np.mean(wrong):.0%} / {np.mean(ambiguous):.0%}"
 
 
 def slope(outcomes: list[Outcome], key: str = "ms", above: int = 30) -> float:

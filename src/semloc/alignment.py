@@ -7,23 +7,36 @@ once" in `clustering.py`).  `align` bounds that work and keeps the paper's algor
 is cheap:
 
 1. **Seeds.**  A small B (at most `whole_below` objects) is one Localizer update with every
-   object: its hypotheses are the paper's algorithm's.  A larger B is localized in `views`
-   seed views: their centres are B's most distinctive objects (the fewest candidates in A: a
-   fridge anchors a view in the kitchen, where a chair fits every classroom), at least 3 m
-   apart, then spread by farthest-point sampling; each holds the `view_size` objects of B
-   nearest to its centre and is one Localizer update against A (clustering, verification,
-   pose recovery): a local map like a robot's, the case the Localizer is made for.
+   object: its answer is the paper's algorithm's (status, places, poses, confidence, whose
+   evidence is made for a few objects), each place's pairs completed by guided matching
+   under its pose (step 2's narrowest radius).  A larger B is localized in up to
+   `views` seed views: the first `rare_views` are centred on B's most distinctive objects (the
+   fewest candidates in A: a fridge anchors a view in the kitchen, where a chair fits every
+   classroom), at least 3 m apart, the others spread over B by farthest-point sampling (where
+   A overlaps only part of B, views centred on rare objects alone may all fall outside it: an
+   object A lacks has one candidate fewer, so it looks rarer); each holds the `view_size`
+   objects of B nearest to its centre and is one Localizer update against A (clustering,
+   verification, pose recovery): a local map like a robot's, the case the Localizer is made
+   for.
 2. **Growth by guided matching.**  Every distinct place of the seeds (the `per_view` best of
    each view) places all of B in A's frame; each object of B is paired with the nearest object
    of A it may be (the Localizer's candidates: labels, label map, descriptor gate), mutual
-   nearest within a radius, and the closed-form pose is refitted on the pairs; one pass per
-   radius of `match_radii`, wide to narrow.  In maps of repeated rooms a view fits several
-   places and the right one is rarely a view's best, but grown over B it pairs the most.
-3. **Decision.**  The grown places are ranked by their pairs (then centre residual) and merged
+   nearest within a radius, and the pose is refitted on the pairs (closed form, robust:
+   `refits` rounds weighted by each pair's distance); one pass per radius of `match_radii`,
+   wide to narrow.  In maps of repeated rooms a view fits several places and the right one is
+   rarely a view's best, but grown over B it fits the most.
+3. **Score.**  A grown place scores its agreeing pairs: each pair counts 1 - (d / fit_radius)²
+   by the distance d of its centres, nothing beyond.  Not the number of pairs: a place
+   shifted into a twin room pairs B's objects with twins a few decimetres off, and it pairs
+   more of them than the right place where A's session saw less of B than the twin room holds.
+4. **Decision.**  The grown places are ranked by their score (then centre residual) and merged
    when they are the same place; each keeps the evidence features of the view that seeded it
-   with its grown pairs and residual, the shipped confidence model scores them against each
-   other and `decision.decide` gives the status, as for a localization; `localized` further
-   needs the best place to pair (1 + margin) times as many objects as any other place.
+   with its score as its pairs and its grown residual, the shipped confidence model scores
+   them against each other and `decision.decide` gives the status, as for a localization;
+   `localized` further needs the best place to score (1 + margin) times as much as any other
+   place.  Where two places fit B equally (identical rooms) the answer is `ambiguous`.
+   Views stop early once the best place scores `settled_pairs`, (1 + margin)² times as much
+   as any other, and `confirmations` views have found it.
 
 Work: `views` localizations of `view_size` objects, then per seed place one pass over B's
 candidate pairs per radius: linear in B's size (and in the number of same-label objects of A).
@@ -44,7 +57,6 @@ from semloc.decision import (
     decide,
     distinct,
     local_anchor,
-    same_place,
     score_confidence,
     shipped_model,
 )
@@ -64,13 +76,33 @@ class AlignmentConfig(BaseModel):
         24, ge=2, description="B with at most this many objects is one Localizer update."
     )
     views: int = Field(8, ge=1, description="Seed views of a larger B.")
+    rare_views: int | None = Field(
+        2,
+        ge=0,
+        description="How many views are centred on B's rarest objects; the others spread over "
+        "B (farthest points) so that some fall where A overlaps it (None: all on rare ones).",
+    )
     view_size: int = Field(10, ge=3, description="Objects of B per seed view.")
     per_view: int = Field(10, ge=1, description="Distinct places of each view that are tried.")
     settled_pairs: int = Field(
-        8,
+        6,
         ge=3,
-        description="Views stop once the best grown place pairs this many objects and (1 + "
-        "margin)² times as many as any other place.",
+        description="Views stop once the best grown place scores this many agreeing pairs, (1 + "
+        "margin)² times as much as any other place, and `confirmations` views found it.",
+    )
+    fit_radius: float = Field(
+        0.3,
+        gt=0,
+        description="A grown place's score: each pair counts 1 - (d / fit_radius)² (d: the "
+        "distance (m) of its centres under the place's pose), nothing beyond.",
+    )
+    confirmations: int = Field(
+        2,
+        ge=1,
+        description="Views stop early only once this many views have found the best place.",
+    )
+    refits: int = Field(
+        3, ge=1, description="Rounds of the robust refit after each guided-matching pass."
     )
     match_radii: tuple[float, ...] = Field(
         (2.0, 1.0, 0.6),
@@ -107,21 +139,34 @@ class _Aligner:
         self.cand_b = np.repeat(np.arange(len(b)), [len(c) for c in candidates])
         self.cand_a = np.concatenate([*candidates, np.zeros(0, dtype=int)]).astype(int)
         self.b_xyz, self.a_xyz = b.positions, self.a.positions
+        # the centres of every candidate pair, gathered once for the guided matching
+        self.cand_b_xyz, self.cand_a_xyz = self.b_xyz[self.cand_b], self.a_xyz[self.cand_a]
 
     def run(self) -> Result:
+        if len(self.b) <= self.alignment.whole_below:
+            return self._whole()
         start = time.perf_counter()
         timing = {"association": 0.0, "clustering": 0.0, "pose": 0.0, "growth": 0.0}
         grown: list[Hypothesis] = []
+        votes: list[set[int]] = []  # the views that found each grown place
         tried = 0
-        for view in self._views():
+        for number, view in enumerate(self._views()):
             seeds = self._seeds_of(view, timing)
             tick = time.perf_counter()
             for seed in seeds:
-                if not any(self._same_place(seed.pose, h.pose) for h in grown):
+                known = self._place_of(seed.pose, grown)
+                if known is None:
                     tried += 1
-                    grown += [h for h in [self._grown(seed)] if h is not None]
+                    place = self._grown(seed)
+                    known = None if place is None else self._place_of(place.pose, grown)
+                    if place is not None and known is None:
+                        grown.append(place)
+                        votes.append(set())
+                        known = len(grown) - 1
+                if known is not None:
+                    votes[known].add(number)
             timing["growth"] += (time.perf_counter() - tick) * 1e3
-            if self._settled(grown):
+            if self._settled(grown, votes):
                 break
         hypotheses = self._decided_places(grown)
         status, reason = decide(hypotheses, self.config.decision, "residual")
@@ -134,13 +179,32 @@ class _Aligner:
                     top_scores=[h.score for h in hypotheses][:10], status=status)  # fmt: skip
         return Result.of(status, hypotheses[: self.config.top_k], [step], timing, reason)
 
+    def _whole(self) -> Result:
+        """A small B as one Localizer update: its answer (status, places, poses, confidence),
+        each place's pairs completed by guided matching under its pose."""
+        localizer = Localizer(self.prior, self.config, local_up=self.b.up)
+        result = localizer.update(list(self.b))
+        assert result is not None
+        tick = time.perf_counter()
+        for h in result.hypotheses:
+            if h.pose is not None:
+                h.pairs = self._completed(h.pairs, h.pose)
+        result.timing_ms["growth"] = (time.perf_counter() - tick) * 1e3
+        return result
+
+    def _completed(self, pairs: list[tuple[str, str]], pose: np.ndarray) -> list[tuple[str, str]]:
+        """`pairs` and the guided matches under `pose` (narrowest radius) of objects they miss."""
+        a_done, b_done = {g for g, _ in pairs}, {l for _, l in pairs}
+        found = self._matches(pose, self.alignment.match_radii[-1])
+        extra = [(str(self.a.ids[g]), str(self.b.ids[l])) for g, l in found]
+        return [*pairs, *((g, l) for g, l in extra if g not in a_done and l not in b_done)]
+
     def _views(self) -> list[np.ndarray]:
-        """B whole when it is small, else its seed views (see the module docstring)."""
-        if len(self.b) <= self.alignment.whole_below:
-            return [np.arange(len(self.b))]
+        """B's seed views (see the module docstring)."""
         rarity = np.bincount(self.cand_b, minlength=len(self.b))
         rarity = np.where(rarity == 0, np.iinfo(np.int64).max, rarity)  # no candidate: last
-        return seed_views(self.b_xyz, self.alignment.views, self.alignment.view_size, rarity)
+        return seed_views(self.b_xyz, self.alignment.views, self.alignment.view_size, rarity,
+                          rare=self.alignment.rare_views)  # fmt: skip
 
     def _seeds_of(self, view: np.ndarray, timing: dict[str, float]) -> list[Hypothesis]:
         """The distinct places (with a pose) of one view's localization, best first."""
@@ -151,29 +215,46 @@ class _Aligner:
             timing[stage] += result.timing_ms.get(stage, 0.0)
         return [h for h in result.hypotheses[: self.alignment.per_view] if h.pose is not None]
 
-    def _same_place(self, pose: np.ndarray, other: np.ndarray) -> bool:
-        return same_place(((), pose), ((), other), self.config.decision, local_anchor(self.b_xyz))
+    def _place_of(self, pose: np.ndarray, grown: list[Hypothesis]) -> int | None:
+        """The index of the first grown place at `pose`, or None: `same_place`'s pose test
+        (rotation and translation at B's centroid), on all grown places at once."""
+        if not grown:
+            return None
+        poses = np.stack([h.pose for h in grown])
+        point = np.append(local_anchor(self.b_xyz), 1.0)
+        shift = np.linalg.norm((poses - pose) @ point, axis=1)
+        cos = (np.einsum("ij,kij->k", pose[:3, :3], poses[:, :3, :3]) - 1.0) / 2.0
+        angle = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+        decision = self.config.decision
+        same = (angle < decision.distinct_rotation_deg) & (shift < decision.distinct_translation)
+        return int(np.argmax(same)) if same.any() else None
 
-    def _settled(self, grown: list[Hypothesis]) -> bool:
-        """Whether more views are not needed: the best grown place pairs at least
-        `settled_pairs` objects and (1 + margin)² times as many as any other place."""
+    def _settled(self, grown: list[Hypothesis], votes: list[set[int]]) -> bool:
+        """Whether more views are not needed: the best grown place scores at least
+        `settled_pairs`, (1 + margin)² times as much as any other place, and was found by
+        `confirmations` views (a view centred where A lacks B's objects finds only the
+        twins of a repeated room)."""
         if not grown:
             return False
-        counts = sorted((len(h.pairs) for h in grown), reverse=True)
-        factor = (1.0 + self.config.decision.margin) ** 2
-        best = counts[0]
-        return best >= self.alignment.settled_pairs and all(best >= factor * c for c in counts[1:])
+        order = sorted(range(len(grown)), key=lambda i: -grown[i].score)
+        best, factor = grown[order[0]].score, (1.0 + self.config.decision.margin) ** 2
+        return (
+            best >= self.alignment.settled_pairs
+            and len(votes[order[0]]) >= self.alignment.confirmations
+            and all(best >= factor * grown[i].score for i in order[1:])
+        )
 
     def _clearly_best(self, hypotheses: list[Hypothesis]) -> tuple[str, str]:
-        """`localized` only when no other place pairs nearly as many objects of B: in a
-        building of identical rooms a shifted pose pairs most of B too, and the confidence
+        """`localized` only when no other place scores nearly as many agreeing pairs of B: in
+        a building of identical rooms a shifted pose pairs most of B too, and the confidence
         model, fitted on a few objects, has not seen such rivals."""
         best, factor = hypotheses[0], 1.0 + self.config.decision.margin
         for rival in hypotheses[1:]:
-            if len(best.pairs) < factor * len(rival.pairs):
+            if best.score < factor * rival.score:
                 return "ambiguous", (
-                    f"a rival place pairs nearly as many objects: rank {rival.rank} with "
-                    f"{len(rival.pairs)} pairs against {len(best.pairs)}"
+                    f"a rival place fits nearly as many objects: rank {rival.rank} scores "
+                    f"{rival.score:.1f} agreeing pairs ({len(rival.pairs)} pairs) against "
+                    f"{best.score:.1f} ({len(best.pairs)})"
                 )
         return "localized", ""
 
@@ -187,21 +268,19 @@ class _Aligner:
                 break
             pairs = found
             try:
-                pose = align_positions(
-                    self.b_xyz[pairs[:, 1]], self.a_xyz[pairs[:, 0]], self.b.up, self.a.up
-                )
+                pose = self._refit(pose, pairs, radius)
             except ValueError:  # under-determined: keep the last pose
                 break
         if len(pairs) < 2:
             return None
         residual = centre_residual(pose, self.b_xyz[pairs[:, 1]], self.a_xyz[pairs[:, 0]])
+        score = self._score(pose, pairs)
         features = None
-        if seed.features is not None:
-            features = {**seed.features, "pairs": float(len(pairs)), "residual": residual,
-                        "support": 0.0}  # fmt: skip
+        if seed.features is not None:  # the agreeing pairs count as the pairs
+            features = {**seed.features, "pairs": score, "residual": residual, "support": 0.0}
         return Hypothesis(
             rank=0,
-            score=float(len(pairs)),
+            score=score,
             pairs=[(str(self.a.ids[g]), str(self.b.ids[l])) for g, l in pairs],
             pose=pose,
             fitness=None,  # the seed view's point fitness says little about the grown place
@@ -210,24 +289,47 @@ class _Aligner:
             features=features,
         )
 
+    def _refit(self, pose: np.ndarray, pairs: np.ndarray, radius: float) -> np.ndarray:
+        """The closed-form pose of `pairs`, robust: `refits` rounds of weighted least squares,
+        each pair weighted (1 - (d / radius)²)² by its distance d under the previous pose (one
+        wrong pair among ten noisy ones turns a plain fit by degrees)."""
+        local, other = self.b_xyz[pairs[:, 1]], self.a_xyz[pairs[:, 0]]
+        for _ in range(self.alignment.refits):
+            distance = np.linalg.norm(local @ pose[:3, :3].T + pose[:3, 3] - other, axis=1)
+            weights = np.clip(1.0 - (distance / radius) ** 2, 0.0, None) ** 2
+            if np.count_nonzero(weights) < 2:
+                break
+            pose = align_positions(local, other, self.b.up, self.a.up, weights)
+        return pose
+
+    def _score(self, pose: np.ndarray, pairs: np.ndarray) -> float:
+        """The agreeing pairs: each pair counts 1 - (d / fit_radius)², nothing beyond (d: the
+        distance of its centres under `pose`).  A place of a repeated room pairs B's objects
+        with twins a few decimetres off, the right place with the same objects: a count of
+        pairs alone prefers the twin room when it holds more of B's objects than A's
+        session saw."""
+        moved = self.b_xyz[pairs[:, 1]] @ pose[:3, :3].T + pose[:3, 3]
+        distance = np.linalg.norm(moved - self.a_xyz[pairs[:, 0]], axis=1)
+        return float(np.sum(np.clip(1.0 - (distance / self.alignment.fit_radius) ** 2, 0.0, None)))
+
     def _matches(self, pose: np.ndarray, radius: float) -> np.ndarray:
         """(A index, B index) pairs under `pose`: each object of B with the nearest object of A
         it may be within `radius`, one to one: a pair is kept when it is the closest of both
         its objects (mutual nearest candidates)."""
-        moved = self.b_xyz @ pose[:3, :3].T + pose[:3, 3]
-        distance = np.linalg.norm(moved[self.cand_b] - self.a_xyz[self.cand_a], axis=1)
-        near = np.flatnonzero(distance < radius)
-        order = near[np.argsort(distance[near], kind="stable")]
+        offset = self.cand_b_xyz @ pose[:3, :3].T + (pose[:3, 3] - self.cand_a_xyz)
+        squared = np.einsum("ij,ij->i", offset, offset)
+        near = np.flatnonzero(squared < radius**2)
+        order = near[np.argsort(squared[near], kind="stable")]
         first_of_b = order[np.unique(self.cand_b[order], return_index=True)[1]]
-        first_of_b = first_of_b[np.argsort(distance[first_of_b], kind="stable")]
+        first_of_b = first_of_b[np.argsort(squared[first_of_b], kind="stable")]
         mutual = first_of_b[np.unique(self.cand_a[first_of_b], return_index=True)[1]]
         pairs = np.stack([self.cand_a[mutual], self.cand_b[mutual]], axis=1)
         return pairs[np.lexsort((pairs[:, 1], pairs[:, 0]))]
 
     def _decided_places(self, grown: list[Hypothesis]) -> list[Hypothesis]:
-        """Distinct places, most pairs first (then the smaller residual), ranked 1, 2, ... and
-        scored by the confidence model against each other."""
-        ordered = sorted(grown, key=lambda h: (-len(h.pairs), h.residual or 0.0))
+        """Distinct places, the highest score first (then the smaller residual), ranked 1, 2,
+        ... and scored by the confidence model against each other."""
+        ordered = sorted(grown, key=lambda h: (-h.score, h.residual or 0.0))
         anchor = local_anchor(self.b_xyz)
         places = ((h.pairs, h.pose) for h in ordered)
         kept = [ordered[i] for i in distinct(places, len(ordered), self.config.decision, anchor)]
@@ -238,12 +340,18 @@ class _Aligner:
 
 
 def seed_views(
-    xyz: np.ndarray, views: int, size: int, rarity: np.ndarray | None = None, spacing: float = 3.0
+    xyz: np.ndarray,
+    views: int,
+    size: int,
+    rarity: np.ndarray | None = None,
+    spacing: float = 3.0,
+    rare: int | None = None,
 ) -> list[np.ndarray]:
     """`views` neighbourhoods of the points `xyz` (indices), each the `size` points nearest to
     its centre.  Centres are the rarest points first (`rarity`: e.g. how many map objects each
-    may be; a rare object anchors a view in a distinctive place), at least `spacing` apart, then
-    farthest-point sampling for the rest."""
+    may be; a rare object anchors a view in a distinctive place), at least `spacing` apart, at
+    most `rare` of them (None: as many as there are), then farthest-point sampling for the
+    rest."""
     xyz = np.asarray(xyz, dtype=float).reshape(-1, 3)
     if len(xyz) == 0:
         return []
@@ -251,7 +359,7 @@ def seed_views(
     centres: list[int] = []
     nearest = np.full(len(xyz), np.inf)
     for i in np.lexsort((np.arange(len(xyz)), rarity)):  # rarest first, stable
-        if len(centres) == min(views, len(xyz)):
+        if len(centres) == min(views if rare is None else rare, len(xyz)):
             break
         if nearest[i] >= spacing:
             centres.append(int(i))

@@ -12,9 +12,10 @@ from hypothesis import strategies as st
 import semloc
 from semloc.alignment import AlignmentConfig, pose_information, seed_views
 from semloc.io.g2o import edge_line, parse_edge
+from semloc.localizer import Localizer
 from semloc.maps import ObjectMap, SemanticObject
 from semloc.tools.merge import merged_map
-from semloc.transforms import pose_error
+from semloc.transforms import pose_error, yaw_pose
 
 
 @pytest.mark.parametrize("n", [12, 40])  # one update with every object; seed views and growth
@@ -46,6 +47,92 @@ def test_a_second_map_that_shares_nothing_fails_with_a_reason():
     result = semloc.align(a, ObjectMap(others, up=[0, 0, 1]))
     assert result.status == "failed" and result.pose is None
     assert "view" in result.reason or "candidates" in result.reason
+
+
+def twin_rooms(seen: int, jitter: float, seed: int = 5) -> tuple[ObjectMap, ObjectMap]:
+    """A: the first `seen` objects of a 20-object room (its session saw no more) and a twin
+    of the whole room 12 m away, each twin object `jitter` m off sideways; B: the whole room."""
+    base = room(20)
+    rng = np.random.default_rng(seed)
+    twins = []
+    for o in base:
+        angle = rng.uniform(-np.pi, np.pi)
+        step = [12.0 + jitter * np.cos(angle), jitter * np.sin(angle), 0.0]
+        twins.append(o.transformed(yaw_pose(0.0, step)).replace(id=f"t{o.id}"))
+    return ObjectMap([*list(base)[:seen], *twins], up=[0, 0, 1], name="A"), second_session(base)
+
+
+@pytest.mark.parametrize("whole_below", [24, 5])
+def test_a_twin_room_that_pairs_more_objects_a_few_decimetres_off_does_not_win(whole_below):
+    # the twin pairs all 20 objects of B, 0.25 m off; the room itself only the 16 A saw
+    a, b = twin_rooms(16, 0.25)
+    result = semloc.align(a, b, alignment=AlignmentConfig(whole_below=whole_below))
+    assert result.status == "localized"
+    rotation, translation = pose_error(result.pose, T_A_B)
+    assert rotation < 1e-6 and translation < 1e-6
+    assert sorted(result.hypotheses[0].pairs) == sorted((f"a{i}", f"b{i}") for i in range(16))
+
+
+@pytest.mark.parametrize("whole_below", [24, 5])
+def test_two_identical_rooms_are_ambiguous(whole_below):
+    a, b = twin_rooms(20, 0.0)
+    result = semloc.align(a, b, alignment=AlignmentConfig(whole_below=whole_below))
+    assert result.status == "ambiguous" and "rival" in result.reason
+    twin = T_A_B.copy()
+    twin[0, 3] += 12.0
+    places = [h.pose for h in result.hypotheses[:2]]
+    assert any(pose_error(p, T_A_B)[1] < 1e-6 for p in places)
+    assert any(pose_error(p, twin)[1] < 1e-6 for p in places)
+
+
+def noisy_session(a: ObjectMap, seed: int = 0) -> ObjectMap:
+    """B of `a` with every centre 0.1-0.3 m off sideways."""
+    rng = np.random.default_rng(seed)
+    objects = []
+    for o in second_session(a):
+        angle, length = rng.uniform(-np.pi, np.pi), rng.uniform(0.1, 0.3)
+        step = [length * np.cos(angle), length * np.sin(angle), 0.0]
+        objects.append(o.transformed(yaw_pose(0.0, step)))
+    return ObjectMap(objects, up=[0, 0, 1], name="B")
+
+
+@pytest.mark.parametrize("whole_below", [60, 10])
+def test_a_noisy_second_map_is_still_aligned_with_every_pair(whole_below):
+    a = room(40)
+    result = semloc.align(a, noisy_session(a), alignment=AlignmentConfig(whole_below=whole_below))
+    assert result.status == "localized"
+    rotation, translation = pose_error(result.pose, T_A_B)
+    assert rotation < 1.0 and translation < 0.2
+    assert sorted(result.hypotheses[0].pairs) == sorted((o.id, o.id.replace("a", "b")) for o in a)
+
+
+def test_one_moved_object_among_exact_ones_barely_turns_the_pose():
+    a = room(10)
+    objects = list(second_session(a))
+    objects[0] = objects[0].transformed(yaw_pose(0.0, [0.55, 0.0, 0.0]))  # still paired
+    result = semloc.align(a, ObjectMap(objects, up=[0, 0, 1]))
+    rotation, translation = pose_error(result.pose, T_A_B)
+    assert rotation < 0.15 and translation < 0.03  # a plain least-squares fit: 1.5° / 0.28 m
+
+
+def test_a_small_second_map_gets_the_localizers_answer_with_its_pairs_completed():
+    a = room(30)
+    b = noisy_session(ObjectMap(list(a)[:12], up=[0, 0, 1]), seed=2)
+    result = semloc.align(a, b)
+    own = Localizer(a, local_up=b.up).update(list(b))
+    assert result.status == own.status and result.confidence == own.confidence
+    np.testing.assert_array_equal(result.pose, own.pose)
+    assert set(own.hypotheses[0].pairs) <= set(result.hypotheses[0].pairs)
+    assert sorted(result.hypotheses[0].pairs) == sorted((f"a{i}", f"b{i}") for i in range(12))
+
+
+def test_views_beyond_the_rare_ones_spread_by_farthest_points():
+    xyz = np.array([[0.0, 0, 0], [1, 0, 0], [2, 0, 0], [10, 0, 0], [20, 0, 0]])
+    rarity = np.array([5, 1, 0, 3, 4])  # the rarest is index 2
+    centres = [view[0] for view in seed_views(xyz, 3, 1, rarity, rare=1)]
+    assert centres == [2, 4, 3]  # then the farthest from it, then the farthest from both
+    all_rare = [view[0] for view in seed_views(xyz, 3, 1, rarity)]
+    assert all_rare == [2, 3, 4]  # by rarity, at least 3 m apart
 
 
 def test_the_merged_map_has_each_object_once_with_its_provenance():
