@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from test_changes_fixtures import T, cube, room, seen_from_t
 
 import semloc
@@ -193,3 +195,35 @@ def test_a_moved_object_whose_old_place_was_seen_is_moved_not_missing():
     assert [m.global_id for m in changes.moved] == ["g4"]
     assert "g4" not in changes.missing  # its place was seen empty: it is the moved one
     assert set(changes.matched) >= {"g0", "g1", "g2", "g3"}
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    yaw=st.floats(-np.pi, np.pi),
+    shift=st.tuples(*[st.floats(-50, 50)] * 2),
+    kept=st.lists(st.integers(0, 7), min_size=2, max_size=8, unique=True),
+    moved_by=st.tuples(st.floats(-2.0, 2.0), st.floats(-2.0, 2.0)),
+)
+def test_the_changes_do_not_depend_on_the_local_frame(yaw, shift, kept, moved_by):
+    """Whatever frame the robot's local map is in (the pose says where it lies), the same view
+    has the same changes; a view of the map's own objects has nothing moved or new."""
+    g = room()
+    objects = [list(g)[i] for i in sorted(kept)]
+    frame = yaw_pose(yaw, [*shift, 0.0])
+    pairs = [(o.id, o.id.replace("g", "l")) for o in objects[:2]]
+    unchanged = [o.transformed(np.linalg.inv(frame)).replace(id=o.id.replace("g", "l"))
+                 for o in objects]  # fmt: skip
+    same = explain(g, unchanged, frame, pairs, candidates_of(g, unchanged))
+    assert same.moved == [] and same.new == []  # (map objects beside it may be missing)
+    objects[-1] = objects[-1].transformed(yaw_pose(0.0, [*moved_by, 0.0]))
+    reference = seen_from_t(objects)
+    expected = explain(g, reference, T, pairs, candidates_of(g, reference))
+    local = [o.transformed(np.linalg.inv(frame)).replace(id=o.id.replace("g", "l"))
+             for o in objects]  # fmt: skip
+    found = explain(g, local, frame, pairs, candidates_of(g, local))
+    assert found.new == expected.new and found.missing == expected.missing
+    assert [(m.global_id, m.local_id) for m in found.moved] == [
+        (m.global_id, m.local_id) for m in expected.moved
+    ]
+    for a, b in zip(found.moved, expected.moved):
+        assert a.offset_m == pytest.approx(b.offset_m, abs=1e-6)
