@@ -17,12 +17,19 @@ Success: the transform within 15° / 0.5 m, counted over the cases whose overlap
 pose: a false answer) and `ambiguous` (the share held back as not sure, right pose or not).  Correspondences: precision and recall of the best hypothesis' pairs against
 the unmoved shared objects.  Times: CPU ms of `semloc.align` with the first map prepared once
 (a robot or server that holds it), one core; peak MB: tracemalloc's peak during one alignment.
-The CLIPPER-style baseline (`semloc.baselines.clipper`, B as one local map) runs on the same
-cases of the real samples (on the buildings its dense consistency graph of thousands of
-same-label candidates takes minutes per case).
+The CLIPPER-style baseline (`semloc.baselines.clipper`, B as one local map, unchanged) runs on
+every case of the real samples and on the first `--clipper-cases` scored cases of each size and
+variant on the buildings (its dense consistency graph of thousands of same-label candidates
+takes minutes there), each run in a forked process bounded by `--clipper-budget` CPU seconds
+(RLIMIT_CPU) and `--clipper-memory` MB (RLIMIT_AS): its time is process CPU time on the same
+core as semloc's, its peak MB the resident peak above the process' start.  A run over the
+budget counts as at least the time it took (the median reads `> t`, the ratio `< r`); a run
+stopped by the memory bound reads `out of memory`, its peak `> bound`.  The ratio is semloc's
+median over the cases the baseline ran on ÷ the baseline's median.
 
     PYTHONPATH=src python benchmarks/bench_align.py [--trials 5] [--sizes 15 30 60 150 300]
-        [--no-real] [--no-clipper] [--markdown TABLE.md]
+        [--no-real] [--no-clipper] [--clipper-cases 1] [--clipper-budget 120]
+        [--clipper-memory 6144] [--markdown TABLE.md]
 """
 
 from __future__ import annotations
