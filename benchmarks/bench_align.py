@@ -17,18 +17,29 @@ Success: the transform within 15° / 0.5 m, counted over the cases whose overlap
 pose: a false answer) and `ambiguous` (the share held back as not sure, right pose or not).  Correspondences: precision and recall of the best hypothesis' pairs against
 the unmoved shared objects.  Times: CPU ms of `semloc.align` with the first map prepared once
 (a robot or server that holds it), one core; peak MB: tracemalloc's peak during one alignment.
-The CLIPPER-style baseline (`semloc.baselines.clipper`, B as one local map) runs on the same
-cases of the real samples (on the buildings its dense consistency graph of thousands of
-same-label candidates takes minutes per case).
+The CLIPPER-style baseline (`semloc.baselines.clipper`, B as one local map, unchanged) runs on
+every case of the real samples and on the first `--clipper-cases` scored cases of each size and
+variant on the buildings (its dense consistency graph of thousands of same-label candidates
+takes minutes there), each run in a forked process bounded by `--clipper-budget` CPU seconds
+(RLIMIT_CPU) and `--clipper-memory` MB (RLIMIT_AS): its time is process CPU time on the same
+core as semloc's, its peak MB the resident peak above the process' start.  A run over the
+budget counts as at least the time it took (the median reads `> t`, the ratio `< r`); a run
+stopped by the memory bound reads `out of memory`, its peak `> bound`.  The ratio is semloc's
+median over the cases the baseline ran on ÷ the baseline's median.
 
     PYTHONPATH=src python benchmarks/bench_align.py [--trials 5] [--sizes 15 30 60 150 300]
-        [--no-real] [--no-clipper] [--markdown TABLE.md]
+        [--no-real] [--no-clipper] [--clipper-cases 1] [--clipper-budget 120]
+        [--clipper-memory 6144] [--markdown TABLE.md]
 """
 
 from __future__ import annotations
 
 import argparse
+import math
+import multiprocessing
 import os
+import resource
+import signal
 import sys
 import time
 import tracemalloc
@@ -69,8 +80,7 @@ class Outcome:
     precision: float
     recall: float
     ms: float
-    clipper_success: bool | None = None
-    clipper_ms: float | None = None
+    clipper: ClipperRun | None = None
 
 
 def second_session(full: ObjectMap, n: int, variant: str, rng: np.random.Generator) -> Case:
@@ -120,7 +130,7 @@ def _direction(rng: np.random.Generator) -> np.ndarray:
     return np.array([np.cos(angle), np.sin(angle)])
 
 
-def run_case(source: str, case: Case, variant: str, clipper: bool) -> Outcome:
+def run_case(source: str, case: Case, variant: str, clipper: Bound | None) -> Outcome:
     Localizer(case.first).prepare()
     start = time.process_time()
     result = semloc.align(case.first, case.second)
@@ -132,12 +142,122 @@ def run_case(source: str, case: Case, variant: str, clipper: bool) -> Outcome:
         result.pose is not None and is_success(result.pose, case.truth), result.status,
         right / len(found) if found else 1.0, right / len(case.pairs) if case.pairs else 1.0, ms,
     )  # fmt: skip
-    if clipper:
-        start = time.process_time()
-        answer = ClipperBaseline(case.first, local_up=case.second.up).update(list(case.second))
-        outcome.clipper_ms = (time.process_time() - start) * 1e3
-        outcome.clipper_success = answer.pose is not None and is_success(answer.pose, case.truth)
+    if clipper is not None:
+        outcome.clipper = run_clipper(case, clipper)
     return outcome
+
+
+@dataclass(frozen=True)
+class Bound:
+    """What one run of the baseline may take: CPU seconds and MB of memory (None: no bound)."""
+
+    seconds: float | None = None
+    mb: float | None = None
+
+
+@dataclass
+class ClipperRun:
+    """One run of the baseline: `ms` its CPU time, or at least that when `over` says why not
+    finished (`time`: over the CPU budget; `memory`: an allocation over the memory bound)."""
+
+    ms: float
+    success: bool = False
+    peak_mb: float = float("nan")  # the process's resident peak above its start
+    over: str | None = None
+    bound_mb: float = float("nan")  # the memory bound, when `over` is `memory`
+
+
+def warm_clipper(full: ObjectMap) -> None:
+    """Loads what the baseline uses (lazy imports, compiled code) in this process, so that the
+    forked runs time the baseline, not its loading."""
+    case = second_session(full, 8, "clean", np.random.default_rng(2))
+    ClipperBaseline(case.first, local_up=case.second.up).update(list(case.second))
+
+
+def run_clipper(case: Case, bound: Bound) -> ClipperRun:
+    """The baseline on `case` (B as one local map) in a forked process bounded by `bound`: CPU
+    time as semloc's (process CPU time on the same core), peak memory as the resident peak."""
+    context = multiprocessing.get_context("fork")
+    receive, send = context.Pipe(duplex=False)
+    child = context.Process(target=_clipper_child, args=(case, bound, send), daemon=True)
+    child.start()
+    send.close()
+    deadline = None if bound.seconds is None else 5 * bound.seconds + 60  # wall time: contention
+    started: float | None = None
+    answer: ClipperRun | None = None
+    while True:  # messages: the CPU time at the start, then the answer
+        if not receive.poll(deadline):
+            break
+        try:
+            message = receive.recv()
+        except EOFError:
+            break
+        if isinstance(message, ClipperRun):
+            answer = message
+            break
+        started = message
+    if answer is None:  # killed by the CPU limit (SIGXCPU), or out of wall time
+        cpu = _cpu_seconds(child.pid) if child.is_alive() else None
+        if child.is_alive():
+            child.kill()
+        child.join()
+        spent = cpu if cpu is not None else (bound.seconds or 0.0)
+        answer = ClipperRun((spent - (started or 0.0)) * 1e3, over="time")
+        if child.exitcode not in (-signal.SIGXCPU, -signal.SIGKILL):
+            answer.over = f"exit {child.exitcode}"
+    child.join()
+    receive.close()
+    return answer
+
+
+def _clipper_child(case: Case, bound: Bound, send) -> None:
+    if bound.seconds is not None:
+        limit = math.ceil(time.process_time() + bound.seconds)
+        resource.setrlimit(resource.RLIMIT_CPU, (limit, limit + 5))
+    if bound.mb is not None:  # address space: what the process has mapped so far and the bound
+        size = _status("VmSize") + bound.mb * 2**20
+        resource.setrlimit(resource.RLIMIT_AS, (int(size), int(size)))
+    rss = _reset_peak()
+    start = time.process_time()
+    send.send(start)
+    try:
+        answer = ClipperBaseline(case.first, local_up=case.second.up).update(list(case.second))
+    except MemoryError:
+        ms = (time.process_time() - start) * 1e3
+        peak = (_status("VmHWM") - rss) / 2**20
+        send.send(ClipperRun(ms, peak_mb=peak, over="memory", bound_mb=bound.mb or float("nan")))
+        return
+    ms = (time.process_time() - start) * 1e3
+    success = answer.pose is not None and is_success(answer.pose, case.truth)
+    send.send(ClipperRun(ms, success, (_status("VmHWM") - rss) / 2**20))
+
+
+def _status(key: str) -> float:
+    """A size (bytes) from /proc/self/status."""
+    with open("/proc/self/status") as status:
+        for line in status:
+            if line.startswith(key + ":"):
+                return float(line.split()[1]) * 1024
+    return float("nan")
+
+
+def _reset_peak() -> float:
+    """Resets the resident peak (VmHWM) to the resident size, which it returns."""
+    try:
+        with open("/proc/self/clear_refs", "w") as clear:
+            clear.write("5")
+    except OSError:
+        pass
+    return _status("VmRSS")
+
+
+def _cpu_seconds(pid: int) -> float | None:
+    try:
+        with open(f"/proc/{pid}/stat") as stat:
+            fields = stat.read().rpartition(")")[2].split()
+        return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+    except (OSError, IndexError, ValueError):
+        return None
 
 
 def peak_mb(case: Case) -> float:
@@ -161,9 +281,10 @@ def first_maps(real: bool, seed: int) -> dict[str, ObjectMap]:
 def table(outcomes: list[Outcome], memory: dict[int, float]) -> str:
     lines = [
         "| objects | variant | cases | success | localized / wrong / ambiguous "
-        "| pairs precision / recall | median / p90 ms "
-        "| CLIPPER-style success | CLIPPER-style median ms | time ÷ CLIPPER | peak MB |",
-        "|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+        "| pairs precision / recall | median / p90 ms | peak MB "
+        "| CLIPPER-style success (cases) | CLIPPER-style median ms | CLIPPER-style peak MB "
+        "| time ÷ CLIPPER |",
+        "|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for size in sorted({o.size for o in outcomes}):
         for variant in VARIANTS:
@@ -171,25 +292,44 @@ def table(outcomes: list[Outcome], memory: dict[int, float]) -> str:
             if not group:
                 continue
             ms = [o.ms for o in group]
-            versus = [o for o in group if o.clipper_ms is not None]
-            ratio = "-"
-            clipper_success = clipper_ms = "-"
-            if versus:
-                mine = np.median([o.ms for o in versus])
-                theirs = np.median([o.clipper_ms for o in versus])
-                ratio = f"{mine / theirs:.2f}"
-                clipper_success = (
-                    f"{np.mean([o.clipper_success for o in versus]):.0%} ({len(versus)})"
-                )
-                clipper_ms = f"{theirs:.0f}"
             lines.append(
                 f"| {size} | {variant} | {len(group)} | {np.mean([o.success for o in group]):.0%} | "
                 f"{_statuses(group)} | "
                 f"{np.mean([o.precision for o in group]):.0%} / {np.mean([o.recall for o in group]):.0%} | "
-                f"{np.median(ms):.0f} / {np.percentile(ms, 90):.0f} | {clipper_success} | "
-                f"{clipper_ms} | {ratio} | {memory.get(size, float('nan')):.1f} |"
+                f"{np.median(ms):.0f} / {np.percentile(ms, 90):.0f} | "
+                f"{memory.get(size, float('nan')):.1f} | {_versus(group)} |"
             )
     return "\n".join(lines)
+
+
+def _versus(group: list[Outcome]) -> str:
+    """The baseline's cells over the cases it ran on: success (over those it finished; how many
+    it ran on), median ms, peak MB, and semloc's median ms over the same cases ÷ its median.
+    An unfinished run counts as at least the time it took: a median that is only bounded
+    reads `> t`, the ratio `< r`; a run stopped by the memory bound makes the peak `> bound`
+    and, when the median is not reached, the time `out of memory` (no ratio)."""
+    versus = [o for o in group if o.clipper is not None]
+    if not versus:
+        return "- | - | - | -"
+    runs = [o.clipper for o in versus]
+    done = [r for r in runs if r.over is None]
+    success = f"{np.mean([r.success for r in done]):.0%}" if done else "-"
+    count = f"{len(versus)}" if len(done) == len(runs) else f"{len(done)} of {len(runs)} finished"
+    exact = float(np.median([r.ms if r.over is None else np.inf for r in runs]))
+    theirs = exact if np.isfinite(exact) else float(np.median([r.ms for r in runs]))
+    mine = float(np.median([o.ms for o in versus]))
+    bounded = "" if np.isfinite(exact) else "> "
+    over_memory = [r for r in runs if r.over == "memory"]
+    peaks = [r.peak_mb for r in done if np.isfinite(r.peak_mb)]
+    peak = (
+        f"> {min(r.bound_mb for r in over_memory):.0f}"
+        if over_memory
+        else (f"{np.median(peaks):.0f}" if peaks else "-")
+    )
+    if bounded and over_memory:  # stopped by the memory bound: its time says nothing
+        return f"{success} ({count}) | out of memory | {peak} | -"
+    ratio = f"{'< ' if bounded else ''}{mine / theirs:.2g}"
+    return f"{success} ({count}) | {bounded}{theirs:.0f} | {peak} | {ratio}"
 
 
 def _statuses(group: list[Outcome]) -> str:
@@ -216,6 +356,25 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--no-real", action="store_true", help="simulated buildings only")
     parser.add_argument("--no-clipper", action="store_true", help="semloc only")
+    parser.add_argument(
+        "--clipper-cases",
+        type=int,
+        default=1,
+        help="the baseline's cases per size and variant on the buildings (the first scored ones; "
+        "it runs on every real-sample case)",
+    )
+    parser.add_argument(
+        "--clipper-budget",
+        type=float,
+        default=120.0,
+        help="CPU seconds the baseline may take per case (0: no bound)",
+    )
+    parser.add_argument(
+        "--clipper-memory",
+        type=float,
+        default=6144.0,
+        help="MB the baseline may allocate per case (0: no bound)",
+    )
     parser.add_argument("--markdown", help="also write the table to this file")
     args = parser.parse_args(argv)
     if hasattr(os, "sched_setaffinity"):
@@ -225,16 +384,23 @@ def main(argv: list[str] | None = None) -> int:
     maps = first_maps(not args.no_real, args.seed)
     warm = second_session(maps["building-0"], 20, "clean", np.random.default_rng(1))
     semloc.align(warm.first, warm.second)  # loads the compiled code
-    outcomes, memory = [], {}
+    if not args.no_clipper:  # the baseline's too, before its runs are forked from this process
+        warm_clipper(maps["building-0"])
+    bound = Bound(args.clipper_budget or None, args.clipper_memory or None)
+    outcomes, memory, on_buildings = [], {}, {}
     for size in args.sizes:
         for source, full in maps.items():
             if size > len(full):
                 continue
-            clipper = not args.no_clipper and not source.startswith("building")
             for variant in VARIANTS:
                 for _ in range(args.trials):
                     case = second_session(full, size, variant, rng)
-                    outcomes.append(run_case(source, case, variant, clipper))
+                    clipper = not args.no_clipper
+                    if clipper and source.startswith("building"):
+                        ran = on_buildings.get((size, variant), 0)
+                        clipper = ran < args.clipper_cases and len(case.pairs) >= MIN_SHARED
+                        on_buildings[(size, variant)] = ran + clipper
+                    outcomes.append(run_case(source, case, variant, bound if clipper else None))
                     if size not in memory and source.startswith("building"):
                         memory[size] = peak_mb(case)
         print(f"done {size} objects", file=sys.stderr)

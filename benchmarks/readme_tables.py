@@ -67,7 +67,10 @@ JOBS = {
         "PYTHONPATH=src python benchmarks/calibrate_confidence.py --sequences 3 --starts 4 "
         "--holdout-sequences 2 --markdown {out}"
     ),
-    "align": Job("PYTHONPATH=src python benchmarks/bench_align.py --trials 5 --markdown {out}"),
+    "align": Job(
+        "PYTHONPATH=src python benchmarks/bench_align.py --trials 5 --clipper-cases 1 "
+        "--clipper-budget 120 --clipper-memory 6144 --markdown {out}"
+    ),
     "bench": Job(
         "semloc bench --methods semloc,clipper,random-walk,segmatch,fpfh-ransac,semloc+geometric,"
         "semloc+voxnet --out {out}",
