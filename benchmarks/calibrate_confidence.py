@@ -64,24 +64,22 @@ def reliability_table(name: str, samples, model) -> str:
              "| observed right |", "|---|---|---|---|"]  # fmt: skip
     for lo, hi, n, p, o in reliability(predicted, right):
         lines.append(f"| {lo:.1f}-{hi:.1f} | {n} | {p:.3f} | {o:.3f} |")
-    claims = [(s, c) for s, c in best_of_answers(samples, model)
-              if c >= model.min_confidence and s.pairs >= 3 and s.fitness >= 0.3]  # fmt: skip
+    claimed = claims(samples, model, model.min_confidence)
     answers = len({s.answer for s in samples})
-    right_claims = sum(s.right for s, _ in claims)
+    right_claims = sum(s.right for s in claimed)
     lines.append(
         f"\nclaims at min_confidence {model.min_confidence:.3f}: {right_claims} right, "
-        f"{len(claims) - right_claims} wrong, of {answers} answers"
+        f"{len(claimed) - right_claims} wrong, of {answers} answers"
     )
     return "\n".join(lines)
 
 
 def claims_line(name: str, samples, model) -> str:
     """Claims right / wrong at the operating point among the answers of `samples`."""
-    claims = [s for s, c in best_of_answers(samples, model)
-              if c >= model.min_confidence and s.pairs >= 3 and s.fitness >= 0.3]  # fmt: skip
-    right = sum(s.right for s in claims)
+    claimed = claims(samples, model, model.min_confidence)
+    right = sum(s.right for s in claimed)
     answers = len({s.answer for s in samples})
-    return f"  {name}: {right} right, {len(claims) - right} wrong claims of {answers} answers"
+    return f"  {name}: {right} right, {len(claimed) - right} wrong claims of {answers} answers"
 
 
 def real_use(real_views: int, vocabulary_views: int) -> list:

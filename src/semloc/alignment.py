@@ -57,6 +57,7 @@ from semloc.decision import (
     decide,
     distinct,
     local_anchor,
+    same_place_index,
     score_confidence,
     shipped_model,
 )
@@ -216,18 +217,10 @@ class _Aligner:
         return [h for h in result.hypotheses[: self.alignment.per_view] if h.pose is not None]
 
     def _place_of(self, pose: np.ndarray, grown: list[Hypothesis]) -> int | None:
-        """The index of the first grown place at `pose`, or None: `same_place`'s pose test
-        (rotation and translation at B's centroid), on all grown places at once."""
-        if not grown:
-            return None
-        poses = np.stack([h.pose for h in grown])
-        point = np.append(local_anchor(self.b_xyz), 1.0)
-        shift = np.linalg.norm((poses - pose) @ point, axis=1)
-        cos = (np.einsum("ij,kij->k", pose[:3, :3], poses[:, :3, :3]) - 1.0) / 2.0
-        angle = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
-        decision = self.config.decision
-        same = (angle < decision.distinct_rotation_deg) & (shift < decision.distinct_translation)
-        return int(np.argmax(same)) if same.any() else None
+        """The index of the first grown place at `pose` (`same_place`'s pose test, at B's
+        centroid), or None."""
+        poses = np.array([h.pose for h in grown]).reshape(-1, 4, 4)
+        return same_place_index(pose, poses, self.config.decision, local_anchor(self.b_xyz))
 
     def _settled(self, grown: list[Hypothesis], votes: list[set[int]]) -> bool:
         """Whether more views are not needed: the best grown place scores at least

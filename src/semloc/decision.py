@@ -217,18 +217,12 @@ def distinct(
     chosen: list[int] = []
     pair_sets: list[set] = []
     poses = np.zeros((0, 4, 4))
-    point = None if anchor is None else np.append(np.asarray(anchor, dtype=float), 1.0)
-    max_cos = math.cos(math.radians(config.distinct_rotation_deg))  # a screen, then exact
     for i, (pairs, pose) in enumerate(places):
         if pairs:
             mine = set(pairs)
             if any(mine <= other for other in pair_sets):
                 continue
-        if (
-            pose is not None
-            and len(poses)
-            and _near_any(pose, poses, anchor, point, config, max_cos)
-        ):
+        if pose is not None and same_place_index(pose, poses, config, anchor) is not None:
             continue
         chosen.append(i)
         if len(chosen) == top_k:
@@ -239,22 +233,28 @@ def distinct(
     return chosen
 
 
-def _near_any(pose, poses, anchor, point, config: DecisionConfig, max_cos: float) -> bool:
-    """Whether `pose` is the same place as any of `poses` by `same_place`'s pose test: a
-    batched screen with a margin, then the exact test on the poses that pass it."""
-    pose = np.asarray(pose, dtype=float)
-    if point is None:
+def same_place_index(
+    pose: np.ndarray, poses: np.ndarray, config: DecisionConfig, anchor: np.ndarray | None = None
+) -> int | None:
+    """The index of the first of `poses` (K, 4, 4) at the same place as `pose` by
+    `same_place`'s pose test, or None: a batched screen with a margin, then the exact test on
+    the poses that pass it."""
+    pose, poses = np.asarray(pose, dtype=float), np.asarray(poses, dtype=float).reshape(-1, 4, 4)
+    if not len(poses):
+        return None
+    if anchor is None:
         shift = np.linalg.norm(poses[:, :3, 3] - pose[:3, 3], axis=1)
     else:
-        shift = np.linalg.norm((pose - poses) @ point, axis=1)
+        shift = np.linalg.norm((pose - poses) @ np.append(np.asarray(anchor, float), 1.0), axis=1)
     near = np.flatnonzero(shift < config.distinct_translation + _SCREEN_MARGIN)
     if not len(near):
-        return False
+        return None
     cos = (np.einsum("ji,kji->k", pose[:3, :3], poses[near, :3, :3]) - 1.0) / 2.0
-    return any(
-        same_place(((), pose), ((), poses[near[k]]), config, anchor)
-        for k in np.flatnonzero(cos > max_cos - _SCREEN_MARGIN).tolist()
-    )
+    max_cos = math.cos(math.radians(config.distinct_rotation_deg))
+    for k in np.flatnonzero(cos > max_cos - _SCREEN_MARGIN).tolist():
+        if same_place(((), pose), ((), poses[near[k]]), config, anchor):
+            return int(near[k])
+    return None
 
 
 _SCREEN_MARGIN = 1e-6

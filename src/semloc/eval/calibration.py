@@ -282,12 +282,22 @@ def best_of_answers(samples: list[Sample], model: ConfidenceModel) -> list[tuple
     return [(s, c) for _, s, c in best.values()]
 
 
-def claims(samples: list[Sample], model: ConfidenceModel, threshold: float) -> list[Sample]:
-    """The best hypotheses of the answers of `samples` that would be claimed at `threshold`
-    (>= min_pairs, >= min_fitness)."""
+def _claimable(sample: Sample) -> bool:
+    """Whether the decision's gates let a best hypothesis be claimed (>= min_pairs, >=
+    min_fitness), its confidence aside."""
     gate = DecisionConfig(min_confidence=0.5)
-    return [s for s, c in best_of_answers(samples, model) if c >= threshold
-            and s.pairs >= gate.min_pairs and s.fitness >= gate.min_fitness]  # fmt: skip
+    return sample.pairs >= gate.min_pairs and sample.fitness >= gate.min_fitness
+
+
+def _ranked_claims(samples: list[Sample], model: ConfidenceModel) -> list[tuple[float, bool]]:
+    """(confidence, right) of the claimable best hypotheses of the answers, surest first."""
+    found = [(c, s.right) for s, c in best_of_answers(samples, model) if _claimable(s)]
+    return sorted(found, key=lambda x: -x[0])
+
+
+def claims(samples: list[Sample], model: ConfidenceModel, threshold: float) -> list[Sample]:
+    """The best hypotheses of the answers of `samples` that would be claimed at `threshold`."""
+    return [s for s, c in best_of_answers(samples, model) if c >= threshold and _claimable(s)]
 
 
 def best_operating_point(
@@ -297,14 +307,8 @@ def best_operating_point(
     answers of `samples` right while its claims stay right at least `precision` of the time,
     and that share (1.0, 0.0 when none does): what this confidence could give on these
     attempts alone, e.g. as `min_confidence` for a user who knows the world is static."""
-    gate = DecisionConfig(min_confidence=0.5)
-    ordered = sorted(
-        ((c, s.right) for s, c in best_of_answers(samples, model)
-         if s.pairs >= gate.min_pairs and s.fitness >= gate.min_fitness),
-        key=lambda x: -x[0],
-    )  # fmt: skip
     best, threshold, right = 0, 1.0, 0
-    for n, (c, ok) in enumerate(ordered, 1):
+    for n, (c, ok) in enumerate(_ranked_claims(samples, model), 1):
         right += ok
         if right / n >= precision and right > best:
             best, threshold = right, c
@@ -320,17 +324,12 @@ def operating_point(samples: list[Sample], model: ConfidenceModel, precision: fl
 
 
 def _threshold(samples: list[Sample], model: ConfidenceModel, precision: float) -> float:
-    gate = DecisionConfig(min_confidence=0.5)
-    claims = sorted(
-        ((c, s.right) for s, c in best_of_answers(samples, model)
-         if s.pairs >= gate.min_pairs and s.fitness >= gate.min_fitness),
-        reverse=True,
-    )  # fmt: skip
+    ranked = _ranked_claims(samples, model)
     threshold, right = 1.0, 0
-    for n, (c, ok) in enumerate(claims, 1):
+    for n, (c, ok) in enumerate(ranked, 1):
         right += ok
         if right / n >= precision:
-            threshold = c if n < len(claims) else 0.0  # all claims hold: no bound from here
+            threshold = c if n < len(ranked) else 0.0  # all claims hold: no bound from here
     return float(min(max(threshold, 0.5), 0.999))
 
 
