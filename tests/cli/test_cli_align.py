@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 
 import numpy as np
 import pytest
@@ -75,3 +76,77 @@ def test_align_settings_are_checked_in_one_line(sessions, capsys):
         assert main(["align", str(out / "a.json"), str(out / "b.json"), "--gamma", value]) == 2
         err = capsys.readouterr().err.strip()
         assert err.startswith("semloc: error:") and "gamma" in err and "\n" not in err
+
+
+def _with_points(objmap: ObjectMap) -> ObjectMap:
+    """`objmap` with a small cloud of 4 points around every object's centre."""
+    offsets = np.array([[0.1, 0, 0], [-0.1, 0, 0], [0, 0.1, 0], [0, -0.1, 0.2]])
+    return ObjectMap([o.replace(points=o.position + offsets) for o in objmap], up=objmap.up)
+
+
+@pytest.mark.parametrize(
+    ("options", "named", "why"),
+    [
+        (["-o", "a.json"], "a.json", "would overwrite map A, an input"),
+        (["--merged", "b.json"], "b.json", "would overwrite map B, an input"),
+        (["-o", "x.json", "--g2o", "./a.json"], "a.json", "would overwrite map A, an input"),
+        # a map written to `a` puts its points in a.points.npz, the points file A names
+        (["-o", "a"], "a.points.npz", "would overwrite the points file of map A, an input"),
+        (["-o", "x.json", "--merged", "x.points.npz"], "x.points.npz", "would both write it"),
+        (["-o", "x.json", "--g2o", "x.points.npz"], "x.points.npz", "would both write it"),
+        (["-o", "x.json", "--result", "x.json"], "x.json", "would both write it"),
+        (["--config", "c.json", "--result", "c.json"], "c.json", "would overwrite the --config"),
+    ],
+)
+def test_an_output_over_an_input_or_another_outputs_file_is_refused(
+    tmp_path, capsys, options, named, why
+):
+    a = _with_points(room(30))
+    semloc.save_map(a, tmp_path / "a.json", points="file")
+    semloc.save_map(_with_points(second_session(a, slice(5, 30))), tmp_path / "b.json")
+    (tmp_path / "c.json").write_text("{}")
+    before = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
+    argv = [str(tmp_path / o) if o.endswith(("json", "npz", "a")) else o for o in options]
+    assert main(["align", str(tmp_path / "a.json"), str(tmp_path / "b.json"), *argv]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("semloc: error:") and "\n" not in err
+    assert f"{named}:" in err and why in err
+    assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before  # nothing written
+
+
+@pytest.mark.skipif(not os.path.exists("/dev/full"), reason="no /dev/full")
+def test_one_output_that_cannot_be_written_leaves_no_other(sessions, capsys):
+    out = sessions
+    argv = ["align", str(out / "a.json"), str(out / "b.json"), "-o", str(out / "b_in_a.json"),
+            "--merged", str(out / "m.json"), "--g2o", "/dev/full"]  # fmt: skip
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == "semloc: error: /dev/full: cannot write (No space left on device)"
+    assert not (out / "b_in_a.json").exists() and not (out / "m.json").exists()
+
+
+@pytest.mark.parametrize("keep", [slice(0, 0), slice(0, 1)])
+def test_an_empty_b_or_one_with_one_object_fails_and_writes_nothing(sessions, capsys, keep):
+    out = sessions
+    semloc.save_map(second_session(room(30), keep), out / "small.json")
+    argv = ["align", str(out / "a.json"), str(out / "small.json"), "-o", str(out / "x.json")]
+    assert main(argv) == 0
+    text = capsys.readouterr().out
+    assert "status: failed" in text and "too few local objects" in text and "not written" in text
+    assert not (out / "x.json").exists()
+
+
+def test_a_b_with_another_up_is_written_in_as_frame(sessions):
+    out = sessions
+    z_to_y = np.array([[1.0, 0, 0, 0], [0, 0, 1, 0], [0, -1, 0, 0], [0, 0, 0, 1]])
+    b = semloc.load_map(out / "b.json").transformed(z_to_y)  # B's frame with y up
+    np.testing.assert_allclose(b.up, [0, 1, 0], atol=1e-12)
+    semloc.save_map(b, out / "b_y.json")
+    argv = ["align", str(out / "a.json"), str(out / "b_y.json"), "-o", str(out / "b_in_a.json")]
+    assert main(argv) == 0
+    a, b_in_a = semloc.load_map(out / "a.json"), semloc.load_map(out / "b_in_a.json")
+    np.testing.assert_allclose(b_in_a.up, a.up, atol=1e-6)
+    for obj in b_in_a:
+        np.testing.assert_allclose(
+            obj.position, a.get(obj.id.replace("b", "a")).position, atol=1e-5
+        )

@@ -3,7 +3,8 @@
 B is aligned into A (`semloc.align`); `-o` gets B in A's frame (same ids), `--merged` one map
 with every object once and its provenance (`semloc.tools.merge`), `--g2o` the relative pose as
 one `EDGE_SE3:QUAT` line with its information matrix (`semloc.io.g2o`), `--result` the Result as
-JSON (the shape of `semloc localize --format json`).  All of them are written or none.  When B
+JSON (the shape of `semloc localize --format json`).  All of them are written or none, and
+none may be an input or another output's file (a map's points file included).  When B
 cannot be placed (status `failed`, or `ambiguous` unless `--accept-ambiguous`) the result and
 its reason are printed, no map or edge is written, and the exit status is still 0: the inputs
 were valid.
@@ -22,11 +23,11 @@ from pydantic import ValidationError
 from semloc.alignment import align as run_align
 from semloc.alignment import pose_information
 from semloc.cli.app import app, console, fail, first_error
-from semloc.cli.files import check_finite, check_output, read_config
+from semloc.cli.files import check_finite, check_output, check_separate, map_paths, read_config
 from semloc.cli.render import print_result
 from semloc.io import load_map
 from semloc.io.g2o import edge_line
-from semloc.io.native import map_files, write_files
+from semloc.io.native import map_files, points_path, write_files
 from semloc.localizer import LocalizerConfig
 from semloc.maps import ObjectMap
 from semloc.results import Result
@@ -48,7 +49,10 @@ def align(
     ] = None,
     g2o: Annotated[
         Path | None,
-        typer.Option("--g2o", help="Write the relative pose as one g2o EDGE_SE3:QUAT line."),
+        typer.Option(
+            "--g2o",
+            help="Write T_A_B and its information matrix as one g2o EDGE_SE3:QUAT line.",
+        ),
     ] = None,
     result_file: Annotated[
         Path | None, typer.Option("--result", help="Write the Result as JSON to this file.")
@@ -67,15 +71,17 @@ def align(
         ),
     ] = False,
 ) -> None:
-    """Align map B into map A: the transform T_A_B, the correspondences, and B in A's frame."""
+    """Align map B into map A: the transform T_A_B, the correspondences, and B in A's frame.
+
+    Only --result is written unless B is placed: `localized` (or `ambiguous`, --accept-ambiguous).
+
+    The files are written all or none; none may be an input or another output's file.
+    """
     check_finite(gamma=gamma)
     targets = {"--output": output, "--merged": merged, "--g2o": g2o, "--result": result_file}
     for option, path in targets.items():
         if path is not None:
             check_output(path, option)
-    given = [p.resolve() for p in targets.values() if p is not None]
-    if len(set(given)) < len(given):
-        fail("--output, --merged, --g2o and --result must name different files")
     settings = read_config(config)
     if gamma is not None:
         settings["gamma"] = gamma
@@ -84,6 +90,13 @@ def align(
     except ValidationError as exc:
         fail(f"invalid settings: {first_error(exc)}")
     a, b = load_map(map_a), load_map(map_b)
+    writes = {
+        option: [path, points_path(path)] if option in ("--output", "--merged") else [path]
+        for option, path in targets.items()
+        if path is not None
+    }
+    inputs = {**map_paths(map_a, a, "map A"), **map_paths(map_b, b, "map B")}
+    check_separate(writes, inputs | ({config: "the --config file"} if config else {}))
     result = run_align(a, b, cfg)
     print_result(result, console)
     placed = result.status == "localized" or (accept_ambiguous and result.status == "ambiguous")

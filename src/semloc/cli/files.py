@@ -14,7 +14,7 @@ import yaml
 from semloc.cli.app import fail
 from semloc.io import read_json, read_regular
 from semloc.io.native import MAX_JSON_BYTES, document_kind
-from semloc.maps import MAX_COORDINATE
+from semloc.maps import MAX_COORDINATE, ObjectMap
 from semloc.results import STATUSES
 from semloc.transforms import as_pose
 
@@ -182,6 +182,34 @@ def check_output(path: Path, option: str = "--output") -> Path:
     if not path.parent.is_dir():
         fail(f"{path}: folder {path.parent} does not exist ({option})")
     return path
+
+
+def map_paths(path: Path, objmap: ObjectMap, what: str) -> dict[Path, str]:
+    """The files the map `what` was read from (the JSON and the points file it names), each
+    with what it is."""
+    points_file = objmap.extra.get("points_file")
+    if not isinstance(points_file, str):
+        return {path: what}
+    return {path: what, path.parent / points_file: f"the points file of {what}"}
+
+
+def check_separate(outputs: dict[str, list[Path]], inputs: dict[Path, str]) -> None:
+    """Refuse, in one line, two outputs that would write one file, or an output that would
+    overwrite an input (`outputs`: option -> the files it writes, a map's points file too;
+    `inputs`: file -> what it is).  Written over, an input map is lost, and its points file
+    written over leaves the map naming the points of other objects."""
+    read = {path.resolve(): what for path, what in inputs.items()}
+    written: dict[Path, str] = {}
+    for option, paths in outputs.items():
+        for path in paths:
+            key = path.resolve()
+            if key in read:
+                fail(f"{path}: {option} would overwrite {read[key]}, an input")
+            if written.setdefault(key, option) != option:
+                fail(
+                    f"{path}: {written[key]} and {option} would both write it; "
+                    "they must name different files"
+                )
 
 
 def check_finite(**options: float | tuple[float, ...] | None) -> None:

@@ -6,7 +6,8 @@ The measurement is T_a_b (B's frame in A's: p_a = R p_b + t); the 21 numbers are
 triangle of the 6x6 information matrix, row by row, in g2o's error order (translation, then the
 imaginary part of the error quaternion).  `semloc.alignment.pose_information` gives it for a
 right perturbation by a rotation vector δθ; the quaternion's imaginary part is δθ / 2, so the
-rotation rows and columns are scaled by 2 here.
+rotation rows and columns are scaled by 2 here.  The quaternion is the unit one with qw >= 0,
+the one of the two that g2o normalises to.
 """
 
 from __future__ import annotations
@@ -38,6 +39,8 @@ def parse_edge(line: str) -> tuple[int, int, np.ndarray, np.ndarray]:
         raise ValueError(f"not an {TAG} line with 30 numbers")
     id_a, id_b = int(fields[1]), int(fields[2])
     values = np.array(fields[3:], dtype=float)
+    if not np.all(np.isfinite(values)):
+        raise ValueError(f"an {TAG} line with a non-finite number")
     pose = np.eye(4)
     pose[:3, 3] = values[:3]
     pose[:3, :3] = Rotation.from_quat(values[3:7]).as_matrix()

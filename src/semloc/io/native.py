@@ -424,6 +424,13 @@ def _list(array: np.ndarray) -> list:
     return np.where(np.isfinite(rounded), rounded, array).tolist()
 
 
+def points_path(path: str | os.PathLike[str]) -> Path:
+    """Where `save_map` puts the points of a map written to `path` when they go to a file:
+    `<name without .json>.points.npz` beside it."""
+    path = Path(path)
+    return path.parent / (path.name.removesuffix(".json") + ".points.npz")
+
+
 def map_files(
     objmap: ObjectMap, path: str | os.PathLike[str], points: str = "auto"
 ) -> list[tuple[Path, bytes]]:
@@ -437,13 +444,13 @@ def map_files(
     document = map_to_dict(objmap, inline_points=not use_file)
     files: list[tuple[Path, bytes]] = []
     if use_file:
-        npz_name = path.name.removesuffix(".json") + ".points.npz"
+        npz_path = points_path(path)
         buffer = io.BytesIO()
         np.savez_compressed(
             buffer, **{o.id: o.points.astype(np.float32) for o in objmap if o.points is not None}
         )
-        files.append((path.parent / npz_name, buffer.getvalue()))
-        document["points_file"] = npz_name
+        files.append((npz_path, buffer.getvalue()))
+        document["points_file"] = npz_path.name
     try:
         text = json.dumps(document, indent=1, allow_nan=False) + "\n"
     except (ValueError, TypeError) as exc:
