@@ -7,36 +7,42 @@ once" in `clustering.py`).  `align` bounds that work and keeps the paper's algor
 is cheap:
 
 1. **Seeds.**  A small B (at most `whole_below` objects) is one Localizer update with every
-   object: its answer is the paper's algorithm's (status, places, poses, confidence, whose
-   evidence is made for a few objects), each place's pairs completed by guided matching
-   under its pose (step 2's narrowest radius).  A larger B is localized in up to
-   `views` seed views: the first `rare_views` are centred on B's most distinctive objects (the
-   fewest candidates in A: a fridge anchors a view in the kitchen, where a chair fits every
-   classroom), at least 3 m apart, the others spread over B by farthest-point sampling (where
-   A overlaps only part of B, views centred on rare objects alone may all fall outside it: an
-   object A lacks has one candidate fewer, so it looks rarer); each holds the `view_size`
-   objects of B nearest to its centre and is one Localizer update against A (clustering,
-   verification, pose recovery): a local map like a robot's, the case the Localizer is made
-   for.
+   object (the paper's algorithm), its `whole_places` best distinct places the seeds.  A
+   larger B is localized in up to `views` seed views: the first `rare_views` are centred on
+   B's most distinctive objects (the fewest candidates in A: a fridge anchors a view in the
+   kitchen, where a chair fits every classroom), at least 3 m apart, the others spread over
+   B by farthest-point sampling (where A overlaps only part of B, views centred on rare
+   objects alone may all fall outside it: an object A lacks has one candidate fewer, so it
+   looks rarer); each holds the `view_size` objects of B nearest to its centre and is one
+   Localizer update against A (clustering, verification, pose recovery): a local map like a
+   robot's, the case the Localizer is made for.
 2. **Growth by guided matching.**  Every distinct place of the seeds (the `per_view` best of
    each view) places all of B in A's frame; each object of B is paired with the nearest object
    of A it may be (the Localizer's candidates: labels, label map, descriptor gate), mutual
    nearest within a radius, and the pose is refitted on the pairs (closed form, robust:
    `refits` rounds weighted by each pair's distance); one pass per radius of `match_radii`,
-   wide to narrow.  In maps of repeated rooms a view fits several places and the right one is
-   rarely a view's best, but grown over B it fits the most.
+   wide to narrow, or the narrowest alone, whichever scores more (step 3): a wide pass
+   reaches B's far objects from a seed a few degrees off, and pairs close objects of one
+   kind crosswise from a seed that is right.  In maps of repeated rooms a view fits several
+   places and the right one is rarely a view's best, but grown over B it fits the most.
 3. **Score.**  A grown place scores its agreeing pairs: each pair counts 1 - (d / fit_radius)²
    by the distance d of its centres, nothing beyond.  Not the number of pairs: a place
    shifted into a twin room pairs B's objects with twins a few decimetres off, and it pairs
    more of them than the right place where A's session saw less of B than the twin room holds.
-4. **Decision.**  The grown places are ranked by their score (then centre residual) and merged
-   when they are the same place; each keeps the evidence features of the view that seeded it
-   with its score as its pairs and its grown residual, the shipped confidence model scores
-   them against each other and `decision.decide` gives the status, as for a localization;
-   `localized` further needs the best place to score (1 + margin) times as much as any other
-   place.  Where two places fit B equally (identical rooms) the answer is `ambiguous`.
-   Views stop early once the best place scores `settled_pairs`, (1 + margin)² times as much
-   as any other, and `confirmations` views have found it.
+   When B is *precise* (a place pairs `precise_pairs` objects with a median distance below
+   `precise_below`: the same objects measured as precisely as A's), every place is scored at
+   `precise_fit_radius`: a similar room's objects a decimetre or two off no longer agree.
+4. **Decision.**  A small B that is not precise gets the Localizer's answer as it is (status,
+   places, poses, confidence: with noisy centres its point evidence ranks places better than
+   their centres do), each place's pairs completed by guided matching under its pose (step
+   2's narrowest radius).  Otherwise the grown places are ranked by their score (then centre
+   residual) and merged when they are the same place; each keeps the evidence features of
+   the view that seeded it with its score as its pairs and its grown residual, the shipped
+   confidence model scores them against each other and `decision.decide` gives the status,
+   as for a localization; `localized` further needs the best place to score (1 + margin)
+   times as much as any other place.  Where two places fit B equally (identical rooms) the
+   answer is `ambiguous`.  Views stop early once the best place scores `settled_pairs`,
+   (1 + margin)² times as much as any other, and `confirmations` views have found it.
 
 Work: `views` localizations of `view_size` objects, then per seed place one pass over B's
 candidate pairs per radius: linear in B's size (and in the number of same-label objects of A).
@@ -47,6 +53,7 @@ pairs (a pose-graph edge).  Pure computation on numpy arrays.
 from __future__ import annotations
 
 import time
+from collections.abc import Iterable
 from typing import Any
 
 import numpy as np
@@ -97,6 +104,26 @@ class AlignmentConfig(BaseModel):
         description="A grown place's score: each pair counts 1 - (d / fit_radius)² (d: the "
         "distance (m) of its centres under the place's pose), nothing beyond.",
     )
+    precise_below: float = Field(
+        0.05,
+        ge=0,
+        description="B counts as precise when one of its places pairs at least "
+        "`precise_pairs` objects with a median centre distance (m) below this: the same "
+        "objects measured twice (0: never).",
+    )
+    precise_pairs: int = Field(5, ge=3, description="See `precise_below`.")
+    precise_fit_radius: float = Field(
+        0.1,
+        gt=0,
+        description="The score's radius (in place of `fit_radius`) when B is precise: a twin "
+        "room's similar objects a decimetre or two off no longer count as agreeing.",
+    )
+    whole_places: int = Field(
+        30,
+        ge=1,
+        description="Distinct places of B whole that are grown (a twin room that pairs more "
+        "of a small B can rank the right place below the Localizer's usual ten).",
+    )
     confirmations: int = Field(
         2,
         ge=1,
@@ -140,21 +167,45 @@ class _Aligner:
         self.cand_b = np.repeat(np.arange(len(b)), [len(c) for c in candidates])
         self.cand_a = np.concatenate([*candidates, np.zeros(0, dtype=int)]).astype(int)
         self.b_xyz, self.a_xyz = b.positions, self.a.positions
+        self.a_row = {str(i): k for k, i in enumerate(self.a.ids)}
+        self.b_row = {str(i): k for k, i in enumerate(b.ids)}
         # the centres of every candidate pair, gathered once for the guided matching
         self.cand_b_xyz, self.cand_a_xyz = self.b_xyz[self.cand_b], self.a_xyz[self.cand_a]
 
     def run(self) -> Result:
-        if len(self.b) <= self.alignment.whole_below:
-            return self._whole()
         start = time.perf_counter()
         timing = {"association": 0.0, "clustering": 0.0, "pose": 0.0, "growth": 0.0}
+        small = len(self.b) <= self.alignment.whole_below
+        if small:
+            own = self._localized(np.arange(len(self.b)), timing, self.alignment.whole_places)
+            seeds: Iterable[list[Hypothesis]] = [self._seeds(own, self.alignment.whole_places)]
+        else:
+            seeds = (self._seeds_of(view, timing) for view in self._views())
+        grown, tried = self._grown_places(seeds, timing)
+        if small and not self._precise(grown):
+            return self._localizers_answer(own)
+        hypotheses = self._decided_places(grown)
+        status, reason = decide(hypotheses, self.config.decision, "residual")
+        if status == "localized":
+            status, reason = self._clearly_best(hypotheses)
+        if not hypotheses:
+            reason = "no view of the second map found a consistent set of 2 or more pairs"
+        timing["total"] = (time.perf_counter() - start) * 1e3
+        step = Step(step=0, n_local=len(self.b), n_sets=tried, ms=timing["total"],
+                    top_scores=[h.score for h in hypotheses][:10], status=status)  # fmt: skip
+        return Result.of(status, hypotheses[: self.config.top_k], [step], timing, reason)
+
+    def _grown_places(
+        self, seeds: Iterable[list[Hypothesis]], timing: dict[str, float]
+    ) -> tuple[list[Hypothesis], int]:
+        """The distinct places grown from each view's seeds, view after view until settled,
+        and how many seeds were grown."""
         grown: list[Hypothesis] = []
         votes: list[set[int]] = []  # the views that found each grown place
         tried = 0
-        for number, view in enumerate(self._views()):
-            seeds = self._seeds_of(view, timing)
+        for number, view_seeds in enumerate(seeds):
             tick = time.perf_counter()
-            for seed in seeds:
+            for seed in view_seeds:
                 known = self._place_of(seed.pose, grown)
                 if known is None:
                     tried += 1
@@ -169,29 +220,58 @@ class _Aligner:
             timing["growth"] += (time.perf_counter() - tick) * 1e3
             if self._settled(grown, votes):
                 break
-        hypotheses = self._decided_places(grown)
-        status, reason = decide(hypotheses, self.config.decision, "residual")
-        if status == "localized":
-            status, reason = self._clearly_best(hypotheses)
-        if not hypotheses:
-            reason = "no view of the second map found a consistent set of 2 or more pairs"
-        timing["total"] = (time.perf_counter() - start) * 1e3
-        step = Step(step=0, n_local=len(self.b), n_sets=tried, ms=timing["total"],
-                    top_scores=[h.score for h in hypotheses][:10], status=status)  # fmt: skip
-        return Result.of(status, hypotheses[: self.config.top_k], [step], timing, reason)
+        return grown, tried
 
-    def _whole(self) -> Result:
-        """A small B as one Localizer update: its answer (status, places, poses, confidence),
-        each place's pairs completed by guided matching under its pose."""
-        localizer = Localizer(self.prior, self.config, local_up=self.b.up)
-        result = localizer.update(list(self.b))
+    def _localized(
+        self, view: np.ndarray, timing: dict[str, float], places: int | None = None
+    ) -> Result:
+        """One Localizer update of the objects `view` of B against A (`places`: how many
+        distinct places it reports, from four times as many screened sets)."""
+        config = self.config
+        if places is not None and places > config.top_k:
+            screened = max(config.screened_sets, 4 * places)
+            config = config.model_copy(update={"top_k": places, "screened_sets": screened})
+        localizer = Localizer(self.prior, config, local_up=self.b.up)
+        result = localizer.update([self.b[int(i)] for i in view])
         assert result is not None
+        for stage in ("association", "clustering", "pose"):
+            timing[stage] += result.timing_ms.get(stage, 0.0)
+        return result
+
+    def _seeds(self, result: Result, places: int | None = None) -> list[Hypothesis]:
+        """The distinct places (with a pose) of one view's localization, best first."""
+        places = self.alignment.per_view if places is None else places
+        return [h for h in result.hypotheses[:places] if h.pose is not None]
+
+    def _seeds_of(self, view: np.ndarray, timing: dict[str, float]) -> list[Hypothesis]:
+        return self._seeds(self._localized(view, timing))
+
+    def _precise(self, places: list[Hypothesis]) -> bool:
+        """Whether one of `places` pairs `precise_pairs` objects or more with a median centre
+        distance below `precise_below`: B holds the same objects as A measured as precisely,
+        and a place whose pairs are a decimetre or two off is a twin, not a match."""
+        for h in places:
+            if h.pose is None or len(h.pairs) < self.alignment.precise_pairs:
+                continue
+            if (
+                np.median(self._distances(h.pose, self._rows(h.pairs)))
+                < self.alignment.precise_below
+            ):
+                return True
+        return False
+
+    def _localizers_answer(self, result: Result) -> Result:
+        """A small B's answer as one Localizer update of every object (status, its
+        `top_k` places, poses, confidence), each place's pairs completed by guided matching
+        under its pose."""
         tick = time.perf_counter()
-        for h in result.hypotheses:
+        hypotheses = result.hypotheses[: self.config.top_k]
+        for h in hypotheses:
             if h.pose is not None:
                 h.pairs = self._completed(h.pairs, h.pose)
-        result.timing_ms["growth"] = (time.perf_counter() - tick) * 1e3
-        return result
+        timing = {**result.timing_ms, "growth": (time.perf_counter() - tick) * 1e3}
+        return Result.of(result.status, hypotheses, result.steps, timing, result.reason,
+                         result.explain)  # fmt: skip
 
     def _completed(self, pairs: list[tuple[str, str]], pose: np.ndarray) -> list[tuple[str, str]]:
         """`pairs` and the guided matches under `pose` (narrowest radius) of objects they miss."""
@@ -206,15 +286,6 @@ class _Aligner:
         rarity = np.where(rarity == 0, np.iinfo(np.int64).max, rarity)  # no candidate: last
         return seed_views(self.b_xyz, self.alignment.views, self.alignment.view_size, rarity,
                           rare=self.alignment.rare_views)  # fmt: skip
-
-    def _seeds_of(self, view: np.ndarray, timing: dict[str, float]) -> list[Hypothesis]:
-        """The distinct places (with a pose) of one view's localization, best first."""
-        localizer = Localizer(self.prior, self.config, local_up=self.b.up)
-        result = localizer.update([self.b[int(i)] for i in view])
-        assert result is not None
-        for stage in ("association", "clustering", "pose"):
-            timing[stage] += result.timing_ms.get(stage, 0.0)
-        return [h for h in result.hypotheses[: self.alignment.per_view] if h.pose is not None]
 
     def _place_of(self, pose: np.ndarray, grown: list[Hypothesis]) -> int | None:
         """The index of the first grown place at `pose` (`same_place`'s pose test, at B's
@@ -252,22 +323,20 @@ class _Aligner:
         return "localized", ""
 
     def _grown(self, seed: Hypothesis) -> Hypothesis | None:
-        """The seed's place grown over all of B by guided matching; None if it has < 2 pairs."""
-        pose = seed.pose
-        pairs = np.zeros((0, 2), dtype=int)
-        for radius in self.alignment.match_radii:
-            found = self._matches(pose, radius)
-            if len(found) < 2:
-                break
-            pairs = found
-            try:
-                pose = self._refit(pose, pairs, radius)
-            except ValueError:  # under-determined: keep the last pose
-                break
+        """The seed's place grown over all of B by guided matching; None if it has < 2 pairs.
+
+        Grown twice, by passes at every radius of `match_radii` (wide to narrow) and by the
+        narrowest alone, the one that scores more kept: from a seed that is already right, a
+        wide pass among close objects of one kind (a row of chairs) pairs them crosswise and
+        can turn the pose by tens of degrees; from a seed a few degrees off, only the wide
+        passes reach B's far objects."""
+        radii = self.alignment.match_radii
+        schedules = [radii] if len(radii) == 1 else [radii, radii[-1:]]
+        grown = [self._passes(seed.pose, schedule) for schedule in schedules]
+        pose, pairs, score = max(grown, key=lambda place: place[2])
         if len(pairs) < 2:
             return None
         residual = centre_residual(pose, self.b_xyz[pairs[:, 1]], self.a_xyz[pairs[:, 0]])
-        score = self._score(pose, pairs)
         features = None
         if seed.features is not None:  # the agreeing pairs count as the pairs
             features = {**seed.features, "pairs": score, "residual": residual, "support": 0.0}
@@ -282,6 +351,23 @@ class _Aligner:
             features=features,
         )
 
+    def _passes(
+        self, pose: np.ndarray, radii: tuple[float, ...]
+    ) -> tuple[np.ndarray, np.ndarray, float]:
+        """Guided matching from `pose`, one pass per radius: the pose, its pairs and their
+        score (pairs: < 2 when the first pass finds fewer)."""
+        pairs = np.zeros((0, 2), dtype=int)
+        for radius in radii:
+            found = self._matches(pose, radius)
+            if len(found) < 2:
+                break
+            pairs = found
+            try:
+                pose = self._refit(pose, pairs, radius)
+            except ValueError:  # under-determined: keep the last pose
+                break
+        return pose, pairs, self._score(pose, pairs)
+
     def _refit(self, pose: np.ndarray, pairs: np.ndarray, radius: float) -> np.ndarray:
         """The closed-form pose of `pairs`, robust: `refits` rounds of weighted least squares,
         each pair weighted (1 - (d / radius)²)² by its distance d under the previous pose (one
@@ -295,15 +381,25 @@ class _Aligner:
             pose = align_positions(local, other, self.b.up, self.a.up, weights)
         return pose
 
-    def _score(self, pose: np.ndarray, pairs: np.ndarray) -> float:
-        """The agreeing pairs: each pair counts 1 - (d / fit_radius)², nothing beyond (d: the
-        distance of its centres under `pose`).  A place of a repeated room pairs B's objects
-        with twins a few decimetres off, the right place with the same objects: a count of
-        pairs alone prefers the twin room when it holds more of B's objects than A's
-        session saw."""
+    def _score(self, pose: np.ndarray, pairs: np.ndarray, radius: float | None = None) -> float:
+        """The agreeing pairs: each pair counts 1 - (d / radius)², nothing beyond (d: the
+        distance of its centres under `pose`; radius: `fit_radius` unless given).  A place of
+        a repeated room pairs B's objects with twins a few decimetres off, the right place
+        with the same objects: a count of pairs alone prefers the twin room when it holds
+        more of B's objects than A's session saw."""
+        radius = self.alignment.fit_radius if radius is None else radius
+        distance = self._distances(pose, pairs)
+        return float(np.sum(np.clip(1.0 - (distance / radius) ** 2, 0.0, None)))
+
+    def _distances(self, pose: np.ndarray, pairs: np.ndarray) -> np.ndarray:
+        """The distance of each pair's centres (rows: A index, B index) under `pose`."""
         moved = self.b_xyz[pairs[:, 1]] @ pose[:3, :3].T + pose[:3, 3]
-        distance = np.linalg.norm(moved - self.a_xyz[pairs[:, 0]], axis=1)
-        return float(np.sum(np.clip(1.0 - (distance / self.alignment.fit_radius) ** 2, 0.0, None)))
+        return np.linalg.norm(moved - self.a_xyz[pairs[:, 0]], axis=1)
+
+    def _rows(self, pairs: list[tuple[str, str]]) -> np.ndarray:
+        """(A index, B index) rows of (A id, B id) pairs."""
+        rows = [(self.a_row[g], self.b_row[l]) for g, l in pairs]
+        return np.array(rows, dtype=int).reshape(-1, 2)
 
     def _matches(self, pose: np.ndarray, radius: float) -> np.ndarray:
         """(A index, B index) pairs under `pose`: each object of B with the nearest object of A
@@ -321,7 +417,15 @@ class _Aligner:
 
     def _decided_places(self, grown: list[Hypothesis]) -> list[Hypothesis]:
         """Distinct places, the highest score first (then the smaller residual), ranked 1, 2,
-        ... and scored by the confidence model against each other."""
+        ... and scored by the confidence model against each other.  When B is precise
+        (`_precise`), every place is scored again at `precise_fit_radius`."""
+        if self._precise(grown):
+            for h in grown:
+                h.score = self._score(
+                    h.pose, self._rows(h.pairs), self.alignment.precise_fit_radius
+                )
+                if h.features is not None:
+                    h.features = {**h.features, "pairs": h.score}
         ordered = sorted(grown, key=lambda h: (-h.score, h.residual or 0.0))
         anchor = local_anchor(self.b_xyz)
         places = ((h.pairs, h.pose) for h in ordered)
