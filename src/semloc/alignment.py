@@ -436,6 +436,25 @@ class _Aligner:
         return kept
 
 
+def place_scores(
+    a: ObjectMap,
+    b: ObjectMap,
+    poses: list[np.ndarray],
+    config: LocalizerConfig | None = None,
+    alignment: AlignmentConfig | None = None,
+) -> list[float]:
+    """How well B fits A at each pose (T_A_B): B grown from the pose by guided matching as
+    `align` grows its seeds, and its agreeing pairs scored at `fit_radius` (0 when it pairs
+    fewer than 2 objects).  E.g. whether a wrong place fits B as well as the true one."""
+    aligner = _Aligner(a, b, config, alignment or AlignmentConfig(), {})
+    scores = []
+    for pose in poses:
+        seed = Hypothesis(rank=0, score=0.0, pairs=[], pose=np.asarray(pose, float), method="")
+        place = aligner._grown(seed)
+        scores.append(0.0 if place is None else place.score)
+    return scores
+
+
 def seed_views(
     xyz: np.ndarray,
     views: int,

@@ -10,7 +10,13 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import semloc
-from semloc.alignment import AlignmentConfig, _Aligner, pose_information, seed_views
+from semloc.alignment import (
+    AlignmentConfig,
+    _Aligner,
+    place_scores,
+    pose_information,
+    seed_views,
+)
 from semloc.eval.success import is_success
 from semloc.io.g2o import edge_line, parse_edge
 from semloc.io.importers.replica import load_replica
@@ -155,6 +161,16 @@ def test_growth_from_the_right_pose_keeps_it_among_close_objects_of_one_kind(rea
     rotation, translation = pose_error(place.pose, case.truth)
     assert rotation < 2.0 and translation < 0.1
     assert case.pairs <= set(place.pairs)
+
+
+def test_place_scores_count_the_agreeing_pairs_of_each_pose():
+    a, b = twin_rooms(16, 0.15)
+    twin = T_A_B.copy()
+    twin[0, 3] += 12.0
+    truth, at_twin, nowhere = place_scores(a, b, [T_A_B, twin, yaw_pose(0.0, [100, 0, 0])])
+    assert truth == pytest.approx(16.0)  # the 16 objects A saw, exactly
+    assert 12.0 < at_twin < 16.0  # all 20 objects, each 0.15 m off (0.75 each), refitted
+    assert nowhere == 0.0
 
 
 def test_views_beyond_the_rare_ones_spread_by_farthest_points():
