@@ -29,8 +29,8 @@ is cheap:
    by the distance d of its centres, nothing beyond.  Not the number of pairs: a place
    shifted into a twin room pairs B's objects with twins a few decimetres off, and it pairs
    more of them than the right place where A's session saw less of B than the twin room holds.
-   When B is *precise* (a place pairs `precise_pairs` objects with a median distance below
-   `precise_below`: the same objects measured as precisely as A's), every place is scored at
+   When B is *precise* (a place pairs `precise_pairs` objects, and a quarter of B's, with a
+   median distance below `precise_below`: the same objects measured as precisely as A's), every place is scored at
    `precise_fit_radius`: a similar room's objects a decimetre or two off no longer agree.
 4. **Decision.**  A small B that is not precise gets the Localizer's answer as it is (status,
    places, poses, confidence: with noisy centres its point evidence ranks places better than
@@ -45,13 +45,15 @@ is cheap:
    (1 + margin)² times as much as any other, and `confirmations` views have found it.
 
 Work: `views` localizations of `view_size` objects, then per seed place one pass over B's
-candidate pairs per radius: linear in B's size (and in the number of same-label objects of A).
+candidate pairs per radius and one more at the narrowest: linear in B's size (and in the
+number of same-label objects of A).
 `pose_information` estimates the information matrix of the relative pose from the aligned
 pairs (a pose-graph edge).  Pure computation on numpy arrays.
 """
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Iterable
 from typing import Any
@@ -111,7 +113,12 @@ class AlignmentConfig(BaseModel):
         "`precise_pairs` objects with a median centre distance (m) below this: the same "
         "objects measured twice (0: never).",
     )
-    precise_pairs: int = Field(5, ge=3, description="See `precise_below`.")
+    precise_pairs: int = Field(
+        5,
+        ge=3,
+        description="See `precise_below`; at least a quarter of B's objects too (among many "
+        "places of a large noisy B a few pairs can meet closely by chance).",
+    )
     precise_fit_radius: float = Field(
         0.1,
         gt=0,
@@ -247,11 +254,12 @@ class _Aligner:
         return self._seeds(self._localized(view, timing))
 
     def _precise(self, places: list[Hypothesis]) -> bool:
-        """Whether one of `places` pairs `precise_pairs` objects or more with a median centre
-        distance below `precise_below`: B holds the same objects as A measured as precisely,
+        """Whether one of `places` pairs `precise_pairs` objects or more (and a quarter of B's)
+        with a median centre distance below `precise_below`: B holds the same objects as A measured as precisely,
         and a place whose pairs are a decimetre or two off is a twin, not a match."""
+        enough = max(self.alignment.precise_pairs, math.ceil(len(self.b) / 4))
         for h in places:
-            if h.pose is None or len(h.pairs) < self.alignment.precise_pairs:
+            if h.pose is None or len(h.pairs) < enough:
                 continue
             if (
                 np.median(self._distances(h.pose, self._rows(h.pairs)))
