@@ -18,8 +18,8 @@ pose: a false answer) and `ambiguous` (the share held back as not sure, right po
 `where the truth fits best`: success over the cases where no wrong place of the answer fits B
 as well as the truth does (`semloc.alignment.place_scores`: each pose grown by guided matching,
 its agreeing pairs scored; where a wrong place fits as well the data cannot tell them apart),
-and how many cases that leaves.  Correspondences: precision and recall of the best hypothesis' pairs against
-the unmoved shared objects.  Times: CPU ms of `semloc.align` with the first map prepared once
+and how many cases that leaves.  Correspondences: precision and recall of the best
+hypothesis' pairs against the unmoved shared objects.  Times: CPU ms of `semloc.align` with the first map prepared once
 (a robot or server that holds it), one core; peak MB: tracemalloc's peak during one alignment.
 The CLIPPER-style baseline (`semloc.baselines.clipper`, B as one local map, unchanged) runs on
 every case of the real samples and on the first `--clipper-cases` scored cases of each size and

@@ -163,7 +163,7 @@ def align(
 
 
 class _Aligner:
-    """One alignment of a larger B: seed views, growth, decision."""
+    """One alignment of B in A: seeds, growth, decision."""
 
     def __init__(self, a, b, config, alignment: AlignmentConfig, overrides: dict) -> None:
         probe = Localizer(a, config, local_up=b.up, **overrides)
@@ -189,9 +189,10 @@ class _Aligner:
         else:
             seeds = (self._seeds_of(view, timing) for view in self._views())
         grown, tried = self._grown_places(seeds, timing)
-        if small and not self._precise(grown):
+        precise = self._precise(grown)
+        if small and not precise:
             return self._localizers_answer(own)
-        hypotheses = self._decided_places(grown)
+        hypotheses = self._decided_places(grown, precise)
         status, reason = decide(hypotheses, self.config.decision, "residual")
         if status == "localized":
             status, reason = self._clearly_best(hypotheses)
@@ -255,8 +256,9 @@ class _Aligner:
 
     def _precise(self, places: list[Hypothesis]) -> bool:
         """Whether one of `places` pairs `precise_pairs` objects or more (and a quarter of B's)
-        with a median centre distance below `precise_below`: B holds the same objects as A measured as precisely,
-        and a place whose pairs are a decimetre or two off is a twin, not a match."""
+        with a median centre distance below `precise_below`: B holds the same objects as A
+        measured as precisely, and a place whose pairs are a decimetre or two off is a twin,
+        not a match."""
         enough = max(self.alignment.precise_pairs, math.ceil(len(self.b) / 4))
         for h in places:
             if h.pose is None or len(h.pairs) < enough:
@@ -423,11 +425,11 @@ class _Aligner:
         pairs = np.stack([self.cand_a[mutual], self.cand_b[mutual]], axis=1)
         return pairs[np.lexsort((pairs[:, 1], pairs[:, 0]))]
 
-    def _decided_places(self, grown: list[Hypothesis]) -> list[Hypothesis]:
+    def _decided_places(self, grown: list[Hypothesis], precise: bool) -> list[Hypothesis]:
         """Distinct places, the highest score first (then the smaller residual), ranked 1, 2,
-        ... and scored by the confidence model against each other.  When B is precise
-        (`_precise`), every place is scored again at `precise_fit_radius`."""
-        if self._precise(grown):
+        ... and scored by the confidence model against each other.  When B is `precise`,
+        every place is scored again at `precise_fit_radius`."""
+        if precise:
             for h in grown:
                 h.score = self._score(
                     h.pose, self._rows(h.pairs), self.alignment.precise_fit_radius

@@ -190,17 +190,20 @@ SIZE_STEP = 0.1
 
 def _size_mismatch(local: SemanticObject, mapped: SemanticObject) -> int:
     """How far apart two boxes are, in `SIZE_STEP`s (0 when either has no box)."""
-    if local.size is None or mapped.size is None:
-        return 0
-    a, b = np.maximum(np.sort(local.size), 0.05), np.maximum(np.sort(mapped.size), 0.05)
-    return int(round(float(np.max(np.abs(np.log(a / b)))) / SIZE_STEP))
+    return int(round(_box_log_ratio(local, mapped) / SIZE_STEP))
 
 
 def _similar_size(local: SemanticObject, mapped: SemanticObject, config: ChangesConfig) -> bool:
+    return _box_log_ratio(local, mapped) <= np.log(config.size_ratio)
+
+
+def _box_log_ratio(local: SemanticObject, mapped: SemanticObject) -> float:
+    """The largest log-ratio of the two boxes' sorted extents (each at least 5 cm); 0 when
+    either has no box."""
     if local.size is None or mapped.size is None:
-        return True
-    a, b = np.sort(local.size), np.sort(mapped.size)
-    return bool(np.all(np.maximum(a, b) <= config.size_ratio * np.maximum(np.minimum(a, b), 0.05)))
+        return 0.0
+    a, b = np.maximum(np.sort(local.size), 0.05), np.maximum(np.sort(mapped.size), 0.05)
+    return float(np.max(np.abs(np.log(a / b))))
 
 
 def _gap_to_observed(global_map, local_objects, pose, reach: float) -> np.ndarray:
