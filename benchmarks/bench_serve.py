@@ -464,10 +464,9 @@ def _raw(url: str, method: str, path: str, body: bytes, token: str | None) -> tu
     if token:
         headers["Authorization"] = f"Bearer {token}"
     try:
-        try:
+        # answered early and closed: its answer may still be read
+        with contextlib.suppress(BrokenPipeError, ConnectionResetError):
             connection.request(method, path, body, headers)
-        except (BrokenPipeError, ConnectionResetError):
-            pass  # answered early and closed: its answer may still be read
         response = connection.getresponse()
         data = response.read()
     except (ConnectionError, http.client.HTTPException):
