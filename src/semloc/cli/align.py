@@ -23,11 +23,18 @@ from pydantic import ValidationError
 from semloc.alignment import align as run_align
 from semloc.alignment import pose_information
 from semloc.cli.app import app, console, fail, first_error
-from semloc.cli.files import check_finite, check_output, check_separate, map_paths, read_config
+from semloc.cli.files import (
+    check_finite,
+    check_output,
+    check_separate,
+    map_outputs,
+    map_paths,
+    read_config,
+)
 from semloc.cli.render import print_result
 from semloc.io import load_map
 from semloc.io.g2o import edge_line
-from semloc.io.native import map_files, points_path, write_files
+from semloc.io.native import map_files, write_files
 from semloc.localizer import LocalizerConfig
 from semloc.maps import ObjectMap
 from semloc.results import Result
@@ -91,12 +98,11 @@ def align(
         fail(f"invalid settings: {first_error(exc)}")
     a, b = load_map(map_a), load_map(map_b)
     writes = {
-        option: [path, points_path(path)] if option in ("--output", "--merged") else [path]
+        option: map_outputs(path) if option in ("--output", "--merged") else path
         for option, path in targets.items()
-        if path is not None
     }
     inputs = {**map_paths(map_a, a, "map A"), **map_paths(map_b, b, "map B")}
-    check_separate(writes, inputs | ({config: "the --config file"} if config else {}))
+    check_separate(writes, {**inputs, config: "the --config file"})
     result = run_align(a, b, cfg)
     print_result(result, console)
     placed = result.status == "localized" or (accept_ambiguous and result.status == "ambiguous")

@@ -15,7 +15,7 @@ import numpy as np
 import typer
 
 from semloc.cli.app import app, console, fail
-from semloc.cli.files import read_result
+from semloc.cli.files import check_separate, map_paths, read_result
 from semloc.io import load_map
 from semloc.io.ply import write_ply
 from semloc.maps import ObjectMap
@@ -60,14 +60,18 @@ def export(
 ) -> None:
     """Write MAP's objects (and --local ones placed by --result) as a PLY coloured by label."""
     global_map = load_map(map_file)
+    inputs = {**map_paths(map_file, global_map, "MAP"), result: "the --result file"}
     placed = None
     if local is not None:
         pose = read_result(result).pose if result is not None else None
         if pose is None:
             fail("--local needs a --result with a pose to place the local objects")
-        placed = load_map(local).transformed(pose)
+        local_map = load_map(local)
+        inputs.update(map_paths(local, local_map, "the --local map"))
+        placed = local_map.transformed(pose)
     elif result is not None:
         fail("--result places local objects: give them with --local")
+    check_separate({"--output": output}, inputs)
     vertices = scene_vertices(global_map, placed)
     write_ply(output, vertices, binary=not ascii_ply)
     placed_text = "" if placed is None else f" and {len(placed)} local objects"

@@ -13,7 +13,7 @@ import yaml
 
 from semloc.cli.app import fail
 from semloc.io import read_json, read_regular
-from semloc.io.native import MAX_JSON_BYTES, document_kind
+from semloc.io.native import MAX_JSON_BYTES, document_kind, points_path
 from semloc.maps import MAX_COORDINATE, ObjectMap
 from semloc.results import STATUSES
 from semloc.transforms import as_pose
@@ -193,16 +193,27 @@ def map_paths(path: Path, objmap: ObjectMap, what: str) -> dict[Path, str]:
     return {path: what, path.parent / points_file: f"the points file of {what}"}
 
 
-def check_separate(outputs: dict[str, list[Path]], inputs: dict[Path, str]) -> None:
-    """Refuse, in one line, two outputs that would write one file, or an output that would
-    overwrite an input (`outputs`: option -> the files it writes, a map's points file too;
-    `inputs`: file -> what it is).  Written over, an input map is lost, and its points file
-    written over leaves the map naming the points of other objects."""
-    read = {path.resolve(): what for path, what in inputs.items()}
-    written: dict[Path, str] = {}
+def map_outputs(path: Path | None) -> list[Path]:
+    """The files a map written to `path` may take: the JSON and its points file."""
+    return [] if path is None else [path, points_path(path)]
+
+
+def check_separate(
+    outputs: dict[str, list[Path] | Path | None], inputs: dict[Path | None, str]
+) -> None:
+    """Refuse, in one line, an output that would overwrite an input or two outputs that would
+    write one file, before anything is written (every command that writes files calls it).
+
+    `outputs`: option -> the file(s) it writes, a map's points file too (`map_outputs`);
+    `inputs`: file -> what it is (a map's points file too: `map_paths`); None entries are
+    skipped.  Files are compared as the file system sees them (symlinks, hard links, `./`).
+    Written over, an input map is lost, and its points file written over leaves the map
+    naming the points of other objects."""
+    read = {_identity(path): what for path, what in inputs.items() if path is not None}
+    written: dict[object, str] = {}
     for option, paths in outputs.items():
-        for path in paths:
-            key = path.resolve()
+        for path in [paths] if isinstance(paths, Path) else paths or []:
+            key = _identity(path)
             if key in read:
                 fail(f"{path}: {option} would overwrite {read[key]}, an input")
             if written.setdefault(key, option) != option:
@@ -210,6 +221,15 @@ def check_separate(outputs: dict[str, list[Path]], inputs: dict[Path, str]) -> N
                     f"{path}: {written[key]} and {option} would both write it; "
                     "they must name different files"
                 )
+
+
+def _identity(path: Path) -> object:
+    """What names one file: its device and inode when it exists, else its resolved path."""
+    try:
+        info = path.stat()
+    except OSError:
+        return path.resolve()
+    return (info.st_dev, info.st_ino)
 
 
 def check_finite(**options: float | tuple[float, ...] | None) -> None:

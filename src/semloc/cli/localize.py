@@ -22,7 +22,15 @@ from rich.console import Console
 
 from semloc.association import DESCRIBERS, CandidateIndex, label_report
 from semloc.cli.app import app, choices, console, err_console, fail, first_error, with_default
-from semloc.cli.files import check_finite, check_output, read_config, read_label_map, read_pose
+from semloc.cli.files import (
+    check_finite,
+    check_output,
+    check_separate,
+    map_paths,
+    read_config,
+    read_label_map,
+    read_pose,
+)
 from semloc.cli.render import (
     labels_json,
     print_ground_truth,
@@ -135,6 +143,10 @@ def localize(
         fail(f"invalid settings: {first_error(exc)}")
     truth = read_pose(gt, "--gt takes a file with T_global_local") if gt is not None else None
     global_objects, local_objects = load_map(global_map), load_map(local_map)
+    inputs = {**map_paths(global_map, global_objects, "the global map"),
+              **map_paths(local_map, local_objects, "the local map"),
+              config: "the --config file", label_map: "the --label-map file", gt: "the --gt file"}  # fmt: skip
+    check_separate({"--output": output}, inputs)
     warm = warm_up(lambda text: err_console.print(f"{text}…", style="dim"))
     with replay_progress(err_console, local_objects) as progress:
         result = run_localize(global_objects, local_objects, cfg, progress=progress)

@@ -13,7 +13,15 @@ from rich.table import Table
 
 from semloc.cli.app import MAX_SEED, app, console, fail, first_error
 from semloc.cli.extras import need
-from semloc.cli.files import ResultFile, check_finite, check_output, read_pose, read_result
+from semloc.cli.files import (
+    ResultFile,
+    check_finite,
+    check_output,
+    check_separate,
+    map_paths,
+    read_pose,
+    read_result,
+)
 from semloc.cli.options import (
     RESOLUTION_HELP,
     SIZE_HELP,
@@ -226,6 +234,14 @@ def view(
     local_map = load_map(local) if local is not None else None
     if local_map is not None and pose is None and truth is None:
         fail("--local needs a --result with a pose (or --gt) to place the local objects")
+    inputs = {
+        **map_paths(map_file, objmap, "MAP"),
+        result: "the --result file",
+        gt: "the --gt file",
+    }
+    if local is not None and local_map is not None:
+        inputs.update(map_paths(local, local_map, "the --local map"))
+    check_separate({"--output": png, "--rrd": rrd}, inputs)
     alone = local_map is None and pose is None
     role = "local" if alone and _looks_local(map_file, objmap.name) else "global"
     if png is not None:

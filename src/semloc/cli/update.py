@@ -21,7 +21,7 @@ import typer
 from semloc.association import CandidateIndex
 from semloc.changes import Changes, Moved, explain
 from semloc.cli.app import app, console
-from semloc.cli.files import check_output, read_result
+from semloc.cli.files import check_output, check_separate, map_outputs, map_paths, read_result
 from semloc.cli.render import print_changes
 from semloc.io import load_map
 from semloc.io.native import map_files, write_files
@@ -49,6 +49,9 @@ def update_map(
     """Write GLOBAL with the changes LOCAL shows applied: moved, new, missing objects."""
     check_output(output)
     prior, local = load_map(global_map), load_map(local_map)
+    inputs = {**map_paths(global_map, prior, "the global map"),
+              **map_paths(local_map, local, "the local map"), result_file: "the --result file"}  # fmt: skip
+    check_separate({"--output": map_outputs(output)}, inputs)
     if result_file is None:
         result = localize(prior, local)
         status, pose, changes = result.status, result.pose, result.changes
