@@ -30,9 +30,12 @@ from semloc.cli import simulation, localize, update, align, datasets  # noqa: F4
 from semloc.cli import export, bench, descriptors, config  # noqa: F401, E402
 
 # isort: on
+from semloc.cli.app import document_exit_statuses  # noqa: E402
 from semloc.io.native import interrupts_wait
 from semloc.maps import MapError
 from semloc.tools.display import printable
+
+document_exit_statuses(app)
 
 
 class Interrupted(BaseException):

@@ -22,7 +22,7 @@ from pydantic import ValidationError
 
 from semloc.alignment import align as run_align
 from semloc.alignment import pose_information
-from semloc.cli.app import app, console, fail, first_error
+from semloc.cli.app import app, console, exit_statuses, fail, first_error
 from semloc.cli.files import (
     check_finite,
     check_output,
@@ -42,7 +42,9 @@ from semloc.tools.display import for_rich
 from semloc.tools.merge import merged_map
 
 
-@app.command()
+@app.command(
+    epilog=exit_statuses("an answer, placed or not (not placed: only --result is written)")
+)
 def align(
     map_a: Annotated[Path, typer.Argument(help="First map (the reference frame), semloc JSON.")],
     map_b: Annotated[Path, typer.Argument(help="Second map, aligned into the first.")],

@@ -21,7 +21,16 @@ from pydantic import ValidationError
 from rich.console import Console
 
 from semloc.association import DESCRIBERS, CandidateIndex, label_report
-from semloc.cli.app import app, choices, console, err_console, fail, first_error, with_default
+from semloc.cli.app import (
+    app,
+    choices,
+    console,
+    err_console,
+    exit_statuses,
+    fail,
+    first_error,
+    with_default,
+)
 from semloc.cli.files import (
     check_finite,
     check_output,
@@ -54,7 +63,7 @@ class OutputFormat(StrEnum):
     json = "json"
 
 
-@app.command()
+@app.command(epilog=exit_statuses("an answer, localized or not (it says why)"))
 def localize(
     global_map: Annotated[Path, typer.Argument(help="Global (prior) map, semloc JSON.")],
     local_map: Annotated[

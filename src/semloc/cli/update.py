@@ -7,7 +7,8 @@ kept), a new object is added in the global frame (its id prefixed `new:` when ta
 one is flagged `"missing": true` (kept: one look is no proof that it is gone; the flag goes
 when a later view sees the object again, where it was or moved).  Every change is
 listed; the new map is written all or nothing.  Nothing is written when the answer is not
-`localized` (unless `--accept-ambiguous`).
+`localized` (unless `--accept-ambiguous`): the command then says so and exits with status 1,
+so that a script can tell.
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ import typer
 
 from semloc.association import CandidateIndex
 from semloc.changes import Changes, Moved, explain
-from semloc.cli.app import app, console
+from semloc.cli.app import app, console, exit_statuses
 from semloc.cli.files import check_output, check_separate, map_outputs, map_paths, read_result
 from semloc.cli.render import print_changes
 from semloc.io import load_map
@@ -29,7 +30,7 @@ from semloc.localizer import LocalizerConfig, localize
 from semloc.maps import ObjectMap, SemanticObject
 
 
-@app.command("update-map")
+@app.command("update-map", epilog=exit_statuses(not_localized=True))
 def update_map(
     global_map: Annotated[Path, typer.Argument(help="Global (prior) map, semloc JSON.")],
     local_map: Annotated[Path, typer.Argument(help="Local map of detected objects.")],
@@ -61,7 +62,7 @@ def update_map(
         changes = Changes() if pose is None else _explained(prior, local, pose, saved.pairs)
     if pose is None or not (status == "localized" or (accept_ambiguous and status == "ambiguous")):
         console.print(f"not localized (status {status}): no map written")
-        raise typer.Exit(0)
+        raise typer.Exit(1)
     print_changes(changes, console)
     updated = applied(prior, local, pose, changes)
     write_files(map_files(updated, output))
