@@ -42,6 +42,7 @@ from semloc.cli.files import (
 )
 from semloc.cli.render import (
     labels_json,
+    print_centres_only,
     print_ground_truth,
     print_labels,
     print_result,
@@ -175,6 +176,7 @@ def localize(
         return
     target = console if output is None else Console(record=True, width=120, file=io.StringIO())
     print_result(result, target, warm)
+    print_centres_only(local_objects, result.changes, target)
     print_labels(labels, target)
     if report is not None:
         print_ground_truth(report, target)

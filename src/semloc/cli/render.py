@@ -96,6 +96,18 @@ def print_changes(changes: Changes, out: Console) -> None:
             out.print(f"changes, {name}: {text}")
 
 
+def print_centres_only(local: ObjectMap, changes: Changes, out: Console) -> None:
+    """When `new` objects are reported and some local objects have neither points nor a box,
+    say what a change report needs: a centre alone does not show that a map object's place
+    was in view, so such an object that moved reads as new, and nothing near it as missing."""
+    bare = sum(o.points is None and o.size is None for o in local)
+    if changes.new and bare:
+        out.print(
+            f"note: {bare} of {len(local)} local objects have neither points nor a box: such "
+            "an object that moved reads as new (points or boxes show what was in view)"
+        )
+
+
 def print_labels(report: dict[str, LabelResolution], out: Console) -> None:
     """How each local label was read against the map's labels, one row per label."""
     table = Table(title="labels (local → map)")

@@ -23,7 +23,7 @@ from semloc.association import CandidateIndex
 from semloc.changes import Changes, Moved, explain
 from semloc.cli.app import app, console, exit_statuses
 from semloc.cli.files import check_output, check_separate, map_outputs, map_paths, read_result
-from semloc.cli.render import print_changes
+from semloc.cli.render import print_centres_only, print_changes
 from semloc.io import load_map
 from semloc.io.native import map_files, write_files
 from semloc.localizer import LocalizerConfig, localize
@@ -64,6 +64,7 @@ def update_map(
         console.print(f"not localized (status {status}): no map written")
         raise typer.Exit(1)
     print_changes(changes, console)
+    print_centres_only(local, changes, console)
     updated = applied(prior, local, pose, changes)
     write_files(map_files(updated, output))
     console.print(
