@@ -32,6 +32,10 @@ def folder(tmp_path, monkeypatch):
         json.dumps({"status": "localized", "pose": np.eye(4).tolist()})
     )
     (tmp_path / "labels.json").write_text('{"sofa": "couch"}')
+    # inputs named with an output's suffix (view writes .png, export .ply): any name is read
+    for name, source in (("r.ply", "r.json"), ("t.png", "t.json"), ("l.ply", "l.json"),
+                         ("l.png", "l.json"), ("g.png", "l.json")):  # fmt: skip
+        (tmp_path / name).write_bytes((tmp_path / source).read_bytes())
     monkeypatch.chdir(tmp_path)
     return tmp_path
 
@@ -67,19 +71,16 @@ CASES = [
       "--transform", "x.gt.json"], "x.gt.json: --output would overwrite the --transform file"),
     (["config", "--dump", "--config", "c.json", "-o", "c.json"],
      "c.json: --output would overwrite the --config file, an input"),
-    (["export", "g.json", "-o", "g.points.npz"],
-     "--output would overwrite the points file of MAP, an input"),
-    (["export", "g.json", "--local", "l.json", "--result", "r.json", "-o", "l.json"],
-     "l.json: --output would overwrite the --local map, an input"),
-    (["export", "g.json", "--local", "l.json", "--result", "r.json", "-o", "r.json"],
-     "r.json: --output would overwrite the --result file, an input"),
-    (["view", "g.json", "-o", "g.json"], "g.json: --output would overwrite MAP, an input"),
-    (["view", "g.json", "--result", "r.json", "--local", "l.json", "-o", "l.json"],
-     "l.json: --output would overwrite the --local map, an input"),
-    (["view", "g.json", "--gt", "t.json", "-o", "t.json"],
-     "t.json: --output would overwrite the --gt file, an input"),
-    (["view", "g.json", "-o", "x.png", "--rrd", "x.png"],
-     "x.png: --output and --rrd would both write it"),
+    (["export", "g.json", "-o", "g.points.npz"], "--output writes a PLY point cloud"),
+    (["export", "g.json", "--local", "l.ply", "--result", "r.json", "-o", "l.ply"],
+     "l.ply: --output would overwrite the --local map, an input"),
+    (["export", "g.json", "--local", "l.json", "--result", "r.ply", "-o", "r.ply"],
+     "r.ply: --output would overwrite the --result file, an input"),
+    (["view", "g.png", "-o", "g.png"], "g.png: --output would overwrite MAP, an input"),
+    (["view", "g.json", "--result", "r.json", "--local", "l.png", "-o", "l.png"],
+     "l.png: --output would overwrite the --local map, an input"),
+    (["view", "g.json", "--gt", "t.png", "-o", "t.png"],
+     "t.png: --output would overwrite the --gt file, an input"),
     (["align", "g.json", "l.json", "-o", "l.json"],
      "l.json: --output would overwrite map B, an input"),
     (["train-descriptor", "--out", "w.npz", "--fixture", "w.npz"],
@@ -128,3 +129,11 @@ def test_separate_outputs_are_written(folder, capsys):
     objects = [SemanticObject("x", "chair", [0, 0, 0])]
     semloc.save_map(ObjectMap(objects), folder / "one.json")
     assert main(["config", "--dump", "--config", "c.json", "-o", "c2.json"]) == 0
+
+
+def test_view_refuses_two_outputs_of_one_file(folder, capsys):
+    os.symlink("x.png", folder / "x.rrd")  # one file by two names
+    before = snapshot(folder)
+    assert main(["view", "g.json", "-o", "x.png", "--rrd", "x.rrd"]) == 2
+    assert "x.rrd: --output and --rrd would both write it" in capsys.readouterr().err
+    assert snapshot(folder) == before

@@ -106,7 +106,7 @@ def align(
     inputs = {**map_paths(map_a, a, "map A"), **map_paths(map_b, b, "map B")}
     check_separate(writes, {**inputs, config: "the --config file"})
     result = run_align(a, b, cfg)
-    print_result(result, console)
+    print_result(result, console, frames=("A", "B"))
     placed = result.status == "localized" or (accept_ambiguous and result.status == "ambiguous")
     files: list[tuple[Path, bytes | str]] = []
     if placed and result.pose is not None:
@@ -116,7 +116,8 @@ def align(
     if result_file is not None:
         files.append((result_file, json.dumps(result.to_dict(), indent=1, allow_nan=False) + "\n"))
     if files:
-        write_files(files)
+        for path in write_files(files):
+            console.print(f"wrote {for_rich(path, None)}")
 
 
 def _outputs(

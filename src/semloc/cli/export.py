@@ -15,7 +15,7 @@ import numpy as np
 import typer
 
 from semloc.cli.app import app, console, fail
-from semloc.cli.files import check_separate, map_paths, read_result
+from semloc.cli.files import check_separate, check_suffix, map_paths, read_result
 from semloc.io import load_map
 from semloc.io.ply import write_ply
 from semloc.maps import ObjectMap
@@ -59,6 +59,7 @@ def export(
     ascii_ply: Annotated[bool, typer.Option("--ascii", help="Text PLY instead of binary.")] = False,
 ) -> None:
     """Write MAP's objects (and --local ones placed by --result) as a PLY coloured by label."""
+    check_suffix(output, ".ply", "--output", "a PLY point cloud")
     global_map = load_map(map_file)
     inputs = {**map_paths(map_file, global_map, "MAP"), result: "the --result file"}
     placed = None

@@ -184,6 +184,14 @@ def check_output(path: Path, option: str = "--output") -> Path:
     return path
 
 
+def check_suffix(path: Path | None, suffix: str, option: str, what: str) -> None:
+    """Refuse a file name whose suffix says another format than the one `option` writes
+    (`view -o x.txt` wrote a PNG named x.txt); a stream (`/dev/stdout`) takes any."""
+    if path is None or path.suffix.lower() == suffix or (path.exists() and not path.is_file()):
+        return
+    fail(f"{path}: {option} writes {what}; give a file name ending in {suffix}")
+
+
 def map_paths(path: Path, objmap: ObjectMap, what: str) -> dict[Path, str]:
     """The files the map `what` was read from (the JSON and the points file it names), each
     with what it is."""

@@ -162,7 +162,8 @@ def localize(
         result = run_localize(global_objects, local_objects, cfg, progress=progress)
     report = None if truth is None else ground_truth_report(result.pose, result.hypotheses, truth)
     labels = label_report(CandidateIndex(global_objects, cfg.association), local_objects)
-    warn_unmatched(labels, err_console)
+    if len(global_objects):  # an empty map: the result's reason says so, once
+        warn_unmatched(labels, err_console)
     if output_format is OutputFormat.json:
         document = {**result.to_dict(), "warm_up_ms": round(warm.seconds * 1000, 3)}
         document["labels"] = labels_json(labels)

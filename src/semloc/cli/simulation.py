@@ -18,6 +18,7 @@ from semloc.cli.files import (
     check_finite,
     check_output,
     check_separate,
+    check_suffix,
     map_paths,
     read_pose,
     read_result,
@@ -222,6 +223,8 @@ def view(
     png = output
     if png is None and rrd is None:
         png = map_file.with_suffix(".png")
+    check_suffix(png, ".png", "--output", "a PNG picture")
+    check_suffix(rrd, ".rrd", "--rrd", "a Rerun recording")
     if png is not None:
         check_output(png)
         need("view", "viz", modules=("matplotlib",))
