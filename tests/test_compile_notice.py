@@ -9,7 +9,7 @@ import sys
 
 import semloc
 from semloc.cli import main
-from semloc.tools.warmup import COMPILING, LIBRARY_NOTICE
+from semloc.compiling import COMPILING, LIBRARY_NOTICE
 
 FIRST_USE = """
 from semloc.digests import encode_ids, pair_digests

@@ -9,12 +9,12 @@ semloc.warmup()                  # compile the inner loops ahead (once after ins
 
 from semloc import descriptors  # registers the descriptor kinds (numpy only)
 from semloc.alignment import AlignmentConfig, align
+from semloc.compiling import warmup  # compiles the inner loops ahead; says once when it does
 from semloc.io import load_map, save_map
 from semloc.localizer import Localizer, LocalizerConfig, localize
 from semloc.maps import MapError, ObjectMap, SemanticObject
+from semloc.pictures import colors  # label colours of pictures, exports, recordings (no plotting)
 from semloc.results import Hypothesis, Result, Step
-from semloc.tools import colors  # label colours of pictures, exports, recordings (no plotting)
-from semloc.tools.warmup import warmup  # compiles the inner loops ahead; says once when it does
 
 __version__ = "0.1.0"
 __all__ = [

@@ -100,7 +100,7 @@ def test_view_draws_an_arrow_per_moved_object(tmp_path, capsys):
     assert png.stat().st_size > 0
 
     from semloc.cli.files import read_result
-    from semloc.tools.viz import map_figure, plot_localization
+    from semloc.pictures.viz import map_figure, plot_localization
 
     answer = read_result(result)
     assert answer.moved == (("g4", "l4"),)
@@ -109,7 +109,7 @@ def test_view_draws_an_arrow_per_moved_object(tmp_path, capsys):
     plot_localization(ax, g, local, answer.pose, answer.pairs, moved=answer.moved)
     from matplotlib.colors import to_rgba
 
-    from semloc.tools.viz import MOVED_COLOR
+    from semloc.pictures.viz import MOVED_COLOR
 
     arrows = [t for t in ax.texts if getattr(t, "arrow_patch", None) is not None
               and np.allclose(t.arrow_patch.get_edgecolor(), to_rgba(MOVED_COLOR))]  # fmt: skip
@@ -131,7 +131,7 @@ def test_a_bad_moved_entry_in_a_result_file_is_one_line(tmp_path, capsys):
 
 
 def test_the_rerun_recording_gets_the_moved_arrows(tmp_path):
-    from semloc.tools.viz3d import _moved_arrows, write_localization
+    from semloc.pictures.viz3d import _moved_arrows, write_localization
 
     g = write_scene(tmp_path)
     local = semloc.load_map(tmp_path / "local.json")

@@ -17,16 +17,16 @@ from format_fixtures import write_scannet
 from rich.console import Console
 
 import semloc
+from semloc import compiling as warmup_module
 from semloc.cli import app, main
 from semloc.cli.files import ResultFile
 from semloc.cli.render import print_result, timing_line
 from semloc.cli.simulation import _heading
+from semloc.compiling import COMPILING, WarmUp, compile_notice, warm_up
 from semloc.io import load_map
+from semloc.pictures.colors import color_distance, label_colors
 from semloc.results import Hypothesis, Result, Step
 from semloc.sim.layouts import layout, observe
-from semloc.tools import warmup as warmup_module
-from semloc.tools.colors import color_distance, label_colors
-from semloc.tools.warmup import COMPILING, WarmUp, compile_notice, warm_up
 from semloc.transforms import yaw_pose
 
 
@@ -156,7 +156,7 @@ def _texts(ax) -> list[str]:
 
 def test_view_draws_labels_zooms_to_the_local_objects_and_draws_rivals(maps):
     pytest.importorskip("matplotlib")
-    from semloc.tools.viz import ZOOM_MARGIN, map_figure, plot_localization
+    from semloc.pictures.viz import ZOOM_MARGIN, map_figure, plot_localization
 
     folder, obs = maps
     g, local = load_map(folder / "global.json"), load_map(folder / "local.json")

@@ -33,7 +33,7 @@ from semloc.cli import export, bench, descriptors, config, warmup  # noqa: F401,
 from semloc.cli.app import document_exit_statuses  # noqa: E402
 from semloc.io.native import interrupts_wait
 from semloc.maps import MapError
-from semloc.tools.display import printable
+from semloc.pictures.display import printable
 
 document_exit_statuses(app)
 

@@ -37,8 +37,8 @@ from semloc.io.g2o import edge_line
 from semloc.io.native import map_files, write_files
 from semloc.localizer import LocalizerConfig
 from semloc.maps import ObjectMap
+from semloc.pictures.display import for_rich
 from semloc.results import Result
-from semloc.tools.display import for_rich
 from semloc.tools.merge import merged_map
 
 

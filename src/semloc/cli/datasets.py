@@ -23,8 +23,8 @@ from semloc.io import importers, load_map
 from semloc.io.importers import IMPORTERS
 from semloc.io.native import map_files, write_files
 from semloc.maps import MapError
+from semloc.pictures.display import for_rich
 from semloc.sim.crop import crop_truth_to_dict, crop_with_truth
-from semloc.tools.display import for_rich
 
 ConvertKind = choices("ConvertKind", IMPORTERS)
 _SOURCE_HELP = "; ".join(f"{name}: {imp.source_help}" for name, imp in IMPORTERS.items())

@@ -1,6 +1,6 @@
 """`semloc export`: a map (and local objects placed by a result's pose) as a coloured PLY.
 
-Every point is coloured by its object's label (`semloc.tools.colors`, as in the pictures); local
+Every point is coloured by its object's label (`semloc.pictures.colors`, as in the pictures); local
 objects are drawn darker and flagged by the vertex property `local` = 1, so that a viewer
 (MeshLab, CloudCompare, Open3D) shows where they landed.  Objects without points are one
 point at their centre.  Needs only the core install.
@@ -19,7 +19,7 @@ from semloc.cli.files import check_separate, check_suffix, map_paths, read_resul
 from semloc.io import load_map
 from semloc.io.ply import write_ply
 from semloc.maps import ObjectMap
-from semloc.tools.colors import label_colors
+from semloc.pictures.colors import label_colors
 
 LOCAL_SHADE = 0.6
 """Local objects keep their label's hue at this brightness."""

@@ -49,11 +49,11 @@ from semloc.cli.render import (
     replay_progress,
     warn_unmatched,
 )
+from semloc.compiling import warm_up
 from semloc.eval.success import ground_truth_report
 from semloc.io import load_map, write_atomic
 from semloc.localizer import LocalizerConfig
 from semloc.localizer import localize as run_localize
-from semloc.tools.warmup import warm_up
 
 DescriptorKind = choices("DescriptorKind", DESCRIBERS)
 DEFAULTS = LocalizerConfig()

@@ -1,6 +1,6 @@
 """Rich rendering of what the commands print: a Result, its ground-truth check, progress.
 
-User text (ids, labels, file names) goes through `semloc.tools.display.for_rich`: shortened and with
+User text (ids, labels, file names) goes through `semloc.pictures.display.for_rich`: shortened and with
 rich markup escaped."""
 
 from __future__ import annotations
@@ -18,12 +18,12 @@ from rich.table import Table
 
 from semloc.association import LabelResolution
 from semloc.changes import Changes
+from semloc.compiling import WarmUp
 from semloc.eval.success import ROTATION_TOLERANCE_DEG, TRANSLATION_TOLERANCE_M
 from semloc.maps import ObjectMap
+from semloc.pictures.display import for_rich, shorten
 from semloc.results import Hypothesis, Result
 from semloc.tools.demo import STATUS_STYLE
-from semloc.tools.display import for_rich, shorten
-from semloc.tools.warmup import WarmUp
 
 LONG_REPLAY = 10
 """Replays of at least this many updates show a progress bar (on a terminal)."""
@@ -36,7 +36,7 @@ def print_result(
     frames: tuple[str, str] = ("global", "local"),
 ) -> None:
     """Status line, pose, top hypotheses and timing of a Result (and of the warm-up before
-    it, which loaded the compiled code: `semloc.tools.warmup`).  `frames`: the names of the
+    it, which loaded the compiled code: `semloc.compiling`).  `frames`: the names of the
     two maps (`align`: A and B), as the pose `T_<first>_<second>` and the pairs name them."""
     out.print(f"status: [bold {STATUS_STYLE[result.status]}]{result.status}[/]")
     best = result.best

@@ -39,12 +39,12 @@ from semloc.eval.success import (
 from semloc.io import load_map
 from semloc.io.native import staged_folder
 from semloc.maps import ObjectMap
+from semloc.pictures.display import for_rich
 from semloc.sim.export import write_sequence
 from semloc.sim.noise import DetectionNoise
 from semloc.sim.scenario import simulate_sequence
 from semloc.sim.world import MAX_ROOMS
 from semloc.tools.demo import DemoConfig, run_demo
-from semloc.tools.display import for_rich
 from semloc.tools.scandemo import ScanDemoConfig, run_scan_demo
 from semloc.transforms import pose_error
 
@@ -248,7 +248,7 @@ def view(
     alone = local_map is None and pose is None
     role = "local" if alone and _looks_local(map_file, objmap.name) else "global"
     if png is not None:
-        from semloc.tools.viz import map_figure, plot_localization, save_figure  # matplotlib
+        from semloc.pictures.viz import map_figure, plot_localization, save_figure  # matplotlib
 
         heading = title or _heading(map_file, objmap, answer, truth)
         rivals = answer.hypotheses[1:] if status == "ambiguous" else ()
@@ -258,7 +258,7 @@ def view(
                           zoom=local_map is not None or bool(rivals))  # fmt: skip
         console.print(f"wrote {for_rich(save_figure(fig, png), None)}")
     if rrd is not None:
-        from semloc.tools.viz3d import write_localization  # rerun
+        from semloc.pictures.viz3d import write_localization  # rerun
 
         written = write_localization(rrd, objmap, local_map, pose, pairs, truth, answer.moved)
         shown = for_rich(written, None)

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from semloc.cli.app import app, console, err_console
-from semloc.tools.warmup import warmup as run_warmup
+from semloc.compiling import warmup as run_warmup
 
 
 @app.command()

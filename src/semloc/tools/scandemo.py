@@ -128,7 +128,7 @@ def write_outputs(
     out: Path, kind: str, scan: RealScan, demo: DemoResult, keyframes: list[int], statuses: list
 ) -> list[Path]:
     """scores.png, map.png, scan.png, result.json, ground_truth.json, global.json, local.json."""
-    from semloc.tools.viz import (  # matplotlib (the pictures)
+    from semloc.pictures.viz import (  # matplotlib (the pictures)
         label_colors,
         map_figure,
         new_figure,
