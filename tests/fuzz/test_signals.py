@@ -436,7 +436,7 @@ def test_an_interrupt_waits_for_a_block_that_must_not_be_cut():
     """Inside `interrupts_deferred` a signal does not raise; it raises a moment after the
     block ends (nothing is blocked: processes started inside still get their signals)."""
     from semloc.cli import Interrupted, _interrupts_raise
-    from semloc.io.native import interrupts_deferred
+    from semloc.io.interrupts import interrupts_deferred
 
     finished = False
     with pytest.raises(Interrupted) as caught, _interrupts_raise(script=False):

@@ -31,7 +31,7 @@ from semloc.cli import export, bench, descriptors, config, warmup  # noqa: F401,
 
 # isort: on
 from semloc.cli.app import document_exit_statuses  # noqa: E402
-from semloc.io.native import interrupts_wait
+from semloc.io.interrupts import interrupts_wait
 from semloc.maps import MapError
 from semloc.pictures.display import printable
 

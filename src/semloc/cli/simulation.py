@@ -37,7 +37,7 @@ from semloc.eval.success import (
     is_success,
 )
 from semloc.io import load_map
-from semloc.io.native import staged_folder
+from semloc.io.output import staged_folder
 from semloc.maps import ObjectMap
 from semloc.pictures.display import for_rich
 from semloc.sim.export import write_sequence

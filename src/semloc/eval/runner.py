@@ -37,7 +37,8 @@ from semloc.eval.protocol import (
     start_keyframes,
 )  # fmt: skip
 from semloc.eval.report import write_outputs
-from semloc.io.native import interrupts_deferred, staged_folder
+from semloc.io.interrupts import interrupts_deferred
+from semloc.io.output import staged_folder
 
 _ONE_THREAD = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
 

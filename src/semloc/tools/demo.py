@@ -6,7 +6,7 @@ fused local objects), feeds the objects that are new or updated at each keyframe
 status, time) and finally the pose error against ground truth.  It writes `scores.png`,
 `map.png`, `world.png`, `result.json`, `ground_truth.json` and the global/local maps to `out`,
 and with `rrd` a 3D Rerun recording of the updates (`semloc.pictures.viz3d`, the `viz` extra);
-the files in `out` all or none (`semloc.io.native.staged_folder`).
+the files in `out` all or none (`semloc.io.output.staged_folder`).
 """
 
 from __future__ import annotations

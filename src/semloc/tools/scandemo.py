@@ -5,7 +5,7 @@ renders a walk through its free space into depth and instance images, detects (t
 noise model) and fuses them into a local map in the odometry frame, then relocalizes
 incrementally against the scene's reconstruction or CAD map with the same live table, report,
 pictures (`scores.png`, `map.png`, `scan.png`), `result.json`, `ground_truth.json` and maps as
-`semloc demo`, all files or none (`semloc.io.native.staged_folder`, `result.json` moved in
+`semloc demo`, all files or none (`semloc.io.output.staged_folder`, `result.json` moved in
 last).  A relative `scan` folder is also looked up in the real-data folder (`$SEMLOC_DATA`, else
 `../shared/data/real`).
 """
