@@ -12,7 +12,6 @@ were valid.
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Annotated
 
@@ -114,7 +113,7 @@ def align(
     elif output or merged or g2o:
         console.print(f"[yellow]not written[/] (status {result.status}): {for_rich(result.reason)}")
     if result_file is not None:
-        files.append((result_file, json.dumps(result.to_dict(), indent=1, allow_nan=False) + "\n"))
+        files.append((result_file, result.to_json()))
     if files:
         for path in write_files(files):
             console.print(f"wrote {for_rich(path, None)}")

@@ -10,7 +10,6 @@ JSON); an unmatched label is a warning on stderr, never an error.  Long replays 
 from __future__ import annotations
 
 import io
-import json
 import sys
 from enum import StrEnum
 from pathlib import Path
@@ -165,11 +164,10 @@ def localize(
     if len(global_objects):  # an empty map: the result's reason says so, once
         warn_unmatched(labels, err_console)
     if output_format is OutputFormat.json:
-        document = {**result.to_dict(), "warm_up_ms": round(warm.seconds * 1000, 3)}
-        document["labels"] = labels_json(labels)
+        extra = {"warm_up_ms": round(warm.seconds * 1000, 3), "labels": labels_json(labels)}
         if report is not None:
-            document["ground_truth"] = report
-        text = json.dumps(document, indent=1, allow_nan=False) + "\n"
+            extra["ground_truth"] = report
+        text = result.to_json(**extra)
         if output is None:
             sys.stdout.write(text)
         else:

@@ -165,7 +165,7 @@ def write_outputs(
     files.append(save_figure(fig, out / "scan.png"))
     files.append(save_map(gmap, out / "global.json"))
     files.append(save_map(seq.local_map, out / "local.json"))
-    write_atomic(out / "result.json", json.dumps(result.to_dict(), indent=1) + "\n")
+    write_atomic(out / "result.json", result.to_json())
     write_atomic(out / "ground_truth.json", json.dumps(seq.ground_truth(), indent=1) + "\n")
     return [*files, out / "result.json", out / "ground_truth.json"]
 
