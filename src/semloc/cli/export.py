@@ -1,6 +1,6 @@
 """`semloc export`: a map (and local objects placed by a result's pose) as a coloured PLY.
 
-Every point is coloured by its object's label (`semloc.tools.colors`, as in the pictures); local
+Every point is coloured by its object's label (`semloc.pictures.colors`, as in the pictures); local
 objects are drawn darker and flagged by the vertex property `local` = 1, so that a viewer
 (MeshLab, CloudCompare, Open3D) shows where they landed.  Objects without points are one
 point at their centre.  Needs only the core install.
@@ -15,11 +15,11 @@ import numpy as np
 import typer
 
 from semloc.cli.app import app, console, fail
-from semloc.cli.files import read_result
+from semloc.cli.files import check_separate, check_suffix, map_paths, read_result
 from semloc.io import load_map
 from semloc.io.ply import write_ply
 from semloc.maps import ObjectMap
-from semloc.tools.colors import label_colors
+from semloc.pictures.colors import label_colors
 
 LOCAL_SHADE = 0.6
 """Local objects keep their label's hue at this brightness."""
@@ -59,15 +59,20 @@ def export(
     ascii_ply: Annotated[bool, typer.Option("--ascii", help="Text PLY instead of binary.")] = False,
 ) -> None:
     """Write MAP's objects (and --local ones placed by --result) as a PLY coloured by label."""
+    check_suffix(output, ".ply", "--output", "a PLY point cloud")
     global_map = load_map(map_file)
+    inputs = {**map_paths(map_file, global_map, "MAP"), result: "the --result file"}
     placed = None
     if local is not None:
         pose = read_result(result).pose if result is not None else None
         if pose is None:
             fail("--local needs a --result with a pose to place the local objects")
-        placed = load_map(local).transformed(pose)
+        local_map = load_map(local)
+        inputs.update(map_paths(local, local_map, "the --local map"))
+        placed = local_map.transformed(pose)
     elif result is not None:
         fail("--result places local objects: give them with --local")
+    check_separate({"--output": output}, inputs)
     vertices = scene_vertices(global_map, placed)
     write_ply(output, vertices, binary=not ascii_ply)
     placed_text = "" if placed is None else f" and {len(placed)} local objects"

@@ -18,12 +18,12 @@ from pathlib import Path
 
 from pydantic import BaseModel, ConfigDict, Field
 
+from semloc.compiling import warm_up
 from semloc.localizer import LocalizerConfig
 from semloc.serve.access import Access, TokenFileError
 from semloc.serve.app import DEFAULT_MAX_BODY, create_app
 from semloc.serve.service import Service
 from semloc.serve.store import open_store
-from semloc.tools.warmup import warm_up
 
 ENVIRONMENT = "SEMLOC_SERVE_SETTINGS"
 __all__ = ["Access", "ServeSettings", "TokenFileError", "build_app", "is_loopback", "run"]
