@@ -7,8 +7,6 @@ import shutil
 import socket
 import subprocess
 import tempfile
-import threading
-import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
@@ -18,43 +16,25 @@ import pytest
 pytest.importorskip("fastapi", reason="the serve extra is not installed")
 pytest.importorskip("uvicorn", reason="the serve extra is not installed")
 
-import uvicorn  # noqa: E402
 
 from semloc.compiling import warm_up  # noqa: E402
 from semloc.io import map_from_dict, map_to_dict  # noqa: E402
 from semloc.maps import ObjectMap  # noqa: E402
 from semloc.serve.access import Access  # noqa: E402
 from semloc.serve.app import create_app  # noqa: E402
-from semloc.serve.server import bind  # noqa: E402
+from semloc.serve.server import ThreadedServer  # noqa: E402
 from semloc.serve.service import Service  # noqa: E402
 from semloc.serve.store import Store, open_store  # noqa: E402
 from semloc.sim.layouts import layout  # noqa: E402
 from semloc.transforms import yaw_pose  # noqa: E402
 
 
-class LiveServer:
-    """uvicorn serving `create_app(...)` on 127.0.0.1:<free port> until `stop()`."""
+class LiveServer(ThreadedServer):
+    """The app of `service` served on 127.0.0.1:<free port> until `stop()`."""
 
     def __init__(self, service: Service, access: Access | None = None, **options) -> None:
         self.service = service
-        self.sock = bind("127.0.0.1", 0)
-        self.url = f"http://127.0.0.1:{self.sock.getsockname()[1]}"
-        config = uvicorn.Config(create_app(service, access, **options), log_level="error",
-                                access_log=False)  # fmt: skip
-        self.server = uvicorn.Server(config)
-        self.server.install_signal_handlers = lambda: None  # not the main thread
-        self.thread = threading.Thread(target=self.server.run, kwargs={"sockets": [self.sock]},
-                                       daemon=True)  # fmt: skip
-        self.thread.start()
-        deadline = time.monotonic() + 10
-        while not self.server.started:
-            assert time.monotonic() < deadline, "the server did not start in 10 s"
-            time.sleep(0.01)
-
-    def stop(self) -> None:
-        self.server.should_exit = True
-        self.thread.join(10)
-        self.sock.close()
+        super().__init__(create_app(service, access, **options))
 
 
 @pytest.fixture(scope="session")

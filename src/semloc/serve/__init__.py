@@ -5,7 +5,13 @@
     access.py   the token file, rights per map, request rates
     service.py  what the service does: versions, localization, sessions, change reports
     app.py      the HTTP API under /v1 (FastAPI) and the page at /
-    server.py   settings and running it (uvicorn, one or several worker processes)
+    server.py   settings and running it (uvicorn, one or several worker processes, or a
+                thread of this process: `serving`)
 
-The client is `semloc.client.Client`; the API is described in docs/serve.md.
+The client is `semloc.client.Client`; the API is described in docs/serve.md.  Importing this
+package needs the `serve` extra (FastAPI, uvicorn).
 """
+
+from semloc.serve.server import ServeSettings, serving
+
+__all__ = ["ServeSettings", "serving"]

@@ -13,7 +13,10 @@ import ipaddress
 import json
 import os
 import socket
-from collections.abc import Callable
+import threading
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 from pydantic import BaseModel, ConfigDict, Field
@@ -26,7 +29,8 @@ from semloc.serve.service import Service
 from semloc.serve.store import open_store
 
 ENVIRONMENT = "SEMLOC_SERVE_SETTINGS"
-__all__ = ["Access", "ServeSettings", "TokenFileError", "build_app", "is_loopback", "run"]
+__all__ = ["Access", "ServeSettings", "ThreadedServer", "TokenFileError", "build_app",
+           "is_loopback", "run", "serving"]  # fmt: skip
 
 
 class ServeSettings(BaseModel):
@@ -81,6 +85,46 @@ def bind(host: str, port: int) -> socket.socket:
     sock.listen(2048)
     sock.set_inheritable(True)
     return sock
+
+
+class ThreadedServer:
+    """uvicorn serving `app` in a thread of this process on `host`:`port` (0: a free port)
+    until `stop()`: for tests, notebooks and programs that embed the service."""
+
+    def __init__(self, app, host: str = "127.0.0.1", port: int = 0) -> None:
+        import uvicorn
+
+        self.sock = bind(host, port)
+        self.url = f"http://{host}:{self.sock.getsockname()[1]}"
+        config = uvicorn.Config(app, log_level="error", access_log=False)
+        self.server = uvicorn.Server(config)
+        self.server.install_signal_handlers = lambda: None  # not the main thread
+        self.thread = threading.Thread(
+            target=self.server.run, kwargs={"sockets": [self.sock]}, daemon=True
+        )
+        self.thread.start()
+        deadline = time.monotonic() + 30
+        while not self.server.started:
+            if not self.thread.is_alive() or time.monotonic() > deadline:
+                self.sock.close()
+                raise RuntimeError("the server did not start")
+            time.sleep(0.01)
+
+    def stop(self) -> None:
+        self.server.should_exit = True
+        self.thread.join(10)
+        self.sock.close()
+
+
+@contextmanager
+def serving(data: str | Path, **settings) -> Iterator[str]:
+    """The service over the store in `data` (other `ServeSettings` as keywords), served from a
+    thread of this process on a free loopback port while the block runs; yields its URL."""
+    server = ThreadedServer(build_app(ServeSettings(data=Path(data), port=0, **settings)))
+    try:
+        yield server.url
+    finally:
+        server.stop()
 
 
 def run(settings: ServeSettings, announce: Callable[[str], None] = print) -> None:
