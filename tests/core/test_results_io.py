@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import json
+import re
 
 import numpy as np
 import pytest
@@ -49,3 +50,36 @@ def test_a_field_of_the_wrong_shape_is_named(change, message):
     change(document)
     with pytest.raises(ValueError, match=message.replace("[", r"\[").replace("(", r"\(")):
         saved_result(document)
+
+
+def test_from_dict_is_the_inverse_of_to_dict():
+    from semloc.changes import Changes, Moved
+    from semloc.results import Step
+
+    original = result()
+    original.steps.append(Step(0, 3, 12, [4.0, 2.0], 1.25, "localized"))
+    original.explain = lambda: Changes([Moved("g7", "l7", 1.25)], ["l9"], ["g8"])
+    document = json.loads(original.to_json())
+    back = Result.from_dict(document)
+    assert back.to_dict() == document
+    assert back.changes.moved == [Moved("g7", "l7", 1.25)] and back.changes.new == ["l9"]
+    assert back.best.confidence == 0.95 and back.hypotheses[1].pose is None
+
+
+@pytest.mark.parametrize(
+    ("change", "message"),
+    [
+        ({"status": "maybe"}, "'status' must be one of"),
+        (
+            {"hypotheses": [{"pairs": [], "score": "high"}]},
+            "'hypotheses[0].score' must be a number",
+        ),
+        ({"changes": {"moved": [{"global": "g"}]}}, "'changes.moved[0]' must be"),
+        ({"changes": {"moved": [], "new": 3}}, "'changes' is not a changes object"),
+        ({"steps": [{"when": 1}]}, "'steps' are not steps"),
+    ],
+)
+def test_from_dict_names_what_is_wrong(change, message):
+    document = {**json.loads(result().to_json()), **change}
+    with pytest.raises(ValueError, match=re.escape(message)):
+        Result.from_dict(document)

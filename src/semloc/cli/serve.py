@@ -40,7 +40,10 @@ def serve(
     ] = None,
     db: Annotated[
         str | None,
-        typer.Option(help="postgresql://user@host:port/db: keep the store there, not in --data."),
+        typer.Option(
+            help="A PostgreSQL database for the store, instead of --data: a URL such as "
+            "postgresql://host/db."
+        ),
     ] = None,
     session_idle: Annotated[
         float,
