@@ -361,3 +361,33 @@ def test_replies_leave_without_waiting_for_an_acknowledgement():
                 assert accepted.getsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY) == 1
     finally:
         sock.close()
+
+
+def test_racing_change_reports_of_one_object_give_one_version_and_one_409(serve, building):
+    """Two devices report chair 7 moved to two different places, both from version 1, at
+    once: one report becomes version 2, the other is refused (409), never a mix."""
+    client = Client(serve().url)
+    client.put_map("office", building)
+    reports = []
+    for shift in ((0.9, 0.6, 0.0), (-0.8, -0.5, 0.0)):
+        local = _moved_view(building, shift)
+        reports.append((client.localize("office", local), local))
+    outcomes: list[object] = []
+    barrier = threading.Barrier(2)
+
+    def report(answer, local) -> None:
+        barrier.wait()
+        try:
+            outcomes.append(Client(client.url).report_changes("office", answer, local=local))
+        except ServerError as error:
+            outcomes.append(error.status)
+
+    threads = [threading.Thread(target=report, args=r) for r in reports]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join()
+    assert sorted(map(str, outcomes)) == sorted(["409", str({"version": 2, "changed": True})])
+    moved = client.get_map("office").get("7").position - building.get("7").position
+    assert min(np.linalg.norm(moved - s) for s in ([0.9, 0.6, 0], [-0.8, -0.5, 0])) < 0.05
+    assert [v["version"] for v in client.versions("office")] == [1, 2]
