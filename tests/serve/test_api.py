@@ -167,8 +167,14 @@ def test_a_change_report_becomes_a_new_version(serve, building):
     answer = client.localize("office", local)
     assert answer["status"] == "localized"
     assert [m["global"] for m in answer["changes"]["moved"]] == ["7"]
-    created = client.report_changes("office", answer, local=local)
-    assert created == {"version": 2, "changed": True}
+    status, refused = raw(client.url, "POST", "/v1/maps/office/changes",
+                          json.dumps({**answer, "localization_id": "unknown"}).encode())  # fmt: skip
+    assert status == 422 and "localization_id" in refused["detail"]
+    # the answer as it came: the server kept the local objects under its localization_id
+    status, created = raw(
+        client.url, "POST", "/v1/maps/office/changes", json.dumps(answer).encode()
+    )
+    assert (status, created) == (201, {"version": 2, "changed": True})
     updated = client.get_map("office")
     np.testing.assert_allclose(updated.get("7").position, building.get("7").position + [0.9, 0.6, 0],
                                atol=0.02)  # fmt: skip

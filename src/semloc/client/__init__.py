@@ -90,8 +90,8 @@ class Client:
     ) -> dict[str, Any]:
         """Apply what `answer` (a localization of that map, with its `map_version`) found
         changed, as a new version: `{"version", "changed"}`; ServerError 409 when the map moved
-        on and the changes no longer apply.  The local objects come from `local` or from the
-        session that produced the answer."""
+        on and the changes no longer apply.  The local objects are `local` when given, else the
+        server's copy of them (the answer's `localization_id` or `session_id`)."""
         body = dict(answer)
         if local is not None:
             body["local"] = _map_document(local)

@@ -145,11 +145,18 @@ class Service:
 
     # one-shot localization --------------------------------------------------------------------
     def localize(self, map_id: str, document: Any) -> dict[str, Any]:
+        """The answer for a local map, with the map version and a `localization_id` under which
+        the local map is kept (as long as an idle session) for a change report of the answer."""
+        self._expire()
         version, global_map = self.object_map(map_id)
         local = parse_map(document)
         result = localize(global_map, local, self.config)
         labels = label_report(CandidateIndex(global_map, self.config.association), local)
-        return answer(result, labels, map_version=version)
+        document = answer(result, labels, map_version=version)
+        document["localization_id"] = secrets.token_urlsafe(18)
+        kept = {"local": map_to_dict(local), "answer": _answer_record(document)}
+        self.store.put_localization(document["localization_id"], map_id, kept)
+        return document
 
     # sessions ---------------------------------------------------------------------------------
     def create_session(self, map_id: str, body: Any) -> str:
@@ -295,17 +302,18 @@ class Service:
         is written when the report changes nothing; `Conflict` (409) when the map moved on."""
         if not isinstance(body, dict):
             raise ServiceError(422, "invalid change report", "the body must be a result object")
-        base_version = body.get("map_version")
-        if isinstance(base_version, bool) or not isinstance(base_version, int):
-            raise ServiceError(422, "invalid change report", "'map_version' must be an integer")
         if self.store.latest_version(map_id) is None:
             raise not_found(f"map {map_id!r}")
+        local, kept = self._reported_local(map_id, body)
+        reported = {**body, **kept}  # the server's own record of the answer wins
+        base_version = reported.get("map_version")
+        if isinstance(base_version, bool) or not isinstance(base_version, int):
+            raise ServiceError(422, "invalid change report", "'map_version' must be an integer")
         found = self.store.get_map(map_id, base_version)
         if found is None:
             raise ServiceError(422, "invalid change report", f"no version {base_version}")
         base = map_from_dict(found[1])
-        local = self._reported_local(body)
-        pose, pairs = _reported_answer(body)
+        pose, pairs = _reported_answer(reported)
         changes = self._explain(base, local, pose, pairs)
         if not (changes.moved or changes.new or changes.missing or _flagged(base, changes)):
             return self.store.latest_version(map_id) or base_version, False
@@ -325,15 +333,31 @@ class Service:
             raise not_found(f"map {map_id!r}") from None
         return version, True
 
-    def _reported_local(self, body: dict) -> ObjectMap:
+    def _reported_local(self, map_id: str, body: dict) -> tuple[ObjectMap, dict[str, Any]]:
+        """The local objects of a report, and the server's own record of the answer when it
+        kept one: the objects sent along (`local`: the body's answer is taken as it is), or
+        those of the answer's one-shot localization (`localization_id`) or session
+        (`session_id`, its latest answer)."""
         if "local" in body:
-            return parse_map(body["local"], "local")
+            return parse_map(body["local"], "local"), {}
+        if isinstance(body.get("localization_id"), str):
+            found = self.store.localization(body["localization_id"])
+            if found is None or found[0] != map_id:
+                raise ServiceError(422, "invalid change report",
+                                   "unknown or expired localization_id: send 'local'")  # fmt: skip
+            return map_from_dict(found[2]["local"]), found[2]["answer"]
         if isinstance(body.get("session_id"), str):
-            return self.session_objects(body["session_id"])
+            row = self.store.session(body["session_id"])
+            if row is None or row.map_id != map_id or row.last is None:
+                raise ServiceError(422, "invalid change report",
+                                   "unknown or expired session_id: send 'local'")  # fmt: skip
+            kept = {key: row.last[key] for key in ANSWER_KEYS if key in row.last}
+            return self.session_objects(body["session_id"]), kept
         raise ServiceError(
             422,
             "invalid change report",
-            "the local objects are needed: 'local' (a semloc map) or 'session_id'",
+            "the local objects are needed: 'local' (a semloc map), or the answer's "
+            "'localization_id' or 'session_id'",
         )
 
     def _explain(self, base: ObjectMap, local: ObjectMap, pose, pairs) -> Changes:
@@ -406,6 +430,19 @@ def _same(a, b) -> bool:
     )
 
 
+ANSWER_KEYS = ("status", "pose", "hypotheses", "map_version")
+"""What the server keeps of an answer to check a change report of it."""
+
+
+def _answer_record(document: dict[str, Any]) -> dict[str, Any]:
+    """An answer's status, pose, map version and its best hypothesis' pairs."""
+    best = document["hypotheses"][:1]
+    return {"status": document["status"], "pose": document["pose"],
+            "map_version": document["map_version"],
+            "hypotheses": [{"pairs": h["pairs"]} for h in best]}  # fmt: skip
+
+
 def _summary(document: dict[str, Any]) -> dict[str, Any]:
-    """What the page shows of a session's latest answer."""
-    return {key: document.get(key) for key in ("status", "pose", "confidence", "stamp", "update")}
+    """What the page shows of a session's latest answer (and a change report checks)."""
+    shown = {key: document.get(key) for key in ("confidence", "stamp", "update")}
+    return {**shown, **_answer_record(document)}

@@ -11,6 +11,8 @@ Tables:
     map_versions(map_id, version, created, source, document)   every version, JSON (zlib)
     sessions(session_id, map_id, map_version, up, created, touched, last)
     session_batches(session_id, seq, stamp, objects)     every update a session received
+    localizations(localization_id, map_id, created, local)     a one-shot localization's
+                                                         local map and answer, for its change report
 
 Map versions are integers from 1.  `derive_map` runs a caller's function on the latest version
 while holding that map's write lock (SQLite: the database's; PostgreSQL: the `maps` row's), so
@@ -40,6 +42,8 @@ SCHEMA = (
     "touched DOUBLE PRECISION NOT NULL, last TEXT)",
     "CREATE TABLE IF NOT EXISTS session_batches (session_id TEXT NOT NULL, seq INTEGER NOT NULL, "
     "stamp DOUBLE PRECISION NOT NULL, objects {blob} NOT NULL, PRIMARY KEY (session_id, seq))",
+    "CREATE TABLE IF NOT EXISTS localizations (localization_id TEXT PRIMARY KEY, "
+    "map_id TEXT NOT NULL, created DOUBLE PRECISION NOT NULL, local {blob} NOT NULL)",
 )
 
 
@@ -288,10 +292,32 @@ class Store:
             cur.execute(self._sql("DELETE FROM sessions WHERE session_id = ?"), (session_id,))
             return cur.rowcount > 0
 
+    # one-shot localizations --------------------------------------------------------------------
+    def put_localization(self, localization_id: str, map_id: str, local: dict) -> None:
+        with self._transaction(write=True, durable=False) as cur:
+            cur.execute(
+                self._sql("INSERT INTO localizations VALUES (?, ?, ?, ?)"),
+                (localization_id, map_id, time.time(), _pack(local)),
+            )
+
+    def localization(self, localization_id: str) -> tuple[str, float, dict] | None:
+        """(map id, created, what was kept) of a one-shot localization, or None."""
+        with self._transaction() as cur:
+            cur.execute(
+                self._sql(
+                    "SELECT map_id, created, local FROM localizations WHERE localization_id = ?"
+                ),
+                (localization_id,),
+            )
+            row = cur.fetchone()
+        return None if row is None else (row[0], float(row[1]), _unpack(row[2]))
+
     def expire_sessions(self, idle_seconds: float) -> list[str]:
-        """Delete the sessions idle for longer than `idle_seconds`; their ids."""
+        """Delete the sessions idle for longer than `idle_seconds` (and the one-shot
+        localizations older than that); the sessions' ids."""
         cutoff = time.time() - idle_seconds
-        with self._transaction(write=True) as cur:
+        with self._transaction(write=True, durable=False) as cur:
+            cur.execute(self._sql("DELETE FROM localizations WHERE created < ?"), (cutoff,))
             cur.execute(self._sql("SELECT session_id FROM sessions WHERE touched < ?"), (cutoff,))
             gone = [r[0] for r in cur.fetchall()]
             for sid in gone:
