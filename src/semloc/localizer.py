@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -55,7 +54,8 @@ from semloc.verification import (
     Evidence,
     MapSupport,
     VerificationConfig,
-    consensus_rows,
+    Verified,
+    verify_sets,
 )
 
 _COMPONENTS: dict[str, type[BaseModel]] = {
@@ -324,56 +324,15 @@ class Localizer:
         ]
         return rank_places(hypotheses, cfg.rank_by, cfg.decision, shipped_model(), anchor)
 
-    def _verified_all(self, sets: SetPairs, local_xyz: np.ndarray) -> list[_Verified]:
-        """Each set's pairs split by its consensus pose, grown by guided matching (the grown
-        pairs verified once more together), and that pose's evidence on the map.
-
-        All sets go through each step at once, as (global index, local index) rows with the
-        set of each row (`owner`); only the result is turned into per-set lists."""
-        n = len(sets.sizes)
-        if not n:
-            return []
-        up = (self.local_up, self.global_map.up, self.config.verification)
-        first = consensus_rows(sets.pairs, sets.sizes, local_xyz, self.global_map.positions, *up)
-        agree, owner = first.agreeing(sets.sizes), _owners(sets.sizes)
-        kept, kept_owner = sets.pairs[agree], owner[agree]
-        rejected, rejected_owner = sets.pairs[~agree], owner[~agree]
-        kept_sizes = np.bincount(kept_owner, minlength=n)
-        added, added_start, conflicts = self._support.extend_rows(
-            first.poses, local_xyz, kept, kept_sizes
-        )
-        # a posed set with local objects outside it grows (its pairs then by local object)
-        grows = first.has_pose & (kept_sizes < len(local_xyz))
-        rows, owner, is_new = _grown(kept, kept_owner, added, _owners(np.diff(added_start)), grows)
-        poses, residual = first.poses.copy(), first.residual.copy()
-        regrown = grows & (np.bincount(owner[is_new], minlength=n) > 0)
-        if regrown.any():  # the grown pairs verified together
-            again = np.flatnonzero(regrown[owner])
-            sizes = np.bincount(owner, minlength=n)[regrown]
-            second = consensus_rows(rows[again], sizes, local_xyz, self.global_map.positions, *up)
-            settled = np.zeros(n, dtype=bool)
-            settled[regrown] = second.has_pose
-            poses[settled] = second.poses[second.has_pose]
-            residual[settled] = second.residual[second.has_pose]
-            disagree = again[~second.agreeing(sizes)]
-            disagree = disagree[settled[owner[disagree]]]
-            rejected = np.concatenate([rejected, rows[disagree]])
-            rejected_owner = np.concatenate([rejected_owner, owner[disagree]])
-            keep = np.ones(len(rows), dtype=bool)
-            keep[disagree] = False
-            rows, owner, is_new = rows[keep], owner[keep], is_new[keep]
-        order = np.argsort(rejected_owner, kind="stable")  # a set's first rejections first
-        pairs, rejected = _split(rows, owner, n), _split(rejected[order], rejected_owner[order], n)
-        support = np.bincount(owner[is_new], minlength=n).tolist()
-        conflicts = np.where(grows, conflicts, 0).tolist()
-        return [
-            _Verified(score, pairs[i], rejected[i], poses[i] if first.has_pose[i] else None,
-                      float(residual[i]), support[i], conflicts[i])
-            for i, score in enumerate(sets.scores.tolist())
-        ]  # fmt: skip
+    def _verified_all(self, sets: SetPairs, local_xyz: np.ndarray) -> list[Verified]:
+        """Each set verified against the map (`semloc.verification.verify_sets`)."""
+        return verify_sets(
+            sets.pairs, sets.sizes, sets.scores, local_xyz, self.global_map.positions,
+            (self.local_up, self.global_map.up), self.config.verification, self._support,
+        )  # fmt: skip
 
     def _hypothesis(
-        self, rank: int, verified: _Verified, local_xyz: np.ndarray, previous: dict
+        self, rank: int, verified: Verified, local_xyz: np.ndarray, previous: dict
     ) -> Hypothesis:
         """Full pose recovery of a verified set's inlier pairs, and its evidence."""
         local_objects = list(self._local.values())
@@ -454,45 +413,7 @@ class Localizer:
         return estimate
 
 
-@dataclass
-class _Verified:
-    """A screened association set after the consensus: inlier and rejected (global index,
-    local index) pairs, the inliers' closed-form pose and residual, and its map evidence."""
-
-    score: float  # the set's clustering score
-    pairs: list[tuple[int, int]]
-    rejected: list[tuple[int, int]]
-    pose: np.ndarray | None
-    residual: float
-    support: int
-    conflicts: int
-
-
 _PoseKey = tuple[bool, frozenset[tuple[int, int]]]  # (refined, pairs)
-
-
-def _owners(sizes: np.ndarray) -> np.ndarray:
-    """The set of each row, for sets of `sizes` rows one after the other."""
-    return np.repeat(np.arange(len(sizes)), sizes)
-
-
-def _grown(kept, kept_owner, added, added_owner, grows) -> tuple[np.ndarray, ...]:
-    """The kept rows of every set with the added rows of the sets that grow, set after set:
-    a growing set's rows ordered by local object, the others' as they were; (rows, owner,
-    whether each row was added)."""
-    taken = grows[added_owner]
-    rows = np.concatenate([kept, added[taken]])
-    owner = np.concatenate([kept_owner, added_owner[taken]])
-    is_new = np.arange(len(rows)) >= len(kept)
-    order = np.lexsort((np.where(grows[owner], rows[:, 1], np.arange(len(rows))), owner))
-    return rows[order], owner[order], is_new[order]
-
-
-def _split(rows: np.ndarray, owner: np.ndarray, n: int) -> list[list[tuple[int, int]]]:
-    """Rows grouped set after set (`owner` ascending) as n lists of int pairs."""
-    sizes = np.bincount(owner, minlength=n)
-    listed, ends = rows.tolist(), np.cumsum(sizes).tolist()
-    return [list(map(tuple, listed[end - size : end])) for end, size in zip(ends, sizes.tolist())]
 
 
 def _warm_start(pairs: frozenset, previous: dict[_PoseKey, PoseEstimate | None]):

@@ -11,6 +11,10 @@ search finds that pose again there, while near the tolerance it may rightly drop
 `consensus_many` does all of this for many sets in one compiled pass (numba), the minimal
 samples fitted by `closed_form.fit`.
 
+`verify_sets` runs the whole verification of the Localizer's screened sets at once: the
+consensus, the guided matching on the map and the consensus of the grown sets, giving each
+set's `Verified` pairs, rejected pairs, pose, residual, support and conflicts.
+
 `MapSupport` asks what the pose says about the local objects outside the set: those that land
 near a map object they could be join the hypothesis (guided matching: `support`), those with
 no map object of their kind anywhere near are `conflicts`.  `Evidence` is what a hypothesis
@@ -327,3 +331,94 @@ class Evidence:
             "support": float(min(self.support, 12)),
             "conflict_share": self.conflicts / max(self.n_local, 1),
         }
+
+
+@dataclass
+class Verified:
+    """A screened association set after the consensus: inlier and rejected (global index,
+    local index) pairs, the inliers' closed-form pose and residual, and its map evidence."""
+
+    score: float  # the set's clustering score
+    pairs: list[tuple[int, int]]
+    rejected: list[tuple[int, int]]
+    pose: np.ndarray | None
+    residual: float
+    support: int
+    conflicts: int
+
+
+def verify_sets(
+    set_pairs: np.ndarray, set_sizes: np.ndarray, scores: np.ndarray, local_xyz: np.ndarray,
+    global_xyz: np.ndarray, ups: tuple[np.ndarray | None, np.ndarray | None],
+    config: VerificationConfig, support: MapSupport,
+) -> list[Verified]:  # fmt: skip
+    """Each association set (its (global index, local index) rows `set_pairs`, `set_sizes`
+    rows per set, one set after the other, its clustering score in `scores`) split by its
+    consensus pose, grown by guided matching on the map (`support`; the grown pairs verified
+    once more together), and that pose's evidence on the map.
+
+    All sets go through each step at once, as rows with the set of each row (`owner`); only
+    the result is turned into per-set lists."""
+    n = len(set_sizes)
+    if not n:
+        return []
+    up = (*ups, config)
+    first = consensus_rows(set_pairs, set_sizes, local_xyz, global_xyz, *up)
+    agree, owner = first.agreeing(set_sizes), _owners(set_sizes)
+    kept, kept_owner = set_pairs[agree], owner[agree]
+    rejected, rejected_owner = set_pairs[~agree], owner[~agree]
+    kept_sizes = np.bincount(kept_owner, minlength=n)
+    added, added_start, conflicts = support.extend_rows(first.poses, local_xyz, kept, kept_sizes)
+    # a posed set with local objects outside it grows (its pairs then by local object)
+    grows = first.has_pose & (kept_sizes < len(local_xyz))
+    rows, owner, is_new = _grown(kept, kept_owner, added, _owners(np.diff(added_start)), grows)
+    poses, residual = first.poses.copy(), first.residual.copy()
+    regrown = grows & (np.bincount(owner[is_new], minlength=n) > 0)
+    if regrown.any():  # the grown pairs verified together
+        again = np.flatnonzero(regrown[owner])
+        sizes = np.bincount(owner, minlength=n)[regrown]
+        second = consensus_rows(rows[again], sizes, local_xyz, global_xyz, *up)
+        settled = np.zeros(n, dtype=bool)
+        settled[regrown] = second.has_pose
+        poses[settled] = second.poses[second.has_pose]
+        residual[settled] = second.residual[second.has_pose]
+        disagree = again[~second.agreeing(sizes)]
+        disagree = disagree[settled[owner[disagree]]]
+        rejected = np.concatenate([rejected, rows[disagree]])
+        rejected_owner = np.concatenate([rejected_owner, owner[disagree]])
+        keep = np.ones(len(rows), dtype=bool)
+        keep[disagree] = False
+        rows, owner, is_new = rows[keep], owner[keep], is_new[keep]
+    order = np.argsort(rejected_owner, kind="stable")  # a set's first rejections first
+    pairs, rejected = _split(rows, owner, n), _split(rejected[order], rejected_owner[order], n)
+    grown = np.bincount(owner[is_new], minlength=n).tolist()
+    conflicts = np.where(grows, conflicts, 0).tolist()
+    return [
+        Verified(score, pairs[i], rejected[i], poses[i] if first.has_pose[i] else None,
+                 float(residual[i]), grown[i], conflicts[i])
+        for i, score in enumerate(np.asarray(scores).tolist())
+    ]  # fmt: skip
+
+
+def _owners(sizes: np.ndarray) -> np.ndarray:
+    """The set of each row, for sets of `sizes` rows one after the other."""
+    return np.repeat(np.arange(len(sizes)), sizes)
+
+
+def _grown(kept, kept_owner, added, added_owner, grows) -> tuple[np.ndarray, ...]:
+    """The kept rows of every set with the added rows of the sets that grow, set after set:
+    a growing set's rows ordered by local object, the others' as they were; (rows, owner,
+    whether each row was added)."""
+    taken = grows[added_owner]
+    rows = np.concatenate([kept, added[taken]])
+    owner = np.concatenate([kept_owner, added_owner[taken]])
+    is_new = np.arange(len(rows)) >= len(kept)
+    order = np.lexsort((np.where(grows[owner], rows[:, 1], np.arange(len(rows))), owner))
+    return rows[order], owner[order], is_new[order]
+
+
+def _split(rows: np.ndarray, owner: np.ndarray, n: int) -> list[list[tuple[int, int]]]:
+    """Rows grouped set after set (`owner` ascending) as n lists of int pairs."""
+    sizes = np.bincount(owner, minlength=n)
+    listed, ends = rows.tolist(), np.cumsum(sizes).tolist()
+    return [list(map(tuple, listed[end - size : end])) for end, size in zip(ends, sizes.tolist())]

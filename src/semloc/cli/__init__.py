@@ -129,13 +129,21 @@ def _redeliver(previous_hook):
     """An unraisable-exception hook that sends an `Interrupted` swallowed where exceptions
     cannot propagate (a weakref callback, `__del__`: Python would print "Exception ignored" and
     go on) to the process again, so the handler raises it where the command can stop.  It is
-    sent a moment later from a thread: raised at once, it would land in the hook itself."""
+    sent a moment later from a thread: raised at once, it would land in the hook itself.  On a
+    busy machine the one sent may still land in the hook (while it waits for the sending
+    thread to start): swallowed there too, so it is sent once more."""
 
     def hook(unraisable) -> None:
-        if isinstance(unraisable.exc_value, Interrupted):
-            _Resend.later(unraisable.exc_value.signum)
-        else:
+        if not isinstance(unraisable.exc_value, Interrupted):
             previous_hook(unraisable)
+            return
+        signum = unraisable.exc_value.signum
+        while True:
+            try:
+                _Resend.later(signum)
+                return
+            except Interrupted as again:
+                signum = again.signum
 
     return hook
 
