@@ -21,7 +21,8 @@ CORE = {"maps", "pointsets", "transforms", "association", "clustering", "pose", 
         "confidence_model", "_clustering_fast", "_verification_fast", "alignment", "changes",
         "semantics"}  # fmt: skip
 THIRD_PARTY_CORE = {"numpy", "scipy", "pydantic", "numba"}
-EXTRAS = ("open3d", "matplotlib", "dask", "distributed", "sklearn", "torch", "rerun")
+EXTRAS = ("open3d", "matplotlib", "dask", "distributed", "sklearn", "torch", "rerun", "rosbags",
+          "mcap", "spark_dsg")  # fmt: skip
 MAX_LOCAL_SEMLOC_IMPORTS = 10
 
 

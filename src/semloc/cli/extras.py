@@ -17,6 +17,8 @@ EXTRAS: dict[str, tuple[str, ...]] = {
     "sim": ("open3d",),
     "bench": ("dask", "distributed", "sklearn", "matplotlib"),
     "train": ("torch",),
+    "ros": ("rosbags", "mcap"),
+    "dsg": ("spark_dsg",),
 }
 """The top-level modules each extra of pyproject.toml brings."""
 
