@@ -10,6 +10,7 @@ import numpy as np
 import typer
 
 from semloc.cli.app import MAX_SEED, app, choices, console, fail
+from semloc.cli.extras import need
 from semloc.cli.files import check_finite, check_output, read_pose
 from semloc.cli.options import DescribeOption, with_descriptors
 from semloc.io import importers, load_map
@@ -89,6 +90,8 @@ def convert(
 
     With a second (scan-derived) map both files are written, or neither."""
     check_finite(voxel=voxel)
+    if kind.value == "dsg":
+        need("convert dsg", "dsg")
     check_output(output)
     second = None
     if kind.value == "scan2cad":
