@@ -143,7 +143,7 @@ def test_a_missing_ros_extra_is_named_in_one_line(args, absent, monkeypatch, cap
 # Messages (need the extra) ----------------------------------------------------------------
 rosbags = pytest.importorskip("rosbags")
 from semloc.ros import messages as msgs  # noqa: E402
-from semloc.ros.bag import _detection  # noqa: E402
+from semloc.ros.bag import detection_from_msg  # noqa: E402
 
 
 @given(st.lists(st.tuples(finite, finite, finite), max_size=40),
@@ -174,7 +174,7 @@ def test_detections_round_trip_through_cdr(label, score, centre, q, size):
     det = msgs.new("vision_msgs/msg/Detection3D", results=results, bbox=box)
     array = msgs.new(msgs.DETECTIONS, header=msgs.header(5, "cam"), detections=[det])
     again = msgs.deserialize(msgs.serialize(array, msgs.DETECTIONS), msgs.DETECTIONS)
-    found = _detection(again.detections[0], None)
+    found = detection_from_msg(again.detections[0], None)
     assert found is not None and found.label == label.strip()
     assert np.allclose(found.centre, T[:3, 3]) and np.allclose(found.rotation, T[:3, :3])
     assert np.allclose(found.size, size)
@@ -182,8 +182,35 @@ def test_detections_round_trip_through_cdr(label, score, centre, q, size):
 
 def test_a_detection_without_a_class_is_skipped_and_an_unset_orientation_is_upright():
     box = msgs.new("vision_msgs/msg/BoundingBox3D", size=msgs.vector((1, 2, 3)))  # w = 0
-    assert _detection(msgs.new("vision_msgs/msg/Detection3D", bbox=box), None) is None
+    assert detection_from_msg(msgs.new("vision_msgs/msg/Detection3D", bbox=box), None) is None
     hyp = msgs.new("vision_msgs/msg/ObjectHypothesis", class_id="sofa", score=0.5)
     result = msgs.new("vision_msgs/msg/ObjectHypothesisWithPose", hypothesis=hyp)
-    det = _detection(msgs.new("vision_msgs/msg/Detection3D", bbox=box, results=[result]), None)
+    det = detection_from_msg(
+        msgs.new("vision_msgs/msg/Detection3D", bbox=box, results=[result]), None
+    )
     assert det is not None and np.allclose(det.rotation, np.eye(3))
+
+
+def test_a_node_built_on_rclpy_messages_gets_the_same_detections():
+    """`detection_from_msg` reads fields only: rclpy's messages (here stand-ins with the same
+    fields) give the detections rosbags' do, which is what a live node relies on."""
+    from types import SimpleNamespace as M
+
+    T = matrix_of([1.0, 2.0, 0.5], Rotation.from_euler("z", 30, degrees=True).as_quat())
+    x, y, z, w = quaternion_of(T[:3, :3])
+    fake = M(
+        results=[M(hypothesis=M(class_id="chair", score=0.8))],
+        bbox=M(center=M(position=M(x=1.0, y=2.0, z=0.5), orientation=M(x=x, y=y, z=z, w=w)),
+               size=M(x=0.5, y=0.6, z=0.9)),
+    )  # fmt: skip
+    hyp = msgs.new("vision_msgs/msg/ObjectHypothesis", class_id="chair", score=0.8)
+    real = msgs.new(
+        "vision_msgs/msg/Detection3D",
+        results=[msgs.new("vision_msgs/msg/ObjectHypothesisWithPose", hypothesis=hyp)],
+        bbox=msgs.new("vision_msgs/msg/BoundingBox3D", center=msgs.pose(T),
+                      size=msgs.vector((0.5, 0.6, 0.9))),
+    )  # fmt: skip
+    a, b = detection_from_msg(fake), detection_from_msg(real)
+    assert a.label == b.label == "chair" and a.score == b.score
+    for field in ("centre", "size", "rotation"):
+        assert np.allclose(getattr(a, field), getattr(b, field))

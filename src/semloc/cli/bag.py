@@ -54,9 +54,12 @@ def info(bag: BagArgument) -> None:
     """List BAG's topics: type, messages, and which option of `bag localize` reads each."""
     need("bag info", "ros")
     found, duration = topics(bag)
-    table = Table(title=f"{for_rich(bag, None)}: {duration:.1f} s", title_justify="left")
-    for column in ("topic", "type", "messages", "use"):
-        table.add_column(column)
+    title = f"{for_rich(bag, None)}: {duration:.1f} s"
+    table = Table(title=title, title_justify="left", box=None)
+    for column, names in (("topic", [t.name for t in found]), ("type", [t.msgtype for t in found])):
+        table.add_column(column, no_wrap=True, min_width=max(map(len, names), default=4))
+    table.add_column("messages", justify="right")
+    table.add_column("use")
     for topic in found:
         table.add_row(topic.name, topic.msgtype, str(topic.count), topic.use or "")
     console.print(table)

@@ -24,7 +24,7 @@ import numpy as np
 
 from semloc.maps import MapError
 from semloc.ros import messages as msgs
-from semloc.ros.frames import Trajectory
+from semloc.ros.frames import Trajectory, matrix_of
 from semloc.ros.stream import BoxDetection, DetectionFrame
 
 USES = {msgs.DETECTIONS: "--detections", msgs.ODOMETRY: "--odom", msgs.POINTS: "--points"}
@@ -190,7 +190,7 @@ class Run:
         points = self._points(cloud, len(message.detections)) if cloud is not None else {}
         detections = []
         for i, det in enumerate(message.detections):
-            found = _detection(det, points.get(i))
+            found = detection_from_msg(det, points.get(i))
             if found is None:
                 why = "detections without a class or a finite box"
                 self.skipped[why] = self.skipped.get(why, 0) + 1
@@ -219,19 +219,20 @@ def _drop_older(clouds: dict[tuple[int, str], Any], stamp: int) -> None:
         del clouds[key]
 
 
-def _detection(det: Any, points: np.ndarray | None) -> BoxDetection | None:
-    """A BoxDetection of a vision_msgs Detection3D (label: the best hypothesis's class_id), or
-    None when it has no hypothesis with a class."""
+def detection_from_msg(det: Any, points: np.ndarray | None = None) -> BoxDetection | None:
+    """A BoxDetection of a vision_msgs Detection3D (label: the best hypothesis's `class_id`;
+    an orientation left all zeros counts as axis-aligned), or None when it has no hypothesis
+    with a class or its box is not finite.  Reads fields only, so it takes the messages of
+    rosbags and of rclpy alike."""
     results = [r for r in det.results if r.hypothesis.class_id.strip()]
     if not results:
         return None
     best = max(results, key=lambda r: r.hypothesis.score)
     box = det.bbox
-    q = box.center.orientation
-    if q.x == q.y == q.z == q.w == 0:  # an orientation left unset: axis-aligned
-        q.w = 1.0
+    p, q = box.center.position, box.center.orientation
+    quaternion = (q.x, q.y, q.z, q.w) if (q.x, q.y, q.z, q.w) != (0, 0, 0, 0) else (0, 0, 0, 1)
     try:
-        T = msgs.matrix(box.center)
+        T = matrix_of((p.x, p.y, p.z), quaternion)
         score = float(best.hypothesis.score)
         return BoxDetection(best.hypothesis.class_id.strip(), T[:3, 3],
                             (box.size.x, box.size.y, box.size.z), T[:3, :3],
