@@ -206,3 +206,16 @@ def test_outputs_never_overwrite_the_inputs(walk, tmp_path, capsys):
     out = tmp_path / "same"
     assert _localize(copy, walk, out, "--detections", "/detections", "--jsonl", str(out)) == 2
     _one_error_line(capsys, "would both write it")
+
+
+def test_the_last_answer_agrees_with_semloc_localize_on_the_final_local_map(localized, capsys):
+    """`semloc localize` replays the final local map by `seen` (objects in their final state),
+    the bag one message at a time (objects as they were then): the same place, within mm."""
+    capsys.readouterr()
+    assert main(["localize", str(localized / "global_reconstruction.json"),
+                 str(localized / "local.json"), "--format", "json"]) == 0  # fmt: skip
+    replayed = json.loads(capsys.readouterr().out)
+    last = _lines(localized / "out.jsonl")[-1]["result"]
+    assert replayed["status"] == last["status"] == "localized"
+    rotation, translation = pose_error(np.asarray(last["pose"]), np.asarray(replayed["pose"]))
+    assert rotation < 0.5 and translation < 0.02

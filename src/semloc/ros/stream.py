@@ -8,7 +8,7 @@ the points of each where the detector gives them) in one frame at one stamp.
 into local objects with the front end (`semloc.frontend.ObjectFusion`: association by
 overlap and label) and, when local objects were added or changed, runs one incremental
 `Localizer.update` and returns its `Result`.  A detection without points is fused as points
-sampled on its box surface (so boxes associate by overlap); when no detection of the run
+sampled on its box surface (so boxes associate by overlap; `box_surface`); when no detection of the run
 carries points (`use_points=False`) the local objects reach the Localizer as centres and boxes
 only.
 """
@@ -25,8 +25,10 @@ from semloc.localizer import Localizer, LocalizerConfig
 from semloc.maps import MapError, ObjectMap, SemanticObject
 from semloc.results import Result
 
-BOX_STEP_M = 0.05
-"""Spacing of the points sampled on a box without points (the fusion's voxel size)."""
+BOX_GRID = 3
+"""Points per box edge sampled for a detection without points: the corners, edge middles and
+face centres (26 points).  A track keeps the union of what it was fused from, so denser samples
+of boxes that differ a little from view to view would pile up voxels without adding anything."""
 
 
 @dataclass(frozen=True)
@@ -75,11 +77,11 @@ class DetectionFrame:
 
 
 def box_surface(
-    centre: np.ndarray, size: np.ndarray, rotation: np.ndarray, step: float = BOX_STEP_M
+    centre: np.ndarray, size: np.ndarray, rotation: np.ndarray, count: int = BOX_GRID
 ) -> np.ndarray:
-    """Points on the surface of an oriented box, a grid of about `step` spacing (at least three
-    points per edge)."""
-    axes = [np.linspace(-s / 2, s / 2, max(3, int(np.ceil(s / step)) + 1)) for s in size]
+    """Points on the surface of an oriented box: the surface of a grid of `count` (>= 2) points
+    per edge."""
+    axes = [np.linspace(-s / 2, s / 2, max(2, count)) for s in size]
     grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1)
     shape = grid.shape[:3]
     index = np.indices(shape)
