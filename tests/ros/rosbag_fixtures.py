@@ -35,8 +35,10 @@ def detection(label: str, T_box: np.ndarray, size, stamp: int, frame: str, score
                     results=[result], bbox=box)  # fmt: skip
 
 
-def messages(global_map: ObjectMap, n: int = 12, frame: str = "base", radius: float = 100.0):
-    """(topic, type, stamp, message) of a drive past `global_map`: /odom and /detections."""
+def messages(global_map: ObjectMap, n: int = 12, frame: str = "base", radius: float = 100.0,
+             points: bool = False):  # fmt: skip
+    """(topic, type, stamp, message) of a drive past `global_map`: /odom and /detections, and
+    with `points` /points (each detection's map points, or points in its box)."""
     out = []
     T_odom_map = np.linalg.inv(T_MAP_ODOM)
     for k, T_odom_base in enumerate(robot_poses(n)):
@@ -45,7 +47,7 @@ def messages(global_map: ObjectMap, n: int = 12, frame: str = "base", radius: fl
         odom.pose.pose = msgs.pose(T_odom_base)
         out.append(("/odom", msgs.ODOMETRY, stamp, odom))
         T_base_map = np.linalg.inv(T_odom_base) @ T_odom_map
-        dets = []
+        dets, clouds = [], []
         for obj in global_map:
             T = np.eye(4)
             T[:3, 3] = obj.position
@@ -53,9 +55,21 @@ def messages(global_map: ObjectMap, n: int = 12, frame: str = "base", radius: fl
             if np.linalg.norm(T_box[:3, 3]) < radius:
                 size = obj.size if obj.size is not None else (0.5, 0.5, 0.8)
                 dets.append(detection(obj.label, T_box, size, stamp, frame))
+                cloud = obj.points if obj.points is not None else _inside(obj.position, size, k)
+                clouds.append(cloud @ T_base_map[:3, :3].T + T_base_map[:3, 3])
         array = msgs.new(msgs.DETECTIONS, header=msgs.header(stamp, frame), detections=dets)
         out.append(("/detections", msgs.DETECTIONS, stamp, array))
+        if points:
+            index = np.concatenate([np.full(len(c), i) for i, c in enumerate(clouds)])
+            cloud = msgs.cloud(stamp, frame, np.concatenate(clouds), index)
+            out.append(("/points", msgs.POINTS, stamp, cloud))
     return out
+
+
+def _inside(centre, size, seed: int) -> np.ndarray:
+    """60 points spread in a box (a depth camera's view of the object)."""
+    rng = np.random.default_rng(seed)
+    return np.asarray(centre) + rng.uniform(-0.5, 0.5, (60, 3)) * np.asarray(size)
 
 
 def write_bag(path: Path, records, storage: str = "mcap") -> Path:

@@ -119,16 +119,17 @@ def test_the_mcap_output_reads_back_with_its_topics_and_schemas(localized):
 
 
 @pytest.mark.parametrize("storage", ["sqlite3", "mcap"])
-def test_bags_built_by_rosbags_localize_from_boxes(tmp_path, storage):
+@pytest.mark.parametrize("points", [False, True])
+def test_bags_built_by_rosbags_localize(tmp_path, storage, points):
     from helpers import room
 
     gmap = room(14)
     semloc.save_map(gmap, tmp_path / "map.json")
-    bag = write_bag(tmp_path / "run", messages(gmap), storage)
+    bag = write_bag(tmp_path / "run", messages(gmap, points=points), storage)
     argv = ["bag", "localize", str(bag), "--map", str(tmp_path / "map.json"),
             "--detections", "/detections", "--odom", "/odom", "-o", str(tmp_path / "o.mcap"),
             "--jsonl", str(tmp_path / "o.jsonl")]  # fmt: skip
-    assert main(argv) == 0
+    assert main(argv + (["--points", "/points"] if points else [])) == 0
     last = _lines(tmp_path / "o.jsonl")[-1]["result"]
     assert last["status"] == "localized"
     rotation, translation = pose_error(np.asarray(last["pose"]), T_MAP_ODOM)
