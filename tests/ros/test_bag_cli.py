@@ -196,6 +196,24 @@ def test_detections_in_a_frame_the_odometry_does_not_give_are_refused(tmp_path, 
     assert not (tmp_path / "o.mcap").exists()
 
 
+def test_detections_without_odometry_near_them_are_refused(tmp_path, capsys):
+    from helpers import room
+
+    gmap = room(8)
+    semloc.save_map(gmap, tmp_path / "map.json")
+    records = messages(gmap)
+    for topic, _, stamp, message in records:  # the odometry 100 s later than the detections
+        if topic == "/odom":
+            message.header.stamp = msgs.stamp(stamp + 100 * 10**9)
+    bag = write_bag(tmp_path / "run", records, "sqlite3")
+    capsys.readouterr()
+    argv = ["bag", "localize", str(bag), "--map", str(tmp_path / "map.json"),
+            "--detections", "/detections", "--odom", "/odom", "-o", str(tmp_path / "o.mcap")]  # fmt: skip
+    assert main(argv) == 2
+    _one_error_line(capsys, "no detection message has odometry within 0.5 s")
+    assert not (tmp_path / "o.mcap").exists()
+
+
 def test_outputs_never_overwrite_the_inputs(walk, tmp_path, capsys):
     copy = tmp_path / "walk.mcap"
     shutil.copy(walk / "walk.mcap", copy)

@@ -31,7 +31,7 @@ from semloc.localizer import LocalizerConfig
 from semloc.ros.answers import OUTPUT_TOPICS, AnswerTopics, Frames
 from semloc.ros.bag import Run, opened, topics
 from semloc.ros.mcap_out import McapSink
-from semloc.ros.replay import answer_json, replay
+from semloc.ros.replay import Answer, answer_json, replay
 from semloc.ros.stream import StreamLocalizer
 from semloc.tools.display import for_rich
 
@@ -159,7 +159,16 @@ def _bag_files(bag: Path) -> dict[Path, str]:
     return files
 
 
-def _report(run, last, stream, seconds, output, jsonl, counts) -> None:  # noqa: ANN001
+def _report(
+    run: Run,
+    last: Answer | None,
+    stream: StreamLocalizer,
+    seconds: float,
+    output: Path,
+    jsonl: Path | None,
+    counts: dict[str, int],
+) -> None:
+    """What the run did: messages left out, the last answer, the files written."""
     for why, count in run.skipped.items():
         console.print(f"skipped {count} {why}")
     if last is None:

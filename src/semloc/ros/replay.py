@@ -39,6 +39,8 @@ def replay(run: Run, stream: StreamLocalizer) -> Iterator[Answer]:
     """The answers of `run` (see the module docstring); `run.skipped` counts what was left out."""
     odometry = run.odometry()
     fixed: str | None = None
+    stamps: list[int] = []  # of the messages left out for want of odometry
+    placed = 0
     for frame in run.frames():
         if odometry is None:
             fixed = fixed if fixed is not None else frame.frame
@@ -52,11 +54,20 @@ def replay(run: Run, stream: StreamLocalizer) -> Iterator[Answer]:
             pose = sensor_pose(run, frame, odometry)
         if pose is None:
             run.skipped[NO_ODOMETRY] = run.skipped.get(NO_ODOMETRY, 0) + 1
+            stamps.append(frame.stamp)
             continue
+        placed += 1
         result = stream.step(frame, pose)
         if result is not None:
             odom_frame = frame.frame if odometry is None else odometry.frame
             yield Answer(frame.stamp, frame.frame, odom_frame, pose, result)
+    if odometry is not None and stamps and not placed:
+        known = odometry.trajectory.stamps
+        raise BagError(
+            f"{run.path}: no detection message has odometry within {MAX_GAP_S:g} s (detections "
+            f"at {min(stamps) / 1e9:.1f}-{max(stamps) / 1e9:.1f} s, odometry at "
+            f"{known[0] / 1e9:.1f}-{known[-1] / 1e9:.1f} s)"
+        )
 
 
 def sensor_pose(run: Run, frame: DetectionFrame, odometry: Odometry) -> np.ndarray | None:
