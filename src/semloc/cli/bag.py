@@ -36,7 +36,7 @@ from semloc.ros.stream import StreamLocalizer
 from semloc.tools.display import for_rich
 
 bag_app = typer.Typer(
-    help="ROS 2 bags and MCAP: localize a recorded run, list a bag's topics (semloc[ros]).",
+    help="ROS 2 bags and MCAP: localize a recorded run, list a bag's topics (the ros extra).",
     no_args_is_help=True,
 )
 app.add_typer(bag_app, name="bag")
@@ -104,12 +104,13 @@ def localize(
     ] = None,
     map_frame: Annotated[str, typer.Option(help="Frame id of the map in the output.")] = "map",
 ) -> None:
-    """Localize a recorded run: fuse BAG's detections into local objects, relocalize after
-    each message in the global map, write the answers as MCAP for Foxglove.
+    """Localize a recorded run and write the answers as MCAP for Foxglove.
 
-    Output topics: /semloc/pose (PoseWithCovarianceStamped, when localized), /tf (map -> odometry
-    frame, odometry -> detections' frame), /semloc/status (JSON), /semloc/map and
-    /semloc/matches (MarkerArray).  Both outputs are written at the end, both or neither.
+    BAG's detections are fused into local objects, relocalized in the map after each message.
+
+    Output: /semloc/pose (when localized), /tf, /semloc/status (JSON), /semloc/map, /semloc/matches.
+
+    Both outputs are written at the end, both or neither.
     """
     check_finite(gamma=gamma)
     need("bag localize", "ros")

@@ -84,7 +84,7 @@ def export(
         ExportFormat,
         typer.Option(
             "--format",
-            help="ply, or dsg: a Spark-DSG scene graph (.json, else binary; semloc[dsg]).",
+            help="ply, or dsg: a Spark-DSG scene graph (.json, else binary; the dsg extra).",
         ),
     ] = ExportFormat.ply,
 ) -> None:

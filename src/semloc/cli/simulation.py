@@ -145,7 +145,7 @@ def simulate(
         typer.Option(
             "--bag",
             help="Also write the walk as a ROS 2 bag, walk.mcap: /detections, /odom and "
-            "/detections/points (semloc[ros]).",
+            "/detections/points (the ros extra).",
         ),
     ] = False,
 ) -> None:

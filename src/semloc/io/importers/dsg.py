@@ -13,4 +13,4 @@ def _convert(source, *, labels, include_structure, voxel, seed) -> Maps:
     return load_dsg(source, voxel=voxel), None
 
 
-IMPORTER = Importer("dsg", _convert, "a Spark-DSG scene graph (.json or binary; semloc[dsg])")
+IMPORTER = Importer("dsg", _convert, "a Spark-DSG scene graph (.json or binary; the dsg extra)")
