@@ -21,7 +21,7 @@ from semloc.maps import ObjectMap, SemanticObject  # noqa: E402
 LABELSPACE = {3: "chair", 5: "table", 9: "couch"}
 
 
-def hydra_graph(path, with_mesh=True):
+def hydra_graph(path, with_mesh=True, labelspace=True):
     """A small graph as Hydra writes them: objects O(n) with label numbers, boxes and mesh
     connections, a label space, and a place node (not an object)."""
     graph = spark.DynamicSceneGraph()
@@ -43,7 +43,8 @@ def hydra_graph(path, with_mesh=True):
     place = spark.PlaceNodeAttributes()
     place.position = np.zeros(3)
     graph.add_node(spark.DsgLayers.PLACES, spark.NodeSymbol("p", 0), place)
-    graph.set_labelspace(spark.Labelspace(LABELSPACE), 2, 0)
+    if labelspace:
+        graph.set_labelspace(spark.Labelspace(LABELSPACE), 2, 0)
     if with_mesh:
         mesh = spark.Mesh()
         mesh.resize_vertices(len(vertices))
@@ -69,6 +70,20 @@ def test_convert_dsg_reads_the_object_layer(tmp_path):
                                                 [np.sin(0.6), np.cos(0.6)]], atol=1e-6)  # fmt: skip
     assert np.allclose(chair.points, vertices[:5], atol=1e-6)
     assert len(couch.points) == 7
+
+
+def test_label_numbers_without_names_get_them_from_a_label_map(tmp_path, capsys):
+    hydra_graph(tmp_path / "old.json", labelspace=False)
+    assert list(load_dsg(tmp_path / "old.json").labels) == ["class_3", "class_5", "class_9"]
+    (tmp_path / "names.json").write_text(json.dumps({"3": "chair", "9": "sofa"}))
+    argv = ["convert", "dsg", str(tmp_path / "old.json"), "-o", str(tmp_path / "m.json"),
+            "--label-map", str(tmp_path / "names.json")]  # fmt: skip
+    assert main(argv) == 0
+    assert list(semloc.load_map(tmp_path / "m.json").labels) == ["chair", "class_5", "sofa"]
+    (tmp_path / "bad.json").write_text(json.dumps({"chair": "sofa"}))
+    capsys.readouterr()
+    assert main(argv[:-1] + [str(tmp_path / "bad.json")]) == 2
+    _one_error_line(capsys, "bad.json", "label numbers")
 
 
 def test_a_graph_goes_to_a_map_and_back_unchanged(tmp_path):

@@ -46,7 +46,7 @@ def convert(
         Path | None,
         typer.Option(
             help="scannet: a JSON file {raw: label}, or ScanNet's label table (.tsv), mapping "
-            "raw labels."
+            'raw labels; dsg: a JSON file {"3": "chair"} naming label numbers.'
         ),
     ] = None,
     include_structure: Annotated[

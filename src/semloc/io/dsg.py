@@ -3,8 +3,8 @@ back as a scene graph.  Needs the `semloc[dsg]` extra (`spark-dsg`), imported on
 
 Reading (`load_dsg`): every node of the OBJECTS layer (layer 2, partition 0) is an object: id
 the node symbol (`O(7)`; the semloc id for graphs semloc wrote, kept in the node's metadata),
-label the name of its `semantic_label` in the graph's label space for that layer (`class_<n>`
-where the graph has none), position the node's position, the bounding box when it is valid
+label the name of its `semantic_label` in the graph's label space for that layer (or in a
+label map the caller gives; `class_<n>` where neither has it), position the node's position, the bounding box when it is valid
 (centre, dimensions, rotation; the semloc box is about the centre, so its centre becomes the
 position when the two differ), points the mesh vertices the node connects to (`mesh_connections`),
 `up` +z (Hydra's world frame).  Each object keeps `{"dsg": {"symbol", "semantic_label"}}` so a
@@ -21,12 +21,13 @@ from __future__ import annotations
 import os
 import re
 import tempfile
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from semloc.io.native import read_json, read_regular
+from semloc.io import read_json, read_regular
 from semloc.maps import MapError, ObjectMap, SemanticObject
 from semloc.pointsets import voxel_downsample
 
@@ -41,17 +42,20 @@ def _spark() -> Any:
     return spark_dsg
 
 
-def load_dsg(path: str | os.PathLike[str], voxel: float = 0.0) -> ObjectMap:
+def load_dsg(
+    path: str | os.PathLike[str], voxel: float = 0.0, names: Mapping[int, str] | None = None
+) -> ObjectMap:
     """The objects of a Spark-DSG graph (.json or binary) as a map (see the module docstring);
-    points voxel-downsampled with edge `voxel` (0: all).  MapError naming the file if it is not
-    a readable scene graph or has no objects."""
+    points voxel-downsampled with edge `voxel` (0: all); `names` of label numbers win over the
+    graph's label space.  MapError naming the file if it is not a readable scene graph or has
+    no objects."""
     path = Path(path)
     graph = _load(path)
     layer = graph.get_layer(OBJECTS_LAYER) if graph.has_layer(OBJECTS_LAYER) else None
     nodes = [] if layer is None else list(layer.nodes)
     if not nodes:
         raise MapError(f"{path}: the scene graph has no objects (layer {OBJECTS_LAYER}, OBJECTS)")
-    names = _label_names(graph)
+    names = {**_label_names(graph), **(names or {})}
     vertices = _vertices(graph)
     objects = [_object(path, node, names, vertices, voxel) for node in nodes]
     return ObjectMap(objects, up=UP, name=path.name.split(".")[0])
