@@ -21,9 +21,9 @@ CORE = {"maps", "pointsets", "transforms", "association", "clustering", "pose", 
         "confidence_model", "_clustering_fast", "_verification_fast", "alignment", "changes",
         "semantics"}  # fmt: skip
 THIRD_PARTY_CORE = {"numpy", "scipy", "pydantic", "numba"}
-EXTRAS = ("open3d", "matplotlib", "dask", "distributed", "sklearn", "torch", "rerun", "rosbags",
-          "mcap", "spark_dsg")  # fmt: skip
-MAX_LOCAL_SEMLOC_IMPORTS = 10
+EXTRAS = ("open3d", "matplotlib", "dask", "distributed", "sklearn", "torch", "rerun", "fastapi",
+          "uvicorn", "starlette", "psycopg", "rosbags", "mcap", "spark_dsg")  # fmt: skip
+MAX_LOCAL_SEMLOC_IMPORTS = 11  # + `semloc serve` importing its extra when run
 
 
 def _imports(path: Path) -> list[tuple[list[str], bool]]:

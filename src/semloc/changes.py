@@ -221,3 +221,44 @@ def _gap_to_observed(global_map, local_objects, pose, reach: float) -> np.ndarra
     if len(near):
         gap[near] = cKDTree(observed).query(xyz[near], distance_upper_bound=reach)[0]
     return gap
+
+
+# Applying changes to a map ------------------------------------------------------------------
+def apply_changes(
+    prior: ObjectMap, local: ObjectMap, pose: np.ndarray, changes: Changes
+) -> ObjectMap:
+    """`prior` with `changes` applied: a moved object is put where it was observed (its points
+    shifted with it, its other fields kept, `moved_from` / `moved_m` noted), a new object is added
+    in the global frame (its id prefixed `new:` when taken, `new: true`), a missing one is flagged
+    `missing: true` (kept: one look is no proof that it is gone); the flag goes when a later view
+    sees the object again, where it was or moved."""
+    seen = {o.id: o.transformed(pose) for o in local}
+    moved = {m.global_id: m for m in changes.moved}
+    missing = set(changes.missing)
+    found = set(changes.matched) | set(moved)
+    objects = []
+    for obj in prior:
+        if obj.id in moved:
+            obj = _moved(obj, seen[moved[obj.id].local_id], moved[obj.id])
+        if obj.id in missing:
+            obj = obj.replace(extra={**obj.extra, "missing": True})
+        elif obj.id in found and "missing" in obj.extra:  # flagged before, seen again
+            obj = obj.replace(extra={k: v for k, v in obj.extra.items() if k != "missing"})
+        objects.append(obj)
+    taken = {o.id for o in objects}
+    for local_id in changes.new:
+        new = seen[local_id]
+        new_id = local_id if local_id not in taken else f"new:{local_id}"
+        taken.add(new_id)
+        objects.append(new.replace(id=new_id, extra={**new.extra, "new": True}))
+    return prior.with_objects(objects)
+
+
+def _moved(obj: SemanticObject, observed: SemanticObject, change: Moved) -> SemanticObject:
+    shift = observed.position - obj.position
+    points = None if obj.points is None else obj.points + shift
+    return obj.replace(
+        position=observed.position,
+        points=points,
+        extra={**obj.extra, "moved_from": obj.position.tolist(), "moved_m": change.offset_m},
+    )

@@ -17,6 +17,7 @@ EXTRAS: dict[str, tuple[str, ...]] = {
     "sim": ("open3d",),
     "bench": ("dask", "distributed", "sklearn", "matplotlib"),
     "train": ("torch",),
+    "serve": ("fastapi", "uvicorn"),
     "ros": ("rosbags", "mcap"),
     "dsg": ("spark_dsg",),
 }

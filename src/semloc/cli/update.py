@@ -15,18 +15,17 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Annotated
 
-import numpy as np
 import typer
 
 from semloc.association import CandidateIndex
-from semloc.changes import Changes, Moved, explain
+from semloc.changes import Changes, apply_changes, explain
 from semloc.cli.app import app, console
 from semloc.cli.files import check_output, read_result
 from semloc.cli.render import print_changes
 from semloc.io import load_map
 from semloc.io.native import map_files, write_files
 from semloc.localizer import LocalizerConfig, localize
-from semloc.maps import ObjectMap, SemanticObject
+from semloc.maps import ObjectMap
 
 
 @app.command("update-map")
@@ -60,45 +59,11 @@ def update_map(
         console.print(f"not localized (status {status}): no map written")
         raise typer.Exit(0)
     print_changes(changes, console)
-    updated = applied(prior, local, pose, changes)
+    updated = apply_changes(prior, local, pose, changes)
     write_files(map_files(updated, output))
     console.print(
         f"wrote {output}: {len(changes.moved)} moved, {len(changes.new)} new, "
         f"{len(changes.missing)} flagged missing"
-    )
-
-
-def applied(prior: ObjectMap, local: ObjectMap, pose: np.ndarray, changes: Changes) -> ObjectMap:
-    """`prior` with `changes` applied (see the module docstring)."""
-    seen = {o.id: o.transformed(pose) for o in local}
-    moved = {m.global_id: m for m in changes.moved}
-    missing = set(changes.missing)
-    found = set(changes.matched) | set(moved)
-    objects = []
-    for obj in prior:
-        if obj.id in moved:
-            obj = _moved(obj, seen[moved[obj.id].local_id], moved[obj.id])
-        if obj.id in missing:
-            obj = obj.replace(extra={**obj.extra, "missing": True})
-        elif obj.id in found and "missing" in obj.extra:  # flagged before, seen again
-            obj = obj.replace(extra={k: v for k, v in obj.extra.items() if k != "missing"})
-        objects.append(obj)
-    taken = {o.id for o in objects}
-    for local_id in changes.new:
-        new = seen[local_id]
-        new_id = local_id if local_id not in taken else f"new:{local_id}"
-        taken.add(new_id)
-        objects.append(new.replace(id=new_id, extra={**new.extra, "new": True}))
-    return prior.with_objects(objects)
-
-
-def _moved(obj: SemanticObject, observed: SemanticObject, change: Moved) -> SemanticObject:
-    shift = observed.position - obj.position
-    points = None if obj.points is None else obj.points + shift
-    return obj.replace(
-        position=observed.position,
-        points=points,
-        extra={**obj.extra, "moved_from": obj.position.tolist(), "moved_m": change.offset_m},
     )
 
 

@@ -1,0 +1,84 @@
+"""`semloc serve`: the localization service (`semloc.serve`) on a folder or a PostgreSQL store.
+
+Everything is checked before the socket is bound (the extra, the token file, the store, the
+settings file), so that a bad start is one line and exit status 2.  Without `--tokens` the
+server answers everyone, so it only listens on a loopback address.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from pydantic import ValidationError
+
+from semloc.cli.app import app, err_console, fail, first_error
+from semloc.cli.extras import need
+from semloc.cli.files import read_config
+from semloc.localizer import LocalizerConfig
+
+EXIT_STATUSES = "Exit status: 0 stopped (Ctrl-C / SIGTERM), 2 bad settings or files."
+
+
+@app.command(epilog=EXIT_STATUSES)
+def serve(
+    data: Annotated[
+        Path, typer.Option("--data", help="Folder of the store (SQLite file semloc.sqlite3).")
+    ],
+    host: Annotated[str, typer.Option(help="Address to listen on.")] = "127.0.0.1",
+    port: Annotated[int, typer.Option(help="Port (0: any free port, printed).")] = 8765,
+    workers: Annotated[
+        int, typer.Option(help="Worker processes over the one store (any serves any request).")
+    ] = 1,
+    tokens: Annotated[
+        Path | None,
+        typer.Option(help="Token file, JSON or YAML: who may read, localize, write which map."),
+    ] = None,
+    db: Annotated[
+        str | None,
+        typer.Option(help="postgresql://user@host:port/db: keep the store there, not in --data."),
+    ] = None,
+    session_idle: Annotated[
+        float, typer.Option("--session-idle", help="Seconds after which an idle session ends.")
+    ] = 600.0,
+    rate: Annotated[
+        float, typer.Option(help="Requests a second per token, bursts of twice that (0: off).")
+    ] = 100.0,
+    max_body_mb: Annotated[
+        float, typer.Option("--max-body-mb", help="Largest request body, MiB (413 beyond).")
+    ] = 64.0,
+    config: Annotated[
+        Path | None,
+        typer.Option(help="Localizer settings file, JSON or .yaml (`semloc config --dump`)."),
+    ] = None,
+) -> None:
+    """Serve shared maps over HTTP: uploads, versions, localization, live sessions, changes."""
+    need("serve", "serve")
+    from semloc.serve import server  # the serve extra: imported only here
+
+    if tokens is None and not server.is_loopback(host):
+        fail(f"--host {host}: without --tokens the server answers anyone, so it listens on a "
+             "loopback address only (127.0.0.1, ::1); give --tokens FILE to serve a network")  # fmt: skip
+    if tokens is not None:
+        try:
+            server.Access.from_file(tokens)
+        except server.TokenFileError as exc:
+            fail(str(exc))
+    try:
+        settings = server.ServeSettings(
+            data=data, db=db, host=host, port=port, workers=workers, tokens=tokens,
+            session_idle_s=session_idle, rate=rate, max_body=int(max_body_mb * 2**20),
+            localizer=read_config(config),
+        )  # fmt: skip
+        LocalizerConfig(**settings.localizer)
+    except ValidationError as exc:
+        fail(f"invalid settings: {first_error(exc)}")
+    if data.exists() and not data.is_dir():
+        fail(f"{data}: is a file; --data takes a folder")
+    try:
+        server.run(settings, announce=lambda line: err_console.print(line, soft_wrap=True))
+    except ValueError as exc:
+        fail(str(exc))
+    except OSError as exc:
+        fail(f"cannot serve on {host}:{port}: {exc.strerror or exc}")

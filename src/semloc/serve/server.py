@@ -1,0 +1,108 @@
+"""Running the service: settings, the app of one worker process, and uvicorn.
+
+`ServeSettings` is everything `semloc serve` takes; `run(settings)` binds the socket (port 0:
+any free port, printed), then serves it from one process or from `workers` processes over
+the same store (uvicorn's supervisor).  Each worker builds its app with `app_from_environment`
+from the settings passed in `SEMLOC_SERVE_SETTINGS`, so that any worker can serve any request:
+the state is in the store, not in a process.
+"""
+
+from __future__ import annotations
+
+import ipaddress
+import json
+import os
+import socket
+from collections.abc import Callable
+from pathlib import Path
+
+from pydantic import BaseModel, ConfigDict, Field
+
+from semloc.localizer import LocalizerConfig
+from semloc.serve.access import Access, TokenFileError
+from semloc.serve.app import DEFAULT_MAX_BODY, create_app
+from semloc.serve.service import Service
+from semloc.serve.store import open_store
+from semloc.tools.warmup import warm_up
+
+ENVIRONMENT = "SEMLOC_SERVE_SETTINGS"
+__all__ = ["Access", "ServeSettings", "TokenFileError", "build_app", "is_loopback", "run"]
+
+
+class ServeSettings(BaseModel):
+    """The settings of `semloc serve`."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    data: Path = Field(description="Folder of the SQLite store (created if absent).")
+    db: str | None = Field(None, description="A postgresql:// URL: the store instead of SQLite.")
+    host: str = "127.0.0.1"
+    port: int = Field(8765, ge=0, le=65535)
+    workers: int = Field(1, ge=1, le=64)
+    tokens: Path | None = Field(None, description="Token file (JSON or YAML).")
+    session_idle_s: float = Field(600.0, gt=0, description="Sessions idle this long expire.")
+    rate: float = Field(100.0, ge=0, description="Requests a second per token (0: no limit).")
+    max_body: int = Field(DEFAULT_MAX_BODY, gt=0, description="Largest request body (bytes).")
+    localizer: dict = Field(default_factory=dict, description="LocalizerConfig settings.")
+
+
+def is_loopback(host: str) -> bool:
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
+
+
+def build_app(settings: ServeSettings):
+    """The app of one worker: its own store connection, the token file, the settings."""
+    access = Access.from_file(settings.tokens) if settings.tokens else Access.open()
+    store = open_store(settings.data, settings.db)
+    service = Service(store, LocalizerConfig(**settings.localizer), settings.session_idle_s)
+    return create_app(service, access, settings.rate, settings.max_body)
+
+
+def app_from_environment():
+    """uvicorn's factory for worker processes (`--workers N`)."""
+    return build_app(ServeSettings.model_validate_json(os.environ[ENVIRONMENT]))
+
+
+def bind(host: str, port: int) -> socket.socket:
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    sock = socket.socket(family, socket.SOCK_STREAM)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    sock.bind((host, port))
+    sock.listen(2048)
+    sock.set_inheritable(True)
+    return sock
+
+
+def run(settings: ServeSettings, announce: Callable[[str], None] = print) -> None:
+    """Serve until interrupted (SIGINT / SIGTERM end it cleanly)."""
+    import uvicorn
+    from uvicorn.supervisors import Multiprocess
+
+    app = build_app(settings)  # checks the store and the token file before binding
+    warm_up(lambda text: announce(f"{text}…"))  # compiled before the first request, not in it
+    sock = bind(settings.host, settings.port)
+    host, port = sock.getsockname()[:2]
+    url = f"http://{'[' + host + ']' if ':' in host else host}:{port}"
+    access = "tokens required" if settings.tokens else "no tokens: loopback only"
+    store = settings.db.split("@")[-1] if settings.db else str(settings.data)
+    announce(f"semloc serve: listening on {url} ({access}; store {store}; "
+             f"{settings.workers} worker{'s' if settings.workers > 1 else ''})")  # fmt: skip
+    if settings.workers == 1:
+        config = uvicorn.Config(app, log_level="warning", access_log=False, timeout_keep_alive=30)
+        uvicorn.Server(config).run(sockets=[sock])
+        return
+    os.environ[ENVIRONMENT] = json.dumps(settings.model_dump(mode="json"))
+    config = uvicorn.Config(
+        "semloc.serve.server:app_from_environment",
+        factory=True,
+        workers=settings.workers,
+        log_level="warning",
+        access_log=False,
+        timeout_keep_alive=30,
+    )
+    Multiprocess(config, sockets=[sock]).run()

@@ -1,0 +1,394 @@
+"""What the service does, apart from HTTP: map versions, one-shot localizations, live sessions
+and change reports, over a `Store`.
+
+Any worker process can serve any request: a session's update batches are kept in the store,
+and a worker that does not hold the session's `Localizer` in memory rebuilds it by replaying
+the stored batches one update each, in order, so that its answers equal an uninterrupted
+session's.  Each session is pinned to the map version it was created on.  Parsed maps are kept
+per (map, version) in a small cache (a version never changes once written).
+
+Errors are `ServiceError`s carrying the HTTP status the web layer answers with.
+"""
+
+from __future__ import annotations
+
+import math
+import secrets
+import threading
+import time
+from collections import OrderedDict
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from semloc.association import CandidateIndex, label_report
+from semloc.changes import Changes, apply_changes, explain
+from semloc.io import map_from_dict, map_to_dict
+from semloc.localizer import Localizer, LocalizerConfig, localize
+from semloc.maps import MapError, ObjectMap
+from semloc.results import Result
+from semloc.serve.store import Conflict, Store
+from semloc.transforms import as_pose
+
+MAX_ID_LENGTH = 200
+
+
+class ServiceError(Exception):
+    """A request the service refuses: `status` (HTTP), a short `error` and a `detail`."""
+
+    def __init__(self, status: int, error: str, detail: Any = None) -> None:
+        super().__init__(error)
+        self.status, self.error, self.detail = status, error, detail
+
+
+def not_found(what: str) -> ServiceError:
+    return ServiceError(404, "not found", what)
+
+
+def check_id(value: str, what: str) -> str:
+    if not value or len(value) > MAX_ID_LENGTH or not value.isprintable() or "/" in value:
+        raise ServiceError(422, f"invalid {what}", f"1 to {MAX_ID_LENGTH} printable characters")
+    return value
+
+
+def parse_map(document: Any, what: str = "body") -> ObjectMap:
+    """A semloc map sent over HTTP (points inline: a `points_file` would name a server file)."""
+    if isinstance(document, dict) and "points_file" in document:
+        raise ServiceError(422, "invalid map", f"{what}: points must be inline, not a points_file")
+    try:
+        return map_from_dict(document)
+    except MapError as exc:
+        raise ServiceError(422, "invalid map", f"{what}: {exc}") from None
+
+
+def _objects_map(objects: Any, up: list[float] | None, what: str) -> ObjectMap:
+    if not isinstance(objects, list):
+        raise ServiceError(422, "invalid objects", f"{what}: 'objects' must be a list")
+    document: dict[str, Any] = {"format": "semloc-map", "version": 1, "objects": objects}
+    if up is not None:
+        document["up"] = up
+    return parse_map(document, what)
+
+
+def answer(result: Result, labels: dict, **extra: Any) -> dict[str, Any]:
+    """The JSON of a result, as `semloc localize --format json` writes it, plus `extra`."""
+    document = result.to_dict()
+    document["labels"] = {label: {"resolved": r.resolved, "map_labels": list(r.map_labels)}
+                          for label, r in labels.items()}  # fmt: skip
+    document.update(extra)
+    return document
+
+
+@dataclass
+class _LiveSession:
+    """A session's Localizer in this process and the answers not yet read, by batch number."""
+
+    localizer: Localizer
+    map_version: int
+    applied: int = 0
+    lock: threading.Lock = field(default_factory=threading.Lock)
+    answers: dict[int, Result] = field(default_factory=dict)
+
+
+class Service:
+    """The service over `store`; `config` holds the Localizer settings of every request."""
+
+    MAP_CACHE = 16
+    LIVE_SESSIONS = 4096
+    EXPIRY_EVERY_S = 10.0
+
+    def __init__(
+        self, store: Store, config: LocalizerConfig | None = None, session_idle_s: float = 600.0
+    ) -> None:
+        self.store = store
+        self.config = config or LocalizerConfig()
+        self.session_idle_s = session_idle_s
+        self._maps: OrderedDict[tuple[str, int], ObjectMap] = OrderedDict()
+        self._live: OrderedDict[str, _LiveSession] = OrderedDict()
+        self._lock = threading.Lock()
+        self._next_expiry = 0.0
+
+    # maps -------------------------------------------------------------------------------------
+    def put_map(self, map_id: str, document: Any) -> int:
+        check_id(map_id, "map id")
+        objmap = parse_map(document)
+        return self.store.put_map(map_id, map_to_dict(objmap), "upload")
+
+    def map_document(self, map_id: str, version: int | None = None) -> tuple[int, dict]:
+        found = self.store.get_map(map_id, version)
+        if found is None:
+            raise not_found(f"map {map_id!r}" + ("" if version is None else f" version {version}"))
+        return found
+
+    def object_map(self, map_id: str, version: int | None = None) -> tuple[int, ObjectMap]:
+        """The parsed map (cached per version); its version."""
+        if version is None:
+            version = self.store.latest_version(map_id)
+            if version is None:
+                raise not_found(f"map {map_id!r}")
+        key = (map_id, version)
+        with self._lock:
+            cached = self._maps.get(key)
+            if cached is not None:
+                self._maps.move_to_end(key)
+                return version, cached
+        _, document = self.map_document(map_id, version)
+        objmap = map_from_dict(document)
+        with self._lock:
+            self._maps[key] = objmap
+            while len(self._maps) > self.MAP_CACHE:
+                self._maps.popitem(last=False)
+        return version, objmap
+
+    # one-shot localization --------------------------------------------------------------------
+    def localize(self, map_id: str, document: Any) -> dict[str, Any]:
+        version, global_map = self.object_map(map_id)
+        local = parse_map(document)
+        result = localize(global_map, local, self.config)
+        labels = label_report(CandidateIndex(global_map, self.config.association), local)
+        return answer(result, labels, map_version=version)
+
+    # sessions ---------------------------------------------------------------------------------
+    def create_session(self, map_id: str, body: Any) -> str:
+        self._expire()
+        up = None
+        if body is not None:
+            if not isinstance(body, dict) or set(body) - {"up"}:
+                raise ServiceError(
+                    422, "invalid session", 'the body is optional: {"up": [x, y, z]}'
+                )
+            up = body.get("up")
+            if up is not None:
+                _objects_map([], up, "body")  # validates `up` as a map's
+        version, _ = self.object_map(map_id)
+        session_id = secrets.token_urlsafe(18)
+        self.store.create_session(session_id, map_id, version, up)
+        return session_id
+
+    def session_map(self, session_id: str) -> str:
+        """The map a live session localizes in (404 for an unknown or expired one)."""
+        row = self.store.session(session_id)
+        if row is None or time.time() - row.touched > self.session_idle_s:
+            raise not_found(f"session {session_id!r}")
+        return row.map_id
+
+    def update_session(self, session_id: str, body: Any) -> dict[str, Any]:
+        self._expire()
+        row = self.store.session(session_id)
+        if row is None or time.time() - row.touched > self.session_idle_s:
+            raise not_found(f"session {session_id!r}")
+        if not isinstance(body, dict) or "objects" not in body:
+            raise ServiceError(422, "invalid update", 'body: {"objects": [...], "stamp": float}')
+        stamp = body.get("stamp", 0.0)
+        if (
+            isinstance(stamp, bool)
+            or not isinstance(stamp, (int, float))
+            or not math.isfinite(stamp)
+        ):
+            raise ServiceError(422, "invalid update", "'stamp' must be a finite number")
+        _objects_map(body["objects"], row.up, "objects")  # refused before it is stored
+        seq = self.store.append_batch(session_id, float(stamp), body["objects"])
+        if seq is None:
+            raise not_found(f"session {session_id!r}")
+        live = self._live_session(session_id, row.map_id, row.map_version, row.up)
+        result = self._advance(session_id, live, row.up, seq)
+        document = answer(
+            result, live.localizer.label_report(), map_version=row.map_version, stamp=stamp
+        )
+        document["session_id"], document["update"] = session_id, seq
+        self.store.set_last(session_id, _summary(document))
+        return document
+
+    def _live_session(
+        self, session_id: str, map_id: str, version: int, up: list[float] | None
+    ) -> _LiveSession:
+        with self._lock:
+            live = self._live.get(session_id)
+            if live is not None:
+                self._live.move_to_end(session_id)
+                return live
+        _, global_map = self.object_map(map_id, version)
+        fresh = _LiveSession(Localizer(global_map, self.config, local_up=up), version)
+        with self._lock:
+            live = self._live.setdefault(session_id, fresh)
+            while len(self._live) > self.LIVE_SESSIONS:
+                self._live.popitem(last=False)  # rebuilt from the store if it comes back
+        return live
+
+    def _advance(
+        self, session_id: str, live: _LiveSession, up: list[float] | None, seq: int
+    ) -> Result:
+        """Apply the stored batches up to `seq` not yet applied here; the answer after `seq`."""
+        with live.lock:
+            if seq > live.applied:
+                for batch in self.store.batches(session_id, live.applied, seq):
+                    objects = _objects_map(batch.objects, up, f"batch {batch.seq}")
+                    result = live.localizer.update(list(objects))
+                    assert result is not None
+                    live.applied = batch.seq
+                    live.answers[batch.seq] = result
+            result = live.answers.pop(seq, None)
+            for old in [s for s in live.answers if s < seq - 64]:  # answers nobody came for
+                del live.answers[old]
+        if result is None:
+            raise ServiceError(409, "update superseded", f"update {seq} was answered already")
+        return result
+
+    def delete_session(self, session_id: str) -> None:
+        with self._lock:
+            self._live.pop(session_id, None)
+        if not self.store.delete_session(session_id):
+            raise not_found(f"session {session_id!r}")
+
+    def sessions(self, map_id: str) -> list[dict[str, Any]]:
+        """The live sessions of a map with their latest answer (for the page)."""
+        now = time.time()
+        return [
+            {"session_id": s.session_id, "map_version": s.map_version, "up": s.up,
+             "idle_s": round(now - s.touched, 3), "last": s.last}
+            for s in self.store.sessions_of(map_id)
+            if now - s.touched <= self.session_idle_s
+        ]  # fmt: skip
+
+    def _expire(self) -> None:
+        now = time.monotonic()
+        if now < self._next_expiry:
+            return
+        self._next_expiry = now + self.EXPIRY_EVERY_S
+        gone = self.store.expire_sessions(self.session_idle_s)
+        with self._lock:
+            for session_id in gone:
+                self._live.pop(session_id, None)
+
+    def session_objects(self, session_id: str) -> ObjectMap:
+        """Every object a session received (the latest version of each), in its frame."""
+        row = self.store.session(session_id)
+        if row is None:
+            raise not_found(f"session {session_id!r}")
+        latest: dict[str, Any] = {}
+        for batch in self.store.batches(session_id):
+            for raw in batch.objects:
+                latest[str(raw["id"])] = raw
+        return _objects_map(list(latest.values()), row.up, f"session {session_id}")
+
+    # change reports ---------------------------------------------------------------------------
+    def report_changes(self, map_id: str, body: Any) -> tuple[int, bool]:
+        """Apply a localization result's changes as a new version: (version, written).  Nothing
+        is written when the report changes nothing; `Conflict` (409) when the map moved on."""
+        if not isinstance(body, dict):
+            raise ServiceError(422, "invalid change report", "the body must be a result object")
+        base_version = body.get("map_version")
+        if isinstance(base_version, bool) or not isinstance(base_version, int):
+            raise ServiceError(422, "invalid change report", "'map_version' must be an integer")
+        if self.store.latest_version(map_id) is None:
+            raise not_found(f"map {map_id!r}")
+        found = self.store.get_map(map_id, base_version)
+        if found is None:
+            raise ServiceError(422, "invalid change report", f"no version {base_version}")
+        base = map_from_dict(found[1])
+        local = self._reported_local(body)
+        pose, pairs = _reported_answer(body)
+        changes = self._explain(base, local, pose, pairs)
+        if not (changes.moved or changes.new or changes.missing or _flagged(base, changes)):
+            return self.store.latest_version(map_id) or base_version, False
+
+        def build(latest: int | None, document: dict | None) -> dict:
+            assert latest is not None and document is not None
+            current = map_from_dict(document)
+            if latest != base_version:
+                _check_still_applies(base, current, local, pose, changes)
+            return map_to_dict(apply_changes(current, local, pose, changes))
+
+        try:
+            version = self.store.derive_map(map_id, build, f"changes (from version {base_version})")
+        except Conflict as exc:
+            raise ServiceError(409, "conflict", str(exc)) from None
+        except KeyError:
+            raise not_found(f"map {map_id!r}") from None
+        return version, True
+
+    def _reported_local(self, body: dict) -> ObjectMap:
+        if "local" in body:
+            return parse_map(body["local"], "local")
+        if isinstance(body.get("session_id"), str):
+            return self.session_objects(body["session_id"])
+        raise ServiceError(
+            422,
+            "invalid change report",
+            "the local objects are needed: 'local' (a semloc map) or 'session_id'",
+        )
+
+    def _explain(self, base: ObjectMap, local: ObjectMap, pose, pairs) -> Changes:
+        """The changes under the reported pose and pairs, by the Localizer's candidate rule (the
+        report's own `changes` are not trusted: they are recomputed on the server)."""
+        index = CandidateIndex(base, self.config.association)
+        known = set(base.ids.tolist())
+        local_ids = {o.id for o in local}
+        pairs = [(g, l) for g, l in pairs if g in known and l in local_ids]
+        candidates = {o.id: index.candidates(o) for o in local}
+        return explain(base, list(local), pose, pairs, candidates, self.config.changes)
+
+
+def _reported_answer(body: dict) -> tuple[np.ndarray, list[tuple[str, str]]]:
+    if body.get("status") != "localized" and not body.get("accept_ambiguous"):
+        raise ServiceError(
+            422, "not localized", f"status {body.get('status')!r}: only a localized answer's "
+            "changes are applied (or set accept_ambiguous)",
+        )  # fmt: skip
+    try:
+        pose = as_pose(body.get("pose"), "pose")
+    except (ValueError, TypeError) as exc:
+        raise ServiceError(422, "invalid change report", str(exc)) from None
+    hypotheses = body.get("hypotheses") or []
+    pairs: list[tuple[str, str]] = []
+    if isinstance(hypotheses, list) and hypotheses and isinstance(hypotheses[0], dict):
+        for pair in hypotheses[0].get("pairs") or []:
+            if isinstance(pair, dict) and isinstance(pair.get("global"), (str, int)):
+                pairs.append((str(pair["global"]), str(pair.get("local"))))
+    return pose, pairs
+
+
+def _flagged(base: ObjectMap, changes: Changes) -> bool:
+    """Whether a matched object carries a `missing` flag the report would clear."""
+    matched = set(changes.matched)
+    return any(o.id in matched and "missing" in o.extra for o in base)
+
+
+def _check_still_applies(base: ObjectMap, current: ObjectMap, local, pose, changes) -> None:
+    """Raise `Conflict` when the versions written since `base` touched what the report changes
+    or relies on: an object it moves, flags missing or matched was changed or removed, or an
+    object added since lies where the report adds one (two devices reporting one new chair)."""
+    before = {o.id: o for o in base}
+    after = {o.id: o for o in current}
+    touched = {
+        i for i, o in before.items()
+        if i not in after or not _same(o, after[i])
+    }  # fmt: skip
+    relied = {m.global_id for m in changes.moved} | set(changes.missing) | set(changes.matched)
+    clash = sorted(relied & touched)
+    if clash:
+        raise Conflict(f"objects changed since the report's version: {', '.join(clash[:10])}")
+    added = [o for i, o in after.items() if i not in before]
+    if added and changes.new:
+        R, t = pose[:3, :3], pose[:3, 3]
+        placed = {o.id: R @ o.position + t for o in local}
+        for local_id in changes.new:
+            for other in added:
+                if np.linalg.norm(other.position - placed[local_id]) < 1.0:
+                    raise Conflict(
+                        f"new object {local_id} lies where object {other.id} was added since"
+                    )
+
+
+def _same(a, b) -> bool:
+    return (
+        a.label == b.label
+        and np.allclose(a.position, b.position, atol=1e-6)
+        and (a.extra.get("missing") == b.extra.get("missing"))
+    )
+
+
+def _summary(document: dict[str, Any]) -> dict[str, Any]:
+    """What the page shows of a session's latest answer."""
+    return {key: document.get(key) for key in ("status", "pose", "confidence", "stamp", "update")}

@@ -1,0 +1,387 @@
+"""Where the service keeps its state: map versions and live sessions, in SQLite or PostgreSQL.
+
+One storage layer, two databases: `open_store(url)` gives an SQLite store for a file path (the
+default, `DIR/semloc.sqlite3`, nothing to install) or a PostgreSQL store for a
+`postgresql://` URL (several machines share it).  Every write is one transaction, so a crash or
+`kill -9` at any moment leaves the store as it was before the request or as after it: a map
+version is stored whole or not at all, and a session's update batch likewise.
+
+Tables:
+    maps(map_id, latest)                                 the newest version of each map
+    map_versions(map_id, version, created, source, document)   every version, JSON (zlib)
+    sessions(session_id, map_id, map_version, up, created, touched, last)
+    session_batches(session_id, seq, stamp, objects)     every update a session received
+
+Map versions are integers from 1.  `derive_map` runs a caller's function on the latest version
+while holding that map's write lock (SQLite: the database's; PostgreSQL: the `maps` row's), so
+that two writers of one map are serialised: each sees the other's version or gets a conflict.
+"""
+
+from __future__ import annotations
+
+import json
+import sqlite3
+import threading
+import time
+import zlib
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+SCHEMA = (
+    "CREATE TABLE IF NOT EXISTS maps (map_id TEXT PRIMARY KEY, latest INTEGER NOT NULL)",
+    "CREATE TABLE IF NOT EXISTS map_versions (map_id TEXT NOT NULL, version INTEGER NOT NULL, "
+    "created DOUBLE PRECISION NOT NULL, source TEXT NOT NULL, document {blob} NOT NULL, "
+    "PRIMARY KEY (map_id, version))",
+    "CREATE TABLE IF NOT EXISTS sessions (session_id TEXT PRIMARY KEY, map_id TEXT NOT NULL, "
+    "map_version INTEGER NOT NULL, up TEXT, created DOUBLE PRECISION NOT NULL, "
+    "touched DOUBLE PRECISION NOT NULL, last TEXT)",
+    "CREATE TABLE IF NOT EXISTS session_batches (session_id TEXT NOT NULL, seq INTEGER NOT NULL, "
+    "stamp DOUBLE PRECISION NOT NULL, objects {blob} NOT NULL, PRIMARY KEY (session_id, seq))",
+)
+
+
+class Conflict(Exception):
+    """A derived version cannot be written: the map moved on and the change no longer applies."""
+
+
+@dataclass(frozen=True)
+class VersionInfo:
+    version: int
+    created: float  # seconds since the epoch (UTC)
+    source: str
+
+
+@dataclass(frozen=True)
+class SessionRow:
+    session_id: str
+    map_id: str
+    map_version: int
+    up: list[float] | None
+    created: float
+    touched: float
+    last: dict[str, Any] | None  # a summary of the latest answer (status, pose, stamp)
+
+
+@dataclass(frozen=True)
+class Batch:
+    seq: int
+    stamp: float
+    objects: list[dict[str, Any]]
+
+
+def _pack(document: Any) -> bytes:
+    return zlib.compress(json.dumps(document, allow_nan=False).encode(), 1)
+
+
+def _unpack(blob: bytes) -> Any:
+    return json.loads(zlib.decompress(bytes(blob)))
+
+
+class Store:
+    """The operations the service needs; subclasses provide connections and the write lock."""
+
+    placeholder = "?"
+    blob = "BLOB"
+
+    def __init__(self) -> None:
+        self._local = threading.local()
+        with self._transaction(write=True) as cur:
+            for statement in SCHEMA:
+                cur.execute(statement.format(blob=self.blob))
+
+    # connections and transactions (per thread) ------------------------------------------------
+    def _connect(self) -> Any:
+        raise NotImplementedError
+
+    def _connection(self) -> Any:
+        connection = getattr(self._local, "connection", None)
+        if connection is None:
+            connection = self._local.connection = self._connect()
+        return connection
+
+    @contextmanager
+    def _transaction(self, write: bool = False) -> Iterator[Any]:
+        raise NotImplementedError
+
+    def _sql(self, statement: str) -> str:
+        return statement if self.placeholder == "?" else statement.replace("?", self.placeholder)
+
+    def _lock_map(self, cur: Any, map_id: str) -> int | None:
+        """Inside a write transaction: the latest version of `map_id` (None if unknown), locked
+        until the transaction ends."""
+        cur.execute(self._sql("SELECT latest FROM maps WHERE map_id = ?"), (map_id,))
+        row = cur.fetchone()
+        return None if row is None else int(row[0])
+
+    def close(self) -> None:
+        connection = getattr(self._local, "connection", None)
+        if connection is not None:
+            connection.close()
+            self._local.connection = None
+
+    # maps -------------------------------------------------------------------------------------
+    def put_map(self, map_id: str, document: dict[str, Any], source: str) -> int:
+        """Store `document` as the next version of `map_id` (1 for a new map); its number."""
+        return self.derive_map(map_id, lambda latest, old: document, source, create=True)
+
+    def derive_map(
+        self,
+        map_id: str,
+        build: Callable[[int | None, dict[str, Any] | None], dict[str, Any]],
+        source: str,
+        create: bool = False,
+    ) -> int:
+        """Write `build(latest_version, latest_document)` as the next version, all in one
+        transaction holding the map's lock; `build` may raise `Conflict` (nothing written).
+        Without `create`, an unknown map raises KeyError."""
+        blob_out: bytes
+        with self._transaction(write=True) as cur:
+            latest = self._lock_map(cur, map_id)
+            if latest is None and not create:
+                raise KeyError(map_id)
+            old = None if latest is None else self._document(cur, map_id, latest)
+            blob_out = _pack(build(latest, old))
+            version = 1 if latest is None else latest + 1
+            if latest is None:
+                cur.execute(self._sql("INSERT INTO maps VALUES (?, ?)"), (map_id, version))
+            else:
+                cur.execute(
+                    self._sql("UPDATE maps SET latest = ? WHERE map_id = ?"), (version, map_id)
+                )
+            cur.execute(
+                self._sql("INSERT INTO map_versions VALUES (?, ?, ?, ?, ?)"),
+                (map_id, version, time.time(), source, blob_out),
+            )
+        return version
+
+    def _document(self, cur: Any, map_id: str, version: int) -> dict[str, Any] | None:
+        cur.execute(
+            self._sql("SELECT document FROM map_versions WHERE map_id = ? AND version = ?"),
+            (map_id, version),
+        )
+        row = cur.fetchone()
+        return None if row is None else _unpack(row[0])
+
+    def latest_version(self, map_id: str) -> int | None:
+        with self._transaction() as cur:
+            cur.execute(self._sql("SELECT latest FROM maps WHERE map_id = ?"), (map_id,))
+            row = cur.fetchone()
+        return None if row is None else int(row[0])
+
+    def get_map(self, map_id: str, version: int | None = None) -> tuple[int, dict] | None:
+        """(version, document) of `version` (the latest without one), or None if absent."""
+        with self._transaction() as cur:
+            if version is None:
+                cur.execute(self._sql("SELECT latest FROM maps WHERE map_id = ?"), (map_id,))
+                row = cur.fetchone()
+                if row is None:
+                    return None
+                version = int(row[0])
+            document = self._document(cur, map_id, version)
+        return None if document is None else (version, document)
+
+    def versions(self, map_id: str) -> list[VersionInfo]:
+        with self._transaction() as cur:
+            cur.execute(
+                self._sql(
+                    "SELECT version, created, source FROM map_versions WHERE map_id = ? "
+                    "ORDER BY version"
+                ),
+                (map_id,),
+            )
+            return [VersionInfo(int(v), float(c), s) for v, c, s in cur.fetchall()]
+
+    def map_ids(self) -> list[tuple[str, int]]:
+        """Every map with its latest version, by id."""
+        with self._transaction() as cur:
+            cur.execute("SELECT map_id, latest FROM maps ORDER BY map_id")
+            return [(m, int(v)) for m, v in cur.fetchall()]
+
+    # sessions ---------------------------------------------------------------------------------
+    def create_session(
+        self, session_id: str, map_id: str, map_version: int, up: list[float] | None
+    ) -> None:
+        now = time.time()
+        with self._transaction(write=True) as cur:
+            cur.execute(
+                self._sql("INSERT INTO sessions VALUES (?, ?, ?, ?, ?, ?, ?)"),
+                (session_id, map_id, map_version, None if up is None else json.dumps(up),
+                 now, now, None),
+            )  # fmt: skip
+
+    def session(self, session_id: str) -> SessionRow | None:
+        with self._transaction() as cur:
+            cur.execute(self._sql("SELECT * FROM sessions WHERE session_id = ?"), (session_id,))
+            row = cur.fetchone()
+        if row is None:
+            return None
+        sid, map_id, version, up, created, touched, last = row
+        return SessionRow(
+            sid, map_id, int(version), None if up is None else json.loads(up),
+            float(created), float(touched), None if last is None else json.loads(last),
+        )  # fmt: skip
+
+    def sessions_of(self, map_id: str) -> list[SessionRow]:
+        with self._transaction() as cur:
+            cur.execute(
+                self._sql("SELECT session_id FROM sessions WHERE map_id = ? ORDER BY created"),
+                (map_id,),
+            )
+            ids = [r[0] for r in cur.fetchall()]
+        return [s for s in map(self.session, ids) if s is not None]
+
+    def append_batch(self, session_id: str, stamp: float, objects: list[dict]) -> int | None:
+        """Store the next batch of a session and touch it; its sequence number (from 1), or
+        None when the session is gone."""
+        with self._transaction(write=True) as cur:
+            cur.execute(
+                self._sql("SELECT session_id FROM sessions WHERE session_id = ?"), (session_id,)
+            )
+            if cur.fetchone() is None:
+                return None
+            if self.placeholder != "?":  # PostgreSQL: serialise a session's appends
+                cur.execute(
+                    "SELECT session_id FROM sessions WHERE session_id = %s FOR UPDATE",
+                    (session_id,),
+                )
+            cur.execute(
+                self._sql("SELECT COALESCE(MAX(seq), 0) FROM session_batches WHERE session_id = ?"),
+                (session_id,),
+            )
+            seq = int(cur.fetchone()[0]) + 1
+            cur.execute(
+                self._sql("INSERT INTO session_batches VALUES (?, ?, ?, ?)"),
+                (session_id, seq, stamp, _pack(objects)),
+            )
+            cur.execute(
+                self._sql("UPDATE sessions SET touched = ? WHERE session_id = ?"),
+                (time.time(), session_id),
+            )
+        return seq
+
+    def batches(self, session_id: str, after: int = 0, upto: int | None = None) -> list[Batch]:
+        """The batches of a session with `after < seq <= upto`, in order."""
+        with self._transaction() as cur:
+            cur.execute(
+                self._sql(
+                    "SELECT seq, stamp, objects FROM session_batches WHERE session_id = ? "
+                    "AND seq > ? AND seq <= ? ORDER BY seq"
+                ),
+                (session_id, after, 2**62 if upto is None else upto),
+            )
+            return [Batch(int(s), float(t), _unpack(o)) for s, t, o in cur.fetchall()]
+
+    def set_last(self, session_id: str, last: dict[str, Any]) -> None:
+        with self._transaction(write=True) as cur:
+            cur.execute(
+                self._sql("UPDATE sessions SET last = ? WHERE session_id = ?"),
+                (json.dumps(last, allow_nan=False), session_id),
+            )
+
+    def delete_session(self, session_id: str) -> bool:
+        with self._transaction(write=True) as cur:
+            cur.execute(
+                self._sql("DELETE FROM session_batches WHERE session_id = ?"), (session_id,)
+            )
+            cur.execute(self._sql("DELETE FROM sessions WHERE session_id = ?"), (session_id,))
+            return cur.rowcount > 0
+
+    def expire_sessions(self, idle_seconds: float) -> list[str]:
+        """Delete the sessions idle for longer than `idle_seconds`; their ids."""
+        cutoff = time.time() - idle_seconds
+        with self._transaction(write=True) as cur:
+            cur.execute(self._sql("SELECT session_id FROM sessions WHERE touched < ?"), (cutoff,))
+            gone = [r[0] for r in cur.fetchall()]
+            for sid in gone:
+                cur.execute(self._sql("DELETE FROM session_batches WHERE session_id = ?"), (sid,))
+                cur.execute(self._sql("DELETE FROM sessions WHERE session_id = ?"), (sid,))
+        return gone
+
+
+class SQLiteStore(Store):
+    """The default store: one SQLite file (WAL journal, full sync: a committed write survives a
+    crash of the process and of the machine)."""
+
+    def __init__(self, path: str | Path) -> None:
+        self.path = str(path)
+        super().__init__()
+
+    def _connect(self) -> sqlite3.Connection:
+        connection = sqlite3.connect(self.path, timeout=30.0, isolation_level=None)
+        connection.execute("PRAGMA journal_mode=WAL")
+        connection.execute("PRAGMA synchronous=FULL")
+        connection.execute("PRAGMA busy_timeout=30000")
+        return connection
+
+    @contextmanager
+    def _transaction(self, write: bool = False) -> Iterator[sqlite3.Cursor]:
+        connection = self._connection()
+        cur = connection.cursor()
+        # IMMEDIATE takes the write lock at once: a read-then-write cannot be overtaken
+        cur.execute("BEGIN IMMEDIATE" if write else "BEGIN")
+        try:
+            yield cur
+        except BaseException:
+            connection.rollback()
+            raise
+        else:
+            connection.commit()
+        finally:
+            cur.close()
+
+
+class PostgresStore(Store):
+    """The shared store: a PostgreSQL database (`postgresql://user@host:port/db`), for several
+    worker processes or machines.  Needs `psycopg` (the `serve` extra)."""
+
+    placeholder = "%s"
+    blob = "BYTEA"
+
+    def __init__(self, url: str) -> None:
+        import psycopg  # the serve extra; only a PostgreSQL store needs it
+
+        self._psycopg = psycopg
+        self.url = url
+        super().__init__()
+
+    def _connect(self) -> Any:
+        return self._psycopg.connect(self.url, autocommit=False)
+
+    def _lock_map(self, cur: Any, map_id: str) -> int | None:
+        cur.execute("SELECT latest FROM maps WHERE map_id = %s FOR UPDATE", (map_id,))
+        row = cur.fetchone()
+        if row is not None:
+            return int(row[0])
+        # a new map: serialise creators of this id on an advisory lock of its hash
+        cur.execute("SELECT pg_advisory_xact_lock(hashtext(%s))", (map_id,))
+        cur.execute("SELECT latest FROM maps WHERE map_id = %s FOR UPDATE", (map_id,))
+        row = cur.fetchone()
+        return None if row is None else int(row[0])
+
+    @contextmanager
+    def _transaction(self, write: bool = False) -> Iterator[Any]:
+        connection = self._connection()
+        if connection.closed or connection.broken:
+            connection = self._local.connection = self._connect()
+        try:
+            with connection.cursor() as cur:
+                yield cur
+        except BaseException:
+            connection.rollback()
+            raise
+        else:
+            connection.commit()
+
+
+def open_store(data_dir: str | Path, url: str | None = None) -> Store:
+    """The store of `url` (`postgresql://…`), or SQLite in `data_dir` without one."""
+    if url is not None and url.startswith(("postgresql://", "postgres://")):
+        return PostgresStore(url)
+    if url is not None:
+        raise ValueError(f"--db takes a postgresql:// URL, got {url[:60]!r}")
+    folder = Path(data_dir)
+    folder.mkdir(parents=True, exist_ok=True)
+    return SQLiteStore(folder / "semloc.sqlite3")

@@ -1,0 +1,138 @@
+"""Who may do what: the token file, and the auth matrix (token x right x map) over HTTP."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+from conftest import T_TRUE, view
+from test_api import raw
+
+from semloc.io import map_to_dict
+from semloc.serve.access import Access, TokenFileError, digest
+
+READER, LOCALIZER, WRITER, ADMIN, OTHER = (
+    "reader-token-1", "localizer-token", "writer-token-1", "admin-token-1", "other-map-token",
+)  # fmt: skip
+TOKENS = {
+    "tokens": [
+        {"token": READER, "maps": {"office": ["read"]}},
+        {"token": LOCALIZER, "maps": {"office": ["localize"], "*": ["read"]}},
+        {"sha256": digest(WRITER), "maps": {"office": ["read", "write"]}},
+        {"token": ADMIN, "maps": {"*": ["read", "localize", "write"]}},
+        {"token": OTHER, "maps": {"lab": ["read", "localize", "write"]}},
+    ]
+}
+
+
+@pytest.fixture
+def secured(serve, building, tmp_path):
+    path = tmp_path / "tokens.json"
+    path.write_text(json.dumps(TOKENS))
+    server = serve(access=Access.from_file(path))
+    document = json.dumps(map_to_dict(building)).encode()
+    assert raw(server.url, "PUT", "/v1/maps/office", document, ADMIN)[0] == 201
+    assert raw(server.url, "PUT", "/v1/maps/lab", document, ADMIN)[0] == 201
+    return server, document
+
+
+def _session(url: str) -> str:
+    return raw(url, "POST", "/v1/maps/office/sessions", None, ADMIN)[1]["session_id"]
+
+
+def test_the_auth_matrix(secured, building):
+    server, document = secured
+    url = server.url
+    local = json.dumps(map_to_dict(view(building, [3, 4, 5], T_TRUE))).encode()
+    requests = {  # what -> (method, path, body)
+        "read": ("GET", "/v1/maps/office", None),
+        "versions": ("GET", "/v1/maps/office/versions", None),
+        "sessions list": ("GET", "/v1/maps/office/sessions", None),
+        "localize": ("POST", "/v1/maps/office/localize", local),
+        "open session": ("POST", "/v1/maps/office/sessions", None),
+        "write": ("PUT", "/v1/maps/office", document),
+    }
+    expected = {  # token -> the status of each request, in order
+        None: [401] * 6,
+        "not-a-token": [401] * 6,
+        READER: [200, 200, 200, 403, 403, 403],
+        LOCALIZER: [200, 200, 200, 200, 201, 403],
+        WRITER: [200, 200, 200, 403, 403, 201],
+        ADMIN: [200, 200, 200, 200, 201, 201],
+        OTHER: [404] * 6,  # office is not theirs: as if it did not exist
+    }
+    for token, statuses in expected.items():
+        got = [raw(url, m, p, b, token)[0] for m, p, b in requests.values()]
+        assert got == statuses, (token, dict(zip(requests, got)))
+
+
+def test_sessions_and_change_reports_follow_the_map_rights(secured, building):
+    server, _ = secured
+    url = server.url
+    session_id = _session(url)
+    update = b'{"objects": [], "stamp": 1.5}'
+    path = f"/v1/sessions/{session_id}/objects"
+    assert raw(url, "POST", path, update, READER)[0] == 403
+    assert raw(url, "POST", path, update, OTHER)[0] == 404
+    assert raw(url, "POST", path, update)[0] == 401
+    status, answer = raw(url, "POST", path, update, LOCALIZER)
+    assert status == 200 and answer["stamp"] == 1.5
+    report = json.dumps({**answer, "local": map_to_dict(view(building, [3], T_TRUE))}).encode()
+    assert raw(url, "POST", "/v1/maps/office/changes", report, LOCALIZER)[0] == 403
+    assert raw(url, "POST", "/v1/maps/office/changes", report, OTHER)[0] == 404
+    assert raw(url, "DELETE", f"/v1/sessions/{session_id}", None, WRITER)[0] == 403
+    assert raw(url, "DELETE", f"/v1/sessions/{session_id}", None, LOCALIZER)[0] == 204
+
+
+def test_the_map_list_shows_only_readable_maps(secured):
+    url = secured[0].url
+    assert [m["map_id"] for m in raw(url, "GET", "/v1/maps", None, READER)[1]] == ["office"]
+    assert [m["map_id"] for m in raw(url, "GET", "/v1/maps", None, LOCALIZER)[1]] == [
+        "lab",
+        "office",
+    ]
+    assert [m["map_id"] for m in raw(url, "GET", "/v1/maps", None, OTHER)[1]] == ["lab"]
+    assert raw(url, "GET", "/v1/health")[0] == 200  # no token needed
+
+
+def test_401_names_the_scheme(secured):
+    status, error = raw(secured[0].url, "GET", "/v1/maps/office", None, None)
+    assert status == 401 and error["error"] == "unauthorized"
+    status, _ = raw(secured[0].url, "GET", "/v1/maps/office", None, None,
+                    headers={"Authorization": "Basic eDp5"})  # fmt: skip
+    assert status == 401
+
+
+@pytest.mark.parametrize(
+    "content, problem",
+    [
+        ("{", "not valid JSON"),
+        ('{"tokens": {}}', '{"tokens": [...]}'),
+        ('{"tokens": [{"maps": {"*": ["read"]}}]}', "exactly one of 'token' and 'sha256'"),
+        ('{"tokens": [{"token": "short", "maps": {"*": ["read"]}}]}', "at least 8 characters"),
+        ('{"tokens": [{"sha256": "abc", "maps": {"*": ["read"]}}]}', "64 hexadecimal digits"),
+        ('{"tokens": [{"token": "longenough", "maps": {"*": ["fly"]}}]}', "must be a list of"),
+        ('{"tokens": [{"token": "longenough", "maps": {}}]}', "'maps' must be an object"),
+        (
+            '{"tokens": [{"token": "longenough", "maps": {"*": ["read"]}}, '
+            '{"sha256": "' + digest("longenough") + '", "maps": {"*": ["read"]}}]}',
+            "twice",
+        ),
+    ],
+)
+def test_a_bad_token_file_is_one_line_naming_it(tmp_path, content, problem):
+    path = tmp_path / "tokens.json"
+    path.write_text(content)
+    with pytest.raises(TokenFileError) as error:
+        Access.from_file(path)
+    assert str(path) in str(error.value) and problem in str(error.value)
+
+
+def test_yaml_token_files_and_hashes(tmp_path):
+    path = tmp_path / "tokens.yaml"
+    path.write_text(
+        f"tokens:\n  - sha256: {digest('robot-fleet-7')}\n    maps:\n      '*': [read]\n"
+    )
+    access = Access.from_file(path)
+    assert access.grant("robot-fleet-7").rights("any") == {"read"}
+    assert access.grant("robot-fleet-8") is None and access.grant(None) is None

@@ -1,0 +1,112 @@
+"""The storage layer on SQLite and on a real PostgreSQL server: versions, derived versions and
+conflicts, concurrent writers, sessions and their batches, expiry."""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import pytest
+
+from semloc.serve.store import Conflict, Store, open_store
+
+DOC = {"format": "semloc-map", "version": 1, "objects": []}
+
+
+@pytest.fixture(params=["sqlite", "postgresql"])
+def store(request, tmp_path) -> Store:
+    if request.param == "sqlite":
+        return open_store(tmp_path)
+    return request.getfixturevalue("postgres_store")
+
+
+def test_versions_count_from_one_and_keep_every_document(store):
+    assert store.get_map("m") is None and store.latest_version("m") is None
+    for n in range(1, 4):
+        assert store.put_map("m", {**DOC, "name": f"v{n}"}, "upload") == n
+    assert store.get_map("m") == (3, {**DOC, "name": "v3"})
+    assert store.get_map("m", 1) == (1, {**DOC, "name": "v1"})
+    assert store.get_map("m", 4) is None
+    assert [(v.version, v.source) for v in store.versions("m")] == [
+        (n, "upload") for n in (1, 2, 3)
+    ]
+    assert store.map_ids() == [("m", 3)]
+
+
+def test_a_conflicting_derivation_writes_nothing(store):
+    store.put_map("m", DOC, "upload")
+
+    def refuse(latest, document):
+        raise Conflict("moved on")
+
+    with pytest.raises(Conflict):
+        store.derive_map("m", refuse, "changes")
+    with pytest.raises(KeyError):
+        store.derive_map("unknown", lambda latest, document: DOC, "changes")
+    assert store.latest_version("m") == 1 and store.map_ids() == [("m", 1)]
+    seen = []
+    assert store.derive_map("m", lambda v, d: seen.append((v, d)) or {**d, "name": "x"}, "c") == 2
+    assert seen == [(1, DOC)]
+
+
+def test_concurrent_writers_are_serialised(store):
+    """Eight threads append to one map, and eight create maps of one new id: every version
+    number is given once, and each derivation saw the version before its own."""
+    store.put_map("m", {**DOC, "n": 0}, "upload")
+    errors = []
+
+    def bump(latest, document):
+        assert document["n"] == latest - 1
+        return {**document, "n": latest}
+
+    def work() -> None:
+        try:
+            for _ in range(4):
+                store.derive_map("m", bump, "changes")
+                store.put_map("fresh", DOC, "upload")
+        except Exception as exc:  # noqa: BLE001 - reported below
+            errors.append(exc)
+
+    threads = [threading.Thread(target=work) for _ in range(8)]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join()
+    assert errors == []
+    assert [v.version for v in store.versions("m")] == list(range(1, 34))
+    assert store.get_map("m")[1]["n"] == 32
+    assert [v.version for v in store.versions("fresh")] == list(range(1, 33))
+
+
+def test_sessions_keep_their_batches_in_order(store):
+    store.put_map("m", DOC, "upload")
+    store.create_session("s1", "m", 1, [0.0, 0.0, 1.0])
+    assert store.append_batch("s1", 0.5, [{"id": "a"}]) == 1
+    assert store.append_batch("s1", 1.5, [{"id": "b"}, {"id": "c"}]) == 2
+    assert store.append_batch("nope", 0.0, []) is None
+    assert [(b.seq, b.stamp, b.objects) for b in store.batches("s1")] == [
+        (1, 0.5, [{"id": "a"}]), (2, 1.5, [{"id": "b"}, {"id": "c"}])
+    ]  # fmt: skip
+    assert [b.seq for b in store.batches("s1", after=1)] == [2]
+    assert [b.seq for b in store.batches("s1", after=0, upto=1)] == [1]
+    row = store.session("s1")
+    assert (row.map_id, row.map_version, row.up, row.last) == ("m", 1, [0.0, 0.0, 1.0], None)
+    store.set_last("s1", {"status": "failed"})
+    assert store.session("s1").last == {"status": "failed"}
+    assert [s.session_id for s in store.sessions_of("m")] == ["s1"]
+    assert store.delete_session("s1") and not store.delete_session("s1")
+    assert store.session("s1") is None and store.batches("s1") == []
+
+
+def test_idle_sessions_expire(store):
+    store.put_map("m", DOC, "upload")
+    store.create_session("old", "m", 1, None)
+    time.sleep(0.3)
+    store.create_session("new", "m", 1, None)
+    assert store.expire_sessions(0.2) == ["old"]
+    assert store.session("old") is None and store.session("new") is not None
+
+
+def test_an_unknown_database_url_is_refused(tmp_path):
+    with pytest.raises(ValueError, match="postgresql://"):
+        open_store(tmp_path, "mysql://x")
