@@ -3,7 +3,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: install demo test test-install lint bench docs-numbers clean
+.PHONY: install system-deps demo test test-install lint bench docs-numbers clean
 
 install: $(STAMP)
 
@@ -15,6 +15,18 @@ $(STAMP): pyproject.toml constraints.txt
 	$(BIN)/python -m pip uninstall --quiet --yes open3d-cpu 2>/dev/null || true
 	$(BIN)/python -m pip install --quiet -c constraints.txt -e ".[all,test]"
 	touch $(STAMP)
+
+# Debian packages some tests use (they skip without them): PostgreSQL, the service's shared
+# store, and Chromium, which loads the service's page.  CI installs them; `make test` does not.
+system-deps:
+	@need=""; \
+	command -v chromium >/dev/null 2>&1 || need="$$need chromium"; \
+	ls /usr/lib/postgresql/*/bin/initdb >/dev/null 2>&1 || need="$$need postgresql"; \
+	if [ -n "$$need" ]; then \
+	  sudo=""; [ "$$(id -u)" -eq 0 ] || sudo="sudo"; \
+	  $$sudo apt-get update -qq && \
+	  DEBIAN_FRONTEND=noninteractive $$sudo apt-get install -y -qq --no-install-recommends $$need; \
+	fi
 
 demo: install
 	$(BIN)/semloc demo

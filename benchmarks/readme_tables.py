@@ -1,10 +1,11 @@
-"""Rerun the benchmarks behind the README's result tables and rewrite those tables in place.
+"""Rerun the benchmarks behind the README's and the docs' result tables and rewrite them in place.
 
-Each table of README.md (and of a few docs pages) sits between `<!-- table: NAME -->` and `<!-- /table -->`; this script
-runs the benchmark that makes it (each benchmark once, also when it feeds two tables), takes the
-table from the benchmark's markdown output (some rows and columns of it) and writes it back
-between the markers with the command that reproduces it, so the README is current after every
-change without hand-editing.  Everything: about 25 minutes on 2 cores.
+Each table of README.md and of the docs pages sits between `<!-- table: NAME -->` and
+`<!-- /table -->`; this script runs the benchmark that makes it (each benchmark once, also when
+it feeds several tables), takes the table from the benchmark's markdown output (some rows and
+columns of it, or a table built from several of its tables: the README's headline) and writes
+it back between the markers with the command that reproduces it, so the pages are current
+after every change without hand-editing.  Everything: about 25 minutes on 2 cores.
 
     python benchmarks/readme_tables.py [--only real-layouts trust ...] [--dry-run]
 
@@ -42,15 +43,59 @@ class Job:
         )
 
 
+Tables = list[list[list[str]]]
+"""The markdown tables of a report, each as rows of cells (header first)."""
+
+
 @dataclass(frozen=True)
 class TableSpec:
-    """Which table of a job's report goes into the README, and which of its rows and columns."""
+    """Which table of a job's report goes into a page, and which of its rows and columns (or
+    `build`: the table made from all of the report's tables)."""
 
     job: str
     index: int  # the index-th markdown table of the report
     keep_row: Callable[[dict[str, str]], bool] = lambda row: True
     columns: tuple[str, ...] = ()  # headers to keep, in order (empty: all)
     file: str = "README.md"  # the page that shows it, relative to the repository's root
+    build: Callable[[Tables], list[list[str]]] | None = None
+
+
+SIMULATED_KINDS = ("reconstruction", "cad", "dynamic")
+
+
+def headline(tables: Tables) -> list[list[str]]:
+    """The README's one table, from `semloc bench`'s report: semloc and the best peer (the
+    other method with the best mean top-1 over the simulated map kinds): top-1 / top-10 per
+    map kind, the `localized` claims over all attempts (right / wrong, precision) and the
+    median time per update."""
+    recall, claims = tables[0], tables[1]
+    rows = {row[0]: dict(zip(recall[0], row)) for row in recall[1:]}
+
+    def mean_top1(method: str) -> float:
+        return sum(float(rows[method][f"{k}: top-1 / top-10"].split("/")[0])
+                   for k in SIMULATED_KINDS) / len(SIMULATED_KINDS)  # fmt: skip
+
+    peers = [m for m in rows if not m.startswith("semloc")]
+    if "semloc" not in rows or not peers:
+        raise SystemExit("readme_tables: the bench report needs semloc and another method")
+    best = max(peers, key=mean_top1)
+    header = ["method", "top-1 / top-10: reconstruction · CAD · dynamic",
+              "`localized` claims right / wrong", "precision", "median ms / update"]  # fmt: skip
+    body = []
+    for method, shown in (("semloc", "semloc"), (best, f"{best} (best peer)")):
+        right = wrong = 0
+        for row in claims[1:]:
+            cells = dict(zip(claims[0], row))
+            if cells["method"] == method:
+                right, wrong = (
+                    right + int(cells["claims right"]),
+                    wrong + int(cells["claims wrong"]),
+                )
+        precision = f"{100 * right / (right + wrong):.1f}%" if right + wrong else "-"
+        accuracy = " · ".join(rows[method][f"{k}: top-1 / top-10"] for k in SIMULATED_KINDS)
+        body.append([shown, accuracy, f"{right} / {wrong}", precision,
+                     rows[method]["median ms / update"]])  # fmt: skip
+    return [header, *body]
 
 
 JOBS = {
@@ -79,31 +124,10 @@ JOBS = {
 }
 
 TABLES = {
-    "real-layouts": TableSpec(
-        "real",
-        0,
-        lambda r: (
-            (r["observed objects"] == "all" and "re-fitted" not in r["check"]) or r["runs"] == "1"
-        ),
-        ("check", "observed objects", "runs", "top-1", "top-10", "localized", "wrongly localized"),
+    "headline": TableSpec("bench", 0, build=headline),
+    "buildings": TableSpec(
+        "buildings", 0, lambda r: r["observed objects"] not in {"4", "6"}, file="docs/benchmark.md"
     ),
-    "buildings": TableSpec("buildings", 0, lambda r: r["observed objects"] not in {"4", "6"}),
-    "trust": TableSpec(
-        "real",
-        1,
-        lambda r: r["objects"] in {"all", ">= 5"},
-        (
-            "variant",
-            "objects",
-            "runs",
-            "top-1",
-            "top-10",
-            "claims right",
-            "claims wrong",
-            "precision",
-            "coverage",
-        ),
-    ),  # fmt: skip
     "speed": TableSpec(
         "speed",
         0,
@@ -117,34 +141,14 @@ TABLES = {
             "peak MB",
             "success",
         ),
+        file="docs/benchmark.md",
     ),  # fmt: skip
-    "comparison": TableSpec("bench", 0, lambda r: not r["method"].startswith("semloc+")),
     "variants": TableSpec("real", 1, file="docs/trust.md"),
     "crops": TableSpec("real", 0, file="docs/real_layouts.md"),
     "align": TableSpec("align", 0, file="docs/alignment.md"),
     "changes": TableSpec("changes", 0, file="docs/trust.md"),
     "real-use": TableSpec("calibration", 0, file="docs/trust.md"),
     "unchanged": TableSpec("changes", 1, file="docs/trust.md"),
-    "changes-summary": TableSpec(
-        "changes",
-        0,
-        lambda r: r["objects"] == "all",
-        (
-            "variant",
-            "views",
-            "top-1",
-            "moved precision",
-            "moved recall",
-            "new precision",
-            "new recall",
-            "right answers without a false `moved`",
-        ),
-    ),  # fmt: skip
-    "vocabulary": TableSpec(
-        "vocab",
-        0,
-        lambda r: r["source"] == "all" and r["cases"] in {"clean", "noisy", "dynamic", "all"},
-    ),
     "vocabulary-all": TableSpec("vocab", 0, file="docs/vocabulary.md"),
     "recall": TableSpec("bench", 0, file="docs/benchmark.md"),
     "claims": TableSpec("bench", 1, file="docs/benchmark.md"),
@@ -221,7 +225,8 @@ def rewritten(readme: str, names: list[str], reports: dict[str, str | None]) -> 
         tables = markdown_tables(report)
         if len(tables) <= spec.index:
             raise SystemExit(f"readme_tables: the report of {spec.job} has no table {spec.index}")
-        body = f"`{JOBS[spec.job].shown()}`\n\n" + as_markdown(select(tables[spec.index], spec))
+        rows = spec.build(tables) if spec.build else select(tables[spec.index], spec)
+        body = f"`{JOBS[spec.job].shown()}`\n\n" + as_markdown(rows)
         readme = replace_table(readme, name, body)
     return readme
 

@@ -19,7 +19,10 @@ PACKAGE = Path(semloc.__file__).parent
 CORE = {"maps", "pointsets", "transforms", "association", "clustering", "pose", "neighbours",
         "registration", "closed_form", "digests", "verification", "results", "decision", "localizer",
         "confidence_model", "_clustering_fast", "_verification_fast", "alignment", "changes",
-        "semantics"}  # fmt: skip
+        "semantics", "compiling"}  # fmt: skip
+APPLICATIONS = {"tools", "cli"}
+"""The applications: nothing below them imports them."""
+BELOW_APPLICATIONS = ("io", "pictures", "sim", "eval", "baselines", "frontend", "descriptors")
 THIRD_PARTY_CORE = {"numpy", "scipy", "pydantic", "numba"}
 EXTRAS = ("open3d", "matplotlib", "dask", "distributed", "sklearn", "torch", "rerun", "fastapi",
           "uvicorn", "starlette", "psycopg", "rosbags", "mcap", "spark_dsg")  # fmt: skip
@@ -79,8 +82,22 @@ def test_core_imports_only_the_core():
         _check_imports(PACKAGE / f"{name}.py", CORE)
 
 
+def test_nothing_below_the_applications_imports_them():
+    """The simulator's exports and the evaluation's reports draw with `semloc.pictures`, and
+    the package's top level (`import semloc`) loads no application: no import climbs up."""
+    files = [
+        PACKAGE / "__init__.py",
+        *(f for part in BELOW_APPLICATIONS for f in _module_files(part)),
+    ]
+    for path in files:
+        for modules, _ in _imports(path):
+            part = _semloc_part(modules[0])
+            assert part not in APPLICATIONS, f"{path.relative_to(PACKAGE)} imports {modules[0]}"
+
+
 def test_the_top_level_is_the_core_alone():
-    """Applications (demo, pictures, recordings) live in `semloc.tools`, not beside the core."""
+    """Applications (the demo) live in `semloc.tools`, pictures in `semloc.pictures`, not
+    beside the core."""
     top = {path.stem for path in PACKAGE.glob("*.py")} - {"__init__", "__main__"}
     assert top == CORE
 

@@ -4,15 +4,17 @@ import semloc
 g = semloc.load_map("global.json")
 l = semloc.load_map("local.json")
 r = semloc.localize(g, l)        # r.status, r.pose (4x4 T_global_local), r.hypotheses
+semloc.warmup()                  # compile the inner loops ahead (once after installing)
 """
 
 from semloc import descriptors  # registers the descriptor kinds (numpy only)
 from semloc.alignment import AlignmentConfig, align
+from semloc.compiling import warmup  # compiles the inner loops ahead; says once when it does
 from semloc.io import load_map, save_map
 from semloc.localizer import Localizer, LocalizerConfig, localize
 from semloc.maps import MapError, ObjectMap, SemanticObject
+from semloc.pictures import colors  # label colours of pictures, exports, recordings (no plotting)
 from semloc.results import Hypothesis, Result, Step
-from semloc.tools import colors  # label colours of pictures, exports, recordings (no plotting)
 
 __version__ = "0.1.0"
 __all__ = [
@@ -32,4 +34,5 @@ __all__ = [
     "load_map",
     "localize",
     "save_map",
+    "warmup",
 ]

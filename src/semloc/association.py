@@ -13,12 +13,18 @@ With `descriptor` set, the Localizer computes descriptors of that kind for objec
 Descriptor kinds are a registry (`DESCRIBERS`, name -> `Describer`) that `semloc.descriptors`
 fills when semloc is imported; the Localizer resolves its describer and gate once, when it is
 built, and a user may pass a describer of their own.
+
+Label similarity comes from a registry too (`SIMILARITY_SOURCES`, name -> `SimilaritySource`,
+in order): the shipped taxonomy through the label map (`taxonomy`), then embeddings where both
+objects carry one (`embedding`, overriding the taxonomy on those map objects).  A source that
+scores per label caches its values per map, keyed by its name and the label map
+(`CandidateIndex.per_label`), so two sources never read each other's values.
 """
 
 from __future__ import annotations
 
 import weakref
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -146,9 +152,24 @@ class CandidateIndex:
         self._map = global_map
         self._stacks: dict[tuple[int, ...], tuple[np.ndarray, np.ndarray]] = {}
         self._gate = config.delta if gate is None else gate
-        self._of_label = _SIMILARITIES.setdefault(global_map, {}).setdefault(
-            tuple(sorted(self._label_map.items())), {}
-        )  # local label -> similarity per map object, shared by the indexes of one map
+        self._caches = _SIMILARITIES.setdefault(global_map, {})  # shared by one map's indexes
+
+    @property
+    def map(self) -> ObjectMap:
+        return self._map
+
+    def per_label(
+        self, source: str, label: str, compute: Callable[[str], np.ndarray]
+    ) -> np.ndarray:
+        """`compute(label)` (a similarity per map object) of source `source`, computed once
+        per map, source, label map and label, then shared read-only."""
+        key = (source, tuple(sorted(self._label_map.items())))
+        cache = self._caches.setdefault(key, {})
+        if label not in cache:
+            values = np.asarray(compute(label), dtype=float)
+            values.flags.writeable = False
+            cache[label] = values
+        return cache[label]
 
     @property
     def labels(self) -> set[str]:
@@ -169,7 +190,7 @@ class CandidateIndex:
     def resolution(self, label: str, objects: Sequence[SemanticObject] = ()) -> LabelResolution:
         """How `label` is read against the map (`objects`: the local objects of that label;
         with embeddings their candidates' labels are reported)."""
-        embedded = [o for o in objects if self._embedding_scores(o) is not None]
+        embedded = [o for o in objects if self.embedding_scores(o) is not None]
         if embedded:
             found = {i for o in embedded for i in self.candidates(o).tolist()}
             names = sorted({str(self._map.labels[i]) for i in found})
@@ -189,19 +210,20 @@ class CandidateIndex:
         return LabelResolution(kind, tuple(names))
 
     def label_similarity(self, label: str) -> np.ndarray:
-        """The similarity of `label` to each map object's label (read-only, cached)."""
-        if label not in self._of_label:
-            local = canonical_label(label, self._label_map)
-            exact_only = self._user_mapped(label)
-            similarity = np.zeros(len(self._map))
-            for name, group in self._by_label.items():
-                value = 1.0 if local == name else semantic_similarity(local, name)
-                if exact_only and value < 1.0:
-                    value = 0.0
-                similarity[group] = value
-            similarity.flags.writeable = False
-            self._of_label[label] = similarity
-        return self._of_label[label]
+        """The taxonomy's similarity of `label` to each map object's label, through the label
+        map (read-only, cached)."""
+        return self.per_label("taxonomy", label, self._taxonomy_similarity)
+
+    def _taxonomy_similarity(self, label: str) -> np.ndarray:
+        local = canonical_label(label, self._label_map)
+        exact_only = self._user_mapped(label)
+        similarity = np.zeros(len(self._map))
+        for name, group in self._by_label.items():
+            value = 1.0 if local == name else semantic_similarity(local, name)
+            if exact_only and value < 1.0:
+                value = 0.0
+            similarity[group] = value
+        return similarity
 
     def _user_mapped(self, label: str) -> bool:
         return label in self.config.label_map or label.strip().lower() in self._label_map
@@ -210,15 +232,22 @@ class CandidateIndex:
         return canonical_label(map_label, self._label_map)
 
     def _similarities(self, obj: SemanticObject) -> np.ndarray:
-        similarity = self.label_similarity(obj.label)
-        scores = self._embedding_scores(obj)
-        if scores is None:
-            return similarity
-        similarity = similarity.copy()
-        similarity[scores[0]] = scores[1]
-        return similarity
+        """The similarity of `obj` to each map object: each registered source in turn, a later
+        one deciding for the map objects it scores."""
+        similarity = None
+        for source in SIMILARITY_SOURCES.values():
+            found = source.score(self, obj)
+            if found is None:
+                continue
+            rows, values = found
+            if rows is None:
+                similarity = values
+            else:
+                similarity = np.zeros(len(self._map)) if similarity is None else similarity.copy()
+                similarity[rows] = values
+        return np.zeros(len(self._map)) if similarity is None else similarity
 
-    def _embedding_scores(self, obj: SemanticObject) -> tuple[np.ndarray, np.ndarray] | None:
+    def embedding_scores(self, obj: SemanticObject) -> tuple[np.ndarray, np.ndarray] | None:
         """(map objects with a comparable embedding, calibrated similarity) or None."""
         rows, stack = self._map.embeddings
         if obj.embedding is None or not len(rows) or self._user_mapped(obj.label):
@@ -269,7 +298,38 @@ def label_report(
 
 _SIMILARITIES: weakref.WeakKeyDictionary[ObjectMap, dict[tuple, dict[str, np.ndarray]]] = (
     weakref.WeakKeyDictionary()
+)  # map -> (source, label map) -> local label -> similarity per map object
+
+
+Scores = tuple[np.ndarray | None, np.ndarray]
+"""(map object indices, or None for all of them; their similarity to a local object)."""
+
+
+@dataclass(frozen=True)
+class SimilaritySource:
+    """A kind of label similarity: `score(index, obj)` gives the similarity of a local object
+    to the map objects this source decides for (`Scores`), or None when it has no say (e.g. no
+    embedding).  A source that depends on the label only should cache through
+    `CandidateIndex.per_label` under its own name."""
+
+    name: str
+    score: Callable[[CandidateIndex, SemanticObject], Scores | None]
+
+
+SIMILARITY_SOURCES: dict[str, SimilaritySource] = {}
+"""The label similarity sources in the order they are applied (later ones decide for the map
+objects they score)."""
+
+
+def register_similarity(source: SimilaritySource) -> None:
+    """Add (or replace) a similarity source, applied after those registered before it."""
+    SIMILARITY_SOURCES[source.name] = source
+
+
+register_similarity(
+    SimilaritySource("taxonomy", lambda index, obj: (None, index.label_similarity(obj.label)))
 )
+register_similarity(SimilaritySource("embedding", lambda index, obj: index.embedding_scores(obj)))
 
 
 _LABEL_GROUPS: weakref.WeakKeyDictionary[ObjectMap, dict[tuple, dict[str, np.ndarray]]] = (

@@ -17,9 +17,10 @@ Under the pose T_global_local of a hypothesis each local object is
 A map object that nobody matched or moved is `missing` when the place where it stood was
 observed: some observed local point lies within `observed_radius` of that place.  That is the
 bound: a local map holds the points of the objects seen, not the free space seen, so only a
-place right beside observed surfaces counts as seen, and objects without points (centres only)
-vouch for nothing; objects farther away are not reported, since nothing says whether they are
-still there.  Greedy and one to one (matches nearest first, moved objects by box agreement,
+place right beside observed surfaces counts as seen; objects farther away are not reported,
+since nothing says whether they are still there.  A local object without points but with a box
+(size, rotation) was seen on its box's surface (sampled); one with a centre only vouches for
+nothing, so with centres only a moved object reads as `new` and nothing is `missing`.  Greedy and one to one (matches nearest first, moved objects by box agreement,
 then nearest), so that a moved object and a new one of the same class are not both explained
 by one map object.  Pure computation on numpy arrays.
 """
@@ -96,6 +97,17 @@ class Changes:
             "new": list(self.new),
             "missing": list(self.missing),
         }
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> Changes:
+        """The changes of a `to_dict` document (`ValueError` for one that is not)."""
+        try:
+            moved = [Moved(str(m["global"]), str(m["local"]), float(m["offset_m"]))
+                     for m in data.get("moved") or []]  # fmt: skip
+            return cls(moved, [str(i) for i in data.get("new") or []],
+                       [str(i) for i in data.get("missing") or []])  # fmt: skip
+        except (KeyError, TypeError, ValueError, AttributeError) as exc:
+            raise ValueError(f"'changes' is not a changes object ({exc})") from None
 
 
 def explain(
@@ -208,10 +220,9 @@ def _box_log_ratio(local: SemanticObject, mapped: SemanticObject) -> float:
 
 def _gap_to_observed(global_map, local_objects, pose, reach: float) -> np.ndarray:
     """Per map object: the distance from its place to the nearest observed local point (inf
-    beyond `reach`, and for all when no local object has points)."""
+    beyond `reach`, and for all when no local object has points or a box)."""
     gap = np.full(len(global_map), np.inf)
-    clouds = [o.points[:: max(1, len(o.points) // POINTS_PER_OBJECT)]
-              for o in local_objects if o.points is not None and len(o.points)]  # fmt: skip
+    clouds = [cloud for cloud in map(_observed_surface, local_objects) if cloud is not None]
     if not clouds:
         return gap
     observed = np.vstack(clouds) @ pose[:3, :3].T + pose[:3, 3]
@@ -221,6 +232,24 @@ def _gap_to_observed(global_map, local_objects, pose, reach: float) -> np.ndarra
     if len(near):
         gap[near] = cKDTree(observed).query(xyz[near], distance_upper_bound=reach)[0]
     return gap
+
+
+_BOX_LATTICE = np.array(
+    [p for p in np.array(np.meshgrid(*[np.linspace(-0.5, 0.5, 4)] * 3)).reshape(3, -1).T
+     if np.abs(p).max() == 0.5]
+)  # fmt: skip
+"""56 points on the surface of the unit cube, a third of an edge apart: a box's surface."""
+
+
+def _observed_surface(obj: SemanticObject) -> np.ndarray | None:
+    """Where `obj` was seen (its frame): about `POINTS_PER_OBJECT` of its points, or without
+    points its box's surface; None for a centre only."""
+    if obj.points is not None and len(obj.points):
+        return obj.points[:: max(1, len(obj.points) // POINTS_PER_OBJECT)]
+    if obj.size is None:
+        return None
+    rotation = np.eye(3) if obj.rotation is None else obj.rotation
+    return (_BOX_LATTICE * obj.size) @ rotation.T + obj.position
 
 
 # Applying changes to a map ------------------------------------------------------------------

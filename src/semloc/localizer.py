@@ -268,6 +268,8 @@ class Localizer:
     def _why_no_sets(self) -> str:
         """Why no association set has 2 pairs: too few objects, or too few with candidates."""
         matched = sum(len(c) > 0 for c in self._candidates_of.values())
+        if len(self.global_map) == 0:
+            return "the global map has no objects"
         if len(self._local) < 2:
             return f"too few local objects: {len(self._local)} seen, 2 needed"
         if matched == 0:
@@ -503,6 +505,9 @@ def _warm_start(pairs: frozenset, previous: dict[_PoseKey, PoseEstimate | None])
     return max(subsets, key=lambda s: s[:2])[2] if subsets else None
 
 
+EMPTY_LOCAL_MAP = "the local map has no objects"
+
+
 def localize(
     global_map: ObjectMap,
     local_map: ObjectMap,
@@ -521,7 +526,7 @@ def localize(
     localizer = Localizer(global_map, config, local_up=local_map.up, **overrides)
     keyframes = sorted(set(local_map.seen.tolist()))
     if not keyframes:
-        return Result(status="failed", pose=None, hypotheses=[])
+        return Result(status="failed", pose=None, hypotheses=[], reason=EMPTY_LOCAL_MAP)
     by_keyframe: dict[int, list[SemanticObject]] = {k: [] for k in keyframes}
     for obj in local_map:  # grouped once: a long replay must not rescan the map per keyframe
         by_keyframe[obj.seen].append(obj)

@@ -464,7 +464,7 @@ class ObjectMap(Sequence[SemanticObject]):
     def to_open3d(self, colors: Mapping[str, Any] | None = None) -> Any:
         """The map as an `open3d.geometry.PointCloud` (see `cloud`; needs `semloc[sim]`).
 
-        `semloc.tools.colors.label_colors` gives every label its own colour, as in semloc's pictures.
+        `semloc.pictures.colors.label_colors` gives every label its own colour, as in semloc's pictures.
         """
         import open3d  # the one optional import of the core: only when asked for
 

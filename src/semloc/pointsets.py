@@ -1,5 +1,6 @@
 """Point-set utilities shared by every stage: voxel keys, voxel-centroid downsampling, the
-axes along which a set of positions spreads most and the order sweeps over them follow.
+axes along which a set of positions spreads most and the order sweeps over them follow, and
+points sampled on a box's surface.
 
 Pure computation on numpy arrays (the voxel sums in one compiled pass); used by the front-end
 (fusion), the simulator, the dataset importers and pose recovery, so that "downsample with
@@ -95,3 +96,21 @@ class SweepOrder(NamedTuple):
         _, rank = np.unique(positions[:, axis], return_inverse=True)
         rank = rank.ravel().astype(np.int64)
         return cls(axis, cross_axis, rank, int(rank.max(initial=-1)) + 1)
+
+
+def sample_box_surface(
+    centre: np.ndarray,
+    size: np.ndarray,
+    rotation: np.ndarray,
+    count: int,
+    rng: np.random.Generator,
+) -> np.ndarray:
+    """`count` points uniformly on the six faces of a box (area-weighted)."""
+    size = np.maximum(np.asarray(size, dtype=float), 0.0)
+    areas = np.array([size[1] * size[2], size[0] * size[2], size[0] * size[1]]).repeat(2)
+    weights = areas / areas.sum() if areas.sum() > 0 else np.full(6, 1 / 6)
+    faces = rng.choice(6, size=count, p=weights)
+    q = rng.uniform(-0.5, 0.5, size=(count, 3))
+    axis = faces // 2
+    q[np.arange(count), axis] = np.where(faces % 2 == 0, -0.5, 0.5)
+    return (q * size) @ np.asarray(rotation).T + centre

@@ -1,11 +1,15 @@
 """What a localization returns: `Result` (status, pose, ranked `Hypothesis` list, `Step` records).
 
 Shared by the Localizer and every baseline, so that callers, the CLI, the evaluation and the
-JSON output see one model.  `Status` is the decision's vocabulary (see `decision.py`).
+JSON output see one model.  `Status` is the decision's vocabulary (see `decision.py`).  Results
+are written as JSON by `Result.to_json` and read back by `saved_result` (every field checked:
+the CLI's `view`, `export` and `update-map --result`); no file access here.
 """
 
 from __future__ import annotations
 
+import json
+import reprlib
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import cached_property
@@ -14,6 +18,8 @@ from typing import Any, Literal
 import numpy as np
 
 from semloc.changes import Changes
+from semloc.maps import MAX_COORDINATE
+from semloc.transforms import as_pose
 
 Status = Literal["localized", "ambiguous", "failed"]
 STATUSES: tuple[Status, ...] = ("localized", "ambiguous", "failed")
@@ -132,6 +138,32 @@ class Result:
         """The calibrated probability that the best hypothesis is right (None without one)."""
         return None if self.best is None else self.best.confidence
 
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> Result:
+        """A Result from its JSON document (`to_dict`, e.g. a `semloc serve` answer), the
+        inverse of `to_dict` up to its rounding; `ValueError` naming a field not as written."""
+        if not isinstance(data, dict):
+            raise ValueError("a result must be an object")
+        saved = saved_result(data)
+        raws = data.get("hypotheses") or []
+        hypotheses = [_hypothesis_from(raw, pose, pairs, i)
+                      for i, ((pose, pairs), raw) in enumerate(zip(saved.hypotheses, raws))]  # fmt: skip
+        try:
+            steps = [Step(**s) for s in data.get("steps") or []]
+        except TypeError as exc:
+            raise ValueError(f"'steps' are not steps ({exc})") from None
+        changes = Changes.from_dict(data.get("changes") or {})
+        return cls(
+            saved.status or "failed", saved.pose, hypotheses, steps,
+            dict(data.get("timing_ms") or {}), str(data.get("reason") or ""),
+            explain=lambda: changes,
+        )  # fmt: skip
+
+    def to_json(self, **extra: Any) -> str:
+        """The JSON text of `to_dict()` (and `extra` keys), as every writer of a result writes
+        it: indented, NaN and infinities refused (`ValueError`)."""
+        return json.dumps({**self.to_dict(), **extra}, indent=1, allow_nan=False) + "\n"
+
     def to_dict(self) -> dict[str, Any]:
         confidence = self.confidence
         return {
@@ -145,3 +177,119 @@ class Result:
             "timing_ms": {k: round(v, 3) for k, v in self.timing_ms.items()},
             "changes": self.changes.to_dict(),
         }
+
+
+# Reading a saved result back ----------------------------------------------------------------
+@dataclass(frozen=True)
+class SavedResult:
+    """A result read back (the JSON of `Result.to_json`, or a ground-truth file): the pose, the
+    status, each ranked hypothesis's pose and pairs, and the moved objects of `changes` (a
+    ground-truth file gives only a pose)."""
+
+    pose: np.ndarray | None
+    status: str | None = None
+    hypotheses: tuple[tuple[np.ndarray | None, list[tuple[str, str]]], ...] = ()
+    moved: tuple[tuple[str, str], ...] = ()  # (global id, local id) of `changes.moved`
+
+    @property
+    def pairs(self) -> list[tuple[str, str]]:
+        """(global id, local id) pairs of the best hypothesis."""
+        return self.hypotheses[0][1] if self.hypotheses else []
+
+
+def saved_result(data: dict[str, Any]) -> SavedResult:
+    """A parsed result document (or a ground-truth document, `T_global_local`), every field
+    checked: `ValueError` naming the field and what it must be."""
+    key = "pose" if "pose" in data else "T_global_local"
+    pose = None if data.get(key) is None else saved_pose(data[key], key)
+    status = data.get("status")
+    if status is not None and status not in STATUSES:
+        raise ValueError(f"'status' must be one of {', '.join(STATUSES)}, got {_brief(status)}")
+    hypotheses = _list_field(data.get("hypotheses"), "hypotheses")
+    return SavedResult(
+        pose,
+        status,
+        tuple(_hypothesis(h, i) for i, h in enumerate(hypotheses)),
+        _moved(data.get("changes")),
+    )
+
+
+def _hypothesis_from(
+    raw: dict[str, Any], pose: np.ndarray | None, pairs: list[tuple[str, str]], index: int
+) -> Hypothesis:
+    """A hypothesis of a result document (pose and pairs checked by `saved_result`)."""
+
+    def number(key: str) -> float | None:
+        value = raw.get(key)
+        if value is not None and (isinstance(value, bool) or not isinstance(value, (int, float))):
+            raise ValueError(f"'hypotheses[{index}].{key}' must be a number, got {_brief(value)}")
+        return None if value is None else float(value)
+
+    rejected = [(str(p.get("global")), str(p.get("local"))) for p in raw.get("rejected") or []
+                if isinstance(p, dict)]  # fmt: skip
+    features = raw.get("features")
+    return Hypothesis(
+        rank=int(number("rank") or index + 1), score=number("score") or 0.0, pairs=pairs,
+        pose=pose, fitness=number("fitness"), rmse=number("rmse"), residual=number("residual"),
+        method=str(raw.get("method") or ""), confidence=number("confidence"),
+        evidence=number("evidence"), rejected=rejected,
+        features=dict(features) if isinstance(features, dict) else None,
+    )  # fmt: skip
+
+
+def saved_pose(value: object, what: str = "pose") -> np.ndarray:
+    """A 4x4 pose of a saved document, its translation within the maps' coordinate limit;
+    `ValueError` naming `what` and the problem."""
+    pose = as_pose(value, what)
+    if np.abs(pose[:3, 3]).max() > MAX_COORDINATE:
+        raise ValueError(f"{what} has a translation beyond ±{MAX_COORDINATE:g} m (the input limit)")
+    return pose
+
+
+def _moved(changes: object) -> tuple[tuple[str, str], ...]:
+    """The (global id, local id) pairs of a result's `changes.moved` (none without changes)."""
+    if changes is None:
+        return ()
+    if not isinstance(changes, dict):
+        raise ValueError(f"'changes' must be an object, got {_brief(changes)}")
+    moved = []
+    for j, entry in enumerate(_list_field(changes.get("moved"), "changes.moved")):
+        ids = (entry.get("global"), entry.get("local")) if isinstance(entry, dict) else (None,)
+        if len(ids) != 2 or not all(
+            isinstance(i, (str, int)) and not isinstance(i, bool) for i in ids
+        ):
+            raise ValueError(f"'changes.moved[{j}]' must be {MOVED_SHAPE}, got {_brief(entry)}")
+        moved.append((str(ids[0]), str(ids[1])))
+    return tuple(moved)
+
+
+def _hypothesis(value: object, index: int) -> tuple[np.ndarray | None, list[tuple[str, str]]]:
+    where = f"hypotheses[{index}]"
+    if not isinstance(value, dict):
+        raise ValueError(f"'{where}' must be an object, got {_brief(value)}")
+    raw = value.get("pose")
+    pose = None if raw is None else saved_pose(raw, f"{where}.pose")
+    pairs = []
+    for j, pair in enumerate(_list_field(value.get("pairs"), f"{where}.pairs")):
+        ids = (pair.get("global"), pair.get("local")) if isinstance(pair, dict) else (None, None)
+        if not all(isinstance(i, (str, int)) and not isinstance(i, bool) for i in ids):
+            raise ValueError(f"'{where}.pairs[{j}]' must be {PAIR_SHAPE}, got {_brief(pair)}")
+        pairs.append((str(ids[0]), str(ids[1])))
+    return pose, pairs
+
+
+PAIR_SHAPE = '{"global": ID, "local": ID}'
+MOVED_SHAPE = '{"global": ID, "local": ID, "offset_m": NUMBER}'
+
+
+def _list_field(value: object, where: str) -> list:
+    """`value` if a list (None: empty), else one line naming the field."""
+    if value is None:
+        return []
+    if not isinstance(value, list):
+        raise ValueError(f"'{where}' must be a list, got {_brief(value)}")
+    return value
+
+
+def _brief(value: object) -> str:
+    return reprlib.repr(value)[:60]

@@ -9,8 +9,8 @@ import numpy as np
 import semloc
 from semloc.cli import main
 from semloc.io.ply import read_ply
+from semloc.pictures.colors import label_colors, rgb
 from semloc.sim.layouts import layout, observe
-from semloc.tools.colors import label_colors, rgb
 
 
 def test_export_writes_global_and_placed_local_objects(tmp_path, capsys):

@@ -193,7 +193,7 @@ def test_view_with_ground_truth_and_a_3d_recording(simulated, tmp_path, capsys):
 
 
 def test_every_label_has_its_own_colour():
-    from semloc.tools.colors import CLASS_COLORS, label_colors
+    from semloc.pictures.colors import CLASS_COLORS, label_colors
 
     labels = [*CLASS_COLORS, "clock", "bench", "stool", *(f"thing{i}" for i in range(40))]
     colors = label_colors(labels)
@@ -203,7 +203,7 @@ def test_every_label_has_its_own_colour():
 
 
 def test_a_local_map_alone_is_labelled_local(simulated, tmp_path):
-    from semloc.tools.viz import map_figure, plot_localization
+    from semloc.pictures.viz import map_figure, plot_localization
 
     local = semloc.load_map(simulated / "local.json")
     fig, ax = map_figure(local.positions[:, :2])
@@ -213,7 +213,7 @@ def test_a_local_map_alone_is_labelled_local(simulated, tmp_path):
 
 
 def test_labels_appearing_later_keep_the_colours_handed_out():
-    from semloc.tools.colors import label_colors
+    from semloc.pictures.colors import label_colors
 
     first = label_colors(["chair", "clock"])
     later = label_colors(["bench", "armchair"], first)

@@ -100,7 +100,7 @@ def test_view_draws_an_arrow_per_moved_object(tmp_path, capsys):
     assert png.stat().st_size > 0
 
     from semloc.cli.files import read_result
-    from semloc.tools.viz import map_figure, plot_localization
+    from semloc.pictures.viz import map_figure, plot_localization
 
     answer = read_result(result)
     assert answer.moved == (("g4", "l4"),)
@@ -109,7 +109,7 @@ def test_view_draws_an_arrow_per_moved_object(tmp_path, capsys):
     plot_localization(ax, g, local, answer.pose, answer.pairs, moved=answer.moved)
     from matplotlib.colors import to_rgba
 
-    from semloc.tools.viz import MOVED_COLOR
+    from semloc.pictures.viz import MOVED_COLOR
 
     arrows = [t for t in ax.texts if getattr(t, "arrow_patch", None) is not None
               and np.allclose(t.arrow_patch.get_edgecolor(), to_rgba(MOVED_COLOR))]  # fmt: skip
@@ -131,7 +131,7 @@ def test_a_bad_moved_entry_in_a_result_file_is_one_line(tmp_path, capsys):
 
 
 def test_the_rerun_recording_gets_the_moved_arrows(tmp_path):
-    from semloc.tools.viz3d import _moved_arrows, write_localization
+    from semloc.pictures.viz3d import _moved_arrows, write_localization
 
     g = write_scene(tmp_path)
     local = semloc.load_map(tmp_path / "local.json")
@@ -156,3 +156,52 @@ def test_a_flagged_object_seen_again_loses_its_flag(tmp_path):
     plant = semloc.load_map(later).get("g5")
     assert "missing" not in plant.extra
     assert semloc.load_map(later).get("l9").extra["new"] is True
+
+
+def write_room_with_a_moved_chair(folder, boxes: bool) -> tuple[ObjectMap, int]:
+    """A 30-object map without points (with boxes or centres only) and a view of its 9
+    central objects in another frame, one chair moved 1.5 m; (the map, the chair's index)."""
+    from helpers import room as irregular_room
+
+    sizes = {"chair": [0.5, 0.5, 0.9], "table": [1.4, 0.8, 0.75], "lamp": [0.3, 0.3, 1.5],
+             "sofa": [2.0, 0.9, 0.8], "bin": [0.3, 0.3, 0.4], "shelf": [0.4, 1.2, 1.8],
+             "plant": [0.4, 0.4, 0.9], "tv": [1.1, 0.1, 0.6]}  # fmt: skip
+    rng = np.random.default_rng(1)
+    g = irregular_room(30)
+    if boxes:
+        g = ObjectMap([o.replace(size=sizes[o.label], rotation=yaw_pose(rng.uniform(0, 3))[:3, :3])
+                       for o in g], up=[0, 0, 1])  # fmt: skip
+    near = np.argsort(np.linalg.norm(g.positions[:, :2] - g.positions[:, :2].mean(axis=0), axis=1))
+    chair = next(int(i) for i in near[:9] if g[int(i)].label == "chair")
+    to_local = np.linalg.inv(yaw_pose(0.8, [3.0, -2.0, 0.0]))
+    seen = []
+    for k, i in enumerate(near[:9].tolist()):
+        obj = g[i].transformed(yaw_pose(0.0, [1.5, 0.0, 0.0])) if i == chair else g[i]
+        seen.append(obj.transformed(to_local).replace(id=f"l{k}", seen=k))
+    semloc.save_map(g, folder / "global.json")
+    semloc.save_map(ObjectMap(seen, up=[0, 0, 1]), folder / "local.json")
+    return g, chair
+
+
+def test_with_boxes_and_no_points_a_moved_chair_is_moved_not_added(tmp_path, capsys):
+    """Maps of boxes without points (issue 44): a chair moved 1.5 m is `moved` and the
+    updated map keeps its 30 objects, the chair where it was seen (it was `new`: a 31st
+    object, and the old chair left in place)."""
+    g, chair = write_room_with_a_moved_chair(tmp_path, boxes=True)
+    out = tmp_path / "updated.json"
+    assert main(["update-map", str(tmp_path / "global.json"), str(tmp_path / "local.json"),
+                 "-o", str(out)]) == 0  # fmt: skip
+    assert f"changes, moved: {g[chair].id}" in capsys.readouterr().out
+    updated = semloc.load_map(out)
+    assert len(updated) == 30 and not any(o.extra.get("new") for o in updated)
+    np.testing.assert_allclose(updated.get(g[chair].id).position,
+                               g[chair].position + [1.5, 0.0, 0.0], atol=0.05)  # fmt: skip
+
+
+def test_with_centres_only_the_output_says_a_moved_object_reads_as_new(tmp_path, capsys):
+    write_room_with_a_moved_chair(tmp_path, boxes=False)
+    assert main(["localize", str(tmp_path / "global.json"), str(tmp_path / "local.json")]) == 0
+    text = " ".join(capsys.readouterr().out.split())
+    assert "changes, new: l" in text
+    assert ("note: 9 of 9 local objects have neither points nor a box: such an object that "
+            "moved reads as new") in text  # fmt: skip

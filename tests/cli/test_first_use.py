@@ -17,15 +17,16 @@ from format_fixtures import write_scannet
 from rich.console import Console
 
 import semloc
+from semloc import compiling as warmup_module
 from semloc.cli import app, main
 from semloc.cli.files import ResultFile
 from semloc.cli.render import print_result, timing_line
 from semloc.cli.simulation import _heading
+from semloc.compiling import COMPILING, WarmUp, compile_notice, warm_up
 from semloc.io import load_map
+from semloc.pictures.colors import color_distance, label_colors
 from semloc.results import Hypothesis, Result, Step
 from semloc.sim.layouts import layout, observe
-from semloc.tools.colors import color_distance, label_colors
-from semloc.tools.warmup import COMPILING, WarmUp, compile_notice, warm_up
 from semloc.transforms import yaw_pose
 
 
@@ -103,16 +104,20 @@ def test_timing_reports_the_warm_up_apart():
     )
 
 
-def test_a_compilation_is_announced_once_and_a_load_not_at_all():
+def test_a_compilation_of_semlocs_code_is_announced_once_and_a_load_not_at_all(monkeypatch):
+    monkeypatch.setattr(warmup_module._NOTICE, "shown", False)  # as in a new process
+    scope = {"__name__": "semloc.stand_in", "numba": numba}  # a new function of semloc's
+    exec("@numba.njit\ndef twice(x):\n    return 2 * x\n", scope)
+
+    @numba.njit  # a new function of someone else's: not announced
+    def plus_one(x):
+        return x + 1
+
     said = []
-    with compile_notice(said.append):
-
-        @numba.njit  # a new function: compiled now, not loaded from a cache
-        def twice(x):
-            return 2 * x
-
-        assert twice(2) == 4 and twice(2.5) == 5.0  # two compilations, one notice
-    assert said == [COMPILING]
+    with compile_notice(said.append) as compiled:
+        assert plus_one(1) == 2 and not compiled.shown and said == []
+        assert scope["twice"](2) == 4 and scope["twice"](2.5) == 5.0  # two compilations
+    assert said == [COMPILING] and compiled.shown  # one notice
     warm_up()  # whatever the cache held, everything is loaded now
     again = []
     warm = warm_up(again.append)
@@ -151,7 +156,7 @@ def _texts(ax) -> list[str]:
 
 def test_view_draws_labels_zooms_to_the_local_objects_and_draws_rivals(maps):
     pytest.importorskip("matplotlib")
-    from semloc.tools.viz import ZOOM_MARGIN, map_figure, plot_localization
+    from semloc.pictures.viz import ZOOM_MARGIN, map_figure, plot_localization
 
     folder, obs = maps
     g, local = load_map(folder / "global.json"), load_map(folder / "local.json")

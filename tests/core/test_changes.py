@@ -227,3 +227,36 @@ def test_the_changes_do_not_depend_on_the_local_frame(yaw, shift, kept, moved_by
     ]
     for a, b in zip(found.moved, expected.moved):
         assert a.offset_m == pytest.approx(b.offset_m, abs=1e-6)
+
+
+def boxes_only(objects: list[SemanticObject]) -> list[SemanticObject]:
+    """The objects with a box (0.4 m, turned 0.3 rad) and no points: a map of boxes."""
+    rotation = yaw_pose(0.3)[:3, :3]
+    return [o.replace(points=None, size=[0.4, 0.4, 0.4], rotation=rotation) for o in objects]
+
+
+def test_with_boxes_and_no_points_a_moved_object_is_moved_not_new():
+    """Without points, the boxes say where the view saw surfaces: the lamp's old place beside
+    them was in view, so the lamp seen 1.5 m away moved (it read as new), and the plant whose
+    place beside the bin's box was seen is missing."""
+    g = ObjectMap(boxes_only(list(room())), up=[0, 0, 1])
+    objects = list(g)[:6]
+    objects[4] = objects[4].transformed(yaw_pose(0.0, [1.2, -0.9, 0.0]))  # the lamp moved 1.5 m
+    objects[5] = SemanticObject("g9", "bed", [4.5, 1.0, 0.4], size=[0.4, 0.4, 0.4])  # new
+    objects.append(SemanticObject("g10", "bin", [4.0, 3.8, 0.6], size=[0.4, 0.4, 0.4]))
+    local = seen_from_t(objects)
+    pairs = [(f"g{i}", f"l{i}") for i in range(4)]
+    changes = explain(g, local, T, pairs, candidates_of(g, local))
+    assert [(m.global_id, m.local_id) for m in changes.moved] == [("g4", "l4")]
+    assert abs(changes.moved[0].offset_m - 1.5) < 0.05
+    assert changes.new == ["l9", "l10"] and changes.missing == ["g5"]
+
+
+def test_with_centres_only_a_moved_object_reads_as_new():
+    """A centre alone says nothing about what was in view: the bound, documented."""
+    g = room()
+    objects = list(g)[:5]
+    objects[4] = objects[4].transformed(yaw_pose(0.0, [1.2, -0.9, 0.0]))
+    local = [o.replace(points=None) for o in seen_from_t(objects)]
+    changes = explain(g, local, T, [(f"g{i}", f"l{i}") for i in range(4)], candidates_of(g, local))
+    assert changes.moved == [] and changes.new == ["l4"] and changes.missing == []

@@ -24,7 +24,7 @@ from semloc.io.native import MAX_FILE_BYTES, MAX_JSON_BYTES, parse_json
 from semloc.io.ply import read_ply
 from semloc.localizer import Localizer, localize
 from semloc.maps import MAX_LABEL_LENGTH, MapError, ObjectMap, SemanticObject
-from semloc.tools.display import DISPLAY_LENGTH, for_matplotlib, for_rich, printable, shorten
+from semloc.pictures.display import DISPLAY_LENGTH, for_matplotlib, for_rich, printable, shorten
 
 HOSTILE = st.one_of(
     st.none(), st.booleans(), st.text(max_size=4), st.integers(-(10**30), 10**30),

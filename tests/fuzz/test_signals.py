@@ -271,6 +271,106 @@ def test_bench_quick_interrupted_at_random_moments(tmp_path):
     no_leftovers(tmp_path)
 
 
+# As TINY_BENCH, and says "running" when the first task is submitted: the workers are up.
+RUNNING_BENCH = TINY_BENCH.replace(
+    'print("ready", flush=True)',
+    """import dask.distributed
+submit = dask.distributed.Client.submit
+said = []
+
+def announcing(self, *args, **kwargs):
+    if not said:
+        said.append(print("running", flush=True))
+    return submit(self, *args, **kwargs)
+
+dask.distributed.Client.submit = announcing
+print("ready", flush=True)""",
+)
+
+
+def test_bench_ctrl_c_in_a_terminal_is_quiet(tmp_path):
+    """Ctrl-C in a terminal sends SIGINT to the whole process group, the Dask workers too:
+    they must not print a KeyboardInterrupt traceback (they ignore SIGINT; the command closes
+    them), and the command ends with status 130 and no output, or finished first."""
+    rng = random.Random(4)
+    runs = [start([*BENCH, "--out", f"out{i}"], tmp_path, RUNNING_BENCH, start_new_session=True)
+            for i in range(3)]  # fmt: skip
+    for proc in runs:
+        for line in proc.stdout:
+            if line.strip() == "running":
+                break
+    for proc in runs:
+        time.sleep(rng.uniform(0.0, 0.6))
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGINT)  # what a terminal's Ctrl-C does
+    for i, proc in enumerate(runs):
+        _, err = proc.communicate(timeout=120)
+        interrupted = check_status(proc.returncode, err, signal.SIGINT)
+        assert bench_complete(tmp_path / f"out{i}") or interrupted, err
+        no_processes_left(proc.pid)
+    no_leftovers(tmp_path)
+
+
+def test_an_interrupt_while_the_cluster_closes_lets_it_close(monkeypatch, tmp_path):
+    """SIGINT while the benchmark's Dask client closes (the run is over): the close goes on
+    to the end, the client's and the cluster's, and then the interrupt stops the command.
+    Cut half-way, the cluster's worker watcher threads were left waiting without the GIL, and
+    the interpreter's exit could abort ("Fatal Python error: PyThreadState_Get ...")."""
+    import dask.distributed
+
+    from semloc.cli import Interrupted, _interrupts_raise
+    from semloc.eval import protocol, runner
+
+    closed = []
+
+    class Cluster:
+        def __init__(self, **kwargs):
+            pass
+
+        def close(self):
+            closed.append("cluster")
+
+    class Client:
+        def __init__(self, cluster):
+            pass
+
+        def submit(self, *args, **kwargs):
+            raise ValueError("no work today")  # the run ends; the close begins
+
+        def close(self):
+            os.kill(os.getpid(), signal.SIGINT)
+            for _ in range(20):  # still closing when the signal lands
+                time.sleep(0.005)
+            closed.append("client")
+
+    monkeypatch.setattr(dask.distributed, "LocalCluster", Cluster)
+    monkeypatch.setattr(dask.distributed, "Client", Client)
+    config = protocol.BenchConfig.quick(size="tiny", keyframes=40, map_kinds=["cad"],
+                                        ablation_starts=0, real=False)  # fmt: skip
+    with pytest.raises(Interrupted), _interrupts_raise(script=False):
+        try:
+            runner.run_benchmark(config, tmp_path / "out", workers=1, progress=False)
+        except ValueError:
+            for _ in range(200):  # the interrupt held back during the close lands here
+                time.sleep(0.005)
+    assert closed == ["client", "cluster"] and not (tmp_path / "out").exists()
+
+
+def test_the_local_cluster_workers_ignore_sigint():
+    """The benchmark's local workers ignore SIGINT once started (its preload, `dask_setup`)."""
+    import dask.distributed
+
+    from semloc.eval import runner
+
+    with (
+        dask.distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True,
+                                      dashboard_address=":0", preload=[runner.__name__]) as cluster,
+        dask.distributed.Client(cluster) as client,
+    ):  # fmt: skip
+        ignores = client.run(lambda: signal.getsignal(signal.SIGINT) == signal.SIG_IGN)
+    assert list(ignores.values()) == [True]
+
+
 def test_an_interrupt_swallowed_by_a_finaliser_is_delivered_again():
     """A signal that arrives while a finaliser or weakref callback runs raises there, where
     Python prints "Exception ignored" and goes on; it must still stop the command."""
@@ -336,7 +436,7 @@ def test_an_interrupt_waits_for_a_block_that_must_not_be_cut():
     """Inside `interrupts_deferred` a signal does not raise; it raises a moment after the
     block ends (nothing is blocked: processes started inside still get their signals)."""
     from semloc.cli import Interrupted, _interrupts_raise
-    from semloc.io.native import interrupts_deferred
+    from semloc.io.interrupts import interrupts_deferred
 
     finished = False
     with pytest.raises(Interrupted) as caught, _interrupts_raise(script=False):

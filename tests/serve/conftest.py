@@ -20,6 +20,7 @@ pytest.importorskip("uvicorn", reason="the serve extra is not installed")
 
 import uvicorn  # noqa: E402
 
+from semloc.compiling import warm_up  # noqa: E402
 from semloc.io import map_from_dict, map_to_dict  # noqa: E402
 from semloc.maps import ObjectMap  # noqa: E402
 from semloc.serve.access import Access  # noqa: E402
@@ -28,7 +29,6 @@ from semloc.serve.server import bind  # noqa: E402
 from semloc.serve.service import Service  # noqa: E402
 from semloc.serve.store import Store, open_store  # noqa: E402
 from semloc.sim.layouts import layout  # noqa: E402
-from semloc.tools.warmup import warm_up  # noqa: E402
 from semloc.transforms import yaw_pose  # noqa: E402
 
 

@@ -342,3 +342,22 @@ def test_two_workers_over_postgresql(serve, building, postgres_url):
     assert [v["version"] for v in client.versions("office")] == [1, 2]
     with first.service.store._transaction(write=True) as cur:
         cur.execute("DROP TABLE maps, map_versions, sessions, session_batches")
+
+
+def test_replies_leave_without_waiting_for_an_acknowledgement():
+    """The listening socket is TCP with TCP_NODELAY, so accepted connections are too (without
+    it every kept-alive request waited 40 ms for the client's delayed acknowledgement)."""
+    import socket
+
+    from semloc.serve.server import bind
+
+    sock = bind("127.0.0.1", 0)
+    try:
+        assert sock.proto == socket.IPPROTO_TCP
+        assert sock.getsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY) == 1
+        with socket.create_connection(sock.getsockname()):
+            accepted, _ = sock.accept()
+            with accepted:
+                assert accepted.getsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY) == 1
+    finally:
+        sock.close()

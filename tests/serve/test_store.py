@@ -81,9 +81,9 @@ def test_concurrent_writers_are_serialised(store):
 def test_sessions_keep_their_batches_in_order(store):
     store.put_map("m", DOC, "upload")
     store.create_session("s1", "m", 1, [0.0, 0.0, 1.0])
-    assert store.append_batch("s1", 0.5, [{"id": "a"}]) == 1
-    assert store.append_batch("s1", 1.5, [{"id": "b"}, {"id": "c"}]) == 2
-    assert store.append_batch("nope", 0.0, []) is None
+    assert store.append_batch("s1", 0.5, [{"id": "a"}], 60) == 1
+    assert store.append_batch("s1", 1.5, [{"id": "b"}, {"id": "c"}], 60) == 2
+    assert store.append_batch("nope", 0.0, [], 60) is None
     assert [(b.seq, b.stamp, b.objects) for b in store.batches("s1")] == [
         (1, 0.5, [{"id": "a"}]), (2, 1.5, [{"id": "b"}, {"id": "c"}])
     ]  # fmt: skip
@@ -103,6 +103,7 @@ def test_idle_sessions_expire(store):
     store.create_session("old", "m", 1, None)
     time.sleep(0.3)
     store.create_session("new", "m", 1, None)
+    assert store.append_batch("old", 0.0, [], 0.2) is None  # too long idle: not touched
     assert store.expire_sessions(0.2) == ["old"]
     assert store.session("old") is None and store.session("new") is not None
 

@@ -27,12 +27,15 @@ from semloc.cli.app import CliError, app
 # isort: off
 # Importing a command module registers its commands; this order is the order of `--help`.
 from semloc.cli import simulation, localize, update, align, datasets  # noqa: F401, E402
-from semloc.cli import export, bag, bench, descriptors, config, serve  # noqa: F401, E402
+from semloc.cli import export, bag, bench, descriptors, config, warmup, serve  # noqa: F401, E402
 
 # isort: on
-from semloc.io.native import interrupts_wait
+from semloc.cli.app import document_exit_statuses  # noqa: E402
+from semloc.io.interrupts import interrupts_wait
 from semloc.maps import MapError
-from semloc.tools.display import printable
+from semloc.pictures.display import printable
+
+document_exit_statuses(app)
 
 
 class Interrupted(BaseException):

@@ -12,7 +12,6 @@ were valid.
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Annotated
 
@@ -22,20 +21,29 @@ from pydantic import ValidationError
 
 from semloc.alignment import align as run_align
 from semloc.alignment import pose_information
-from semloc.cli.app import app, console, fail, first_error
-from semloc.cli.files import check_finite, check_output, check_separate, map_paths, read_config
+from semloc.cli.app import app, console, exit_statuses, fail, first_error
+from semloc.cli.files import (
+    check_finite,
+    check_output,
+    check_separate,
+    map_outputs,
+    map_paths,
+    read_config,
+)
 from semloc.cli.render import print_result
 from semloc.io import load_map
 from semloc.io.g2o import edge_line
-from semloc.io.native import map_files, points_path, write_files
+from semloc.io.native import map_files, write_files
 from semloc.localizer import LocalizerConfig
 from semloc.maps import ObjectMap
+from semloc.pictures.display import for_rich
 from semloc.results import Result
-from semloc.tools.display import for_rich
 from semloc.tools.merge import merged_map
 
 
-@app.command()
+@app.command(
+    epilog=exit_statuses("an answer, placed or not (not placed: only --result is written)")
+)
 def align(
     map_a: Annotated[Path, typer.Argument(help="First map (the reference frame), semloc JSON.")],
     map_b: Annotated[Path, typer.Argument(help="Second map, aligned into the first.")],
@@ -91,14 +99,13 @@ def align(
         fail(f"invalid settings: {first_error(exc)}")
     a, b = load_map(map_a), load_map(map_b)
     writes = {
-        option: [path, points_path(path)] if option in ("--output", "--merged") else [path]
+        option: map_outputs(path) if option in ("--output", "--merged") else path
         for option, path in targets.items()
-        if path is not None
     }
     inputs = {**map_paths(map_a, a, "map A"), **map_paths(map_b, b, "map B")}
-    check_separate(writes, inputs | ({config: "the --config file"} if config else {}))
+    check_separate(writes, {**inputs, config: "the --config file"})
     result = run_align(a, b, cfg)
-    print_result(result, console)
+    print_result(result, console, frames=("A", "B"))
     placed = result.status == "localized" or (accept_ambiguous and result.status == "ambiguous")
     files: list[tuple[Path, bytes | str]] = []
     if placed and result.pose is not None:
@@ -106,9 +113,10 @@ def align(
     elif output or merged or g2o:
         console.print(f"[yellow]not written[/] (status {result.status}): {for_rich(result.reason)}")
     if result_file is not None:
-        files.append((result_file, json.dumps(result.to_dict(), indent=1, allow_nan=False) + "\n"))
+        files.append((result_file, result.to_json()))
     if files:
-        write_files(files)
+        for path in write_files(files):
+            console.print(f"wrote {for_rich(path, None)}")
 
 
 def _outputs(

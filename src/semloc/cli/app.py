@@ -58,6 +58,31 @@ def first_error(exc: ValidationError) -> str:
     return f"{where}: {error['msg']}" if where else error["msg"]
 
 
+EXIT_STATUSES = {
+    0: "done",
+    1: "nothing written: the answer is not localized",
+    2: "bad input or usage, also an output that would overwrite an input or another output "
+    "(nothing written)",
+    130: "interrupted by Ctrl-C (143: by SIGTERM), no half-written output",
+}
+"""The exit statuses of the commands; 1 only where a command promises an output that needs
+a localized answer (`update-map`)."""
+
+
+def exit_statuses(done: str = EXIT_STATUSES[0], not_localized: bool = False) -> str:
+    """The `--help` epilog that lists a command's exit statuses (`done`: what 0 means)."""
+    meaning = {**EXIT_STATUSES, 0: done}
+    codes = [code for code in meaning if not_localized or code != 1]
+    return "Exit status: " + "; ".join(f"{code} {meaning[code]}" for code in codes) + "."
+
+
+def document_exit_statuses(application: typer.Typer) -> None:
+    """Give every registered command without an epilog of its own the list of exit statuses."""
+    for info in application.registered_commands:
+        if info.epilog is None:
+            info.epilog = exit_statuses()
+
+
 def _print_version(value: bool) -> None:
     if value:
         console.print(f"semloc {semloc.__version__}")

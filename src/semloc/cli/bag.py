@@ -28,12 +28,12 @@ from semloc.cli.files import (
 )
 from semloc.io import load_map, write_files
 from semloc.localizer import LocalizerConfig
+from semloc.pictures.display import for_rich
 from semloc.ros.answers import OUTPUT_TOPICS, AnswerTopics, Frames
 from semloc.ros.bag import Run, opened, topics
 from semloc.ros.mcap_out import McapSink
 from semloc.ros.replay import Answer, answer_json, replay
 from semloc.ros.stream import StreamLocalizer
-from semloc.tools.display import for_rich
 
 bag_app = typer.Typer(
     help="ROS 2 bags and MCAP: localize a recorded run, list a bag's topics (the ros extra).",

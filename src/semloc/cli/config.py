@@ -13,7 +13,7 @@ import yaml
 from pydantic import ValidationError
 
 from semloc.cli.app import app, fail, first_error
-from semloc.cli.files import read_config
+from semloc.cli.files import check_separate, read_config
 from semloc.io import write_atomic
 from semloc.localizer import LocalizerConfig
 
@@ -56,6 +56,7 @@ def config(
     """
     if not dump:
         fail("say what to do: --dump prints the settings (see semloc config --help)")
+    check_separate({"--output": output}, {config_file: "the --config file"})
     try:
         settings = LocalizerConfig(**read_config(config_file))
     except ValidationError as exc:

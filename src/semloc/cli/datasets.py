@@ -11,14 +11,21 @@ import typer
 
 from semloc.cli.app import MAX_SEED, app, choices, console, fail
 from semloc.cli.extras import need
-from semloc.cli.files import check_finite, check_output, read_pose
+from semloc.cli.files import (
+    check_finite,
+    check_output,
+    check_separate,
+    map_outputs,
+    map_paths,
+    read_pose,
+)
 from semloc.cli.options import DescribeOption, with_descriptors
 from semloc.io import importers, load_map
 from semloc.io.importers import IMPORTERS
 from semloc.io.native import map_files, write_files
 from semloc.maps import MapError
+from semloc.pictures.display import for_rich
 from semloc.sim.crop import crop_truth_to_dict, crop_with_truth
-from semloc.tools.display import for_rich
 
 ConvertKind = choices("ConvertKind", IMPORTERS)
 _SOURCE_HELP = "; ".join(f"{name}: {imp.source_help}" for name, imp in IMPORTERS.items())
@@ -97,10 +104,10 @@ def convert(
     if kind.value == "scan2cad":
         second = scan_output or output.with_name(output.name.removesuffix(".json") + ".scan.json")
         check_output(second, "--scan-output")
-        if second.resolve() == output.resolve():
-            fail(f"{second}: --scan-output must differ from --output")
     elif scan_output is not None:
         fail(f"--scan-output does not apply to {kind.value}")
+    inputs = {source: "INPUT", label_map: "the --label-map file"}
+    check_separate({"--output": map_outputs(output), "--scan-output": map_outputs(second)}, inputs)
     options = dict(
         labels=labels,
         label_map=label_map,
@@ -169,10 +176,14 @@ def crop(
         pose = None
     else:
         pose = read_pose(Path(transform), "--transform takes 'random', 'none' or a JSON file")
+    truth_path = output.with_name(output.name.removesuffix(".json") + ".gt.json")
+    inputs = map_paths(map_file, objmap, "MAP")
+    if transform not in ("random", "none"):
+        inputs[Path(transform)] = "the --transform file"
+    check_separate({"--output": [*map_outputs(output), truth_path]}, inputs)
     local, truth = crop_with_truth(objmap, center, radius, pose, seed, recentre=recentre)
     if len(local) == 0:
         fail(f"no object of {map_file} has its centre within {radius} m of {list(center)}")
-    truth_path = output.with_name(output.name.removesuffix(".json") + ".gt.json")
     document = crop_truth_to_dict(truth, objmap.name)
     truth_text = json.dumps(document, indent=1, allow_nan=False) + "\n"
     write_files([*map_files(with_descriptors(local, descriptor), output), (truth_path, truth_text)])

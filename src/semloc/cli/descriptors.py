@@ -11,6 +11,7 @@ import typer
 from semloc.association import DESCRIBERS
 from semloc.cli.app import MAX_SEED, app, choices, console
 from semloc.cli.extras import need
+from semloc.cli.files import check_separate
 from semloc.descriptors.voxnet import WEIGHTS_FILE, load_weights
 from semloc.eval.descriptors.evaluate import EvalConfig, print_report, run_evaluation, write_report
 from semloc.eval.descriptors.train import TrainConfig, save_weights, train
@@ -44,6 +45,7 @@ def train_descriptor(
 
     The defaults reproduce the shipped weights (src/semloc/descriptors/voxnet_weights.npz).
     """
+    check_separate({"--out": out, "--fixture": fixture}, {})
     need("train-descriptor", "train", "sim")
     config = TrainConfig(
         seed=seed, epochs=epochs, views=views, full_views=full_views, batches_per_epoch=batches

@@ -1,7 +1,7 @@
 """`semloc export`: a map (and local objects placed by a result's pose) as a coloured PLY, or
 (`--format dsg`) a map as a Spark-DSG scene graph (`semloc.io.dsg`, the `semloc[dsg]` extra).
 
-Every point is coloured by its object's label (`semloc.tools.colors`, as in the pictures); local
+Every point is coloured by its object's label (`semloc.pictures.colors`, as in the pictures); local
 objects are drawn darker and flagged by the vertex property `local` = 1, so that a viewer
 (MeshLab, CloudCompare, Open3D) shows where they landed.  Objects without points are one
 point at their centre.  Needs only the core install.
@@ -18,12 +18,12 @@ import typer
 
 from semloc.cli.app import app, console, fail
 from semloc.cli.extras import need
-from semloc.cli.files import check_output, check_separate, map_paths, read_result
+from semloc.cli.files import check_output, check_separate, check_suffix, map_paths, read_result
 from semloc.io import load_map, write_atomic
 from semloc.io.dsg import dsg_bytes
 from semloc.io.ply import write_ply
 from semloc.maps import ObjectMap
-from semloc.tools.colors import label_colors
+from semloc.pictures.colors import label_colors
 
 LOCAL_SHADE = 0.6
 """Local objects keep their label's hue at this brightness."""
@@ -71,7 +71,9 @@ def _export_dsg(
 @app.command()
 def export(
     map_file: Annotated[Path, typer.Argument(metavar="MAP", help="A semloc map (JSON).")],
-    output: Annotated[Path, typer.Option("--output", "-o", help="PLY file to write.")],
+    output: Annotated[
+        Path, typer.Option("--output", "-o", help="PLY file to write (a graph with --format dsg).")
+    ],
     result: Annotated[
         Path | None,
         typer.Option(help="Result JSON (semloc localize --format json) or a ground truth file."),
@@ -93,15 +95,20 @@ def export(
     if output_format is ExportFormat.dsg:
         _export_dsg(map_file, output, result, local, ascii_ply)
         return
+    check_suffix(output, ".ply", "--output", "a PLY point cloud")
     global_map = load_map(map_file)
+    inputs = {**map_paths(map_file, global_map, "MAP"), result: "the --result file"}
     placed = None
     if local is not None:
         pose = read_result(result).pose if result is not None else None
         if pose is None:
             fail("--local needs a --result with a pose to place the local objects")
-        placed = load_map(local).transformed(pose)
+        local_map = load_map(local)
+        inputs.update(map_paths(local, local_map, "the --local map"))
+        placed = local_map.transformed(pose)
     elif result is not None:
         fail("--result places local objects: give them with --local")
+    check_separate({"--output": output}, inputs)
     vertices = scene_vertices(global_map, placed)
     write_ply(output, vertices, binary=not ascii_ply)
     placed_text = "" if placed is None else f" and {len(placed)} local objects"

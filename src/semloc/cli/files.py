@@ -1,11 +1,10 @@
-"""The commands' files: reading settings (JSON or YAML), poses and results, and checking
-outputs and numeric options before any work is done."""
+"""The commands' files: reading settings (JSON or YAML), poses and results (their fields are
+checked by `semloc.results`), and checking outputs and numeric options before any work is
+done."""
 
 from __future__ import annotations
 
 import math
-import reprlib
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -13,12 +12,13 @@ import yaml
 
 from semloc.cli.app import fail
 from semloc.io import read_json, read_regular
-from semloc.io.native import MAX_JSON_BYTES, document_kind
-from semloc.maps import MAX_COORDINATE, ObjectMap
-from semloc.results import STATUSES
-from semloc.transforms import as_pose
+from semloc.io.native import MAX_JSON_BYTES, document_kind, points_path
+from semloc.maps import ObjectMap
+from semloc.results import SavedResult, saved_pose, saved_result
 
 YAML_SUFFIXES = (".yaml", ".yml")
+ResultFile = SavedResult
+"""What `view`, `export` and `update-map --result` use of a result file (`semloc.results`)."""
 
 
 def read_config(path: Path | None) -> dict:
@@ -62,13 +62,10 @@ def pose_of(path: Path, value: object, what: str = "pose") -> np.ndarray:
     """A 4x4 pose read from `path` (translation within the maps' coordinate limit), or one line
     naming the file, the key and the problem."""
     try:
-        pose = as_pose(value, what)
+        return saved_pose(value, what)
     except ValueError as exc:
         fail(f"{path}: {exc}")
         raise  # unreachable: fail() raises
-    if np.abs(pose[:3, 3]).max() > MAX_COORDINATE:
-        fail(f"{path}: {what} has a translation beyond ±{MAX_COORDINATE:g} m (the input limit)")
-    return pose
 
 
 def read_pose(path: Path, what: str | None = None) -> np.ndarray:
@@ -86,93 +83,20 @@ def read_pose(path: Path, what: str | None = None) -> np.ndarray:
     return pose_of(path, data)
 
 
-@dataclass(frozen=True)
-class ResultFile:
-    """What `view` and `export` use of a result file: the pose, the status and each ranked
-    hypothesis's pose and pairs (a ground-truth file gives only a pose)."""
-
-    pose: np.ndarray | None
-    status: str | None = None
-    hypotheses: tuple[tuple[np.ndarray | None, list[tuple[str, str]]], ...] = ()
-    moved: tuple[tuple[str, str], ...] = ()  # (global id, local id) of `changes.moved`
-
-    @property
-    def pairs(self) -> list[tuple[str, str]]:
-        """(global id, local id) pairs of the best hypothesis."""
-        return self.hypotheses[0][1] if self.hypotheses else []
-
-
 def read_result(path: Path) -> ResultFile:
-    """A result file (`localize --format json`, or a ground-truth file), every field checked:
-    a field of the wrong type is one line naming the file, the field and what it must be."""
+    """A result file (`localize --format json`, or a ground-truth file), every field checked
+    (`semloc.results.saved_result`): a field of the wrong type is one line naming the file, the
+    field and what it must be."""
     data = read_json(path)
     if not isinstance(data, dict) or not ("pose" in data or "T_global_local" in data):
         kind = document_kind(data)
         seems = f" (this is {kind})" if kind else ""
         fail(f"{path}: not a localization result (no 'pose') nor a ground truth file{seems}")
-    key = "pose" if "pose" in data else "T_global_local"
-    pose = None if data[key] is None else pose_of(path, data[key], key)
-    status = data.get("status")
-    if status is not None and status not in STATUSES:
-        fail(f"{path}: 'status' must be one of {', '.join(STATUSES)}, got {_brief(status)}")
-    hypotheses = _list_field(path, data.get("hypotheses"), "hypotheses")
-    return ResultFile(
-        pose,
-        status,
-        tuple(_hypothesis(path, h, i) for i, h in enumerate(hypotheses)),
-        _moved(path, data.get("changes")),
-    )
-
-
-def _moved(path: Path, changes: object) -> tuple[tuple[str, str], ...]:
-    """The (global id, local id) pairs of a result's `changes.moved` (none without changes)."""
-    if changes is None:
-        return ()
-    if not isinstance(changes, dict):
-        fail(f"{path}: 'changes' must be an object, got {_brief(changes)}")
-    moved = []
-    for j, entry in enumerate(_list_field(path, changes.get("moved"), "changes.moved")):
-        ids = (entry.get("global"), entry.get("local")) if isinstance(entry, dict) else (None,)
-        if len(ids) != 2 or not all(
-            isinstance(i, (str, int)) and not isinstance(i, bool) for i in ids
-        ):
-            fail(f"{path}: 'changes.moved[{j}]' must be {MOVED_SHAPE}, got {_brief(entry)}")
-        moved.append((str(ids[0]), str(ids[1])))
-    return tuple(moved)
-
-
-def _hypothesis(
-    path: Path, value: object, index: int
-) -> tuple[np.ndarray | None, list[tuple[str, str]]]:
-    where = f"hypotheses[{index}]"
-    if not isinstance(value, dict):
-        fail(f"{path}: '{where}' must be an object, got {_brief(value)}")
-    raw = value.get("pose")
-    pose = None if raw is None else pose_of(path, raw, f"{where}.pose")
-    pairs = []
-    for j, pair in enumerate(_list_field(path, value.get("pairs"), f"{where}.pairs")):
-        ids = (pair.get("global"), pair.get("local")) if isinstance(pair, dict) else (None, None)
-        if not all(isinstance(i, (str, int)) and not isinstance(i, bool) for i in ids):
-            fail(f"{path}: '{where}.pairs[{j}]' must be {PAIR_SHAPE}, got {_brief(pair)}")
-        pairs.append((str(ids[0]), str(ids[1])))
-    return pose, pairs
-
-
-PAIR_SHAPE = '{"global": ID, "local": ID}'
-MOVED_SHAPE = '{"global": ID, "local": ID, "offset_m": NUMBER}'
-
-
-def _list_field(path: Path, value: object, where: str) -> list:
-    """`value` if a list (None: empty), else one line naming the field."""
-    if value is None:
-        return []
-    if not isinstance(value, list):
-        fail(f"{path}: '{where}' must be a list, got {_brief(value)}")
-    return value
-
-
-def _brief(value: object) -> str:
-    return reprlib.repr(value)[:60]
+    try:
+        return saved_result(data)
+    except ValueError as exc:
+        fail(f"{path}: {exc}")
+        raise  # unreachable: fail() raises
 
 
 def check_output(path: Path, option: str = "--output") -> Path:
@@ -184,6 +108,14 @@ def check_output(path: Path, option: str = "--output") -> Path:
     return path
 
 
+def check_suffix(path: Path | None, suffix: str, option: str, what: str) -> None:
+    """Refuse a file name whose suffix says another format than the one `option` writes
+    (`view -o x.txt` wrote a PNG named x.txt); a stream (`/dev/stdout`) takes any."""
+    if path is None or path.suffix.lower() == suffix or (path.exists() and not path.is_file()):
+        return
+    fail(f"{path}: {option} writes {what}; give a file name ending in {suffix}")
+
+
 def map_paths(path: Path, objmap: ObjectMap, what: str) -> dict[Path, str]:
     """The files the map `what` was read from (the JSON and the points file it names), each
     with what it is."""
@@ -193,16 +125,27 @@ def map_paths(path: Path, objmap: ObjectMap, what: str) -> dict[Path, str]:
     return {path: what, path.parent / points_file: f"the points file of {what}"}
 
 
-def check_separate(outputs: dict[str, list[Path]], inputs: dict[Path, str]) -> None:
-    """Refuse, in one line, two outputs that would write one file, or an output that would
-    overwrite an input (`outputs`: option -> the files it writes, a map's points file too;
-    `inputs`: file -> what it is).  Written over, an input map is lost, and its points file
-    written over leaves the map naming the points of other objects."""
-    read = {path.resolve(): what for path, what in inputs.items()}
-    written: dict[Path, str] = {}
+def map_outputs(path: Path | None) -> list[Path]:
+    """The files a map written to `path` may take: the JSON and its points file."""
+    return [] if path is None else [path, points_path(path)]
+
+
+def check_separate(
+    outputs: dict[str, list[Path] | Path | None], inputs: dict[Path | None, str]
+) -> None:
+    """Refuse, in one line, an output that would overwrite an input or two outputs that would
+    write one file, before anything is written (every command that writes files calls it).
+
+    `outputs`: option -> the file(s) it writes, a map's points file too (`map_outputs`);
+    `inputs`: file -> what it is (a map's points file too: `map_paths`); None entries are
+    skipped.  Files are compared as the file system sees them (symlinks, hard links, `./`).
+    Written over, an input map is lost, and its points file written over leaves the map
+    naming the points of other objects."""
+    read = {_identity(path): what for path, what in inputs.items() if path is not None}
+    written: dict[object, str] = {}
     for option, paths in outputs.items():
-        for path in paths:
-            key = path.resolve()
+        for path in [paths] if isinstance(paths, Path) else paths or []:
+            key = _identity(path)
             if key in read:
                 fail(f"{path}: {option} would overwrite {read[key]}, an input")
             if written.setdefault(key, option) != option:
@@ -210,6 +153,15 @@ def check_separate(outputs: dict[str, list[Path]], inputs: dict[Path, str]) -> N
                     f"{path}: {written[key]} and {option} would both write it; "
                     "they must name different files"
                 )
+
+
+def _identity(path: Path) -> object:
+    """What names one file: its device and inode when it exists, else its resolved path."""
+    try:
+        info = path.stat()
+    except OSError:
+        return path.resolve()
+    return (info.st_dev, info.st_ino)
 
 
 def check_finite(**options: float | tuple[float, ...] | None) -> None:

@@ -10,7 +10,6 @@ JSON); an unmatched label is a warning on stderr, never an error.  Long replays 
 from __future__ import annotations
 
 import io
-import json
 import sys
 from enum import StrEnum
 from pathlib import Path
@@ -21,21 +20,40 @@ from pydantic import ValidationError
 from rich.console import Console
 
 from semloc.association import DESCRIBERS, CandidateIndex, label_report
-from semloc.cli.app import app, choices, console, err_console, fail, first_error, with_default
-from semloc.cli.files import check_finite, check_output, read_config, read_label_map, read_pose
+from semloc.cli import remote
+from semloc.cli.app import (
+    app,
+    choices,
+    console,
+    err_console,
+    exit_statuses,
+    fail,
+    first_error,
+    with_default,
+)
+from semloc.cli.files import (
+    check_finite,
+    check_output,
+    check_separate,
+    map_paths,
+    read_config,
+    read_label_map,
+    read_pose,
+)
 from semloc.cli.render import (
     labels_json,
+    print_centres_only,
     print_ground_truth,
     print_labels,
     print_result,
     replay_progress,
     warn_unmatched,
 )
+from semloc.compiling import warm_up
 from semloc.eval.success import ground_truth_report
 from semloc.io import load_map, write_atomic
 from semloc.localizer import LocalizerConfig
 from semloc.localizer import localize as run_localize
-from semloc.tools.warmup import warm_up
 
 DescriptorKind = choices("DescriptorKind", DESCRIBERS)
 DEFAULTS = LocalizerConfig()
@@ -46,9 +64,11 @@ class OutputFormat(StrEnum):
     json = "json"
 
 
-@app.command()
+@app.command(epilog=exit_statuses("an answer, localized or not (it says why)"))
 def localize(
-    global_map: Annotated[Path, typer.Argument(help="Global (prior) map, semloc JSON.")],
+    global_map: Annotated[
+        Path, typer.Argument(help="Global (prior) map, semloc JSON (with --server: its id there).")
+    ],
     local_map: Annotated[
         Path, typer.Argument(help="Local map of detected objects, semloc JSON; replayed by `seen`.")
     ],
@@ -117,8 +137,22 @@ def localize(
     output: Annotated[
         Path | None, typer.Option("--output", "-o", help="Write the output to this file.")
     ] = None,
+    server: remote.ServerOption = None,
+    token: remote.TokenOption = None,
 ) -> None:
     """Localize LOCAL in GLOBAL: association sets, hypotheses and the pose T_global_local."""
+    if server is not None:
+        remote.refuse_local_settings(
+            gamma=gamma, delta=delta, top_k=top_k, tolerance=tolerance, descriptor=descriptor,
+            descriptor_delta=descriptor_delta, label_map=label_map, config=config,
+        )  # fmt: skip
+        if output is not None:
+            check_output(output)
+            check_separate({"--output": output}, {local_map: "the local map", gt: "the --gt file"})
+        truth = read_pose(gt, "--gt takes a file with T_global_local") if gt is not None else None
+        as_json = output_format is OutputFormat.json
+        remote.localize(server, token, str(global_map), local_map, truth, as_json, output)
+        return
     check_finite(gamma=gamma, delta=delta, tolerance=tolerance, descriptor_delta=descriptor_delta)
     if output is not None:
         check_output(output)
@@ -135,18 +169,22 @@ def localize(
         fail(f"invalid settings: {first_error(exc)}")
     truth = read_pose(gt, "--gt takes a file with T_global_local") if gt is not None else None
     global_objects, local_objects = load_map(global_map), load_map(local_map)
+    inputs = {**map_paths(global_map, global_objects, "the global map"),
+              **map_paths(local_map, local_objects, "the local map"),
+              config: "the --config file", label_map: "the --label-map file", gt: "the --gt file"}  # fmt: skip
+    check_separate({"--output": output}, inputs)
     warm = warm_up(lambda text: err_console.print(f"{text}…", style="dim"))
     with replay_progress(err_console, local_objects) as progress:
         result = run_localize(global_objects, local_objects, cfg, progress=progress)
     report = None if truth is None else ground_truth_report(result.pose, result.hypotheses, truth)
     labels = label_report(CandidateIndex(global_objects, cfg.association), local_objects)
-    warn_unmatched(labels, err_console)
+    if len(global_objects):  # an empty map: the result's reason says so, once
+        warn_unmatched(labels, err_console)
     if output_format is OutputFormat.json:
-        document = {**result.to_dict(), "warm_up_ms": round(warm.seconds * 1000, 3)}
-        document["labels"] = labels_json(labels)
+        extra = {"warm_up_ms": round(warm.seconds * 1000, 3), "labels": labels_json(labels)}
         if report is not None:
-            document["ground_truth"] = report
-        text = json.dumps(document, indent=1, allow_nan=False) + "\n"
+            extra["ground_truth"] = report
+        text = result.to_json(**extra)
         if output is None:
             sys.stdout.write(text)
         else:
@@ -154,6 +192,7 @@ def localize(
         return
     target = console if output is None else Console(record=True, width=120, file=io.StringIO())
     print_result(result, target, warm)
+    print_centres_only(local_objects, result.changes, target)
     print_labels(labels, target)
     if report is not None:
         print_ground_truth(report, target)

@@ -1,6 +1,6 @@
 """Rich rendering of what the commands print: a Result, its ground-truth check, progress.
 
-User text (ids, labels, file names) goes through `semloc.tools.display.for_rich`: shortened and with
+User text (ids, labels, file names) goes through `semloc.pictures.display.for_rich`: shortened and with
 rich markup escaped."""
 
 from __future__ import annotations
@@ -18,58 +18,93 @@ from rich.table import Table
 
 from semloc.association import LabelResolution
 from semloc.changes import Changes
+from semloc.compiling import WarmUp
 from semloc.eval.success import ROTATION_TOLERANCE_DEG, TRANSLATION_TOLERANCE_M
 from semloc.maps import ObjectMap
-from semloc.results import Result
+from semloc.pictures.display import for_rich, shorten
+from semloc.results import Hypothesis, Result
 from semloc.tools.demo import STATUS_STYLE
-from semloc.tools.display import for_rich
-from semloc.tools.warmup import WarmUp
 
 LONG_REPLAY = 10
 """Replays of at least this many updates show a progress bar (on a terminal)."""
 
 
-def print_result(result: Result, out: Console, warm: WarmUp | None = None) -> None:
+def print_result(
+    result: Result,
+    out: Console,
+    warm: WarmUp | None = None,
+    frames: tuple[str, str] = ("global", "local"),
+) -> None:
     """Status line, pose, top hypotheses and timing of a Result (and of the warm-up before
-    it, which loaded the compiled code: `semloc.tools.warmup`)."""
+    it, which loaded the compiled code: `semloc.compiling`).  `frames`: the names of the
+    two maps (`align`: A and B), as the pose `T_<first>_<second>` and the pairs name them."""
     out.print(f"status: [bold {STATUS_STYLE[result.status]}]{result.status}[/]")
     best = result.best
     if best is not None and best.confidence is not None:
         out.print(f"confidence: {best.confidence:.3f}")
     if result.reason:
         out.print(f"reason: {escape(result.reason)}")
+    pose_name = f"T_{frames[0]}_{frames[1]}"
     if result.pose is not None and result.status != "localized":
         out.print(
             "[bold yellow]warning:[/] not localized: the pose below is the best candidate's, "
             "not a trusted answer"
         )
-        out.print("candidate pose T_global_local:")
+        out.print(f"candidate pose {pose_name}:")
     elif result.pose is not None:
-        out.print("pose T_global_local:")
+        out.print(f"pose {pose_name}:")
     if result.pose is not None:
         for row in result.pose:
             out.print("  " + "  ".join(f"{v:9.4f}" for v in row))
-    table = Table(title="hypotheses (best first)", box=box.SIMPLE_HEAD, padding=(0, 1))
-    for column, width in (("rank", 4), ("score", 5), ("pairs", 5), ("fit", 4),
-                          ("conf.", 5), ("yaw°", 6), ("t (m)", 14)):  # fmt: skip
-        table.add_column(column, justify="right", no_wrap=True, min_width=width)
-    # the last column wraps between pairs on narrow terminals rather than being cut
-    table.add_column("associations local→global", min_width=16, overflow="fold")
-    for h in result.hypotheses:
-        yaw = translation = "-"
-        if h.pose is not None:
-            yaw = f"{np.degrees(np.arctan2(h.pose[1, 0], h.pose[0, 0])):.1f}"
-            translation = " ".join(f"{v:.2f}" for v in h.pose[:3, 3])
-        shown = ", ".join(f"{for_rich(l, 24)}→{for_rich(g, 24)}" for g, l in h.pairs[:6])
-        shown += " …" if len(h.pairs) > 6 else ""
-        fitness = "-" if h.fitness is None else f"{h.fitness:.2f}"
-        confidence = "-" if h.confidence is None else f"{h.confidence:.2f}"
-        table.add_row(str(h.rank), f"{h.score:.2f}", str(len(h.pairs)), fitness, confidence,
-                      yaw, translation, escape(shown))  # fmt: skip
     if result.hypotheses:
-        out.print(table)
+        out.print(_hypotheses_table(result, out.width, frames))
     print_changes(result.changes, out)
     out.print(timing_line(result, warm))
+
+
+PAIRS_SHOWN = 6
+"""Pairs shown per hypothesis (then `…`)."""
+COLUMNS = (("rank", 4), ("score", 5), ("pairs", 5), ("fit", 4), ("conf.", 5), ("yaw°", 6),
+           ("t (m)", 14))  # fmt: skip
+"""The numeric columns of the hypotheses table and their least widths."""
+TABLE_FRAME = 22
+"""Characters of the hypotheses table that are not column content (padding, edges)."""
+
+
+def _hypotheses_table(result: Result, width: int, frames: tuple[str, str]) -> Table:
+    """The ranked places: the rank weighs all of a place's evidence (its confidence), so a
+    set's clustering score need not fall with the rank; the caption says so.  Ids are
+    shortened (with …) so that a pair fits the width left for the pairs: the column wraps
+    between pairs, never inside an id."""
+    rows = [_numbers(h) for h in result.hypotheses]
+    used = TABLE_FRAME + sum(max(size, len(name), *(len(row[i]) for row in rows))
+                             for i, (name, size) in enumerate(COLUMNS))  # fmt: skip
+    limit = max(4, min(24, (width - used - 2) // 2))
+    table = Table(title="hypotheses, best first",
+                  caption="ranked by evidence (pairs, fit, confidence), not by score",
+                  box=box.SIMPLE_HEAD, padding=(0, 1))  # fmt: skip
+    for name, size in COLUMNS:
+        table.add_column(name, justify="right", no_wrap=True, min_width=size)
+    table.add_column(f"associations {frames[1]}→{frames[0]}", min_width=2 * limit + 2,
+                     overflow="fold")  # fmt: skip
+    for h, row in zip(result.hypotheses, rows, strict=True):
+        pairs = [f"{shorten(l, limit)}→{shorten(g, limit)}" for g, l in h.pairs[:PAIRS_SHOWN]]
+        shown = ", ".join(p.replace(" ", "\u00a0") for p in pairs)  # no break inside an id
+        shown += " …" if len(h.pairs) > PAIRS_SHOWN else ""
+        table.add_row(*row, escape(shown))
+    return table
+
+
+def _numbers(h: Hypothesis) -> tuple[str, ...]:
+    """The numeric cells of a hypothesis' row: rank, score, pairs, fit, confidence, yaw, t."""
+    yaw = translation = "-"
+    if h.pose is not None:
+        yaw = f"{np.degrees(np.arctan2(h.pose[1, 0], h.pose[0, 0])):.1f}"
+        translation = " ".join(f"{v:.2f}" for v in h.pose[:3, 3])
+    fitness = "-" if h.fitness is None else f"{h.fitness:.2f}"
+    confidence = "-" if h.confidence is None else f"{h.confidence:.2f}"
+    return (str(h.rank), f"{h.score:.2f}", str(len(h.pairs)), fitness, confidence, yaw,
+            translation)  # fmt: skip
 
 
 def timing_line(result: Result, warm: WarmUp | None = None) -> str:
@@ -96,6 +131,18 @@ def print_changes(changes: Changes, out: Console) -> None:
             out.print(f"changes, {name}: {text}")
 
 
+def print_centres_only(local: ObjectMap, changes: Changes, out: Console) -> None:
+    """When `new` objects are reported and some local objects have neither points nor a box,
+    say what a change report needs: a centre alone does not show that a map object's place
+    was in view, so such an object that moved reads as new, and nothing near it as missing."""
+    bare = sum(o.points is None and o.size is None for o in local)
+    if changes.new and bare:
+        out.print(
+            f"note: {bare} of {len(local)} local objects have neither points nor a box: such "
+            "an object that moved reads as new (points or boxes show what was in view)"
+        )
+
+
 def print_labels(report: dict[str, LabelResolution], out: Console) -> None:
     """How each local label was read against the map's labels, one row per label."""
     table = Table(title="labels (local → map)")
@@ -119,12 +166,14 @@ def labels_json(report: dict[str, LabelResolution]) -> dict[str, dict]:
 
 
 def warn_unmatched(report: dict[str, LabelResolution], out: Console) -> None:
-    """One warning line per local label that matches no map label."""
+    """One warning line per local label that matches no map label (labels as written, in
+    any script)."""
     for label, found in report.items():
         if found.resolved == "unmatched":
-            entry = escape(json.dumps({label: "<map label>"}))
+            entry = for_rich(json.dumps({label: "<map label>"}, ensure_ascii=False), None)
+            shown = for_rich(json.dumps(label, ensure_ascii=False), None)
             out.print(
-                f"[bold yellow]warning:[/] local label {escape(json.dumps(label))} matches no "
+                f"[bold yellow]warning:[/] local label {shown} matches no "
                 f"map label (its objects have no candidates); add a label map entry such as "
                 f"{entry} (--label-map FILE)",
                 soft_wrap=True,

@@ -13,23 +13,26 @@ from typing import Annotated
 import typer
 from pydantic import ValidationError
 
-from semloc.cli.app import app, err_console, fail, first_error
+from semloc.cli.app import app, err_console, exit_statuses, fail, first_error
 from semloc.cli.extras import need
 from semloc.cli.files import read_config
 from semloc.localizer import LocalizerConfig
 
-EXIT_STATUSES = "Exit status: 0 stopped (Ctrl-C / SIGTERM), 2 bad settings or files."
 
-
-@app.command(epilog=EXIT_STATUSES)
+@app.command(epilog=exit_statuses(done="stopped by SIGTERM"))
 def serve(
     data: Annotated[
         Path, typer.Option("--data", help="Folder of the store (SQLite file semloc.sqlite3).")
     ],
     host: Annotated[str, typer.Option(help="Address to listen on.")] = "127.0.0.1",
-    port: Annotated[int, typer.Option(help="Port (0: any free port, printed).")] = 8765,
+    port: Annotated[
+        int, typer.Option(min=0, max=65535, help="Port (0: any free port, printed).")
+    ] = 8765,
     workers: Annotated[
-        int, typer.Option(help="Worker processes over the one store (any serves any request).")
+        int,
+        typer.Option(
+            min=1, max=64, help="Worker processes over the one store (any serves any request)."
+        ),
     ] = 1,
     tokens: Annotated[
         Path | None,
@@ -40,13 +43,22 @@ def serve(
         typer.Option(help="postgresql://user@host:port/db: keep the store there, not in --data."),
     ] = None,
     session_idle: Annotated[
-        float, typer.Option("--session-idle", help="Seconds after which an idle session ends.")
+        float,
+        typer.Option(
+            "--session-idle", min=1, max=7 * 86400, help="Seconds after which an idle session ends."
+        ),
     ] = 600.0,
     rate: Annotated[
-        float, typer.Option(help="Requests a second per token, bursts of twice that (0: off).")
+        float,
+        typer.Option(
+            min=0, max=1e6, help="Requests a second per token, bursts of twice that (0: off)."
+        ),
     ] = 100.0,
     max_body_mb: Annotated[
-        float, typer.Option("--max-body-mb", help="Largest request body, MiB (413 beyond).")
+        float,
+        typer.Option(
+            "--max-body-mb", min=0.001, max=4096, help="Largest request body, MiB (413 beyond)."
+        ),
     ] = 64.0,
     config: Annotated[
         Path | None,

@@ -13,7 +13,16 @@ from rich.table import Table
 
 from semloc.cli.app import MAX_SEED, app, console, fail, first_error
 from semloc.cli.extras import need
-from semloc.cli.files import ResultFile, check_finite, check_output, read_pose, read_result
+from semloc.cli.files import (
+    ResultFile,
+    check_finite,
+    check_output,
+    check_separate,
+    check_suffix,
+    map_paths,
+    read_pose,
+    read_result,
+)
 from semloc.cli.options import (
     RESOLUTION_HELP,
     SIZE_HELP,
@@ -28,15 +37,15 @@ from semloc.eval.success import (
     is_success,
 )
 from semloc.io import load_map, write_atomic
-from semloc.io.native import staged_folder
+from semloc.io.output import staged_folder
 from semloc.maps import ObjectMap
+from semloc.pictures.display import for_rich
 from semloc.ros.simbag import walk_bag
 from semloc.sim.export import write_sequence
 from semloc.sim.noise import DetectionNoise
 from semloc.sim.scenario import simulate_sequence
 from semloc.sim.world import MAX_ROOMS
 from semloc.tools.demo import DemoConfig, run_demo
-from semloc.tools.display import for_rich
 from semloc.tools.scandemo import ScanDemoConfig, run_scan_demo
 from semloc.transforms import pose_error
 
@@ -228,6 +237,8 @@ def view(
     png = output
     if png is None and rrd is None:
         png = map_file.with_suffix(".png")
+    check_suffix(png, ".png", "--output", "a PNG picture")
+    check_suffix(rrd, ".rrd", "--rrd", "a Rerun recording")
     if png is not None:
         check_output(png)
         need("view", "viz", modules=("matplotlib",))
@@ -240,10 +251,18 @@ def view(
     local_map = load_map(local) if local is not None else None
     if local_map is not None and pose is None and truth is None:
         fail("--local needs a --result with a pose (or --gt) to place the local objects")
+    inputs = {
+        **map_paths(map_file, objmap, "MAP"),
+        result: "the --result file",
+        gt: "the --gt file",
+    }
+    if local is not None and local_map is not None:
+        inputs.update(map_paths(local, local_map, "the --local map"))
+    check_separate({"--output": png, "--rrd": rrd}, inputs)
     alone = local_map is None and pose is None
     role = "local" if alone and _looks_local(map_file, objmap.name) else "global"
     if png is not None:
-        from semloc.tools.viz import map_figure, plot_localization, save_figure  # matplotlib
+        from semloc.pictures.viz import map_figure, plot_localization, save_figure  # matplotlib
 
         heading = title or _heading(map_file, objmap, answer, truth)
         rivals = answer.hypotheses[1:] if status == "ambiguous" else ()
@@ -253,7 +272,7 @@ def view(
                           zoom=local_map is not None or bool(rivals))  # fmt: skip
         console.print(f"wrote {for_rich(save_figure(fig, png), None)}")
     if rrd is not None:
-        from semloc.tools.viz3d import write_localization  # rerun
+        from semloc.pictures.viz3d import write_localization  # rerun
 
         written = write_localization(rrd, objmap, local_map, pose, pairs, truth, answer.moved)
         shown = for_rich(written, None)

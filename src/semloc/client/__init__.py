@@ -18,6 +18,7 @@ from __future__ import annotations
 import http.client
 import json
 import os
+import socket
 import threading
 import urllib.parse
 from collections.abc import Iterable
@@ -108,15 +109,14 @@ class Client:
         if self.token:
             headers["Authorization"] = f"Bearer {self.token}"
         for attempt in (0, 1):  # a kept-alive connection the server closed: one retry
-            connection = self._connection()
             try:
+                connection = self._connection()
                 connection.request(method, path, payload, headers)
                 response = connection.getresponse()
                 data = response.read()
                 break
             except (ConnectionError, http.client.HTTPException, TimeoutError, OSError) as exc:
-                connection.close()
-                self._local.connection = None
+                self.close()
                 if attempt:
                     raise ServerError(0, "unreachable", f"{self.url}: {exc}") from None
         if response.status == 204 or not data:
@@ -138,6 +138,9 @@ class Client:
                 else http.client.HTTPConnection
             )
             connection = kind(self._parts.hostname, self._parts.port, timeout=self.timeout)
+            connection.connect()
+            # small requests go out at once (no 40 ms wait for a delayed acknowledgement)
+            connection.sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
             self._local.connection = connection
         return connection
 

@@ -28,8 +28,8 @@ from semloc.eval.recall import HYPOTHESIS_COLUMNS, RESULT_COLUMNS, format_rows
 from semloc.eval.report import comparison_figure, summary_table
 from semloc.io import write_atomic
 from semloc.localizer import Localizer, LocalizerConfig
+from semloc.pictures.viz import plot_scores, save_figure
 from semloc.sim.realscan import load_real_scan, simulate_walk
-from semloc.tools.viz import plot_scores, save_figure
 
 SCENES = {
     "scene0000_00": ("scannet/scene0000_00", ("reconstruction",)),

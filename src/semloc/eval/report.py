@@ -182,7 +182,7 @@ def claims_table(rows: Sequence[dict], methods: Sequence[str]) -> str:
 
 
 def write_outputs(out: Path, config, rows, hyps, ablation, seconds: float) -> list[Path]:
-    from semloc.tools.viz import save_figure
+    from semloc.pictures.viz import save_figure
 
     files = []
     for name, data, columns in (

@@ -19,6 +19,8 @@ from __future__ import annotations
 
 import logging
 import os
+import signal
+import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -35,7 +37,8 @@ from semloc.eval.protocol import (
     start_keyframes,
 )  # fmt: skip
 from semloc.eval.report import write_outputs
-from semloc.io.native import interrupts_deferred, staged_folder
+from semloc.io.interrupts import interrupts_deferred
+from semloc.io.output import staged_folder
 
 _ONE_THREAD = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
 
@@ -118,11 +121,15 @@ def plan(config: BenchConfig, n_keyframes: int) -> list[Attempt]:
 
 def dask_setup(worker: object) -> None:
     """Dask preload of each local worker process: it logs nothing below CRITICAL, like the
-    scheduler.  The workers share the command's stderr: what they log lands among its output,
-    also after its last line (an interrupt's heartbeat traceback, matplotlib building its font
-    cache), while a task's error reaches the caller through its future anyway."""
+    scheduler, and ignores SIGINT.  The workers share the command's stderr: what they log
+    lands among its output, also after its last line (an interrupt's heartbeat traceback,
+    matplotlib building its font cache), while a task's error reaches the caller through its
+    future anyway.  Ctrl-C in a terminal reaches the whole process group: a worker that took
+    it printed a KeyboardInterrupt traceback; the command closes its workers itself."""
     for name in ("", "distributed"):  # the root logger, and distributed's own level
         logging.getLogger(name).setLevel(logging.CRITICAL)
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 def run_benchmark(
@@ -207,10 +214,13 @@ def run_benchmark(
         if config.real_walks:
             real = realwalks.run_real_walks(client, config, progress)
     finally:
-        if client is not None:
-            client.close()
-        if cluster is not None:
-            cluster.close()
+        # the close is not cut either: a cluster left half-closed has worker watcher threads
+        # waiting without the GIL, and the interpreter's exit then aborted (a fatal error)
+        with interrupts_deferred():
+            if client is not None:
+                client.close()
+            if cluster is not None:
+                cluster.close()
     rows.sort(key=lambda r: _order(r, config.methods))
     hyps.sort(key=lambda r: _order(r, config.methods))
     ablation_rows.sort(key=lambda r: _order(r, config.methods))

@@ -1,5 +1,10 @@
 """Reading and writing maps: the native semloc format, and importers for public datasets.
 
+One module per concern: `native` (the map file), `reading` (guarded reading of input files:
+size limits, strict JSON, `.npy` headers), `output` (files written all or none), `interrupts`
+(keeping a group of file operations whole against SIGINT / SIGTERM), `ply`, `labels`, `g2o`,
+`geometry`, and `importers/`.  The names below stay importable from here.
+
 The dataset importers (`semloc.io.importers`, one registry; `load_scannet`, `load_scan2cad`,
 `load_replica`, `load_rscan` here) are imported on first use, so that `import semloc` stays
 light.

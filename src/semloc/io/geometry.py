@@ -10,6 +10,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import ConvexHull, QhullError
 
+from semloc.pointsets import sample_box_surface  # noqa: F401 (the importers' surface sampling)
+
 
 def up_basis(up: np.ndarray | None) -> np.ndarray:
     """A rotation whose third column is the unit `up` (z when `up` is None)."""
@@ -56,24 +58,6 @@ def _footprint_axis(xy: np.ndarray) -> np.ndarray:
     if best[0] < -1e-12 or (abs(best[0]) <= 1e-12 and best[1] < 0):
         best = -best
     return best
-
-
-def sample_box_surface(
-    centre: np.ndarray,
-    size: np.ndarray,
-    rotation: np.ndarray,
-    count: int,
-    rng: np.random.Generator,
-) -> np.ndarray:
-    """`count` points uniformly on the six faces of a box (area-weighted)."""
-    size = np.maximum(np.asarray(size, dtype=float), 0.0)
-    areas = np.array([size[1] * size[2], size[0] * size[2], size[0] * size[1]]).repeat(2)
-    weights = areas / areas.sum() if areas.sum() > 0 else np.full(6, 1 / 6)
-    faces = rng.choice(6, size=count, p=weights)
-    q = rng.uniform(-0.5, 0.5, size=(count, 3))
-    axis = faces // 2
-    q[np.arange(count), axis] = np.where(faces % 2 == 0, -0.5, 0.5)
-    return (q * size) @ np.asarray(rotation).T + centre
 
 
 def sample_triangles(

@@ -8,7 +8,7 @@ import csv
 import os
 from pathlib import Path
 
-from semloc.io.native import MAX_JSON_BYTES, read_json, read_regular
+from semloc.io.reading import MAX_JSON_BYTES, read_json, read_regular
 from semloc.maps import MapError
 
 NYU40 = (

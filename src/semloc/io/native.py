@@ -1,34 +1,41 @@
 """The native semloc map file: JSON (`"format": "semloc-map"`) plus an optional `.npz` of points.
 
 `load_map` validates everything and raises `MapError` with the file, the object id and the
-problem; `save_map` writes the JSON and its `.npz` all or none (temporary files, then renames)
-and keeps unknown keys that were read, so a load/save round trip loses nothing.  `.npz` files
-are read with `allow_pickle=False`, only inside the map's folder, and only the members the map
-names, each checked from its header before it is read.  This module also owns the guarded file
-access of the whole package: `read_regular` / `read_json` (regular files within size limits),
-`write_files` / `write_atomic` (all or none, streams for devices) and `staged_folder` (a set
-of files under one folder, all or none).
+problem; `save_map` writes the JSON and its `.npz` all or none (`semloc.io.output`) and keeps
+unknown keys that were read, so a load/save round trip loses nothing.  `.npz` files are read
+with `allow_pickle=False`, only inside the map's folder, and only the members the map names,
+each checked from its header before it is read (`semloc.io.reading`).  `document_kind` says
+what a JSON document that is not a map looks like (a result, an annotation, settings).
+
+The guarded reading (`semloc.io.reading`), the atomic output (`semloc.io.output`) and the
+interrupt deferral (`semloc.io.interrupts`) that lived here are imported below and stay
+importable from this module.
 """
 
 from __future__ import annotations
 
 import io
 import json
-import math
 import os
-import shutil
-import signal
-import stat
-import tempfile
-import tokenize
 import zipfile
-from collections.abc import Iterator
-from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from semloc.io.interrupts import interrupts_deferred, interrupts_wait, signals_held
+from semloc.io.output import staged_folder, write_atomic, write_files
+from semloc.io.reading import (
+    MAX_FILE_BYTES,
+    MAX_JSON_BYTES,
+    check_regular,
+    npy_header,
+    parse_json,
+    read_json,
+    read_npy,
+    read_regular,
+    require_keys,
+)
 from semloc.maps import (
     MAX_EMBEDDING_LENGTH,
     MAX_ID_LENGTH,
@@ -40,6 +47,14 @@ from semloc.maps import (
     SemanticObject,
 )
 
+__all__ = [  # the map format, and the names that moved out of this module (still here)
+    "BINARY_HINTS", "EMBEDDING_MEMBER", "FORMAT", "KIND_HINTS", "MAX_FILE_BYTES",
+    "MAX_JSON_BYTES", "VERSION", "check_regular", "document_kind", "interrupts_deferred",
+    "interrupts_wait", "load_map", "map_files", "map_from_dict", "map_to_dict", "npy_header",
+    "parse_json", "points_path", "read_json", "read_npy", "read_regular", "require_keys",
+    "save_map", "signals_held", "staged_folder", "write_atomic", "write_files",
+]  # fmt: skip
+
 FORMAT = "semloc-map"
 VERSION = 1
 _OBJECT_KEYS = {
@@ -49,13 +64,8 @@ _OBJECT_KEYS = {
 _TOP_KEYS = {"format", "version", "name", "up", "objects", "points_file"}
 EMBEDDING_MEMBER = "embedding:"
 """An `.npz` member named `embedding:<object id>` holds that object's embedding (a vector)."""
-MAX_JSON_BYTES = 256 * 2**20
-"""Largest JSON file read (maps, settings, results, dataset annotations): 256 MiB."""
-MAX_FILE_BYTES = 2**30
-"""Largest other input file read (points files, meshes, point arrays): 1 GiB."""
 
 
-# Reading ---------------------------------------------------------------------------------------
 def load_map(path: str | os.PathLike[str]) -> ObjectMap:
     """Read a native map file (and its `points_file`); raise `MapError` on any problem."""
     path = Path(path)
@@ -80,6 +90,7 @@ BINARY_HINTS = {
     "datasets",
 }
 """What to tell someone who gave a binary file where a map goes, by its suffix."""
+
 
 KIND_HINTS = {
     "a localization result": "give it to view or export with --result",
@@ -114,96 +125,6 @@ def document_kind(document: Any) -> str | None:
     if keys & {"association", "clustering", "pose", "decision", "gamma", "delta", "top_k"}:
         return "a settings file"
     return None
-
-
-def check_regular(path: str | os.PathLike[str], limit: int = MAX_FILE_BYTES, what: str = "") -> int:
-    """The size of `path` if it is a regular file of at most `limit` bytes; else `MapError`.
-
-    FIFOs, devices and folders are refused before anything opens them (a FIFO would block).
-    """
-    path = Path(path)
-    try:
-        info = path.stat()
-    except FileNotFoundError:
-        raise MapError(f"{path}: file not found{f' ({what})' if what else ''}") from None
-    except OSError as exc:
-        raise MapError(f"{path}: cannot read ({exc.strerror or exc})") from None
-    if stat.S_ISDIR(info.st_mode):
-        raise MapError(f"{path}: is a folder, not a file{f' ({what})' if what else ''}")
-    if not stat.S_ISREG(info.st_mode):
-        raise MapError(f"{path}: not a regular file")
-    if info.st_size > limit:
-        raise MapError(f"{path}: {info.st_size:,} bytes, more than the limit of {limit:,}")
-    return info.st_size
-
-
-def read_regular(
-    path: str | os.PathLike[str], limit: int = MAX_FILE_BYTES, what: str = ""
-) -> bytes:
-    """The bytes of `path` after `check_regular`; `MapError` naming the file on any problem."""
-    check_regular(path, limit, what)
-    try:
-        with open(path, "rb") as handle:
-            return handle.read(limit + 1)
-    except OSError as exc:
-        raise MapError(f"{path}: cannot read ({exc.strerror or exc})") from None
-
-
-def read_json(path: str | os.PathLike[str], what: str = "") -> Any:
-    """Parse a JSON file; `MapError` naming the file on any problem.
-
-    Refused: NaN/Infinity, integers beyond the float range, duplicate keys in an object,
-    nesting deeper than Python's recursion allows, files over `MAX_JSON_BYTES`.  `what` adds a
-    hint to the not-found message (e.g. what the file was expected to be).
-    """
-    path = Path(path)
-    data = read_regular(path, MAX_JSON_BYTES, what)
-    try:
-        text = data.decode("utf-8")
-    except UnicodeDecodeError as exc:
-        raise MapError(f"{path}: not UTF-8 text (byte {exc.start})") from None
-    try:
-        return parse_json(text)
-    except json.JSONDecodeError as exc:
-        raise MapError(f"{path}: not valid JSON ({exc.msg} at line {exc.lineno})") from None
-    except RecursionError:
-        raise MapError(f"{path}: JSON nested too deeply") from None
-    except ValueError as exc:
-        raise MapError(f"{path}: {exc}") from None
-
-
-def parse_json(text: str) -> Any:
-    """`json.loads` with the limits of `read_json` (ValueError / RecursionError otherwise)."""
-    return json.loads(
-        text,
-        parse_constant=_reject_constant,
-        parse_int=_parse_int,
-        object_pairs_hook=_unique_keys,
-    )
-
-
-def _reject_constant(name: str) -> float:
-    raise ValueError(f"non-finite number {name} is not allowed")
-
-
-def _parse_int(text: str) -> int | float:
-    if len(text) <= 18:
-        return int(text)
-    value = float(text)  # beyond int64 the value is only usable as a float
-    if not math.isfinite(value):
-        raise ValueError(f"number {text[:12]}... ({len(text)} digits) is too large")
-    return value
-
-
-def _unique_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
-    document = dict(pairs)
-    if len(document) != len(pairs):
-        seen: set[str] = set()
-        for key, _ in pairs:
-            if key in seen:
-                raise ValueError(f"key {key[:60]!r} occurs more than once in an object")
-            seen.add(key)
-    return document
 
 
 def map_from_dict(document: Any, base_dir: Path | None = None) -> ObjectMap:
@@ -347,47 +268,6 @@ def _npy_shape(handle: Any, object_id: str, available: int) -> tuple[int, ...]:
     return shape
 
 
-def npy_header(handle: Any, available: int | None = None) -> tuple[tuple[int, ...], np.dtype]:
-    """Shape and dtype from the header of the `.npy` stream `handle`, without reading the data;
-    `MapError` for a damaged header, object (pickled) data, or more data declared than the
-    `available` bytes."""
-    try:
-        version = np.lib.format.read_magic(handle)
-        if version == (1, 0):
-            shape, _, dtype = np.lib.format.read_array_header_1_0(handle)
-        elif version == (2, 0):
-            shape, _, dtype = np.lib.format.read_array_header_2_0(handle)
-        else:
-            raise MapError(f"unsupported .npy version {version}")
-    except MapError:
-        raise
-    except (ValueError, SyntaxError, TypeError, EOFError, OSError, tokenize.TokenError) as exc:
-        raise MapError(f"damaged .npy header ({str(exc)[:80]})") from None
-    if dtype.hasobject:
-        raise MapError("object arrays are not read (no pickles)")
-    declared = math.prod(shape) * dtype.itemsize
-    if available is not None and declared > available:
-        raise MapError(f"header declares {declared:,} bytes of data; the file holds fewer")
-    return shape, dtype
-
-
-def read_npy(path: str | os.PathLike[str]) -> np.ndarray:
-    """A `.npy` array (no pickles), its header checked against the file size before the data is
-    read; `MapError` naming the file on any problem."""
-    path = Path(path)
-    size = check_regular(path, MAX_FILE_BYTES)
-    try:
-        with open(path, "rb") as handle:
-            npy_header(handle, size)
-            handle.seek(0)
-            return np.lib.format.read_array(handle, allow_pickle=False)
-    except MapError as exc:
-        raise MapError(f"{path}: not a readable .npy array ({exc})") from None
-    except (OSError, ValueError, EOFError) as exc:
-        raise MapError(f"{path}: not a readable .npy array ({str(exc)[:80]})") from None
-
-
-# Writing ---------------------------------------------------------------------------------------
 def map_to_dict(objmap: ObjectMap, inline_points: bool = True) -> dict[str, Any]:
     """The JSON document for a map; points inline unless `inline_points` is False."""
     document: dict[str, Any] = {"format": FORMAT, "version": VERSION, "name": objmap.name}
@@ -467,181 +347,3 @@ def save_map(objmap: ObjectMap, path: str | os.PathLike[str], points: str = "aut
     """
     write_files(map_files(objmap, path, points))
     return Path(path)
-
-
-def require_keys(document: Any, keys: tuple[str, ...], where: str) -> dict[str, Any]:
-    """`document` if it is a JSON object holding `keys`; else MapError naming `where`."""
-    if not isinstance(document, dict):
-        raise MapError(f"{where}: must be an object")
-    for key in keys:
-        if key not in document:
-            raise MapError(f"{where}: missing key '{key}'")
-    return document
-
-
-def write_atomic(path: str | os.PathLike[str], data: bytes | str) -> Path:
-    """Write `data` to `path` atomically (`write_files` with one file); returns the path."""
-    write_files([(Path(path), data)])
-    return Path(path)
-
-
-def write_files(files: list[tuple[Path, bytes | str]]) -> list[Path]:
-    """Write several files all or none; the last one should be the index that names the others.
-
-    Each regular file is written to a temporary file in its own folder (mode 0666 less the
-    umask, like a plain write); only when all are written are they renamed into place, in order,
-    with SIGINT and SIGTERM held.  A target that exists and is not a regular file (`/dev/full`,
-    `/dev/stdout`, a FIFO) is written as a stream, never renamed over, before the renames: a
-    stream that fails leaves the regular files as they were.  The folders must exist.
-    `MapError` naming the file on any problem.
-    """
-    staged: list[tuple[str, Path]] = []
-    streams: list[tuple[Path, bytes]] = []
-    try:
-        for path, data in files:
-            path = Path(path)
-            payload = data.encode() if isinstance(data, str) else data
-            if _is_stream(path):
-                streams.append((path, payload))
-            else:
-                staged.append((_write_temporary(path, payload), path))
-        for path, payload in streams:
-            _write_stream(path, payload)
-        with signals_held():
-            while staged:
-                tmp, path = staged[0]
-                try:
-                    os.replace(tmp, path)
-                except OSError as exc:
-                    raise MapError(f"{path}: cannot write ({exc.strerror or exc})") from None
-                staged.pop(0)
-    finally:
-        for tmp, _ in staged:
-            if os.path.exists(tmp):
-                os.unlink(tmp)
-    return [Path(path) for path, _ in files]
-
-
-def _write_stream(path: Path, payload: bytes) -> None:
-    try:
-        with open(path, "wb") as handle:
-            handle.write(payload)
-    except OSError as exc:
-        raise MapError(f"{path}: cannot write ({exc.strerror or exc})") from None
-
-
-def _is_stream(path: Path) -> bool:
-    """Whether `path` is an existing non-regular file; `MapError` for a folder or no folder."""
-    try:
-        info = path.stat()
-    except FileNotFoundError:
-        if not path.parent.is_dir():
-            raise MapError(f"{path}: folder {path.parent} does not exist") from None
-        return False
-    except OSError as exc:
-        raise MapError(f"{path}: cannot write ({exc.strerror or exc})") from None
-    if stat.S_ISDIR(info.st_mode):
-        raise MapError(f"{path}: is a folder, not a file")
-    return not stat.S_ISREG(info.st_mode)
-
-
-def _write_temporary(path: Path, payload: bytes) -> str:
-    try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name[:100]}.", suffix=".tmp", dir=path.parent)
-    except OSError as exc:
-        raise MapError(f"{path}: cannot write ({exc.strerror or exc})") from None
-    try:
-        os.fchmod(fd, 0o666 & ~_umask())  # mkstemp creates 0600; give the usual mode
-        with os.fdopen(fd, "wb") as handle:
-            handle.write(payload)
-            handle.flush()
-            os.fsync(handle.fileno())
-    except BaseException as exc:
-        os.unlink(tmp)
-        if isinstance(exc, OSError):
-            raise MapError(f"{path}: cannot write ({exc.strerror or exc})") from None
-        raise
-    return tmp
-
-
-_DEFERRING = [0]  # blocks inside `interrupts_deferred` now (nested ones count)
-
-
-@contextmanager
-def interrupts_deferred() -> Iterator[None]:
-    """Ask the command's interrupt handler (`semloc.cli`) to let the block finish before it
-    raises.  Unlike `signals_held` nothing is blocked, so the processes started inside (they
-    inherit the signal mask) still end on SIGINT and SIGTERM."""
-    _DEFERRING[0] += 1
-    try:
-        yield
-    finally:
-        _DEFERRING[0] -= 1
-
-
-def interrupts_wait() -> bool:
-    """Whether an interrupt arriving now must wait (see `interrupts_deferred`)."""
-    return _DEFERRING[0] > 0
-
-
-@contextmanager
-def signals_held() -> Iterator[None]:
-    """Hold SIGINT and SIGTERM (delivered when the block ends), so that a group of renames is
-    not cut in the middle by an interrupt."""
-    held = {signal.SIGINT, signal.SIGTERM}
-    previous = signal.pthread_sigmask(signal.SIG_BLOCK, held)
-    try:
-        yield
-    finally:
-        signal.pthread_sigmask(signal.SIG_SETMASK, previous)
-
-
-@contextmanager
-def staged_folder(out: str | os.PathLike[str], index: str | None = None) -> Iterator[Path]:
-    """A temporary folder beside `out` to write a set of files into, moved into `out` at the end.
-
-    When the block ends normally, a missing `out` is the staged folder renamed (one atomic
-    step); into an existing `out` the files move one by one with SIGINT/SIGTERM held, the file
-    named `index` last.  On an error or an interrupt the staged folder is removed and `out` is
-    left as it was: all files or none.  Missing parent folders of `out` are created.
-    """
-    out = Path(out)
-    if out.exists() and not out.is_dir():
-        raise MapError(f"{out}: exists and is not a folder")
-    try:
-        out.parent.mkdir(parents=True, exist_ok=True)
-        stage = Path(
-            tempfile.mkdtemp(prefix=f".{out.name[:100]}.", suffix=".partial", dir=out.parent)
-        )
-        os.chmod(stage, 0o777 & ~_umask())
-    except OSError as exc:
-        raise MapError(f"{out}: cannot create the folder ({exc.strerror or exc})") from None
-    try:
-        yield stage
-        with signals_held():
-            _move_into(stage, out, index)
-    finally:
-        shutil.rmtree(stage, ignore_errors=True)
-
-
-def _move_into(stage: Path, out: Path, index: str | None) -> None:
-    try:
-        if not out.exists():
-            os.rename(stage, out)
-            return
-        files = sorted(p for p in stage.rglob("*") if not p.is_dir())
-        files.sort(key=lambda p: p.relative_to(stage).as_posix() == index)
-        for source in files:
-            target = out / source.relative_to(stage)
-            target.parent.mkdir(parents=True, exist_ok=True)
-            os.replace(source, target)
-    except OSError as exc:
-        raise MapError(
-            f"{out}: cannot move the results into place ({exc.strerror or exc})"
-        ) from None
-
-
-def _umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask

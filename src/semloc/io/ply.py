@@ -16,7 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
-from semloc.io.native import read_regular, write_atomic
+from semloc.io.output import write_atomic
+from semloc.io.reading import read_regular
 from semloc.maps import MapError
 
 _TYPES = {

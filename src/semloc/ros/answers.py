@@ -25,11 +25,11 @@ from typing import Any
 import numpy as np
 
 from semloc.maps import ObjectMap
+from semloc.pictures.colors import label_colors, rgb
 from semloc.results import Result
 from semloc.ros import messages as msgs
 from semloc.ros.frames import covariance
 from semloc.ros.mcap_out import McapSink
-from semloc.tools.colors import label_colors, rgb
 
 POSE_TOPIC = "/semloc/pose"
 TF_TOPIC = "/tf"

@@ -22,7 +22,7 @@ from starlette.concurrency import run_in_threadpool
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 import semloc
-from semloc.io.native import parse_json
+from semloc.io.reading import parse_json
 from semloc.serve.access import Access, Grant, RateLimiter
 from semloc.serve.service import Service, ServiceError, not_found
 

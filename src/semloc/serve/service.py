@@ -85,7 +85,9 @@ class _LiveSession:
     """A session's Localizer in this process and the answers not yet read, by batch number."""
 
     localizer: Localizer
+    map_id: str
     map_version: int
+    up: list[float] | None
     applied: int = 0
     lock: threading.Lock = field(default_factory=threading.Lock)
     answers: dict[int, Result] = field(default_factory=dict)
@@ -168,16 +170,23 @@ class Service:
 
     def session_map(self, session_id: str) -> str:
         """The map a live session localizes in (404 for an unknown or expired one)."""
+        return self._session_meta(session_id)[0]
+
+    def _session_meta(self, session_id: str) -> tuple[str, int, list[float] | None]:
+        """(map id, map version, up) of a session: from memory where it is live here (an
+        update still checks in the store that it exists), else from the store."""
+        with self._lock:
+            live = self._live.get(session_id)
+        if live is not None:
+            return live.map_id, live.map_version, live.up
         row = self.store.session(session_id)
         if row is None or time.time() - row.touched > self.session_idle_s:
             raise not_found(f"session {session_id!r}")
-        return row.map_id
+        return row.map_id, row.map_version, row.up
 
     def update_session(self, session_id: str, body: Any) -> dict[str, Any]:
         self._expire()
-        row = self.store.session(session_id)
-        if row is None or time.time() - row.touched > self.session_idle_s:
-            raise not_found(f"session {session_id!r}")
+        map_id, version, up = self._session_meta(session_id)
         if not isinstance(body, dict) or "objects" not in body:
             raise ServiceError(422, "invalid update", 'body: {"objects": [...], "stamp": float}')
         stamp = body.get("stamp", 0.0)
@@ -187,15 +196,17 @@ class Service:
             or not math.isfinite(stamp)
         ):
             raise ServiceError(422, "invalid update", "'stamp' must be a finite number")
-        _objects_map(body["objects"], row.up, "objects")  # refused before it is stored
-        seq = self.store.append_batch(session_id, float(stamp), body["objects"])
-        if seq is None:
-            raise not_found(f"session {session_id!r}")
-        live = self._live_session(session_id, row.map_id, row.map_version, row.up)
-        result = self._advance(session_id, live, row.up, seq)
-        document = answer(
-            result, live.localizer.label_report(), map_version=row.map_version, stamp=stamp
+        objects = _objects_map(body["objects"], up, "objects")  # refused before it is stored
+        seq = self.store.append_batch(
+            session_id, float(stamp), body["objects"], self.session_idle_s
         )
+        if seq is None:
+            with self._lock:
+                self._live.pop(session_id, None)
+            raise not_found(f"session {session_id!r}")
+        live = self._live_session(session_id, map_id, version, up)
+        result = self._advance(session_id, live, seq, objects)
+        document = answer(result, live.localizer.label_report(), map_version=version, stamp=stamp)
         document["session_id"], document["update"] = session_id, seq
         self.store.set_last(session_id, _summary(document))
         return document
@@ -209,25 +220,31 @@ class Service:
                 self._live.move_to_end(session_id)
                 return live
         _, global_map = self.object_map(map_id, version)
-        fresh = _LiveSession(Localizer(global_map, self.config, local_up=up), version)
+        localizer = Localizer(global_map, self.config, local_up=up)
+        fresh = _LiveSession(localizer, map_id, version, up)
         with self._lock:
             live = self._live.setdefault(session_id, fresh)
             while len(self._live) > self.LIVE_SESSIONS:
                 self._live.popitem(last=False)  # rebuilt from the store if it comes back
         return live
 
-    def _advance(
-        self, session_id: str, live: _LiveSession, up: list[float] | None, seq: int
-    ) -> Result:
-        """Apply the stored batches up to `seq` not yet applied here; the answer after `seq`."""
+    def _advance(self, session_id: str, live: _LiveSession, seq: int, objects: ObjectMap) -> Result:
+        """Apply the batches up to `seq` (whose objects are `objects`) not yet applied here, in
+        order (those of other workers read from the store); the answer after `seq`."""
         with live.lock:
             if seq > live.applied:
-                for batch in self.store.batches(session_id, live.applied, seq):
-                    objects = _objects_map(batch.objects, up, f"batch {batch.seq}")
-                    result = live.localizer.update(list(objects))
+                if seq == live.applied + 1:
+                    pending = [(seq, objects)]
+                else:
+                    pending = [
+                        (b.seq, _objects_map(b.objects, live.up, f"batch {b.seq}"))
+                        for b in self.store.batches(session_id, live.applied, seq)
+                    ]
+                for number, batch in pending:
+                    result = live.localizer.update(list(batch))
                     assert result is not None
-                    live.applied = batch.seq
-                    live.answers[batch.seq] = result
+                    live.applied = number
+                    live.answers[number] = result
             result = live.answers.pop(seq, None)
             for old in [s for s in live.answers if s < seq - 64]:  # answers nobody came for
                 del live.answers[old]

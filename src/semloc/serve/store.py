@@ -103,7 +103,10 @@ class Store:
         return connection
 
     @contextmanager
-    def _transaction(self, write: bool = False) -> Iterator[Any]:
+    def _transaction(self, write: bool = False, durable: bool = True) -> Iterator[Any]:
+        """One transaction; a `durable` write is on disk when it returns (map versions), a
+        non-durable one survives a crash of the process but maybe not of the machine (session
+        updates: an update lost with the machine is one the device sends again)."""
         raise NotImplementedError
 
     def _sql(self, statement: str) -> str:
@@ -205,7 +208,7 @@ class Store:
         self, session_id: str, map_id: str, map_version: int, up: list[float] | None
     ) -> None:
         now = time.time()
-        with self._transaction(write=True) as cur:
+        with self._transaction(write=True, durable=False) as cur:
             cur.execute(
                 self._sql("INSERT INTO sessions VALUES (?, ?, ?, ?, ?, ?, ?)"),
                 (session_id, map_id, map_version, None if up is None else json.dumps(up),
@@ -233,20 +236,20 @@ class Store:
             ids = [r[0] for r in cur.fetchall()]
         return [s for s in map(self.session, ids) if s is not None]
 
-    def append_batch(self, session_id: str, stamp: float, objects: list[dict]) -> int | None:
+    def append_batch(
+        self, session_id: str, stamp: float, objects: list[dict], idle_seconds: float
+    ) -> int | None:
         """Store the next batch of a session and touch it; its sequence number (from 1), or
-        None when the session is gone."""
-        with self._transaction(write=True) as cur:
+        None when the session is gone or was idle for longer than `idle_seconds`."""
+        now = time.time()
+        with self._transaction(write=True, durable=False) as cur:
+            # the row lock (PostgreSQL) serialises a session's appends
             cur.execute(
-                self._sql("SELECT session_id FROM sessions WHERE session_id = ?"), (session_id,)
+                self._sql("UPDATE sessions SET touched = ? WHERE session_id = ? AND touched >= ?"),
+                (now, session_id, now - idle_seconds),
             )
-            if cur.fetchone() is None:
+            if cur.rowcount != 1:
                 return None
-            if self.placeholder != "?":  # PostgreSQL: serialise a session's appends
-                cur.execute(
-                    "SELECT session_id FROM sessions WHERE session_id = %s FOR UPDATE",
-                    (session_id,),
-                )
             cur.execute(
                 self._sql("SELECT COALESCE(MAX(seq), 0) FROM session_batches WHERE session_id = ?"),
                 (session_id,),
@@ -255,10 +258,6 @@ class Store:
             cur.execute(
                 self._sql("INSERT INTO session_batches VALUES (?, ?, ?, ?)"),
                 (session_id, seq, stamp, _pack(objects)),
-            )
-            cur.execute(
-                self._sql("UPDATE sessions SET touched = ? WHERE session_id = ?"),
-                (time.time(), session_id),
             )
         return seq
 
@@ -275,7 +274,7 @@ class Store:
             return [Batch(int(s), float(t), _unpack(o)) for s, t, o in cur.fetchall()]
 
     def set_last(self, session_id: str, last: dict[str, Any]) -> None:
-        with self._transaction(write=True) as cur:
+        with self._transaction(write=True, durable=False) as cur:
             cur.execute(
                 self._sql("UPDATE sessions SET last = ? WHERE session_id = ?"),
                 (json.dumps(last, allow_nan=False), session_id),
@@ -302,33 +301,68 @@ class Store:
 
 
 class SQLiteStore(Store):
-    """The default store: one SQLite file (WAL journal, full sync: a committed write survives a
-    crash of the process and of the machine)."""
+    """The default store: one SQLite file (WAL journal).  Map versions are synced to disk before
+    they are acknowledged (they survive a crash of the machine); session updates survive a crash
+    of the process.
+
+    Writers of one process take turns on a lock; writers of several processes (`--workers`)
+    retry every millisecond while another holds the database's write lock (SQLite's own busy
+    handler sleeps up to 100 ms at a time, which would show in every device's latency)."""
+
+    LOCKED_RETRY_S = 0.001
+    LOCKED_GIVE_UP_S = 30.0
 
     def __init__(self, path: str | Path) -> None:
         self.path = str(path)
+        self._writing = threading.Lock()
         super().__init__()
 
     def _connect(self) -> sqlite3.Connection:
-        connection = sqlite3.connect(self.path, timeout=30.0, isolation_level=None)
-        connection.execute("PRAGMA journal_mode=WAL")
+        connection = sqlite3.connect(self.path, timeout=0.0, isolation_level=None)
+        connection.execute("PRAGMA busy_timeout=0")
+        self._retry(lambda: connection.execute("PRAGMA journal_mode=WAL"))
         connection.execute("PRAGMA synchronous=FULL")
-        connection.execute("PRAGMA busy_timeout=30000")
+        self._local.durable = True
         return connection
 
+    def _retry(self, step: Callable[[], object]) -> None:
+        """`step()`, again every millisecond while the database is locked (up to 30 s)."""
+        give_up = time.monotonic() + self.LOCKED_GIVE_UP_S
+        while True:
+            try:
+                step()
+                return
+            except sqlite3.OperationalError as exc:
+                if "locked" not in str(exc) or time.monotonic() > give_up:
+                    raise
+                time.sleep(self.LOCKED_RETRY_S)
+
     @contextmanager
-    def _transaction(self, write: bool = False) -> Iterator[sqlite3.Cursor]:
+    def _transaction(self, write: bool = False, durable: bool = True) -> Iterator[sqlite3.Cursor]:
         connection = self._connection()
+        if not write:
+            with self._begun(connection, "BEGIN") as cur:
+                yield cur
+            return
+        with self._writing:
+            if durable != self._local.durable:  # NORMAL: WAL commits without fsync
+                connection.execute(f"PRAGMA synchronous={'FULL' if durable else 'NORMAL'}")
+                self._local.durable = durable
+            # IMMEDIATE takes the write lock at once: a read-then-write cannot be overtaken
+            with self._begun(connection, "BEGIN IMMEDIATE") as cur:
+                yield cur
+
+    @contextmanager
+    def _begun(self, connection: sqlite3.Connection, statement: str) -> Iterator[sqlite3.Cursor]:
+        self._retry(lambda: connection.execute(statement))
         cur = connection.cursor()
-        # IMMEDIATE takes the write lock at once: a read-then-write cannot be overtaken
-        cur.execute("BEGIN IMMEDIATE" if write else "BEGIN")
         try:
             yield cur
         except BaseException:
             connection.rollback()
             raise
         else:
-            connection.commit()
+            self._retry(connection.commit)  # (a checkpoint of another process may lock it)
         finally:
             cur.close()
 
@@ -362,12 +396,14 @@ class PostgresStore(Store):
         return None if row is None else int(row[0])
 
     @contextmanager
-    def _transaction(self, write: bool = False) -> Iterator[Any]:
+    def _transaction(self, write: bool = False, durable: bool = True) -> Iterator[Any]:
         connection = self._connection()
         if connection.closed or connection.broken:
             connection = self._local.connection = self._connect()
         try:
             with connection.cursor() as cur:
+                if write and not durable:
+                    cur.execute("SET LOCAL synchronous_commit = off")
                 yield cur
         except BaseException:
             connection.rollback()

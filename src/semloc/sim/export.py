@@ -52,7 +52,7 @@ def write_sequence(
             files.append(save(seq.local_map_at(kf.index), path))
     write_atomic(out / "ground_truth.json", json.dumps(seq.ground_truth(), indent=1) + "\n")
     files.append(out / "ground_truth.json")
-    from semloc.tools.viz import map_figure, plot_world, save_figure
+    from semloc.pictures.viz import map_figure, plot_world, save_figure
 
     fig, ax = map_figure(np.array(seq.world.bounds))
     trajectory = np.array([kf.T_world_camera[:2, 3] for kf in seq.keyframes])

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from semloc.frontend.segments import backproject as backproject_matrix
-from semloc.io.native import signals_held
+from semloc.io.interrupts import signals_held
 from semloc.sim.shapes import Mesh
 from semloc.sim.world import World
 

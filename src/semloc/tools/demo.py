@@ -5,8 +5,8 @@ fused local objects), feeds the objects that are new or updated at each keyframe
 `Localizer`, prints a live table (keyframe, local objects, association sets, top-2 scores,
 status, time) and finally the pose error against ground truth.  It writes `scores.png`,
 `map.png`, `world.png`, `result.json`, `ground_truth.json` and the global/local maps to `out`,
-and with `rrd` a 3D Rerun recording of the updates (`semloc.tools.viz3d`, the `viz` extra);
-the files in `out` all or none (`semloc.io.native.staged_folder`).
+and with `rrd` a 3D Rerun recording of the updates (`semloc.pictures.viz3d`, the `viz` extra);
+the files in `out` all or none (`semloc.io.output.staged_folder`).
 """
 
 from __future__ import annotations
@@ -25,17 +25,17 @@ from rich.live import Live
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
+from semloc.compiling import warm_up
 from semloc.eval.success import is_success
 from semloc.io.native import save_map, staged_folder, write_atomic
 from semloc.localizer import Localizer, LocalizerConfig
+from semloc.pictures.display import for_rich
 from semloc.results import Result
 from semloc.sim.mapkinds import MAP_KINDS
 from semloc.sim.noise import DetectionNoise
 from semloc.sim.scenario import SimulatedSequence, simulate_sequence
 from semloc.sim.sensor import check_resolution
 from semloc.sim.trajectory import PATHS
-from semloc.tools.display import for_rich
-from semloc.tools.warmup import warm_up
 from semloc.transforms import pose_error
 
 STATUS_STYLE = {"localized": "green", "ambiguous": "yellow", "failed": "red"}
@@ -125,7 +125,7 @@ def localize_sequence(
 ) -> tuple[Result, list[int], list[str]]:
     """Run the Localizer over the keyframes (live table); the last Result, keyframes, statuses.
 
-    `recording` (a `semloc.tools.viz3d.DemoRecording`) gets the state after every update."""
+    `recording` (a `semloc.pictures.viz3d.DemoRecording`) gets the state after every update."""
     localizer = Localizer(seq.global_maps[kind], LocalizerConfig(gamma=gamma), local_up=(0, 0, 1))
     result = Result(status="failed", pose=None, hypotheses=[])
     keyframes, statuses = [], []
@@ -168,7 +168,7 @@ def run_demo(config: DemoConfig, console: Console | None = None) -> DemoResult:
     )
     recording = None
     if config.rrd is not None:
-        from semloc.tools.viz3d import DemoRecording  # rerun
+        from semloc.pictures.viz3d import DemoRecording  # rerun
 
         recording = DemoRecording(config.rrd, gmap, seq.T_global_local, seq.local_map.labels)
     try:
@@ -200,7 +200,7 @@ def write_outputs(
     config: DemoConfig, demo: DemoResult, keyframes: list[int], statuses: list[str]
 ) -> list[Path]:
     """scores.png, map.png, world.png, result.json, ground_truth.json, global.json, local.json."""
-    from semloc.tools.viz import (
+    from semloc.pictures.viz import (
         map_figure,
         new_figure,
         plot_localization,
@@ -243,7 +243,7 @@ def write_outputs(
     files.append(save_figure(fig, out / "world.png"))
     files.append(save_map(gmap, out / "global.json"))
     files.append(save_map(seq.local_map, out / "local.json"))
-    write_atomic(out / "result.json", json.dumps(result.to_dict(), indent=1) + "\n")
+    write_atomic(out / "result.json", result.to_json())
     write_atomic(out / "ground_truth.json", json.dumps(seq.ground_truth(), indent=1) + "\n")
     files += [out / "result.json", out / "ground_truth.json"]
     return files

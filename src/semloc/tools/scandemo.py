@@ -5,7 +5,7 @@ renders a walk through its free space into depth and instance images, detects (t
 noise model) and fuses them into a local map in the odometry frame, then relocalizes
 incrementally against the scene's reconstruction or CAD map with the same live table, report,
 pictures (`scores.png`, `map.png`, `scan.png`), `result.json`, `ground_truth.json` and maps as
-`semloc demo`, all files or none (`semloc.io.native.staged_folder`, `result.json` moved in
+`semloc demo`, all files or none (`semloc.io.output.staged_folder`, `result.json` moved in
 last).  A relative `scan` folder is also looked up in the real-data folder (`$SEMLOC_DATA`, else
 `../shared/data/real`).
 """
@@ -128,7 +128,7 @@ def write_outputs(
     out: Path, kind: str, scan: RealScan, demo: DemoResult, keyframes: list[int], statuses: list
 ) -> list[Path]:
     """scores.png, map.png, scan.png, result.json, ground_truth.json, global.json, local.json."""
-    from semloc.tools.viz import (  # matplotlib (the pictures)
+    from semloc.pictures.viz import (  # matplotlib (the pictures)
         label_colors,
         map_figure,
         new_figure,
@@ -165,7 +165,7 @@ def write_outputs(
     files.append(save_figure(fig, out / "scan.png"))
     files.append(save_map(gmap, out / "global.json"))
     files.append(save_map(seq.local_map, out / "local.json"))
-    write_atomic(out / "result.json", json.dumps(result.to_dict(), indent=1) + "\n")
+    write_atomic(out / "result.json", result.to_json())
     write_atomic(out / "ground_truth.json", json.dumps(seq.ground_truth(), indent=1) + "\n")
     return [*files, out / "result.json", out / "ground_truth.json"]
 

@@ -18,7 +18,7 @@ import numpy as np
 from semloc.io.geometry import quaternion_matrix, sample_box_surface
 from semloc.io.importers.base import Importer, Maps
 from semloc.io.labels import is_structural, is_unlabeled
-from semloc.io.native import read_json
+from semloc.io.reading import read_json
 from semloc.maps import MapError, ObjectMap, SemanticObject, unit_vector
 
 

@@ -17,7 +17,7 @@ import numpy as np
 from semloc.io.geometry import upright_box
 from semloc.io.importers.base import Importer, Maps
 from semloc.io.labels import LABEL_SETS, class_name, is_structural, is_unlabeled
-from semloc.io.native import read_npy
+from semloc.io.reading import read_npy
 from semloc.maps import MapError, ObjectMap, SemanticObject
 from semloc.pointsets import voxel_downsample
 

@@ -34,8 +34,8 @@ from semloc.io.geometry import (
 )
 from semloc.io.importers.base import Importer, Maps
 from semloc.io.labels import NYU40, is_structural
-from semloc.io.native import read_json, require_keys
 from semloc.io.ply import read_ply
+from semloc.io.reading import read_json, require_keys
 from semloc.maps import MapError, ObjectMap, SemanticObject
 from semloc.pointsets import voxel_downsample
 

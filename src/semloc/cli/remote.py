@@ -1,0 +1,140 @@
+"""`semloc localize --server URL` and `semloc update-map --server URL`: the same commands
+against a `semloc serve` server (`semloc.client`), where GLOBAL names the map on the server.
+
+The localizer's settings are the server's there, so the options that change them are refused
+with `--server`.  A server's refusal is one line naming the server and what it said (exit 2);
+`update-map` exits 1 when nothing was written (not localized, nothing changed, or the map
+moved on since the answer: 409).
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import sys
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.console import Console
+
+from semloc.association import LabelResolution
+from semloc.cli.app import console, fail
+from semloc.cli.render import print_changes, print_ground_truth, print_labels, print_result
+from semloc.client import Client, ServerError
+from semloc.eval.success import ground_truth_report
+from semloc.io import load_map, write_atomic, write_files
+from semloc.io.native import map_files
+from semloc.results import Result
+
+ServerOption = Annotated[
+    str | None,
+    typer.Option(
+        "--server",
+        help="A `semloc serve` URL (http://host:port): localize there; GLOBAL is then the "
+        "map's id on the server.",
+    ),
+]
+TokenOption = Annotated[
+    str | None,
+    typer.Option(
+        "--token", envvar="SEMLOC_TOKEN", help="The server's access token (or $SEMLOC_TOKEN)."
+    ),
+]
+
+
+def refuse_local_settings(**given: object) -> None:
+    """With --server the server's settings apply: refuse options that would change them."""
+    for name, value in given.items():
+        if value is not None:
+            fail(f"--{name.replace('_', '-')}: with --server the server's settings apply "
+                 "(semloc serve --config)")  # fmt: skip
+
+
+def _client(server: str, token: str | None) -> Client:
+    try:
+        return Client(server, token)
+    except ValueError as exc:
+        fail(f"--server: {exc}")
+        raise  # unreachable: fail() raises
+
+
+def _call(server: str, what: str, function, *arguments):
+    try:
+        return function(*arguments)
+    except ServerError as exc:
+        detail = f": {exc.detail}" if exc.detail else ""
+        if exc.status == 0:
+            fail(f"{server}: cannot reach the server ({exc.detail})")
+        fail(f"{server}: {what} refused: {exc.status} {exc.error}{detail}")
+
+
+def localize(
+    server: str, token: str | None, map_id: str, local_map: Path, truth, as_json: bool,
+    output: Path | None,
+) -> None:  # fmt: skip
+    """Localize LOCAL in the server's map `map_id`; print or write the answer."""
+    client = _client(server, token)
+    local = load_map(local_map)
+    answer = _call(server, "localize", client.localize, map_id, local)
+    result = Result.from_dict(answer)
+    report = None if truth is None else ground_truth_report(result.pose, result.hypotheses, truth)
+    if as_json:
+        if report is not None:
+            answer["ground_truth"] = report
+        text = json.dumps(answer, indent=1, allow_nan=False) + "\n"
+        if output is None:
+            sys.stdout.write(text)
+        else:
+            write_atomic(output, text)
+        return
+    target = console if output is None else Console(record=True, width=120, file=io.StringIO())
+    target.print(f"server {server}, map {map_id} version {answer.get('map_version')}")
+    print_result(result, target)
+    print_labels(_labels(answer), target)
+    if report is not None:
+        print_ground_truth(report, target)
+    if output is not None:
+        write_atomic(output, target.export_text())
+
+
+def update_map(
+    server: str, token: str | None, map_id: str, local_map: Path, output: Path | None,
+    accept_ambiguous: bool,
+) -> None:  # fmt: skip
+    """Localize LOCAL in the server's map and report its changes as the map's next version."""
+    client = _client(server, token)
+    local = load_map(local_map)
+    answer = _call(server, "localize", client.localize, map_id, local)
+    status = answer.get("status")
+    if not (status == "localized" or (accept_ambiguous and status == "ambiguous")):
+        console.print(f"not localized (status {status}): no version written")
+        raise typer.Exit(1)
+    report = {**answer, "accept_ambiguous": accept_ambiguous}
+    try:
+        created = client.report_changes(map_id, report, local=local)
+    except ServerError as exc:
+        if exc.status != 409:
+            _call(server, "the change report", _raise, exc)
+        console.print(f"the map moved on since version {answer.get('map_version')} and these "
+                      f"changes no longer apply ({exc.detail}): no version written")  # fmt: skip
+        raise typer.Exit(1) from None
+    print_changes(Result.from_dict(answer).changes, console)
+    if not created.get("changed"):
+        console.print(f"nothing changed: {map_id} stays at version {created['version']}")
+        raise typer.Exit(1)
+    console.print(f"{map_id}: version {created['version']} written on {server}")
+    if output is not None:
+        updated = _call(server, "reading the map", client.get_map, map_id, created["version"])
+        write_files(map_files(updated, output))
+        console.print(f"wrote {output}")
+
+
+def _raise(exc: Exception) -> None:
+    raise exc
+
+
+def _labels(answer: dict) -> dict[str, LabelResolution]:
+    labels = answer.get("labels") or {}
+    return {label: LabelResolution(str(found.get("resolved")), tuple(found.get("map_labels") or ()))
+            for label, found in labels.items() if isinstance(found, dict)}  # fmt: skip
