@@ -10,6 +10,7 @@ import numpy as np
 import typer
 
 from semloc.cli.app import MAX_SEED, app, choices, console, fail
+from semloc.cli.extras import need
 from semloc.cli.files import (
     check_finite,
     check_output,
@@ -52,7 +53,7 @@ def convert(
         Path | None,
         typer.Option(
             help="scannet: a JSON file {raw: label}, or ScanNet's label table (.tsv), mapping "
-            "raw labels."
+            'raw labels; dsg: a JSON file {"3": "chair"} naming label numbers.'
         ),
     ] = None,
     include_structure: Annotated[
@@ -96,6 +97,8 @@ def convert(
 
     With a second (scan-derived) map both files are written, or neither."""
     check_finite(voxel=voxel)
+    if kind.value == "dsg":
+        need("convert dsg", "dsg")
     check_output(output)
     second = None
     if kind.value == "scan2cad":

@@ -1,4 +1,5 @@
-"""`semloc export`: a map (and local objects placed by a result's pose) as a coloured PLY.
+"""`semloc export`: a map (and local objects placed by a result's pose) as a coloured PLY, or
+(`--format dsg`) a map as a Spark-DSG scene graph (`semloc.io.dsg`, the `semloc[dsg]` extra).
 
 Every point is coloured by its object's label (`semloc.pictures.colors`, as in the pictures); local
 objects are drawn darker and flagged by the vertex property `local` = 1, so that a viewer
@@ -8,6 +9,7 @@ point at their centre.  Needs only the core install.
 
 from __future__ import annotations
 
+from enum import StrEnum
 from pathlib import Path
 from typing import Annotated
 
@@ -15,8 +17,10 @@ import numpy as np
 import typer
 
 from semloc.cli.app import app, console, fail
-from semloc.cli.files import check_separate, check_suffix, map_paths, read_result
-from semloc.io import load_map
+from semloc.cli.extras import need
+from semloc.cli.files import check_output, check_separate, check_suffix, map_paths, read_result
+from semloc.io import load_map, write_atomic
+from semloc.io.dsg import dsg_bytes
 from semloc.io.ply import write_ply
 from semloc.maps import ObjectMap
 from semloc.pictures.colors import label_colors
@@ -45,10 +49,31 @@ def scene_vertices(global_map: ObjectMap, placed_local: ObjectMap | None) -> np.
     return np.concatenate(records)
 
 
+class ExportFormat(StrEnum):
+    ply = "ply"
+    dsg = "dsg"
+
+
+def _export_dsg(
+    map_file: Path, output: Path, result: Path | None, local: Path | None, ascii_ply: bool
+) -> None:
+    """MAP as a Spark-DSG scene graph (ids, labels, positions, boxes, points, missing flags)."""
+    if result is not None or local is not None or ascii_ply:
+        fail("--format dsg writes MAP alone: --result, --local and --ascii do not apply")
+    need("export --format dsg", "dsg")
+    check_output(output)
+    objmap = load_map(map_file)
+    check_separate({"--output": [output]}, map_paths(map_file, objmap, "MAP"))
+    write_atomic(output, dsg_bytes(objmap, output))
+    console.print(f"wrote {output}: a scene graph of {len(objmap)} objects")
+
+
 @app.command()
 def export(
     map_file: Annotated[Path, typer.Argument(metavar="MAP", help="A semloc map (JSON).")],
-    output: Annotated[Path, typer.Option("--output", "-o", help="PLY file to write.")],
+    output: Annotated[
+        Path, typer.Option("--output", "-o", help="PLY file to write (a graph with --format dsg).")
+    ],
     result: Annotated[
         Path | None,
         typer.Option(help="Result JSON (semloc localize --format json) or a ground truth file."),
@@ -57,8 +82,19 @@ def export(
         Path | None, typer.Option(help="Local map to place into MAP by the result's pose.")
     ] = None,
     ascii_ply: Annotated[bool, typer.Option("--ascii", help="Text PLY instead of binary.")] = False,
+    output_format: Annotated[
+        ExportFormat,
+        typer.Option(
+            "--format",
+            help="ply, or dsg: a Spark-DSG scene graph (.json, else binary; the dsg extra).",
+        ),
+    ] = ExportFormat.ply,
 ) -> None:
-    """Write MAP's objects (and --local ones placed by --result) as a PLY coloured by label."""
+    """Write MAP's objects (and --local ones placed by --result) as a PLY coloured by label,
+    or MAP as a Spark-DSG scene graph with --format dsg."""
+    if output_format is ExportFormat.dsg:
+        _export_dsg(map_file, output, result, local, ascii_ply)
+        return
     check_suffix(output, ".ply", "--output", "a PLY point cloud")
     global_map = load_map(map_file)
     inputs = {**map_paths(map_file, global_map, "MAP"), result: "the --result file"}

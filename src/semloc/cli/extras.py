@@ -18,6 +18,8 @@ EXTRAS: dict[str, tuple[str, ...]] = {
     "bench": ("dask", "distributed", "sklearn", "matplotlib"),
     "train": ("torch",),
     "serve": ("fastapi", "uvicorn"),
+    "ros": ("rosbags", "mcap"),
+    "dsg": ("spark_dsg",),
 }
 """The top-level modules each extra of pyproject.toml brings."""
 

@@ -36,10 +36,11 @@ from semloc.eval.success import (
     TRANSLATION_TOLERANCE_M,
     is_success,
 )
-from semloc.io import load_map
+from semloc.io import load_map, write_atomic
 from semloc.io.output import staged_folder
 from semloc.maps import ObjectMap
 from semloc.pictures.display import for_rich
+from semloc.ros.simbag import walk_bag
 from semloc.sim.export import write_sequence
 from semloc.sim.noise import DetectionNoise
 from semloc.sim.scenario import simulate_sequence
@@ -148,10 +149,19 @@ def simulate(
         float, typer.Option(min=0, max=90, help="Odometry heading drift in degrees per metre.")
     ] = 0.0,
     descriptor: DescribeOption = None,
+    bag: Annotated[
+        bool,
+        typer.Option(
+            "--bag",
+            help="Also write the walk as a ROS 2 bag, walk.mcap: /detections, /odom and "
+            "/detections/points (the ros extra).",
+        ),
+    ] = False,
 ) -> None:
     """Write a world's global maps (reconstruction, CAD, dynamic), the local maps and ground truth.
 
-    Files: world.json/.png, global_<kind>.json, local.json, keyframes/local_XXXX.json.
+    Files: world.json/.png, global_<kind>.json, local.json, keyframes/local_XXXX.json;
+    with --bag also walk.mcap (detections, odometry and points, 10 per second).
 
     ground_truth.json holds T_global_local, camera poses and correspondences per map kind.
 
@@ -161,6 +171,8 @@ def simulate(
     check_finite(drift=drift, drift_yaw=drift_yaw)
     need("simulate", "sim")
     need("simulate", "viz", modules=("matplotlib",))
+    if bag:
+        need("simulate --bag", "ros")
     noise = DetectionNoise.perfect() if perfect else DetectionNoise()
     noise = noise.model_copy(update={"drift_translation": drift, "drift_yaw_deg": drift_yaw})
     try:
@@ -177,6 +189,8 @@ def simulate(
             snapshots=snapshots,
             descriptor=None if descriptor is None else descriptor.value,
         )
+        if bag:
+            files.append(write_atomic(stage / "walk.mcap", walk_bag(seq)))
     table = Table(
         title=f"simulated world seed {seed} -> {for_rich(out, None)}", title_justify="left"
     )

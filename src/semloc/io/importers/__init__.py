@@ -1,6 +1,7 @@
 """The dataset importers, one registry: `IMPORTERS` (name -> `Importer`), and `convert`.
 
-Each module of this package reads one dataset (ScanNet, Scan2CAD, Replica, 3RScan) and defines
+Each module of this package reads one dataset (ScanNet, Scan2CAD, Replica, 3RScan, Spark-DSG
+scene graphs) and defines
 `IMPORTER`; adding a dataset is one new module and one entry in the tuple below.  `semloc
 convert`'s kinds and help are built from the registry.
 """
@@ -11,11 +12,11 @@ import os
 from pathlib import Path
 from typing import Any
 
-from semloc.io.importers import replica, rscan, scan2cad, scannet
+from semloc.io.importers import dsg, replica, rscan, scan2cad, scannet
 from semloc.io.importers.base import COMMON_OPTIONS, Importer, Maps
 
 IMPORTERS: dict[str, Importer] = {
-    m.IMPORTER.name: m.IMPORTER for m in (scannet, scan2cad, replica, rscan)
+    m.IMPORTER.name: m.IMPORTER for m in (scannet, scan2cad, replica, rscan, dsg)
 }
 
 _DEFAULTS: dict[str, Any] = {"label_map": None, "shapenet": None, "scan_dir": None, "scene": None,

@@ -1,0 +1,241 @@
+"""Reading recorded runs: rosbag2 folders (sqlite3 or MCAP storage) and bare `.mcap` / `.db3`
+files, through `rosbags` (no ROS installation).
+
+`topics(path)` lists what a bag holds and what semloc can use of it.  `Run` reads a run for
+`semloc bag localize`: the odometry first (a `Trajectory` of the child frame in the odometry
+frame), then the detection messages in order as `DetectionFrame`s, each with the pose of its
+frame in the odometry frame, and with the points of a `sensor_msgs/PointCloud2` topic where
+one is given (fields x, y, z and `detection`, the index of the detection in the array of the
+same stamp).  Every problem (no such file, not a bag, truncated, a missing topic, a topic of
+another type, undecodable messages, frames that do not connect) is a `BagError` naming the
+file and what is wrong.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from semloc.maps import MapError
+from semloc.ros import messages as msgs
+from semloc.ros.frames import Trajectory, matrix_of
+from semloc.ros.stream import BoxDetection, DetectionFrame
+
+USES = {msgs.DETECTIONS: "--detections", msgs.ODOMETRY: "--odom", msgs.POINTS: "--points"}
+"""The message types semloc reads, and the option of `semloc bag localize` that takes them."""
+
+MAX_GAP_S = 0.5
+"""Odometry further than this from a detection message (or a gap this long) gives no pose."""
+CLOUD_WAIT_NS = 10**9
+"""A detection message waits this long (log time) for its point cloud."""
+
+
+class BagError(MapError):
+    """A bag that cannot be read as asked: one line naming the file and the problem."""
+
+
+@dataclass(frozen=True)
+class Topic:
+    """One topic of a bag: name, message type, message count, the option that reads it."""
+
+    name: str
+    msgtype: str
+    count: int
+
+    @property
+    def use(self) -> str | None:
+        return USES.get(self.msgtype)
+
+
+@dataclass(frozen=True)
+class Odometry:
+    """The odometry of a run: its frame, the moving (child) frame, and the child's poses."""
+
+    frame: str
+    child: str
+    trajectory: Trajectory
+
+
+@contextmanager
+def opened(path: Path) -> Iterator[Any]:
+    """A rosbags reader of `path`, or a BagError naming the file."""
+    from rosbags.rosbag2 import Reader
+
+    path = Path(path)
+    if not path.exists():
+        raise BagError(f"{path}: no such file or folder")
+    try:
+        reader = Reader(path)
+        reader.open()
+    except Exception as exc:  # rosbags raises many kinds on bad files
+        raise BagError(f"{path}: not a readable ROS 2 bag ({_why(exc)})") from None
+    try:
+        yield reader
+    finally:
+        reader.close()
+
+
+def _why(exc: BaseException) -> str:
+    text = " ".join(str(exc).split()) or type(exc).__name__
+    return text[:200]
+
+
+def topics(path: Path) -> tuple[list[Topic], float]:
+    """The topics of a bag (by name) and its duration in seconds."""
+    with opened(path) as reader:
+        found: dict[str, Topic] = {}
+        for conn in reader.connections:
+            old = found.get(conn.topic)
+            count = conn.msgcount + (old.count if old else 0)
+            found[conn.topic] = Topic(conn.topic, conn.msgtype, count)
+        duration = reader.duration / 1e9 if reader.message_count else 0.0
+    return sorted(found.values(), key=lambda t: t.name), duration
+
+
+class Run:
+    """A recorded run read for localization (see the module docstring)."""
+
+    def __init__(self, reader: Any, path: Path, detections: str, odom: str | None,
+                 points: str | None) -> None:  # fmt: skip
+        self.reader, self.path = reader, Path(path)
+        self.detections = self._connections(detections, msgs.DETECTIONS, "--detections")
+        self.odom = None if odom is None else self._connections(odom, msgs.ODOMETRY, "--odom")
+        self.points = None if points is None else self._connections(points, msgs.POINTS, "--points")
+        self.skipped: dict[str, int] = {}
+
+    def _connections(self, topic: str, msgtype: str, option: str) -> list[Any]:
+        conns = [c for c in self.reader.connections if c.topic == topic]
+        if not conns:
+            names = sorted({c.topic for c in self.reader.connections})
+            raise BagError(f"{self.path}: no topic {topic} ({option}); it has {', '.join(names)}")
+        wrong = [c.msgtype for c in conns if c.msgtype != msgtype]
+        if wrong:
+            raise BagError(f"{self.path}: topic {topic} holds {wrong[0]}; {option} needs {msgtype}")
+        if not sum(c.msgcount for c in conns):
+            raise BagError(f"{self.path}: topic {topic} ({option}) has no messages")
+        return conns
+
+    def messages(self, conns: list[Any]) -> Iterator[tuple[str, int, Any]]:
+        """(topic, log time, decoded message) in log-time order; BagError on bad data."""
+        stream = self.reader.messages(connections=conns)
+        index = 0
+        while True:
+            try:
+                conn, log_time, raw = next(stream)
+            except StopIteration:
+                return
+            except Exception as exc:
+                raise BagError(f"{self.path}: cannot read the messages ({_why(exc)})") from None
+            try:
+                message = msgs.deserialize(raw, conn.msgtype)
+            except Exception as exc:
+                raise BagError(
+                    f"{self.path}: message {index} on {conn.topic} is not a valid "
+                    f"{conn.msgtype} ({_why(exc)})"
+                ) from None
+            index += 1
+            yield conn.topic, int(log_time), message
+
+    def odometry(self) -> Odometry | None:
+        """The odometry of the run (None without an odometry topic)."""
+        if self.odom is None:
+            return None
+        stamps, poses, frames = [], [], set()
+        for topic, log_time, message in self.messages(self.odom):
+            frames.add((message.header.frame_id, message.child_frame_id))
+            stamps.append(msgs.stamp_ns(message.header.stamp) or log_time)
+            try:
+                poses.append(msgs.matrix(message.pose.pose))
+            except ValueError as exc:
+                raise BagError(f"{self.path}: odometry on {topic}: {exc}") from None
+        if len(frames) > 1:
+            shown = ", ".join(f"{a} -> {b}" for a, b in sorted(frames)[:3])
+            raise BagError(f"{self.path}: odometry changes frames ({shown}); one pair expected")
+        frame, child = frames.pop()
+        return Odometry(frame, child, Trajectory(stamps, poses, int(MAX_GAP_S * 1e9)))
+
+    def frames(self) -> Iterator[DetectionFrame]:
+        """The detection messages in log-time order (with their points when `--points`)."""
+        conns = self.detections + (self.points or [])
+        waiting: deque[tuple[int, Any]] = deque()  # (log time, detection message)
+        clouds: dict[tuple[int, str], Any] = {}
+        for _, log_time, message in self.messages(conns):
+            if self.points is not None and message.__msgtype__ == msgs.POINTS:
+                clouds[(msgs.stamp_ns(message.header.stamp), message.header.frame_id)] = message
+            else:
+                waiting.append((log_time, message))
+            while waiting and (
+                self.points is None
+                or _key(waiting[0][1]) in clouds
+                or log_time - waiting[0][0] > CLOUD_WAIT_NS
+            ):
+                first_log, detections = waiting.popleft()
+                cloud = clouds.pop(_key(detections), None)
+                yield self._frame(detections, first_log, cloud)
+                _drop_older(clouds, msgs.stamp_ns(detections.header.stamp) - CLOUD_WAIT_NS)
+        for first_log, detections in waiting:
+            yield self._frame(detections, first_log, clouds.pop(_key(detections), None))
+
+    def _frame(self, message: Any, log_time: int, cloud: Any) -> DetectionFrame:
+        stamp = msgs.stamp_ns(message.header.stamp) or log_time
+        frame = message.header.frame_id or next(
+            (d.header.frame_id for d in message.detections if d.header.frame_id), ""
+        )
+        points = self._points(cloud, len(message.detections)) if cloud is not None else {}
+        detections = []
+        for i, det in enumerate(message.detections):
+            found = detection_from_msg(det, points.get(i))
+            if found is None:
+                why = "detections without a class or a finite box"
+                self.skipped[why] = self.skipped.get(why, 0) + 1
+            else:
+                detections.append(found)
+        return DetectionFrame(stamp, frame, detections)
+
+    def _points(self, cloud: Any, count: int) -> dict[int, np.ndarray]:
+        try:
+            fields = msgs.cloud_fields(cloud, msgs.POINT_FIELDS)
+        except ValueError as exc:
+            raise BagError(f"{self.path}: --points: {exc}") from None
+        xyz = np.column_stack([fields["x"], fields["y"], fields["z"]])
+        index = np.round(fields["detection"]).astype(np.int64)
+        keep = np.all(np.isfinite(xyz), axis=1) & (index >= 0) & (index < count)
+        xyz, index = xyz[keep], index[keep]
+        return {int(i): xyz[index == i] for i in np.unique(index)}
+
+
+def _key(message: Any) -> tuple[int, str]:
+    return msgs.stamp_ns(message.header.stamp), message.header.frame_id
+
+
+def _drop_older(clouds: dict[tuple[int, str], Any], stamp: int) -> None:
+    for key in [k for k in clouds if k[0] < stamp]:
+        del clouds[key]
+
+
+def detection_from_msg(det: Any, points: np.ndarray | None = None) -> BoxDetection | None:
+    """A BoxDetection of a vision_msgs Detection3D (label: the best hypothesis's `class_id`;
+    an orientation left all zeros counts as axis-aligned), or None when it has no hypothesis
+    with a class or its box is not finite.  Reads fields only, so it takes the messages of
+    rosbags and of rclpy alike."""
+    results = [r for r in det.results if r.hypothesis.class_id.strip()]
+    if not results:
+        return None
+    best = max(results, key=lambda r: r.hypothesis.score)
+    box = det.bbox
+    p, q = box.center.position, box.center.orientation
+    quaternion = (q.x, q.y, q.z, q.w) if (q.x, q.y, q.z, q.w) != (0, 0, 0, 0) else (0, 0, 0, 1)
+    try:
+        T = matrix_of((p.x, p.y, p.z), quaternion)
+        score = float(best.hypothesis.score)
+        return BoxDetection(best.hypothesis.class_id.strip(), T[:3, 3],
+                            (box.size.x, box.size.y, box.size.z), T[:3, :3],
+                            score if np.isfinite(score) else None, points)  # fmt: skip
+    except (ValueError, MapError):  # not finite
+        return None

@@ -1,0 +1,95 @@
+"""Replaying a recorded run through a `StreamLocalizer`: each detection message put into the
+odometry frame, fused, localized; the answers with their stamps.
+
+Frames: with odometry, a detection message in the odometry's moving (child) frame is placed by
+the odometry pose at its stamp (interpolated; none within `MAX_GAP_S`: the message is skipped
+and counted), one already in the odometry frame is used as it is, any other frame is a
+`BagError`.  Without odometry every message must be in one frame, which is then the local
+(odometry) frame.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from semloc.results import Result
+from semloc.ros.bag import MAX_GAP_S, BagError, Odometry, Run
+from semloc.ros.stream import DetectionFrame, StreamLocalizer
+
+NO_ODOMETRY = f"detection messages without odometry within {MAX_GAP_S:g} s"
+
+
+@dataclass(frozen=True)
+class Answer:
+    """One answer of a replay: the message's stamp (ns) and frame, the odometry frame, the pose
+    of the message's frame in it, and the Localizer's result."""
+
+    stamp: int
+    frame: str
+    odom_frame: str
+    T_odom_sensor: np.ndarray
+    result: Result
+
+
+def replay(run: Run, stream: StreamLocalizer) -> Iterator[Answer]:
+    """The answers of `run` (see the module docstring); `run.skipped` counts what was left out."""
+    odometry = run.odometry()
+    fixed: str | None = None
+    stamps: list[int] = []  # of the messages left out for want of odometry
+    placed = 0
+    for frame in run.frames():
+        if odometry is None:
+            fixed = fixed if fixed is not None else frame.frame
+            if frame.frame != fixed:
+                raise BagError(
+                    f"{run.path}: detections change frame from '{fixed}' to '{frame.frame}'; "
+                    "give --odom to connect them"
+                )
+            pose: np.ndarray | None = np.eye(4)
+        else:
+            pose = sensor_pose(run, frame, odometry)
+        if pose is None:
+            run.skipped[NO_ODOMETRY] = run.skipped.get(NO_ODOMETRY, 0) + 1
+            stamps.append(frame.stamp)
+            continue
+        placed += 1
+        result = stream.step(frame, pose)
+        if result is not None:
+            odom_frame = frame.frame if odometry is None else odometry.frame
+            yield Answer(frame.stamp, frame.frame, odom_frame, pose, result)
+    if odometry is not None and stamps and not placed:
+        known = odometry.trajectory.stamps
+        raise BagError(
+            f"{run.path}: no detection message has odometry within {MAX_GAP_S:g} s (detections "
+            f"at {min(stamps) / 1e9:.1f}-{max(stamps) / 1e9:.1f} s, odometry at "
+            f"{known[0] / 1e9:.1f}-{known[-1] / 1e9:.1f} s)"
+        )
+
+
+def sensor_pose(run: Run, frame: DetectionFrame, odometry: Odometry) -> np.ndarray | None:
+    """The pose of the message's frame in the odometry frame at its stamp (None: no odometry
+    near it); BagError for a frame the odometry does not give."""
+    if frame.frame == odometry.frame:
+        return np.eye(4)
+    if frame.frame == odometry.child:
+        return odometry.trajectory.at(frame.stamp)
+    raise BagError(
+        f"{run.path}: detections are in frame '{frame.frame}', the odometry gives "
+        f"'{odometry.frame}' -> '{odometry.child}'; they must be in one of those frames"
+    )
+
+
+def answer_json(answer: Answer, stream: StreamLocalizer) -> dict[str, Any]:
+    """One line of `--jsonl`: `{"stamp": seconds, "result": the localize JSON}`; its `steps`
+    hold this update's step only (the earlier ones are on the lines before)."""
+    document = answer.result.to_dict()
+    document["steps"] = document["steps"][-1:]
+    document["labels"] = {
+        label: {"resolved": found.resolved, "map_labels": list(found.map_labels)}
+        for label, found in stream.localizer.label_report().items()
+    }
+    return {"stamp": answer.stamp / 1e9, "result": document}

@@ -1,0 +1,240 @@
+"""`semloc simulate --bag`, `semloc bag info` and `semloc bag localize` end to end: a simulated
+walk written as a bag localizes as the in-process Localizer does on the same detections, the
+answers read back as MCAP with their topics and schemas, bags built by rosbags (sqlite3 and
+MCAP storage) localize, and bad bags end in one line, exit 2 and nothing written."""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import numpy as np
+import pytest
+
+pytest.importorskip("rosbags")
+pytest.importorskip("mcap")
+
+from rosbag_fixtures import T_MAP_ODOM, messages, write_bag  # noqa: E402
+
+import semloc  # noqa: E402
+from semloc.cli import main  # noqa: E402
+from semloc.ros import messages as msgs  # noqa: E402
+from semloc.ros.answers import OUTPUT_TOPICS  # noqa: E402
+from semloc.sim.noise import DetectionNoise  # noqa: E402
+from semloc.sim.scenario import simulate_sequence  # noqa: E402
+from semloc.transforms import pose_error  # noqa: E402
+
+SIM = dict(seed=0, size="small", keyframes=24, resolution="120x90")
+
+
+@pytest.fixture(scope="module")
+def walk(tmp_path_factory):
+    out = tmp_path_factory.mktemp("walk")
+    argv = ["simulate", str(out), "--bag", "--no-snapshots", "--seed", str(SIM["seed"]),
+            "--size", SIM["size"], "--keyframes", str(SIM["keyframes"]),
+            "--resolution", SIM["resolution"]]  # fmt: skip
+    assert main(argv) == 0
+    return out
+
+
+@pytest.fixture(scope="module")
+def localized(walk):
+    argv = ["bag", "localize", str(walk / "walk.mcap"), "--map",
+            str(walk / "global_reconstruction.json"), "--detections", "/detections",
+            "--odom", "/odom", "--points", "/detections/points", "-o", str(walk / "out.mcap"),
+            "--jsonl", str(walk / "out.jsonl")]  # fmt: skip
+    assert main(argv) == 0
+    return walk
+
+
+def _lines(path):
+    return [json.loads(line) for line in path.read_text().splitlines()]
+
+
+def test_simulate_bag_lists_its_topics(walk, capsys):
+    capsys.readouterr()
+    assert main(["bag", "info", str(walk / "walk.mcap")]) == 0
+    out = capsys.readouterr().out
+    for topic, use in (("/detections ", "--detections"), ("/odom", "--odom"),
+                       ("/detections/points", "--points")):  # fmt: skip
+        line = next(line for line in out.splitlines() if topic in line)
+        assert use in line and f" {SIM['keyframes']} " in line
+
+
+def test_bag_answers_equal_the_in_process_localizer_on_the_same_detections(localized):
+    seq = simulate_sequence(SIM["seed"], SIM["size"], "all", "walk", n_keyframes=SIM["keyframes"],
+                            resolution=(120, 90), noise=DetectionNoise())  # fmt: skip
+    gmap = semloc.load_map(localized / "global_reconstruction.json")
+    loc = semloc.Localizer(gmap, local_up=[0, 0, 1])
+    expected = [(1.0 + 0.1 * i, loc.update(kf.objects))
+                for i, kf in enumerate(seq.keyframes) if kf.objects]  # fmt: skip
+    lines = _lines(localized / "out.jsonl")
+    assert [round(line["stamp"], 6) for line in lines] == [round(s, 6) for s, _ in expected]
+    for line, (_, result) in zip(lines, expected, strict=True):
+        got = line["result"]
+        assert got["status"] == result.status
+        assert [h["pairs"] for h in got["hypotheses"]] == [
+            [{"global": g, "local": lid} for g, lid in h.pairs] for h in result.hypotheses
+        ]
+        if result.pose is None:
+            assert got["pose"] is None
+        else:
+            assert np.allclose(got["pose"], result.pose, atol=1e-6)
+        assert len(got["steps"]) == 1 and "labels" in got and "changes" in got
+
+
+def test_bag_localization_of_the_simulated_walk_is_accurate(localized):
+    truth = np.asarray(json.loads((localized / "ground_truth.json").read_text())["T_global_local"])
+    last = _lines(localized / "out.jsonl")[-1]["result"]
+    assert last["status"] == "localized"
+    rotation, translation = pose_error(np.asarray(last["pose"]), truth)
+    assert rotation < 2.0 and translation < 0.1
+
+
+def test_the_mcap_output_reads_back_with_its_topics_and_schemas(localized):
+    from mcap.reader import make_reader
+
+    with open(localized / "out.mcap", "rb") as handle:
+        reader = make_reader(handle)
+        summary = reader.get_summary()
+        channels = {c.topic: summary.schemas[c.schema_id].name for c in summary.channels.values()}
+        assert channels == OUTPUT_TOPICS
+        assert all(s.encoding == "ros2msg" for s in summary.schemas.values())
+        decoded, frames = {}, set()
+        for schema, channel, message in reader.iter_messages():
+            decoded.setdefault(channel.topic, msgs.deserialize(message.data, schema.name))
+            if channel.topic == "/tf":
+                tf = msgs.deserialize(message.data, schema.name)
+                frames |= {(t.header.frame_id, t.child_frame_id) for t in tf.transforms}
+    status = json.loads(decoded["/semloc/status"].data)
+    assert {"stamp", "status", "confidence", "reason", "changes"} <= set(status)
+    pose = decoded["/semloc/pose"]
+    assert pose.header.frame_id == "map"
+    cov = np.asarray(pose.pose.covariance).reshape(6, 6)
+    assert np.all(np.diag(cov) > 0) and np.allclose(cov, cov.T)
+    assert ("map", "odom") in frames and ("odom", "camera") in frames
+    assert len(decoded["/semloc/map"].markers) == 2 * len(
+        semloc.load_map(localized / "global_reconstruction.json")
+    )
+
+
+@pytest.mark.parametrize("storage", ["sqlite3", "mcap"])
+@pytest.mark.parametrize("points", [False, True])
+def test_bags_built_by_rosbags_localize(tmp_path, storage, points):
+    from helpers import room
+
+    gmap = room(14)
+    semloc.save_map(gmap, tmp_path / "map.json")
+    bag = write_bag(tmp_path / "run", messages(gmap, points=points), storage)
+    argv = ["bag", "localize", str(bag), "--map", str(tmp_path / "map.json"),
+            "--detections", "/detections", "--odom", "/odom", "-o", str(tmp_path / "o.mcap"),
+            "--jsonl", str(tmp_path / "o.jsonl")]  # fmt: skip
+    assert main(argv + (["--points", "/points"] if points else [])) == 0
+    last = _lines(tmp_path / "o.jsonl")[-1]["result"]
+    assert last["status"] == "localized"
+    rotation, translation = pose_error(np.asarray(last["pose"]), T_MAP_ODOM)
+    assert rotation < 1.0 and translation < 0.05
+
+
+def _one_error_line(capsys, *fragments):
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("semloc: error: "), err
+    for fragment in fragments:
+        assert fragment in err, err
+
+
+def _localize(bag, walk, out, *extra):
+    return main(["bag", "localize", str(bag), "--map", str(walk / "global_reconstruction.json"),
+                 "-o", str(out), *extra])  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    "options, fragments",
+    [
+        (["--detections", "/nothing"], ["no topic /nothing", "--detections"]),
+        (["--detections", "/odom"], ["/odom holds nav_msgs/msg/Odometry", "Detection3DArray"]),
+        (["--detections", "/detections", "--odom", "/detections"], ["--odom needs"]),
+        (["--detections", "/detections", "--points", "/odom"], ["--points needs"]),
+    ],
+)
+def test_wrong_topics_end_in_one_line(walk, tmp_path, capsys, options, fragments):
+    capsys.readouterr()
+    out = tmp_path / "o.mcap"
+    assert _localize(walk / "walk.mcap", walk, out, *options) == 2
+    _one_error_line(capsys, "walk.mcap", *fragments)
+    assert not out.exists()
+
+
+def test_truncated_and_non_bags_end_in_one_line(walk, tmp_path, capsys):
+    data = (walk / "walk.mcap").read_bytes()
+    cases = {"cut.mcap": data[: len(data) // 2], "text.mcap": b"not a bag\n", "empty.db3": b""}
+    for name, content in cases.items():
+        (tmp_path / name).write_bytes(content)
+        capsys.readouterr()
+        out = tmp_path / "o.mcap"
+        code = _localize(tmp_path / name, walk, out, "--detections", "/detections", "--jsonl",
+                         str(tmp_path / "o.jsonl"))  # fmt: skip
+        assert code == 2, name
+        _one_error_line(capsys, name)
+        assert not out.exists() and not (tmp_path / "o.jsonl").exists()
+    capsys.readouterr()
+    assert main(["bag", "info", str(tmp_path / "missing.mcap")]) == 2
+    _one_error_line(capsys, "missing.mcap", "no such file")
+
+
+def test_detections_in_a_frame_the_odometry_does_not_give_are_refused(tmp_path, capsys):
+    from helpers import room
+
+    gmap = room(8)
+    semloc.save_map(gmap, tmp_path / "map.json")
+    bag = write_bag(tmp_path / "run", messages(gmap, frame="lidar"), "mcap")
+    capsys.readouterr()
+    argv = ["bag", "localize", str(bag), "--map", str(tmp_path / "map.json"),
+            "--detections", "/detections", "--odom", "/odom", "-o", str(tmp_path / "o.mcap")]  # fmt: skip
+    assert main(argv) == 2
+    _one_error_line(capsys, "frame 'lidar'", "'odom' -> 'base'")
+    assert not (tmp_path / "o.mcap").exists()
+
+
+def test_detections_without_odometry_near_them_are_refused(tmp_path, capsys):
+    from helpers import room
+
+    gmap = room(8)
+    semloc.save_map(gmap, tmp_path / "map.json")
+    records = messages(gmap)
+    for topic, _, stamp, message in records:  # the odometry 100 s later than the detections
+        if topic == "/odom":
+            message.header.stamp = msgs.stamp(stamp + 100 * 10**9)
+    bag = write_bag(tmp_path / "run", records, "sqlite3")
+    capsys.readouterr()
+    argv = ["bag", "localize", str(bag), "--map", str(tmp_path / "map.json"),
+            "--detections", "/detections", "--odom", "/odom", "-o", str(tmp_path / "o.mcap")]  # fmt: skip
+    assert main(argv) == 2
+    _one_error_line(capsys, "no detection message has odometry within 0.5 s")
+    assert not (tmp_path / "o.mcap").exists()
+
+
+def test_outputs_never_overwrite_the_inputs(walk, tmp_path, capsys):
+    copy = tmp_path / "walk.mcap"
+    shutil.copy(walk / "walk.mcap", copy)
+    before = copy.read_bytes()
+    capsys.readouterr()
+    assert _localize(copy, walk, copy, "--detections", "/detections") == 2
+    _one_error_line(capsys, "would overwrite the bag")
+    assert copy.read_bytes() == before
+    out = tmp_path / "same"
+    assert _localize(copy, walk, out, "--detections", "/detections", "--jsonl", str(out)) == 2
+    _one_error_line(capsys, "would both write it")
+
+
+def test_the_last_answer_agrees_with_semloc_localize_on_the_final_local_map(localized, capsys):
+    """`semloc localize` replays the final local map by `seen` (objects in their final state),
+    the bag one message at a time (objects as they were then): the same place, within mm."""
+    capsys.readouterr()
+    assert main(["localize", str(localized / "global_reconstruction.json"),
+                 str(localized / "local.json"), "--format", "json"]) == 0  # fmt: skip
+    replayed = json.loads(capsys.readouterr().out)
+    last = _lines(localized / "out.jsonl")[-1]["result"]
+    assert replayed["status"] == last["status"] == "localized"
+    rotation, translation = pose_error(np.asarray(last["pose"]), np.asarray(replayed["pose"]))
+    assert rotation < 0.5 and translation < 0.02
