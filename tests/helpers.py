@@ -23,6 +23,15 @@ def real_sample_or_skip(*parts: str) -> Path:
     return path
 
 
+def box_points(rng: np.random.Generator, obj: SemanticObject, n: int = 600) -> np.ndarray:
+    """`n` points on the faces of an object's box (a 0.5 m cube without one)."""
+    size = np.asarray(obj.size if obj.size is not None else [0.5, 0.5, 0.5], dtype=float)
+    p = rng.uniform(-0.5, 0.5, (n, 3)) * size
+    axis = rng.integers(0, 3, n)
+    p[np.arange(n), axis] = np.sign(rng.uniform(-1, 1, n)) * size[axis] / 2
+    return p + obj.position
+
+
 def benchmark_script(name: str) -> ModuleType:
     """`benchmarks/<name>.py` imported as module `name` (registered first: dataclasses look
     their module up)."""

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from helpers import box_points
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
@@ -263,19 +264,11 @@ def test_accuracy_target_on_repeated_objects():
 # --------------------------------------------------------------------------- pose cache
 
 
-def _box_points(rng: np.random.Generator, obj: SemanticObject, n: int = 600) -> np.ndarray:
-    size = np.asarray(obj.size if obj.size is not None else [0.5, 0.5, 0.5], dtype=float)
-    p = rng.uniform(-0.5, 0.5, (n, 3)) * size
-    axis = rng.integers(0, 3, n)
-    p[np.arange(n), axis] = np.sign(rng.uniform(-1, 1, n)) * size[axis] / 2
-    return p + obj.position
-
-
 @pytest.fixture(scope="module")
 def room_with_points() -> ObjectMap:
     rng = np.random.default_rng(3)
     room = layout(30, seed=5)
-    return ObjectMap([o.replace(points=_box_points(rng, o)) for o in room], up=room.up)
+    return ObjectMap([o.replace(points=box_points(rng, o)) for o in room], up=room.up)
 
 
 class _Spy:

@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import box_points
 
 pytest.importorskip("fastapi", reason="the serve extra is not installed")
 pytest.importorskip("uvicorn", reason="the serve extra is not installed")
@@ -61,21 +62,12 @@ def serve(tmp_path: Path, compiled: None) -> Iterator[Callable[..., LiveServer]]
         server.stop()
 
 
-def box_points(rng: np.random.Generator, obj, n: int = 300) -> np.ndarray:
-    """Points on the faces of an object's box (0.5 m cube without one)."""
-    size = np.asarray(obj.size if obj.size is not None else [0.5, 0.5, 0.5], dtype=float)
-    p = rng.uniform(-0.5, 0.5, (n, 3)) * size
-    axis = rng.integers(0, 3, n)
-    p[np.arange(n), axis] = np.sign(rng.uniform(-1, 1, n)) * size[axis] / 2
-    return p + obj.position
-
-
 @pytest.fixture(scope="session")
 def building() -> ObjectMap:
     """A 40-object floor with points, as the server stores it (JSON rounds to 1e-6)."""
     rng = np.random.default_rng(3)
     floor = layout(40, seed=5)
-    objmap = ObjectMap([o.replace(points=box_points(rng, o)) for o in floor], up=floor.up)
+    objmap = ObjectMap([o.replace(points=box_points(rng, o, 300)) for o in floor], up=floor.up)
     return map_from_dict(map_to_dict(objmap))
 
 

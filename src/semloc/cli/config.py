@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import sys
 from enum import StrEnum
 from pathlib import Path
 from typing import Annotated
@@ -13,8 +12,7 @@ import yaml
 from pydantic import ValidationError
 
 from semloc.cli.app import app, fail, first_error
-from semloc.cli.files import check_separate, read_config
-from semloc.io import write_atomic
+from semloc.cli.files import check_separate, emit, read_config
 from semloc.localizer import LocalizerConfig
 
 
@@ -62,7 +60,4 @@ def config(
     except ValidationError as exc:
         fail(f"{config_file}: invalid settings: {first_error(exc)}")
     text = dump_config(settings, output_format)
-    if output is None:
-        sys.stdout.write(text)
-    else:
-        write_atomic(output, text)
+    emit(text, output)

@@ -5,13 +5,14 @@ done."""
 from __future__ import annotations
 
 import math
+import sys
 from pathlib import Path
 
 import numpy as np
 import yaml
 
 from semloc.cli.app import fail
-from semloc.io import read_json, read_regular
+from semloc.io import read_json, read_regular, write_atomic
 from semloc.io.native import MAX_JSON_BYTES, document_kind, points_path
 from semloc.maps import ObjectMap
 from semloc.results import SavedResult, saved_pose, saved_result
@@ -170,3 +171,11 @@ def check_finite(**options: float | tuple[float, ...] | None) -> None:
         values = value if isinstance(value, tuple) else (value,)
         if any(v is not None and not math.isfinite(v) for v in values):
             fail(f"--{name.replace('_', '-')} must be a finite number, got {value}")
+
+
+def emit(text: str, output: Path | None) -> None:
+    """`text` on stdout, or written to `output` all or nothing."""
+    if output is None:
+        sys.stdout.write(text)
+    else:
+        write_atomic(output, text)

@@ -10,7 +10,6 @@ JSON); an unmatched label is a warning on stderr, never an error.  Long replays 
 from __future__ import annotations
 
 import io
-import sys
 from enum import StrEnum
 from pathlib import Path
 from typing import Annotated
@@ -35,6 +34,7 @@ from semloc.cli.files import (
     check_finite,
     check_output,
     check_separate,
+    emit,
     map_paths,
     read_config,
     read_label_map,
@@ -185,10 +185,7 @@ def localize(
         if report is not None:
             extra["ground_truth"] = report
         text = result.to_json(**extra)
-        if output is None:
-            sys.stdout.write(text)
-        else:
-            write_atomic(output, text)
+        emit(text, output)
         return
     target = console if output is None else Console(record=True, width=120, file=io.StringIO())
     print_result(result, target, warm)

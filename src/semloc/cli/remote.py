@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import io
 import json
-import sys
 from pathlib import Path
 from typing import Annotated
 
@@ -20,6 +19,7 @@ from rich.console import Console
 
 from semloc.association import LabelResolution
 from semloc.cli.app import console, fail
+from semloc.cli.files import emit
 from semloc.cli.render import print_changes, print_ground_truth, print_labels, print_result
 from semloc.client import Client, ServerError
 from semloc.eval.success import ground_truth_report
@@ -83,10 +83,7 @@ def localize(
         if report is not None:
             answer["ground_truth"] = report
         text = json.dumps(answer, indent=1, allow_nan=False) + "\n"
-        if output is None:
-            sys.stdout.write(text)
-        else:
-            write_atomic(output, text)
+        emit(text, output)
         return
     target = console if output is None else Console(record=True, width=120, file=io.StringIO())
     target.print(f"server {server}, map {map_id} version {answer.get('map_version')}")
