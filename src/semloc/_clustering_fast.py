@@ -15,7 +15,7 @@ import numpy as np
 from numba import njit
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, nogil=True, inline="always")
 def mix(x: np.uint64) -> np.uint64:
     """A bijective 64-bit mixer (splitmix64's finaliser)."""
     x = (x ^ (x >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
@@ -23,7 +23,7 @@ def mix(x: np.uint64) -> np.uint64:
     return x ^ (x >> np.uint64(31))
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def candidate_keys(candidates: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Two independent 64-bit keys per candidate index (set keys are their wrapping sums)."""
     key = np.empty(len(candidates), dtype=np.uint64)
@@ -35,7 +35,7 @@ def candidate_keys(candidates: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return key, key2
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def held(members: np.ndarray, n: int) -> np.ndarray:
     """Which of n candidates are members of some set (rows -1 padded)."""
     out = np.zeros(n, dtype=np.bool_)
@@ -46,7 +46,7 @@ def held(members: np.ndarray, n: int) -> np.ndarray:
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def rows_of(table: np.ndarray, owner: np.ndarray, which: np.ndarray) -> np.ndarray:
     """table[owner[which]]: the rows (e.g. positions) of the given candidates' objects."""
     out = np.empty((len(which), table.shape[1]))
@@ -57,7 +57,7 @@ def rows_of(table: np.ndarray, owner: np.ndarray, which: np.ndarray) -> np.ndarr
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def stacked(top: np.ndarray, bottom: np.ndarray) -> np.ndarray:
     """The rows of `top` then those of `bottom`, -1 padded to the wider of the two."""
     out = np.full((len(top) + len(bottom), max(top.shape[1], bottom.shape[1])), -1, np.int64)
@@ -66,7 +66,7 @@ def stacked(top: np.ndarray, bottom: np.ndarray) -> np.ndarray:
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def renumbered(members: np.ndarray, index: np.ndarray) -> np.ndarray:
     """`index[m]` for each member m (-1 padding stays -1)."""
     out = np.empty(members.shape, dtype=np.int64)
@@ -77,7 +77,7 @@ def renumbered(members: np.ndarray, index: np.ndarray) -> np.ndarray:
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def row_sizes(members: np.ndarray) -> np.ndarray:
     """The number of members (entries >= 0) of each row."""
     out = np.zeros(members.shape[0], dtype=np.int64)
@@ -87,7 +87,7 @@ def row_sizes(members: np.ndarray) -> np.ndarray:
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def merges_of_frontier(
     frontier,
     in_frontier,
@@ -297,7 +297,7 @@ def merges_of_frontier(
     )
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def ratio(global_xyz, local_xyz, i, j, min_distance):
     """The paper's h of live candidates i and j (as `merge_metric` with no tolerance)."""
     d_global = np.sqrt(
@@ -316,7 +316,7 @@ def ratio(global_xyz, local_xyz, i, j, min_distance):
     return 1.0 - abs(d_global - d_local) / d_max
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def union_rows(members, size, rows_a, rows_b):
     """The members of A ∪ B for each merge, ascending and -1 padded (rows are ascending)."""
     n = len(rows_a)
@@ -344,7 +344,7 @@ def union_rows(members, size, rows_a, rows_b):
     return out[:, :longest]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def compatible_among(added, covered, cand_g, cand_l, global_xyz, local_distance, tolerance,
                       gamma, min_distance, capacity):  # fmt: skip
     """The compatible pairs (a, b), a in `added`, b in `covered` or later in `added` (2 x E):
@@ -371,7 +371,7 @@ def compatible_among(added, covered, cand_g, cand_l, global_xyz, local_distance,
     return out[:, :n], False
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def distance(xyz, i, j):
     """Euclidean distance of rows i and j of xyz."""
     return np.sqrt(
@@ -379,7 +379,7 @@ def distance(xyz, i, j):
     )
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def gate(d_global, d_local, tolerance, gamma, min_distance):
     """`MergeCriterion.compatible` for one pair of distances."""
     d_max = max(d_global, d_local)
@@ -389,7 +389,7 @@ def gate(d_global, d_local, tolerance, gamma, min_distance):
     return 1.0 - excess / d_max > gamma
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def compatible_sweep(
     added,
     covered,
@@ -485,7 +485,7 @@ def compatible_sweep(
     return out[:, :n], False
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def window_starts(added, cand_g, cand_l, global_xyz, reach, axis, order, starts, sorted_x):
     """For each added candidate i (of local object la) and local object lb: the first row p of
     lb's candidates in sweep order (rows starts[lb]..starts[lb + 1] of `sorted_x`) with
@@ -520,7 +520,7 @@ def window_starts(added, cand_g, cand_l, global_xyz, reach, axis, order, starts,
     return window
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def find_by_keys(pool_key, pool_key2, pool_members, key, key2, members):
     """The pool row with each given first key (-1: none), and whether that is exact: the
     pool's first keys are distinct and every hit has the same second key and members."""
@@ -561,7 +561,7 @@ def find_by_keys(pool_key, pool_key2, pool_members, key, key2, members):
     return rows, True
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def kept_edges(edges, is_covered, new_edges):
     """The edges (2 x E) between covered candidates, then `new_edges`, in order."""
     kept = 0
@@ -577,7 +577,7 @@ def kept_edges(edges, is_covered, new_edges):
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def symmetric_csr(edges, index, n):
     """CSR rows (indptr, indices) over n nodes of the graph with edges (2 x E) between
     candidates, both ways; `index` maps a candidate to its node."""

@@ -15,7 +15,7 @@ from numba import njit
 from semloc.closed_form import DEGENERATE, fit, fit_into
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def consensus_kernel(
     src, dst, sizes, sample_rows, sample_start, sample_count, yaw_only, tol, whole, starts, rounds
 ):
@@ -62,7 +62,7 @@ def consensus_kernel(
     return poses, has_pose, inliers, residual
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def best_start(s, d, samples, yaw_only, tol, starts, rounds):
     """The settled start with the most inliers (then least cost): (inliers, R, t, found)."""
     n, minimal = len(s), samples.shape[1]
@@ -96,7 +96,7 @@ def best_start(s, d, samples, yaw_only, tol, starts, rounds):
     return best_inl, best_R, best_t, found
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def settle(s, d, inl, R, t, yaw_only, tol, rounds):
     """Refit on the inliers and recompute them until they no longer change; the pose is
     updated in `R`, `t`, the settled inliers returned."""
@@ -116,7 +116,7 @@ def settle(s, d, inl, R, t, yaw_only, tol, rounds):
     return inl
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def errors_into(R, t, s, d, out):
     """Distance of each aligned local centre `R @ s_i + t` to its partner `d_i`, into `out`."""
     for i in range(len(s)):
@@ -128,7 +128,7 @@ def errors_into(R, t, s, d, out):
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def msac(errors, tol):
     """Squared errors truncated at the tolerance, summed."""
     total = 0.0
@@ -137,7 +137,7 @@ def msac(errors, tol):
     return total
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def rms(errors, mask):
     total, count = 0.0, 0
     for i in range(len(errors)):
@@ -147,14 +147,14 @@ def rms(errors, mask):
     return np.sqrt(total / count) if count else np.inf
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def store(pose, R, t):
     pose[:3, :3] = R
     pose[:3, 3] = t
     pose[3, 3] = 1.0
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def guided_matches(
     aligned, pairs, pair_start, pair_count, starts, globals_, columns, along, global_xyz, axis,
     tolerance, conflict_radius,
@@ -213,7 +213,7 @@ def guided_matches(
     return added[:n_added], added_start, conflicts
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def by_gap_then_entry(gap, entry):
     """Positions of the entries ordered by gap, then local, then candidate column."""
     order = np.arange(len(gap))
@@ -226,7 +226,7 @@ def by_gap_then_entry(gap, entry):
     return order
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, nogil=True, inline="always")
 def before(gap, entry, a, b):
     if gap[a] != gap[b]:
         return gap[a] < gap[b]

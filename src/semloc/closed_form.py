@@ -18,7 +18,7 @@ DEGENERATE = 1e-9
 """Spread (m) at or below which positions are mathematically degenerate (no pose)."""
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def fit(src, dst, w, yaw_only):
     """Weighted pose of one set, `dst ≈ R @ src + t`: (R (3, 3), t (3,), spread).
 
@@ -29,7 +29,7 @@ def fit(src, dst, w, yaw_only):
     return R, t, spread
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def fit_into(src, dst, w, yaw_only, R, t):
     """`fit` writing the pose into `R` and `t`; returns the spread (no allocation in 4-DoF)."""
     total = 0.0
@@ -69,7 +69,7 @@ def fit_into(src, dst, w, yaw_only, R, t):
     return min(_spread(src, w, total, cs, yaw_only), _spread(dst, w, total, cd, yaw_only))
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _spread(xyz, w, total, centre, yaw_only):
     if yaw_only:
         horizontal = 0.0
@@ -84,7 +84,7 @@ def _spread(xyz, w, total, centre, yaw_only):
     return np.sqrt(max(values[0] - noise, 0.0) + max(values[1] - noise, 0.0))
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _cross_covariance(a, a_centre, b, b_centre, w, total):
     """Σ_i w_i / total · (a_i - a_centre)(b_i - b_centre)ᵀ, (3, 3)."""
     out = np.zeros((3, 3))
@@ -96,7 +96,7 @@ def _cross_covariance(a, a_centre, b, b_centre, w, total):
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def fit_many(src, dst, w, yaw_only):
     """`fit` of S padded sets, (S, m, 3) positions and (S, m) weights: poses (S, 4, 4) and
     spreads (S,)."""

@@ -76,7 +76,7 @@ def pair_digests(
     )  # fmt: skip
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _pair_digests(g_data, g_starts, g_rows, l_data, l_starts, l_rows, iv, sigma):
     """`pair_digests` on the arrays: each message is built in one scratch buffer."""
     longest = 1
@@ -98,7 +98,7 @@ def _pair_digests(g_data, g_starts, g_rows, l_data, l_starts, l_rows, iv, sigma)
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _blake2b_64(message, iv, sigma, h, m):
     """BLAKE2b of `message` with an 8-byte digest, unkeyed, as the number its bytes spell
     (little-endian); h and m are scratch arrays of 8 and 16 words."""
@@ -117,12 +117,12 @@ def _blake2b_64(message, iv, sigma, h, m):
     return h[0]
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, nogil=True, inline="always")
 def _rotr(x, n):
     return (x >> np.uint64(n)) | (x << np.uint64(64 - n))
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, nogil=True, inline="always")
 def _mix(a, b, c, d, x, y):
     """The G function: four state words mixed with the message words x and y."""
     a = a + b + x
@@ -136,7 +136,7 @@ def _mix(a, b, c, d, x, y):
     return a, b, c, d
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _compress(h, m, counter, last, iv, sigma):
     """The compression function F on the state h with the block m (words), counter bytes;
     the working vector v0..v15 stays in registers."""

@@ -37,7 +37,7 @@ LEAF = 8  # ranges of at most this many points are scanned, not split
 _STACK = 128  # deeper than any tree of up to 2^60 points needs
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _widest_axis(points: np.ndarray, rows: np.ndarray) -> int:
     lo = np.full(3, np.inf)
     hi = np.full(3, -np.inf)
@@ -48,7 +48,7 @@ def _widest_axis(points: np.ndarray, rows: np.ndarray) -> int:
     return int(np.argmax(hi - lo))
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _build(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Tree order and split axes: each range is sorted on its widest axis, split at its median."""
     n = len(points)
@@ -100,7 +100,7 @@ class KdTree:
         return len(self.points)
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True, nogil=True, inline="always")
 def _insert(d2: float, j: int, found: int, k: int, best_d2, best_j) -> int:
     """Insert (d2, j) into the sorted best lists; returns the new count."""
     i = min(found, k - 1)
@@ -111,7 +111,7 @@ def _insert(d2: float, j: int, found: int, k: int, best_d2, best_j) -> int:
     return min(found + 1, k)
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True, nogil=True, inline="always")
 def _offer(points, j: int, query, found: int, worst: float, k: int, bound2: float, best_d2, best_j):
     """Offer tree row j to the best lists; returns the new count and pruning distance."""
     d2 = 0.0
@@ -125,7 +125,7 @@ def _offer(points, j: int, query, found: int, worst: float, k: int, bound2: floa
     return found, worst
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def knn_within(
     points, axes, lo0: int, hi0: int, query, k: int, bound2: float, best_d2, best_j, stack, gaps
 ) -> int:
@@ -161,7 +161,7 @@ def knn_within(
     return found
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True, nogil=True, inline="always")
 def knn_in_tree(points, axes, starts, boxes, tree: int, query, k: int, bound2: float, best_d2,
                 best_j, stack, gaps) -> int:  # fmt: skip
     """`knn_within` in tree `tree` of a forest's arrays; no search when the tree's bounding
@@ -181,13 +181,13 @@ def knn_in_tree(points, axes, starts, boxes, tree: int, query, k: int, bound2: f
     return knn_within(points, axes, lo, hi, query, k, bound2, best_d2, best_j, stack, gaps)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def scratch() -> tuple[np.ndarray, np.ndarray]:
     """The scratch space `knn_within` needs (allocate once per batch of queries)."""
     return np.empty((_STACK, 2), dtype=np.int64), np.empty(_STACK)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _nearest_rows(points, axes, starts, boxes, tree_of_row, queries, k: int, bound: float):
     """`Forest.nearest` in compiled code: forest rows and distances, -1 / inf
     where fewer than k points are within `bound`."""
@@ -250,7 +250,7 @@ class Forest:
         return _nearest_rows(*self.arrays, rows, queries, k, float(bound))
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _smallest_eigenvector(C: np.ndarray, M: np.ndarray, out: np.ndarray) -> float:
     """Unit eigenvector (into `out`) and value of the smallest eigenvalue of a symmetric 3x3
     matrix: trigonometric eigenvalues, then the widest cross product of two rows of
@@ -288,7 +288,7 @@ def _smallest_eigenvector(C: np.ndarray, M: np.ndarray, out: np.ndarray) -> floa
     return max(smallest, 0.0)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _shapes(points, axes, k):
     n = len(points)
     normals = np.empty((n, 3))

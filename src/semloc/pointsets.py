@@ -31,7 +31,7 @@ def voxel_accumulate(
     return _voxel_sums(np.ascontiguousarray(points, dtype=float).reshape(-1, 3), voxel_size)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _voxel_sums(points: np.ndarray, voxel_size: float):
     """`voxel_accumulate` in one compiled pass: the points sorted stably by key, so that each
     voxel's points are summed in input order (as `np.bincount` sums its weights)."""

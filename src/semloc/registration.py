@@ -52,14 +52,14 @@ class IcpSettings(NamedTuple):
     point_to_point: float  # weight of the point-to-point error next to point-to-plane
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True, nogil=True, inline="always")
 def _move(R: np.ndarray, t: np.ndarray, x: np.ndarray, out: np.ndarray) -> None:
     """out = R @ x + t, without allocating (t may be a zero vector for a rotation)."""
     for c in range(3):
         out[c] = R[c, 0] * x[0] + R[c, 1] * x[1] + R[c, 2] * x[2] + t[c]
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _rodrigues(v: np.ndarray) -> np.ndarray:
     """Rotation matrix of a rotation vector."""
     angle = np.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
@@ -71,7 +71,7 @@ def _rodrigues(v: np.ndarray) -> np.ndarray:
     return R + np.sin(angle) * K + (1.0 - np.cos(angle)) * (K @ K)
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True, nogil=True, inline="always")
 def _first_compatible(best_j, found, start, pn, t_normals, t_flatness, cos_max) -> int:
     """The first of the found neighbours (from `start`) whose normal is within the angle of
     `pn` (unoriented; any normal of a non-flat point is); -1 if none."""
@@ -87,7 +87,7 @@ def _first_compatible(best_j, found, start, pn, t_normals, t_flatness, cos_max) 
     return -1
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True, nogil=True, inline="always")
 def _bound(p, f_points, last, first, kernel2) -> float:
     """A squared search bound for the `first` nearest of p: kernel2, or just above the larger
     squared distance to its two nearest of the last iteration when they are known (the second
@@ -104,7 +104,7 @@ def _bound(p, f_points, last, first, kernel2) -> float:
     return min(kernel2, farther * (1.0 + 1e-9) + 1e-300)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _correspondences(src, src_normals, tree_of_row, R, t, f_points, f_axes, f_starts,
                      t_normals, t_flatness, kernel, cos_max, k, m, q, n, w, last) -> int:  # fmt: skip
     """For each local point moved by (R, t): the nearest of its k nearest partner points within
@@ -157,7 +157,7 @@ def _correspondences(src, src_normals, tree_of_row, R, t, f_points, f_axes, f_st
     return count
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _gauss_newton_step(m, q, n, w, count, axis, has_axis, point_to_point):
     """Rotation and translation that best move m[:count] onto q[:count] (see `icp`),
     linearised about the identity; with `has_axis`, a rotation about `axis` only."""
@@ -199,7 +199,7 @@ def _gauss_newton_step(m, q, n, w, count, axis, has_axis, point_to_point):
     return dR, delta[P - 3 :].copy()
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _icp(R, t, full_src, full_normals, full_trees, coarse_src, coarse_normals, coarse_trees,
          f_points, f_axes, f_starts, t_normals, t_flatness, axis, has_axis,
          iterations, kernel_start, kernel_final, cos_max, k_coarse, k_final, converged,
@@ -252,7 +252,7 @@ def icp(T: np.ndarray, full: tuple, coarse: tuple, targets: Targets, axis: np.nd
     return out
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _fitness(R, t, src, tree_of_row, f_points, f_axes, f_starts, radius):
     """(inliers, sum of their squared distances, sum of the smooth scores) of `src` moved by
     (R, t), each point against its partner tree."""
@@ -285,7 +285,7 @@ def fitness(T: np.ndarray, src: np.ndarray, tree_of_row: np.ndarray, forest: For
     return inliers / len(src), rmse, smooth / len(src)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def thinned_rows(sizes, input_rows, limit):
     """The local points one problem uses, as rows of its clouds' concatenated tree-ordered
     points (`sizes` points each; `input_rows` maps each cloud's input order to its tree
@@ -308,7 +308,7 @@ def thinned_rows(sizes, input_rows, limit):
     return rows, owner
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _rotation_scores(rotations, pivot_l, pivot_g, src, tree_of_row, f_points, f_axes, f_starts,
                      f_boxes, radius):  # fmt: skip
     best_d2 = np.empty(1)

@@ -142,7 +142,7 @@ def _mutual_matches_many(
     return matches
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _nearest_in_block(d2, first, column_start, holders, forward, forward_d2, backward, backward_d2):
     """Rows `first`.. of the distance matrix: each row's nearest column within every sub-map
     holding it (`holders[column_start[c]:column_start[c + 1]]` hold column c) and each
