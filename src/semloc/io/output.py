@@ -44,8 +44,11 @@ def write_files(files: list[tuple[Path, bytes | str]]) -> list[Path]:
             payload = data.encode() if isinstance(data, str) else data
             if _is_stream(path):
                 streams.append((path, payload))
-            else:
-                staged.append((_write_temporary(path, payload), path))
+                continue
+            with signals_held():  # a temporary file exists only once it is listed for clean-up
+                handle, tmp = _new_temporary(path)
+                staged.append((tmp, path))
+            _fill(handle, path, payload)
         for path, payload in streams:
             _write_stream(path, payload)
         with signals_held():
@@ -57,9 +60,10 @@ def write_files(files: list[tuple[Path, bytes | str]]) -> list[Path]:
                     raise MapError(f"{path}: cannot write ({exc.strerror or exc})") from None
                 staged.pop(0)
     finally:
-        for tmp, _ in staged:
-            if os.path.exists(tmp):
-                os.unlink(tmp)
+        with signals_held():  # a second interrupt cannot cut the clean-up
+            for tmp, _ in staged:
+                if os.path.exists(tmp):
+                    os.unlink(tmp)
     return [Path(path) for path, _ in files]
 
 
@@ -86,23 +90,24 @@ def _is_stream(path: Path) -> bool:
     return not stat.S_ISREG(info.st_mode)
 
 
-def _write_temporary(path: Path, payload: bytes) -> str:
+def _new_temporary(path: Path) -> tuple[int, str]:
+    """An open file descriptor and the name of a new temporary file beside `path`."""
     try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name[:100]}.", suffix=".tmp", dir=path.parent)
+        return tempfile.mkstemp(prefix=f".{path.name[:100]}.", suffix=".tmp", dir=path.parent)
     except OSError as exc:
         raise MapError(f"{path}: cannot write ({exc.strerror or exc})") from None
+
+
+def _fill(handle: int, path: Path, payload: bytes) -> None:
+    """Write `payload` to the temporary file `handle` (for `path`), on disk when it returns."""
     try:
-        os.fchmod(fd, 0o666 & ~_umask())  # mkstemp creates 0600; give the usual mode
-        with os.fdopen(fd, "wb") as handle:
-            handle.write(payload)
-            handle.flush()
-            os.fsync(handle.fileno())
-    except BaseException as exc:
-        os.unlink(tmp)
-        if isinstance(exc, OSError):
-            raise MapError(f"{path}: cannot write ({exc.strerror or exc})") from None
-        raise
-    return tmp
+        os.fchmod(handle, 0o666 & ~_umask())  # mkstemp creates 0600; give the usual mode
+        with os.fdopen(handle, "wb") as stream:
+            stream.write(payload)
+            stream.flush()
+            os.fsync(stream.fileno())
+    except OSError as exc:
+        raise MapError(f"{path}: cannot write ({exc.strerror or exc})") from None
 
 
 @contextmanager
@@ -117,20 +122,23 @@ def staged_folder(out: str | os.PathLike[str], index: str | None = None) -> Iter
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise MapError(f"{out}: exists and is not a folder")
+    stage: Path | None = None
     try:
-        out.parent.mkdir(parents=True, exist_ok=True)
-        stage = Path(
-            tempfile.mkdtemp(prefix=f".{out.name[:100]}.", suffix=".partial", dir=out.parent)
-        )
-        os.chmod(stage, 0o777 & ~_umask())
-    except OSError as exc:
-        raise MapError(f"{out}: cannot create the folder ({exc.strerror or exc})") from None
-    try:
+        try:
+            out.parent.mkdir(parents=True, exist_ok=True)
+            with signals_held():  # the folder exists only once `stage` names it for clean-up
+                stage = Path(tempfile.mkdtemp(prefix=f".{out.name[:100]}.", suffix=".partial",
+                                              dir=out.parent))  # fmt: skip
+            os.chmod(stage, 0o777 & ~_umask())
+        except OSError as exc:
+            raise MapError(f"{out}: cannot create the folder ({exc.strerror or exc})") from None
         yield stage
         with signals_held():
             _move_into(stage, out, index)
     finally:
-        shutil.rmtree(stage, ignore_errors=True)
+        if stage is not None:
+            with signals_held():  # a second interrupt cannot cut the clean-up
+                shutil.rmtree(stage, ignore_errors=True)
 
 
 def _move_into(stage: Path, out: Path, index: str | None) -> None:
