@@ -2,7 +2,7 @@
 
     PYTHONPATH=src python benchmarks/bench_serve.py [--devices 8 32 128] [--seconds 30]
         [--hz 1] [--workers 2] [--db postgresql://...] [--soak 600] [--faults 50] [--fuzz 2000]
-        [--startup-maps 100] [--markdown TABLE.md]
+        [--startup-maps 100] [--access] [--markdown TABLE.md]
 
 A `semloc serve` process on a loopback port (`--workers` processes over one store, SQLite in a
 temporary folder or `--db`) holds the three real maps (ScanNet scene0000_00, Replica office4,
@@ -25,6 +25,9 @@ temporary folder or `--db`) holds the three real maps (ScanNet scene0000_00, Rep
    schema, NaN, oversized bodies, unknown ids, bad tokens, random bytes) mixed with good ones,
    plus slow clients trickling a body: each must get a 4xx with the JSON error shape, never a
    5xx, and good requests keep being answered.
+5. **Access** (`--access`): the token matrix (no token, an unknown one, and tokens with read /
+   localize / write on one map, on every map, on another map) x each right x two maps: every
+   status must be what the token file says (200 / 201, 401, 403, 404).
 
 Every loop is bounded in count and time; everything stays on loopback.
 """
@@ -59,6 +62,12 @@ from semloc.maps import ObjectMap
 from semloc.sim.layouts import layout
 
 TOKEN = "bench-token-0001"
+MATRIX_TOKENS = {  # the token matrix's tokens (5. access) and their rights
+    "matrix-reader-01": {"office": ["read"]},
+    "matrix-localize-1": {"office": ["localize"], "*": ["read"]},
+    "matrix-writer-01": {"office": ["read", "write"]},
+    "matrix-other-map": {"lab": ["read", "localize", "write"]},
+}
 
 
 # the server ---------------------------------------------------------------------------------
@@ -67,8 +76,9 @@ class Server:
 
     def __init__(self, data: Path, workers: int = 1, db: str | None = None) -> None:
         tokens = data / "tokens.json"
-        tokens.write_text(json.dumps({"tokens": [{"token": TOKEN, "maps": {"*": [
-            "read", "localize", "write"]}}]}))  # fmt: skip
+        tokens.write_text(json.dumps({"tokens": [
+            {"token": TOKEN, "maps": {"*": ["read", "localize", "write"]}},
+            *({"token": token, "maps": maps} for token, maps in MATRIX_TOKENS.items())]}))  # fmt: skip
         command = [sys.executable, "-m", "semloc", "serve", "--data", str(data), "--port", "0",
                    "--workers", str(workers), "--tokens", str(tokens), "--rate", "0"]  # fmt: skip
         if db:
@@ -481,6 +491,46 @@ def _raw(url: str, method: str, path: str, body: bytes, token: str | None) -> tu
         return response.status, False
 
 
+# 5. access ---------------------------------------------------------------------------------
+def access_matrix(server: Server, maps: dict[str, ObjectMap]) -> None:
+    """Every token (none, unknown, each of MATRIX_TOKENS) x every right x a map it may and may
+    not see: the status each gets, against what the token file says it must be."""
+    document = map_to_dict(next(iter(maps.values())))
+    admin = Client(server.url, TOKEN)
+    for map_id in ("office", "lab"):
+        admin.put_map(map_id, document)
+    body = json.dumps(document).encode()
+    requests = {"read": ("GET", "/v1/maps/{m}", None), "versions": ("GET", "/v1/maps/{m}/versions", None),
+                "localize": ("POST", "/v1/maps/{m}/localize", body),
+                "session": ("POST", "/v1/maps/{m}/sessions", None),
+                "write": ("PUT", "/v1/maps/{m}", body)}  # fmt: skip
+    right_of = {"read": "read", "versions": "read", "localize": "localize",
+                "session": "localize", "write": "write"}  # fmt: skip
+    success = {"read": 200, "versions": 200, "localize": 200, "session": 201, "write": 201}
+    checked = wrong = 0
+    tokens = [None, "not-a-known-token", *MATRIX_TOKENS]
+    for token in tokens:
+        for map_id in ("office", "lab"):
+            rights = set()
+            if token in MATRIX_TOKENS:
+                grants = MATRIX_TOKENS[token]
+                rights = set(grants.get(map_id, [])) | set(grants.get("*", []))
+            for what, (method, path, payload) in requests.items():
+                if token not in MATRIX_TOKENS:
+                    expected = 401
+                elif not rights:
+                    expected = 404
+                else:
+                    expected = success[what] if right_of[what] in rights else 403
+                got, shaped = _raw(server.url, method, path.format(m=map_id), payload or b"", token)
+                checked += 1
+                wrong += got != expected or (got >= 400 and not shaped)
+    print(
+        f"access: {checked} requests (7 tokens x 2 maps x 5 rights), {wrong} with a status "
+        "other than the token file's or without the error shape"
+    )
+
+
 # the report ---------------------------------------------------------------------------------
 HEADER = ["devices", "updates", "p50 ms", "p95 ms", "p99 ms", "max ms", "errors",
           "differing answers", "updates/s", "updates per server CPU-s"]  # fmt: skip
@@ -502,6 +552,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--soak", type=float, default=0.0, help="seconds (0: no soak)")
     parser.add_argument("--faults", type=int, default=0, help="kills (0: none)")
     parser.add_argument("--fuzz", type=int, default=0, help="bad requests (0: none)")
+    parser.add_argument("--access", action="store_true", help="the token matrix")
     parser.add_argument("--startup-maps", type=int, default=100)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--markdown", type=Path, default=None)
@@ -531,6 +582,8 @@ def main(argv: list[str] | None = None) -> None:
             )
         if args.fuzz:
             fuzz(server, maps, args.fuzz, args.seed)
+        if args.access:
+            access_matrix(server, maps)
         server.stop()
     if args.faults:
         with tempfile.TemporaryDirectory(prefix="semloc-bench-faults-") as folder:

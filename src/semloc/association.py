@@ -296,6 +296,12 @@ def label_report(
     return {label: index.resolution(label, objs) for label, objs in sorted(by_label.items())}
 
 
+def labels_json(report: dict[str, LabelResolution]) -> dict[str, dict]:
+    """A `label_report` as the `labels` object of the result JSON (CLI, service, bag answers)."""
+    return {label: {"resolved": found.resolved, "map_labels": list(found.map_labels)}
+            for label, found in report.items()}  # fmt: skip
+
+
 _SIMILARITIES: weakref.WeakKeyDictionary[ObjectMap, dict[tuple, dict[str, np.ndarray]]] = (
     weakref.WeakKeyDictionary()
 )  # map -> (source, label map) -> local label -> similarity per map object

@@ -161,7 +161,7 @@ def test_no_acknowledged_write_is_lost_when_killed(tmp_path):
     assert restart_s < 30  # a start, imports included; bench_serve reports the figure
 
 
-def test_without_the_serve_extra_it_names_the_extra(tmp_path, monkeypatch):
+def test_without_the_serve_extra_it_names_the_extra(tmp_path, monkeypatch, capsys):
     pytest.importorskip("fastapi")
     from semloc.cli import extras
 
@@ -169,3 +169,5 @@ def test_without_the_serve_extra_it_names_the_extra(tmp_path, monkeypatch):
     from semloc.cli import main
 
     assert main(["serve", "--data", str(tmp_path)]) == 2
+    assert "needs the 'serve' extra (fastapi is not installed)" in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []  # no store was made

@@ -18,7 +18,7 @@ import typer
 from pydantic import ValidationError
 from rich.console import Console
 
-from semloc.association import DESCRIBERS, CandidateIndex, label_report
+from semloc.association import DESCRIBERS, CandidateIndex, label_report, labels_json
 from semloc.cli import remote
 from semloc.cli.app import (
     app,
@@ -41,7 +41,6 @@ from semloc.cli.files import (
     read_pose,
 )
 from semloc.cli.render import (
-    labels_json,
     print_centres_only,
     print_ground_truth,
     print_labels,

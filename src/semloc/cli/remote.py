@@ -63,10 +63,15 @@ def _call(server: str, what: str, function, *arguments):
     try:
         return function(*arguments)
     except ServerError as exc:
-        detail = f": {exc.detail}" if exc.detail else ""
-        if exc.status == 0:
-            fail(f"{server}: cannot reach the server ({exc.detail})")
-        fail(f"{server}: {what} refused: {exc.status} {exc.error}{detail}")
+        _refused(server, what, exc)
+
+
+def _refused(server: str, what: str, exc: ServerError) -> None:
+    """One line for a server's refusal (exit status 2)."""
+    if exc.status == 0:
+        fail(f"{server}: cannot reach the server ({exc.detail})")
+    detail = f": {exc.detail}" if exc.detail else ""
+    fail(f"{server}: {what} refused: {exc.status} {exc.error}{detail}")
 
 
 def localize(
@@ -112,7 +117,7 @@ def update_map(
         created = client.report_changes(map_id, report, local=local)
     except ServerError as exc:
         if exc.status != 409:
-            _call(server, "the change report", _raise, exc)
+            _refused(server, "the change report", exc)
         console.print(f"the map moved on since version {answer.get('map_version')} and these "
                       f"changes no longer apply ({exc.detail}): no version written")  # fmt: skip
         raise typer.Exit(1) from None
@@ -125,10 +130,6 @@ def update_map(
         updated = _call(server, "reading the map", client.get_map, map_id, created["version"])
         write_files(map_files(updated, output))
         console.print(f"wrote {output}")
-
-
-def _raise(exc: Exception) -> None:
-    raise exc
 
 
 def _labels(answer: dict) -> dict[str, LabelResolution]:

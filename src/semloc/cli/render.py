@@ -159,12 +159,6 @@ def print_labels(report: dict[str, LabelResolution], out: Console) -> None:
         out.print(table)
 
 
-def labels_json(report: dict[str, LabelResolution]) -> dict[str, dict]:
-    """The `labels` object of the JSON output."""
-    return {label: {"resolved": found.resolved, "map_labels": list(found.map_labels)}
-            for label, found in report.items()}  # fmt: skip
-
-
 def warn_unmatched(report: dict[str, LabelResolution], out: Console) -> None:
     """One warning line per local label that matches no map label (labels as written, in
     any script)."""

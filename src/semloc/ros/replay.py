@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from semloc.association import labels_json
 from semloc.results import Result
 from semloc.ros.bag import MAX_GAP_S, BagError, Odometry, Run
 from semloc.ros.stream import DetectionFrame, StreamLocalizer
@@ -88,8 +89,5 @@ def answer_json(answer: Answer, stream: StreamLocalizer) -> dict[str, Any]:
     hold this update's step only (the earlier ones are on the lines before)."""
     document = answer.result.to_dict()
     document["steps"] = document["steps"][-1:]
-    document["labels"] = {
-        label: {"resolved": found.resolved, "map_labels": list(found.map_labels)}
-        for label, found in stream.localizer.label_report().items()
-    }
+    document["labels"] = labels_json(stream.localizer.label_report())
     return {"stamp": answer.stamp / 1e9, "result": document}

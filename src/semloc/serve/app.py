@@ -168,8 +168,6 @@ def create_app(
     @app.get("/v1/maps/{map_id}/sessions")
     async def list_sessions(map_id: str, request: Request) -> list[dict[str, Any]]:
         authorize(request, map_id, "read")
-        if service.store.latest_version(map_id) is None:
-            raise not_found(f"map {map_id!r}")
         return await run_in_threadpool(service.sessions, map_id)
 
     @app.post("/v1/sessions/{session_id}/objects")

@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from semloc.association import CandidateIndex, label_report
+from semloc.association import CandidateIndex, label_report, labels_json
 from semloc.changes import Changes, apply_changes, explain
 from semloc.io import map_from_dict, map_to_dict
 from semloc.localizer import Localizer, LocalizerConfig, localize
@@ -74,8 +74,7 @@ def _objects_map(objects: Any, up: list[float] | None, what: str) -> ObjectMap:
 def answer(result: Result, labels: dict, **extra: Any) -> dict[str, Any]:
     """The JSON of a result, as `semloc localize --format json` writes it, plus `extra`."""
     document = result.to_dict()
-    document["labels"] = {label: {"resolved": r.resolved, "map_labels": list(r.map_labels)}
-                          for label, r in labels.items()}  # fmt: skip
+    document["labels"] = labels_json(labels)
     document.update(extra)
     return document
 
@@ -267,6 +266,8 @@ class Service:
 
     def sessions(self, map_id: str) -> list[dict[str, Any]]:
         """The live sessions of a map with their latest answer (for the page)."""
+        if self.store.latest_version(map_id) is None:
+            raise not_found(f"map {map_id!r}")
         now = time.time()
         return [
             {"session_id": s.session_id, "map_version": s.map_version, "up": s.up,
