@@ -526,7 +526,7 @@ def access_matrix(server: Server, maps: dict[str, ObjectMap]) -> None:
                 checked += 1
                 wrong += got != expected or (got >= 400 and not shaped)
     print(
-        f"access: {checked} requests (7 tokens x 2 maps x 5 rights), {wrong} with a status "
+        f"access: {checked} requests ({len(tokens)} tokens x 2 maps x 5 requests), {wrong} with a status "
         "other than the token file's or without the error shape"
     )
 
