@@ -9,9 +9,9 @@ On an error or an interrupt nothing half-written is left.
 from __future__ import annotations
 
 import os
+import secrets
 import shutil
 import stat
-import tempfile
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -45,10 +45,11 @@ def write_files(files: list[tuple[Path, bytes | str]]) -> list[Path]:
             if _is_stream(path):
                 streams.append((path, payload))
                 continue
-            with signals_held():  # a temporary file exists only once it is listed for clean-up
-                handle, tmp = _new_temporary(path)
-                staged.append((tmp, path))
-            _fill(handle, path, payload)
+            # named and listed for clean-up before it exists: an interrupt at any moment
+            # (signal masks hold only this thread) leaves nothing behind
+            tmp = _temporary_name(path, ".tmp")
+            staged.append((tmp, path))
+            _write_new(tmp, path, payload)
         for path, payload in streams:
             _write_stream(path, payload)
         with signals_held():
@@ -60,10 +61,9 @@ def write_files(files: list[tuple[Path, bytes | str]]) -> list[Path]:
                     raise MapError(f"{path}: cannot write ({exc.strerror or exc})") from None
                 staged.pop(0)
     finally:
-        with signals_held():  # a second interrupt cannot cut the clean-up
-            for tmp, _ in staged:
-                if os.path.exists(tmp):
-                    os.unlink(tmp)
+        for tmp, _ in staged:
+            if os.path.exists(tmp):
+                os.unlink(tmp)
     return [Path(path) for path, _ in files]
 
 
@@ -90,18 +90,16 @@ def _is_stream(path: Path) -> bool:
     return not stat.S_ISREG(info.st_mode)
 
 
-def _new_temporary(path: Path) -> tuple[int, str]:
-    """An open file descriptor and the name of a new temporary file beside `path`."""
-    try:
-        return tempfile.mkstemp(prefix=f".{path.name[:100]}.", suffix=".tmp", dir=path.parent)
-    except OSError as exc:
-        raise MapError(f"{path}: cannot write ({exc.strerror or exc})") from None
+def _temporary_name(path: Path, suffix: str) -> str:
+    """A name for a new temporary file or folder beside `path` (hidden, random)."""
+    return str(path.parent / f".{path.name[:100]}.{secrets.token_hex(6)}{suffix}")
 
 
-def _fill(handle: int, path: Path, payload: bytes) -> None:
-    """Write `payload` to the temporary file `handle` (for `path`), on disk when it returns."""
+def _write_new(tmp: str, path: Path, payload: bytes) -> None:
+    """Create `tmp` (mode 0666 less the umask, like a plain write) with `payload`, on disk when
+    it returns; `MapError` naming `path` on a problem."""
     try:
-        os.fchmod(handle, 0o666 & ~_umask())  # mkstemp creates 0600; give the usual mode
+        handle = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
         with os.fdopen(handle, "wb") as stream:
             stream.write(payload)
             stream.flush()
@@ -122,23 +120,18 @@ def staged_folder(out: str | os.PathLike[str], index: str | None = None) -> Iter
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise MapError(f"{out}: exists and is not a folder")
-    stage: Path | None = None
+    stage = Path(_temporary_name(out, ".partial"))  # named before it exists (see write_files)
     try:
         try:
             out.parent.mkdir(parents=True, exist_ok=True)
-            with signals_held():  # the folder exists only once `stage` names it for clean-up
-                stage = Path(tempfile.mkdtemp(prefix=f".{out.name[:100]}.", suffix=".partial",
-                                              dir=out.parent))  # fmt: skip
-            os.chmod(stage, 0o777 & ~_umask())
+            os.mkdir(stage, 0o777)  # less the umask, like a plain folder
         except OSError as exc:
             raise MapError(f"{out}: cannot create the folder ({exc.strerror or exc})") from None
         yield stage
         with signals_held():
             _move_into(stage, out, index)
     finally:
-        if stage is not None:
-            with signals_held():  # a second interrupt cannot cut the clean-up
-                shutil.rmtree(stage, ignore_errors=True)
+        shutil.rmtree(stage, ignore_errors=True)
 
 
 def _move_into(stage: Path, out: Path, index: str | None) -> None:
@@ -156,9 +149,3 @@ def _move_into(stage: Path, out: Path, index: str | None) -> None:
         raise MapError(
             f"{out}: cannot move the results into place ({exc.strerror or exc})"
         ) from None
-
-
-def _umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
