@@ -39,6 +39,7 @@ from typing import Literal, NamedTuple
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
+from semloc._decision_fast import first_same_place
 from semloc.confidence_model import SHIPPED
 from semloc.results import Hypothesis, Status
 from semloc.transforms import pose_error
@@ -213,23 +214,27 @@ def distinct(
     (`anchor`: see `same_place`).
 
     `places` is consumed lazily, so a generator computes poses only as far as needed.  Each
-    place is tested against all picks at once (`same_place`, batched)."""
+    place is tested against all picks at once (`same_place`'s pose test, compiled)."""
     chosen: list[int] = []
     pair_sets: list[set] = []
-    poses = np.zeros((0, 4, 4))
+    poses = np.empty((top_k, 4, 4))
+    posed = 0
     for i, (pairs, pose) in enumerate(places):
         if pairs:
             mine = set(pairs)
             if any(mine <= other for other in pair_sets):
                 continue
-        if pose is not None and same_place_index(pose, poses, config, anchor) is not None:
-            continue
+        if pose is not None:
+            pose = np.ascontiguousarray(pose, dtype=float)
+            if _first_same_place(pose, poses, posed, config, anchor) is not None:
+                continue
         chosen.append(i)
         if len(chosen) == top_k:
             break
         pair_sets.append(set(pairs))
         if pose is not None:
-            poses = np.concatenate([poses, np.asarray(pose, dtype=float)[None]])
+            poses[posed] = pose
+            posed += 1
     return chosen
 
 
@@ -237,28 +242,23 @@ def same_place_index(
     pose: np.ndarray, poses: np.ndarray, config: DecisionConfig, anchor: np.ndarray | None = None
 ) -> int | None:
     """The index of the first of `poses` (K, 4, 4) at the same place as `pose` by
-    `same_place`'s pose test, or None: a batched screen with a margin, then the exact test on
-    the poses that pass it."""
-    pose, poses = np.asarray(pose, dtype=float), np.asarray(poses, dtype=float).reshape(-1, 4, 4)
-    if not len(poses):
-        return None
-    if anchor is None:
-        shift = np.linalg.norm(poses[:, :3, 3] - pose[:3, 3], axis=1)
-    else:
-        shift = np.linalg.norm((pose - poses) @ np.append(np.asarray(anchor, float), 1.0), axis=1)
-    near = np.flatnonzero(shift < config.distinct_translation + _SCREEN_MARGIN)
-    if not len(near):
-        return None
-    cos = (np.einsum("ji,kji->k", pose[:3, :3], poses[near, :3, :3]) - 1.0) / 2.0
-    max_cos = math.cos(math.radians(config.distinct_rotation_deg))
-    for k in np.flatnonzero(cos > max_cos - _SCREEN_MARGIN).tolist():
-        if same_place(((), pose), ((), poses[near[k]]), config, anchor):
-            return int(near[k])
-    return None
+    `same_place`'s pose test, or None (compiled: `_decision_fast.first_same_place`)."""
+    pose = np.ascontiguousarray(pose, dtype=float)
+    poses = np.ascontiguousarray(poses, dtype=float).reshape(-1, 4, 4)
+    return _first_same_place(pose, poses, len(poses), config, anchor)
 
 
-_SCREEN_MARGIN = 1e-6
-"""Slack of the batched screen of `distinct` (far above rounding), so the exact test decides."""
+def _first_same_place(
+    pose: np.ndarray, poses: np.ndarray, count: int, config: DecisionConfig, anchor
+) -> int | None:
+    found = first_same_place(
+        pose, poses, count, _NO_ANCHOR if anchor is None else np.asarray(anchor, dtype=float),
+        anchor is not None, config.distinct_rotation_deg, config.distinct_translation,
+    )  # fmt: skip
+    return None if found < 0 else int(found)
+
+
+_NO_ANCHOR = np.zeros(3)
 
 
 _INF = float("inf")

@@ -32,6 +32,7 @@ from semloc.decision import (
     distinct,
     is_rival,
     same_place,
+    same_place_index,
 )
 from semloc.results import Hypothesis
 from semloc.transforms import yaw_pose
@@ -462,6 +463,28 @@ def test_same_place_just_inside_and_outside(config):
     assert same_place(at(0.0, metres - EPS), here, config)
     assert not same_place(at(0.0, metres + EPS), here, config)
     assert not same_place(((), None), here, config) and not same_place(here, ((), None), config)
+
+
+@pytest.mark.parametrize("config", CONFIGS, ids=IDS)
+@pytest.mark.parametrize("anchor", [None, np.array([2.0, -1.0, 0.5])])
+def test_same_place_index_just_inside_and_outside(config, anchor):
+    """The compiled screen of `distinct` draws the bounds where `same_place` does."""
+    deg, metres = config.distinct_rotation_deg, config.distinct_translation
+    far = yaw_pose(np.radians(90.0), [5.0, 0.0, 0.0])
+
+    def at(theta_deg: float, shift: float) -> np.ndarray:
+        pose = yaw_pose(np.radians(theta_deg))
+        point = np.zeros(3) if anchor is None else anchor
+        pose[:3, 3] = point - pose[:3, :3] @ point + [shift, 0.0, 0.0]  # shift at the anchor
+        return pose
+
+    for pose, inside in [(at(deg - 1e-6, 0.0), True), (at(deg + 1e-6, 0.0), False),
+                         (at(0.0, metres - EPS), True), (at(0.0, metres + EPS), False)]:  # fmt: skip
+        assert same_place(((), pose), ((), HERE), config, anchor) is inside
+        assert same_place_index(pose, np.stack([far, HERE]), config, anchor) == (
+            1 if inside else None
+        )
+    assert same_place_index(HERE, np.zeros((0, 4, 4)), config, anchor) is None
 
 
 def test_same_place_by_pairs():
