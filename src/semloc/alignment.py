@@ -61,6 +61,7 @@ from typing import Any
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
+from semloc._alignment_fast import guided_passes, mutual_nearest
 from semloc.association import CandidateIndex
 from semloc.decision import (
     decide,
@@ -72,7 +73,7 @@ from semloc.decision import (
 )
 from semloc.localizer import Localizer, LocalizerConfig
 from semloc.maps import ObjectMap
-from semloc.pose import align_positions
+from semloc.pose import z_up_rotations
 from semloc.results import Hypothesis, Result, Step
 from semloc.transforms import centre_residual
 
@@ -176,8 +177,13 @@ class _Aligner:
         self.b_xyz, self.a_xyz = b.positions, self.a.positions
         self.a_row = {str(i): k for k, i in enumerate(self.a.ids)}
         self.b_row = {str(i): k for k, i in enumerate(b.ids)}
-        # the centres of every candidate pair, gathered once for the guided matching
-        self.cand_b_xyz, self.cand_a_xyz = self.b_xyz[self.cand_b], self.a_xyz[self.cand_a]
+        # the guided matching works in the z-up frames (4-DoF: a yaw there), on the centres
+        # of every candidate pair gathered once
+        self.yaw_only = b.up is not None and self.a.up is not None
+        self.z_b, self.z_a = z_up_rotations(b.up, self.a.up) if self.yaw_only else (_I3, _I3)
+        self.b_z = np.ascontiguousarray(self.b_xyz @ self.z_b.T)
+        self.a_z = np.ascontiguousarray(self.a_xyz @ self.z_a.T)
+        self.cand_b_z, self.cand_a_z = self.b_z[self.cand_b], self.a_z[self.cand_a]
 
     def run(self) -> Result:
         start = time.perf_counter()
@@ -364,31 +370,28 @@ class _Aligner:
     def _passes(
         self, pose: np.ndarray, radii: tuple[float, ...]
     ) -> tuple[np.ndarray, np.ndarray, float]:
-        """Guided matching from `pose`, one pass per radius: the pose, its pairs and their
-        score (pairs: < 2 when the first pass finds fewer)."""
-        pairs = np.zeros((0, 2), dtype=int)
-        for radius in radii:
-            found = self._matches(pose, radius)
-            if len(found) < 2:
-                break
-            pairs = found
-            try:
-                pose = self._refit(pose, pairs, radius)
-            except ValueError:  # under-determined: keep the last pose
-                break
-        return pose, pairs, self._score(pose, pairs)
+        """Guided matching from `pose`, one pass per radius, each followed by the robust refit
+        (`refits` rounds of the closed form, each pair weighted (1 - (d / radius)²)² by its
+        distance d under the previous pose: one wrong pair among ten noisy ones turns a plain
+        fit by degrees): the pose, its pairs and their score (pairs: < 2 when the first pass
+        finds fewer; an under-determined refit keeps the last pose).  Compiled:
+        `_alignment_fast.guided_passes`."""
+        R, t, pairs, score = guided_passes(
+            *self._to_z(pose), np.asarray(radii, dtype=float), self.alignment.refits,
+            self.yaw_only, self.alignment.fit_radius, self.cand_a, self.cand_b, self.cand_a_z,
+            self.cand_b_z, self.a_z, self.b_z,
+        )  # fmt: skip
+        return self._from_z(R, t), pairs, float(score)
 
-    def _refit(self, pose: np.ndarray, pairs: np.ndarray, radius: float) -> np.ndarray:
-        """The closed-form pose of `pairs`, robust: `refits` rounds of weighted least squares,
-        each pair weighted (1 - (d / radius)²)² by its distance d under the previous pose (one
-        wrong pair among ten noisy ones turns a plain fit by degrees)."""
-        local, other = self.b_xyz[pairs[:, 1]], self.a_xyz[pairs[:, 0]]
-        for _ in range(self.alignment.refits):
-            distance = np.linalg.norm(local @ pose[:3, :3].T + pose[:3, 3] - other, axis=1)
-            weights = np.clip(1.0 - (distance / radius) ** 2, 0.0, None) ** 2
-            if np.count_nonzero(weights) < 2:
-                break
-            pose = align_positions(local, other, self.b.up, self.a.up, weights)
+    def _to_z(self, pose: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """`pose` (B to A) between the z-up frames: (R, t)."""
+        R = self.z_a @ pose[:3, :3] @ self.z_b.T
+        return np.ascontiguousarray(R), self.z_a @ pose[:3, 3]
+
+    def _from_z(self, R: np.ndarray, t: np.ndarray) -> np.ndarray:
+        """The 4x4 pose (B to A) of (R, t) between the z-up frames."""
+        pose = np.eye(4)
+        pose[:3, :3], pose[:3, 3] = self.z_a.T @ R @ self.z_b, self.z_a.T @ t
         return pose
 
     def _score(self, pose: np.ndarray, pairs: np.ndarray, radius: float | None = None) -> float:
@@ -412,18 +415,13 @@ class _Aligner:
         return np.array(rows, dtype=int).reshape(-1, 2)
 
     def _matches(self, pose: np.ndarray, radius: float) -> np.ndarray:
-        """(A index, B index) pairs under `pose`: each object of B with the nearest object of A
-        it may be within `radius`, one to one: a pair is kept when it is the closest of both
-        its objects (mutual nearest candidates)."""
-        offset = self.cand_b_xyz @ pose[:3, :3].T + (pose[:3, 3] - self.cand_a_xyz)
-        squared = np.einsum("ij,ij->i", offset, offset)
-        near = np.flatnonzero(squared < radius**2)
-        order = near[np.argsort(squared[near], kind="stable")]
-        first_of_b = order[np.unique(self.cand_b[order], return_index=True)[1]]
-        first_of_b = first_of_b[np.argsort(squared[first_of_b], kind="stable")]
-        mutual = first_of_b[np.unique(self.cand_a[first_of_b], return_index=True)[1]]
-        pairs = np.stack([self.cand_a[mutual], self.cand_b[mutual]], axis=1)
-        return pairs[np.lexsort((pairs[:, 1], pairs[:, 0]))]
+        """(A index, B index) pairs under `pose`, ascending: each object of B with the nearest
+        object of A it may be within `radius`, one to one: a pair is kept when it is the
+        closest of both its objects (mutual nearest candidates; compiled)."""
+        return mutual_nearest(
+            *self._to_z(pose), radius, self.cand_a, self.cand_b, self.cand_a_z, self.cand_b_z,
+            len(self.a_z), len(self.b_z),
+        )  # fmt: skip
 
     def _decided_places(self, grown: list[Hypothesis], precise: bool) -> list[Hypothesis]:
         """Distinct places, the highest score first (then the smaller residual), ranked 1, 2,
@@ -463,6 +461,10 @@ def place_scores(
         place = aligner._grown(seed)
         scores.append(0.0 if place is None else place.score)
     return scores
+
+
+_I3 = np.eye(3)
+_I3.flags.writeable = False
 
 
 def seed_views(
