@@ -10,8 +10,8 @@ absent) and simulated buildings of about 300 / 1k / 3k / 10k / 20k objects
 320 box-surface points per object).  Local views: the 3 / 5 / 8 objects nearest to a viewpoint
 near a random object (`crop_with_truth`: visible-side points, ~160 per object, random
 heading).  A localization is `semloc.localize` (one update per object in the crop's `seen`
-order, the answer at the last one); streaming feeds the same objects one per
-`Localizer.update`, with an answer at every update (on the largest view size only, to keep
+order, the answer at the last one); streaming feeds new copies of the same objects one per
+`Localizer.update` (each update prepares its object's cloud), with an answer at every update (on the largest view size only, to keep
 the run short).
 
 Each map runs in its own process, pinned to one core (`--cpu`), and reports its peak resident
@@ -219,7 +219,8 @@ def measure_case(
     update_ms = []
     if stream:  # the same objects one per update, an answer at every update
         localizer = Localizer(global_map, local_up=local.up)
-        for obj in sorted(local, key=lambda o: o.seen):
+        # new copies: each update prepares its object's cloud, as a new detection's is
+        for obj in sorted((o.replace() for o in local), key=lambda o: o.seen):
             tick = time.process_time()
             localizer.update([obj])
             update_ms.append((time.process_time() - tick) * 1e3)
