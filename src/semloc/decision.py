@@ -217,7 +217,7 @@ def distinct(
     place is tested against all picks at once (`same_place`'s pose test, compiled)."""
     chosen: list[int] = []
     pair_sets: list[set] = []
-    poses = np.empty((top_k, 4, 4))
+    poses = np.empty((min(top_k, 16), 4, 4))  # grown as needed: top_k may be huge
     posed = 0
     for i, (pairs, pose) in enumerate(places):
         if pairs:
@@ -233,6 +233,8 @@ def distinct(
             break
         pair_sets.append(set(pairs))
         if pose is not None:
+            if posed == len(poses):
+                poses = np.concatenate([poses, np.empty_like(poses)])
             poses[posed] = pose
             posed += 1
     return chosen

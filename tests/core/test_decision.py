@@ -614,3 +614,12 @@ def test_localized_only_when_every_rule_holds(n, fitness, confidence, rival_resi
             assert fitness is None  # 0 against 0 dominates; a fitness ties
         else:  # the confidence path and the residual ranking judge the residual
             assert rival_residual is None or rival_residual > threshold(0.1, config)
+
+
+def test_distinct_takes_any_top_k():
+    """A huge `top_k` (a user's setting) costs nothing up front; more places than the first
+    buffer holds are all compared."""
+    config = DecisionConfig()
+    places = [((), yaw_pose(0.0, [float(i), 0.0, 0.0])) for i in range(40)]
+    places.append(((), yaw_pose(0.0, [3.1, 0.0, 0.0])))  # the same place as the fourth
+    assert distinct(places, 10**15, config) == list(range(40))
