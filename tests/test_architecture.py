@@ -18,7 +18,8 @@ import semloc
 PACKAGE = Path(semloc.__file__).parent
 CORE = {"maps", "pointsets", "transforms", "association", "clustering", "pose", "neighbours",
         "registration", "closed_form", "digests", "verification", "results", "decision", "localizer",
-        "confidence_model", "_clustering_fast", "_verification_fast", "alignment", "changes",
+        "confidence_model", "_clustering_fast", "_verification_fast", "_decision_fast",
+        "_alignment_fast", "alignment", "changes",
         "semantics", "compiling"}  # fmt: skip
 APPLICATIONS = {"tools", "cli"}
 """The applications: nothing below them imports them."""
