@@ -22,6 +22,7 @@ from types import SimpleNamespace
 from dask.distributed import as_completed
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn
 
+from semloc.baselines import METHODS
 from semloc.eval.datasets import real_data_dir
 from semloc.eval.protocol import Attempt, BenchConfig, run_attempts, start_keyframes
 from semloc.eval.recall import HYPOTHESIS_COLUMNS, RESULT_COLUMNS, format_rows
@@ -86,7 +87,8 @@ def score_trace(seq, kind: str, gamma: float) -> dict:
 
 
 def plan(config: BenchConfig) -> list[tuple[str, int, int, str, str]]:
-    """All chains: (scene, walk, start, map kind, method)."""
+    """All chains: (scene, walk, start, map kind, method); the real scans are not rendered in
+    colour, so image methods are not run on them."""
     jobs = []
     for scene, (_, kinds) in SCENES.items():
         for walk in range(config.real_walk_count):
@@ -94,8 +96,8 @@ def plan(config: BenchConfig) -> list[tuple[str, int, int, str, str]]:
             for start in start_keyframes(
                 config, index, config.real_walk_keyframes, config.real_walk_starts
             ):
-                jobs += [(scene, walk, start, kind, method)
-                         for kind in kinds for method in config.methods]  # fmt: skip
+                jobs += [(scene, walk, start, kind, method) for kind in kinds
+                         for method in config.methods if not METHODS[method].images]  # fmt: skip
     return jobs
 
 

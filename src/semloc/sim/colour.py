@@ -1,0 +1,84 @@
+"""Colour images of the simulated worlds by ray casting: RGB-D keyframes for image methods.
+
+`ColourSensor(world)` casts the same rays as `DepthSensor` and colours each hit from its
+surface: objects by the solid texture of their model (`texture_for("label/style")`, in the
+object's frame, so a moved object keeps its look), floor and walls by a texture of their own
+(world frame).  Shading is Lambertian under a fixed daylight direction plus ambient light;
+rays that hit nothing are black.  The output is linear "daylight" colour, 8-bit; other
+illuminations are applied to it afterwards (`semloc.sim.illumination`).
+
+`map_keyframes(world, kind)` renders the mapping sweep of a global map kind (the viewpoints
+`semloc.sim.mapkinds.scan_poses` uses for the reconstruction map) through the world as that
+map shows it (`map_world`), as a `KeyframeMap` in the world frame.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from semloc.frontend.frames import KeyframeMap, RGBDFrame
+from semloc.sim.mapkinds import map_world, scan_poses
+from semloc.sim.sensor import DepthSensor, Intrinsics
+from semloc.sim.textures import Texture, texture_for
+from semloc.sim.world import World
+
+LIGHT = np.array([0.35, 0.55, 0.76])
+"""Direction towards the daylight (world frame, unit length)."""
+AMBIENT = 0.45
+
+
+def surface_textures(world: World) -> list[tuple[Texture, np.ndarray]]:
+    """(texture, T_surface_world) of every mesh, in `DepthSensor`'s order: objects, background."""
+    out = [(texture_for(f"{o.label}/{o.style}"), np.linalg.inv(o.pose)) for o in world.objects]
+    out += [(texture_for(f"{world.size}-{world.seed}/background{i}"), np.eye(4))
+            for i in range(len(world.background))]  # fmt: skip
+    return out
+
+
+class ColourSensor:
+    """Renders colour and depth images of a world (see the module docstring)."""
+
+    def __init__(self, world: World, intrinsics: Intrinsics | None = None, **kwargs) -> None:
+        self.depth_sensor = DepthSensor(world, intrinsics, **kwargs)
+        self.K = self.depth_sensor.K
+        self.surfaces = surface_textures(world)
+
+    def render(
+        self,
+        T_world_camera: np.ndarray,
+        index: int = 0,
+        rng: np.random.Generator | None = None,
+        T_frame_camera: np.ndarray | None = None,
+    ) -> RGBDFrame:
+        """The keyframe seen from `T_world_camera` (posed at `T_frame_camera`, default the
+        world pose); with `rng`, the depth gets the sensor's noise."""
+        hits = self.depth_sensor.cast(T_world_camera)
+        depth, geometry = hits["depth"], hits["geometry"]
+        points = T_world_camera[:3, 3] + hits["dirs"] * depth[:, None]
+        albedo = np.zeros((len(depth), 3))
+        for g in np.unique(geometry[depth > 0]).tolist():
+            texture, T = self.surfaces[g]
+            sel = geometry == g
+            albedo[sel] = texture.colour(points[sel] @ T[:3, :3].T + T[:3, 3])
+        shade = AMBIENT + (1 - AMBIENT) * np.abs(hits["normal"] @ LIGHT)
+        rgb = np.where(depth[:, None] > 0, albedo * shade[:, None], 0.0)
+        if rng is not None:
+            a, b = self.depth_sensor.noise
+            sigma = a + b * (depth - 0.4) ** 2
+            depth = np.where(depth > 0, depth + rng.normal(size=depth.shape) * sigma, 0.0)
+        H, W = self.K.height, self.K.width
+        return RGBDFrame(
+            index, np.round(rgb * 255).astype(np.uint8).reshape(H, W, 3),
+            depth.astype(np.float32).reshape(H, W), self.K.matrix,
+            T_world_camera if T_frame_camera is None else T_frame_camera,
+        )  # fmt: skip
+
+
+def map_keyframes(
+    world: World, kind: str = "reconstruction", resolution: tuple[int, int] = (240, 180)
+) -> KeyframeMap:
+    """The global map `kind` of `world` as day keyframes of its mapping sweep (world frame)."""
+    sensor = ColourSensor(map_world(world, kind), Intrinsics.scannet(*resolution))
+    rng = np.random.default_rng([world.seed, 37])
+    frames = [sensor.render(T, i, rng) for i, T in enumerate(scan_poses(world))]
+    return KeyframeMap.of(frames, up=(0, 0, 1), name=f"{world.size}-{world.seed}-{kind}-keyframes")
