@@ -117,7 +117,7 @@ JOBS = {
         "--clipper-budget 120 --clipper-memory 6144 --markdown {out}"
     ),
     "bench": Job(
-        "semloc bench --methods semloc,clipper,random-walk,segmatch,fpfh-ransac,semloc+geometric,"
+        "semloc bench --methods semloc,clipper,random-walk,segmatch,fpfh-ransac,sift,semloc+geometric,"
         "semloc+voxnet --out {out}",
         report="report.md",
     ),

@@ -33,6 +33,7 @@ from semloc.eval.protocol import (
     Attempt,
     BenchConfig,
     bench_kinds,
+    conditions,
     run_attempts,
     run_real_attempt,
     simulate,
@@ -82,7 +83,8 @@ def _fpfh_index_task(seq, kind: str):
 def _fpfh_chain_task(seq, job: Attempt, index):
     from semloc.baselines.fpfh import FpfhConfig, share_index
 
-    share_index(seq.global_maps[job.map_kind], index, FpfhConfig(**job.settings))
+    kind = conditions(job.map_kind)[0]  # the night queries use the reconstruction map
+    share_index(seq.global_maps[kind], index, FpfhConfig(**job.settings))
     return run_attempts(seq, job)
 
 
@@ -188,7 +190,7 @@ def run_benchmark(
         for job in sorted(plan(config, config.keyframes), key=lambda j: -_cost(j.method)):
             seq, cost = sequences[job.sequence], _cost(job.method)
             if job.method == "fpfh-ransac" and not job.settings:
-                index = indices[job.sequence, job.map_kind]
+                index = indices[job.sequence, conditions(job.map_kind)[0]]
                 future = client.submit(_fpfh_chain_task, seq, job, index, pure=False,
                                        priority=cost)  # fmt: skip
             else:
