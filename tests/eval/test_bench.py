@@ -251,9 +251,11 @@ def test_night_queries_are_planned_for_every_method_beside_reconstruction():
     assert "night" not in bench_kinds(config.model_copy(update={"map_kinds": ["cad"]}))
 
 
-def test_image_methods_are_not_planned_on_object_only_real_walks():
+def test_image_methods_are_planned_on_the_real_scans_colours_not_on_cad_maps():
     from semloc.eval import realwalks
     from semloc.eval.protocol import BenchConfig
 
     config = BenchConfig(methods=["semloc", "sift"], real_walk_count=1, real_walk_starts=1)
-    assert {job[-1] for job in realwalks.plan(config)} == {"semloc"}
+    kinds = {(job[-1], job[3]) for job in realwalks.plan(config)}
+    assert {k for m, k in kinds if m == "sift"} == {"reconstruction", "night"}
+    assert {k for m, k in kinds if m == "semloc"} == {"reconstruction", "night", "cad"}

@@ -31,8 +31,9 @@ from semloc.sim.mapkinds import MAP_KINDS
 
 TOLERANCES = np.round(np.arange(0.05, 1.501, 0.05), 3)
 KS = list(range(1, 21))
-_KIND_ORDER = {kind: i for i, kind in enumerate(["reconstruction", NIGHT, *list(MAP_KINDS)[1:],
-                                                  *(f"real {k}" for k in MAP_KINDS)])}  # fmt: skip
+_SIMULATED_ORDER = ["reconstruction", NIGHT, *list(MAP_KINDS)[1:]]
+_KIND_ORDER = {kind: i for i, kind in enumerate(
+    [*_SIMULATED_ORDER, *(f"real {k}" for k in _SIMULATED_ORDER)])}  # fmt: skip
 """Simulated map kinds first (the night queries beside their day half, reconstruction), then
 those of the real walks (eval.realwalks) in the same order."""
 OBJECT_BINS = [(3, 4), (5, 6), (7, 9), (10, 14), (15, 19), (20, 29), (30, 1000)]
