@@ -165,7 +165,8 @@ def ransac_align(
 
 class SiftBaseline:
     """SIFT + nearest-keyframe retrieval + RANSAC (see the module docstring); the
-    `ImageRelocalizer` interface: `update_frames(frames, answer=True) -> Result`."""
+    `ImageRelocalizer` interface: `update_frames(frames, answer=True) -> Result` (its steps'
+    `n_local` counts the query keyframes received)."""
 
     name = "sift"
     config_class = SiftConfig
@@ -194,6 +195,7 @@ class SiftBaseline:
             if not isinstance(frame, RGBDFrame):
                 raise MapError(f"update_frames() takes RGBDFrame items, got {type(frame).__name__}")
             self._frames[frame.index] = frame
+            self._features.pop(frame.index, None)  # a new version of a keyframe
         if not answer:
             return None
         index = map_index(self.keyframe_map, self.config)
@@ -227,19 +229,8 @@ class SiftBaseline:
         votes = nearest_votes(desc, index)
         order = [int(j) for j in np.argsort(-votes, kind="stable")[: cfg.retrieve] if votes[j]]
         rng = np.random.default_rng(cfg.seed)
-        found = []
-        for j in order:
-            part = index.of(j)
-            matches = ratio_matches(desc, index.descriptors[part], cfg.ratio)
-            src, dst = xyz[matches[:, 0]], index.xyz[part][matches[:, 1]]
-            fit = ransac_align(src, dst, self.local_up, self.keyframe_map.up, cfg, rng)
-            if fit is None:
-                continue
-            T, mask = fit
-            pairs = [(f"{index.keyframes[j]}:{b}", names[a]) for a, b in matches[mask]]
-            residual = float(np.sqrt(np.mean(np.sum(
-                (src[mask] @ T[:3, :3].T + T[:3, 3] - dst[mask]) ** 2, axis=1))))  # fmt: skip
-            found.append((len(pairs), pairs, T, residual))
+        found = [fit for j in order
+                 if (fit := self._register(desc, xyz, names, index, j, rng)) is not None]  # fmt: skip
         found.sort(key=lambda item: -item[0])
         anchor = xyz.mean(axis=0) if len(xyz) else None
         chosen = distinct(((p, T) for _, p, T, _ in found), cfg.top_k, cfg.decision, anchor)
@@ -249,3 +240,20 @@ class SiftBaseline:
             for rank, i in enumerate(chosen, 1)
         ]  # fmt: skip
         return hypotheses, len(found)
+
+    def _register(
+        self, desc: np.ndarray, xyz: np.ndarray, names: list[str], index: MapIndex, j: int, rng
+    ) -> tuple[int, list[tuple[str, str]], np.ndarray, float] | None:
+        """The query's matches with map keyframe `j` by RANSAC: (inliers, pairs, pose,
+        RMS residual of the inliers), or None below `min_inliers`."""
+        part = index.of(j)
+        matches = ratio_matches(desc, index.descriptors[part], self.config.ratio)
+        src, dst = xyz[matches[:, 0]], index.xyz[part][matches[:, 1]]
+        fit = ransac_align(src, dst, self.local_up, self.keyframe_map.up, self.config, rng)
+        if fit is None:
+            return None
+        T, mask = fit
+        pairs = [(f"{index.keyframes[j]}:{b}", names[a]) for a, b in matches[mask]]
+        moved = src[mask] @ T[:3, :3].T + T[:3, 3]
+        residual = float(np.sqrt(np.mean(np.sum((moved - dst[mask]) ** 2, axis=1))))
+        return len(pairs), pairs, T, residual

@@ -115,10 +115,7 @@ class ColourSensor:
             colour = surface.colour(points[sel], hits["primitive"][sel], hits["uv"][sel])
             rgb[sel] = colour * shade[sel, None] if surface.shaded else colour
         rgb = np.clip(rgb, 0.0, 1.0)
-        if rng is not None:
-            a, b = self.depth_sensor.noise
-            sigma = a + b * (depth - 0.4) ** 2
-            depth = np.where(depth > 0, depth + rng.normal(size=depth.shape) * sigma, 0.0)
+        depth = self.depth_sensor.noisy(depth, rng)
         H, W = self.K.height, self.K.width
         return RGBDFrame(
             index, np.round(rgb * 255).astype(np.uint8).reshape(H, W, 3),

@@ -160,15 +160,18 @@ class DepthSensor:
                 "uv": hits["primitive_uvs"].numpy(),
                 "normal": hits["primitive_normals"].numpy()}  # fmt: skip
 
+    def noisy(self, depth: np.ndarray, rng: np.random.Generator | None) -> np.ndarray:
+        """`depth` with the sensor's noise drawn from `rng` (unchanged without `rng`)."""
+        if rng is None or self.noise == (0.0, 0.0):
+            return depth
+        a, b = self.noise
+        sigma = a + b * (depth - 0.4) ** 2
+        noisy = np.where(depth > 0, depth + rng.normal(size=depth.shape) * sigma, 0.0)
+        return noisy.astype(np.float32)
+
     def render(self, T_world_camera: np.ndarray, rng: np.random.Generator | None = None) -> Frame:
         """Depth and instance image from `T_world_camera`; with `rng`, depth noise is added."""
         hits = self.cast(T_world_camera)
-        depth, geometry = hits["depth"], hits["geometry"]
-        if rng is not None and self.noise != (0.0, 0.0):
-            a, b = self.noise
-            sigma = a + b * (depth - 0.4) ** 2
-            depth = np.where(depth > 0, depth + rng.normal(size=depth.shape) * sigma, 0.0).astype(
-                np.float32
-            )
+        depth, geometry = self.noisy(hits["depth"], rng), hits["geometry"]
         H, W = self.K.height, self.K.width
         return Frame(depth.reshape(H, W), self._lookup[geometry].reshape(H, W), T_world_camera)
