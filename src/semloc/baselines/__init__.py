@@ -56,6 +56,15 @@ def _baseline(cls: type[ObjectBaseline]) -> Callable[[ObjectMap, Any, dict[str, 
     return build
 
 
+def _image_baseline(
+    cls: type[SiftBaseline],
+) -> Callable[[KeyframeMap, Any, dict[str, Any]], ImageRelocalizer]:
+    def build(keyframes: KeyframeMap, local_up: Any, settings: dict[str, Any]) -> ImageRelocalizer:
+        return cls(keyframes, cls.config_class(**settings), local_up)
+
+    return build
+
+
 METHODS: dict[str, Method] = {
     m.name: m
     for m in (
@@ -64,7 +73,7 @@ METHODS: dict[str, Method] = {
         Method("random-walk", _baseline(RandomWalkBaseline), "C1"),
         Method("segmatch", _baseline(SegMatchBaseline), "C2"),
         Method("fpfh-ransac", _baseline(FpfhRansacBaseline), "C3"),
-        Method("sift", _baseline(SiftBaseline), "C8", images=True),  # type: ignore[arg-type]
+        Method("sift", _image_baseline(SiftBaseline), "C8", images=True),
         *(
             Method(f"semloc+{kind}", _semloc(descriptor=kind), f"C{4 + i}", default=False)
             for i, kind in enumerate(DESCRIBERS)
