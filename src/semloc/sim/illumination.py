@@ -11,7 +11,7 @@ daylight colour in [0, 1] and z the pixel's depth (m):
    (`read_noise`), then clipping to [0, 1];
 3. tone curve: y = x ** gamma (gamma > 1 crushes the shadows), and 8-bit quantisation.
 
-`NIGHT` darkens an image to about a tenth of its mean brightness with strong noise in the
+`NIGHT` darkens an image to about a fifth of its mean brightness with strong noise in the
 dark parts; `DAY` is the identity.  Relighting is deterministic for a given random generator
 (the evaluation seeds one per keyframe).  Depth is unchanged: an RGB-D sensor's depth does not
 depend on visible light.
