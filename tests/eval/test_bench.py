@@ -234,3 +234,28 @@ def test_replays_are_shared_per_sequence_object_start_and_stop():
     assert replayed(a, 3, 40) is first and a.calls == [(3, 40)]
     assert replayed(a, 4, 40) is not first and replayed(b, 3, 40) is not first
     assert a.calls == [(3, 40), (4, 40)] and b.calls == [(3, 40)]
+
+
+def test_night_queries_are_planned_for_every_method_beside_reconstruction():
+    from semloc.eval.protocol import BenchConfig, bench_kinds, conditions
+    from semloc.eval.runner import plan
+
+    config = BenchConfig(sequences=1, starts=1, ablation_starts=0, methods=["semloc", "sift"],
+                         map_kinds=["cad", "reconstruction", "dynamic"])  # fmt: skip
+    assert bench_kinds(config) == ["cad", "reconstruction", "night", "dynamic"]
+    assert [(j.map_kind, j.method) for j in plan(config, 80) if j.map_kind == "night"] == [
+        ("night", "semloc"), ("night", "sift")]  # fmt: skip
+    assert conditions("night") == ("reconstruction", "night")
+    assert conditions("cad") == ("cad", "day")
+    assert bench_kinds(config.model_copy(update={"night": False})) == config.map_kinds
+    assert "night" not in bench_kinds(config.model_copy(update={"map_kinds": ["cad"]}))
+
+
+def test_image_methods_are_planned_on_the_real_scans_colours_not_on_cad_maps():
+    from semloc.eval import realwalks
+    from semloc.eval.protocol import BenchConfig
+
+    config = BenchConfig(methods=["semloc", "sift"], real_walk_count=1, real_walk_starts=1)
+    kinds = {(job[-1], job[3]) for job in realwalks.plan(config)}
+    assert {k for m, k in kinds if m == "sift"} == {"reconstruction", "night"}
+    assert {k for m, k in kinds if m == "semloc"} == {"reconstruction", "night", "cad"}

@@ -20,10 +20,12 @@ def test_plan_covers_every_scene_walk_start_kind_and_method():
     config = BenchConfig(real_walks=True, real_walk_count=2, real_walk_starts=3,
                          methods=["semloc", "clipper"])  # fmt: skip
     jobs = plan(config)
-    # scene0000_00: 1 map kind, scene0470_00: 2; 2 walks x 3 starts x 2 methods each
-    assert len(jobs) == (1 + 2) * 2 * 3 * 2
+    # scene0000_00: reconstruction + night, scene0470_00: + cad; 2 walks x 3 starts x 2 methods
+    assert len(jobs) == (2 + 3) * 2 * 3 * 2
     assert {(s, k) for s, _, _, k, _ in jobs} == {(s, k) for s, (_, ks) in SCENES.items()
-                                                  for k in ks}  # fmt: skip
+                                                  for k in (*ks, "night")}  # fmt: skip
+    no_night = plan(config.model_copy(update={"night": False}))
+    assert len(no_night) == (1 + 2) * 2 * 3 * 2
     assert all(0 <= start < config.real_walk_keyframes - 35 for _, _, start, _, _ in jobs)
     assert len({(s, w, st) for s, w, st, _, _ in jobs}) == 2 * 2 * 3  # distinct starts per walk
     assert BenchConfig.quick().real_walks is False
@@ -39,7 +41,7 @@ def test_real_walks_run_writes_rows_like_the_serial_protocol(tmp_path):
 
     from semloc.eval.realwalks import run_real_walks, write_outputs
 
-    config = BenchConfig(real_walks=True, real_walk_count=1, real_walk_starts=1,
+    config = BenchConfig(real_walks=True, real_walk_count=1, real_walk_starts=1, night=False,
                          real_walk_keyframes=40, methods=["semloc"], seed=2)  # fmt: skip
     with Client(processes=False, n_workers=1, threads_per_worker=1, dashboard_address=None) as c:
         output = run_real_walks(c, config, progress=False)

@@ -33,8 +33,9 @@ def _sample(*parts):
     return path
 
 
-def _write_scene(folder, name="scene0009_00"):
-    """A 6 x 4 m room: floor, two walls, a chair box and a table box, one segment each."""
+def _write_scene(folder, name="scene0009_00", colours=False):
+    """A 6 x 4 m room: floor, two walls, a chair box and a table box, one segment each (with
+    `colours`: random vertex colours)."""
     parts = [
         ("floor", box((0, 0, -0.005), (6, 4, 0.01))),
         ("wall", box((0, 2.05, 1.3), (6, 0.1, 2.6))),
@@ -45,9 +46,13 @@ def _write_scene(folder, name="scene0009_00"):
     mesh = Mesh.concat([m for _, m in parts])
     segments = np.repeat(np.arange(len(parts)), 8)
     fields = [("x", "<f4"), ("y", "<f4"), ("z", "<f4")]
+    fields += [(c, "u1") for c in ("red", "green", "blue")] if colours else []
     vertices = np.zeros(len(mesh.vertices), dtype=fields)
     for i, c in enumerate("xyz"):
         vertices[c] = mesh.vertices[:, i]
+    rng = np.random.default_rng(0)
+    for c in ("red", "green", "blue") if colours else ():
+        vertices[c] = rng.integers(20, 235, len(vertices))
     write_ply(folder / f"{name}_vh_clean_2.ply", vertices, mesh.triangles)
     (folder / f"{name}_vh_clean_2.0.010000.segs.json").write_text(
         json.dumps({"segIndices": segments.tolist()})
@@ -173,3 +178,26 @@ def test_fused_objects_match_the_scan_instances(parts, kind):
         right += local.label == truth.label
     assert right >= 0.9 * len(matched)
     assert len(seq.correspondences(kind)) >= 3
+
+
+def test_scans_keep_vertex_colours_and_render_them(tmp_path):
+    """The written scene's mesh has vertex colours: the colour sensor interpolates them over
+    the triangle hit (unshaded), with the depth sensor's depth."""
+    _write_scene(tmp_path, colours=True)
+    scan = load_real_scan(tmp_path)
+    assert scan.colours is not None and scan.colours.shape == (len(scan.mesh.vertices), 3)
+    K = Intrinsics.scannet(64, 48)
+    T = walk_path(scan, 40, 0)[0]
+    frame = scan.colour_sensor(K).render(T)
+    depth = scan.sensor(K).render(T).depth
+    assert np.allclose(frame.depth, depth)
+    hit = frame.depth > 0
+    lo, hi = scan.colours.min(axis=0) * 255 - 1, scan.colours.max(axis=0) * 255 + 1
+    assert np.all((frame.rgb[hit] >= lo) & (frame.rgb[hit] <= hi))
+    assert np.all(frame.rgb[~hit] == 0)
+    assert frame.rgb[hit].std() > 5  # interpolated, not one colour
+    uncoloured = tmp_path / "plain"
+    uncoloured.mkdir()
+    _write_scene(uncoloured)
+    with pytest.raises(MapError, match="no vertex colours"):
+        load_real_scan(uncoloured).colour_sensor(K)

@@ -1,5 +1,7 @@
 """What every baseline shares: the `Relocalizer` interface, hypotheses from association groups,
-the shared pose recovery (`semloc.pose.estimate_pose`), results and decision.
+the shared pose recovery (`semloc.pose.estimate_pose`), results and decision; and the
+`ImageRelocalizer` interface of the image methods (SIFT), which localize query keyframes
+(`semloc.frontend.frames.RGBDFrame`) against a map's keyframes instead of objects.
 
 A baseline subclasses `ObjectBaseline` and implements `_groups(local_objects)`, returning
 association groups (score, [(global index, local index)]) best first.  `update(objects)` keeps
@@ -20,6 +22,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
 from semloc.decision import DecisionConfig, decide, distinct
+from semloc.frontend.frames import KeyframeMap, RGBDFrame
 from semloc.maps import MapError, ObjectMap, SemanticObject
 from semloc.pose import PoseConfig, align_positions, cached_cloud, estimate_pose
 from semloc.results import Hypothesis, Result, Step
@@ -35,6 +38,17 @@ class Relocalizer(Protocol):
 
     def update(self, objects: Iterable[SemanticObject], answer: bool = True) -> Result | None:
         """Add new or re-detected local objects; the current answer (None if not asked)."""
+        ...
+
+
+class ImageRelocalizer(Protocol):
+    """What the evaluation needs of an image method: built on a `KeyframeMap` (the global
+    map's keyframes, world frame), fed query keyframes posed in the local frame."""
+
+    keyframe_map: KeyframeMap
+
+    def update_frames(self, frames: Iterable[RGBDFrame], answer: bool = True) -> Result | None:
+        """Add query keyframes; the current answer (None if not asked)."""
         ...
 
 

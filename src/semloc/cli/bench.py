@@ -61,6 +61,14 @@ def bench(
         typer.Option(min=1, max=1000, help="Random starts per sequence (default 8; quick 3)."),
     ] = None,
     progress: Annotated[bool, typer.Option(help="Show a progress bar.")] = True,
+    night: Annotated[
+        bool,
+        typer.Option(
+            help="Add the day / night pair: the reconstruction map (made by day) with the "
+            "query images relit at night (the 'night' column; image methods such as SIFT "
+            "are affected, object methods see the same objects)."
+        ),
+    ] = True,
     real_walks: Annotated[
         bool,
         typer.Option(
@@ -70,11 +78,13 @@ def bench(
         ),
     ] = False,
 ) -> None:
-    """Reproduce the paper's comparison: semloc vs CLIPPER, random-walk, SegMatch, FPFH+RANSAC.
+    """Reproduce the paper's comparison: semloc vs CLIPPER, random-walk, SegMatch, FPFH+RANSAC,
+    SIFT.
 
     Attempts from random keyframes of simulated sequences (when > 2 objects
     are seen, then +15 and +30 keyframes) against reconstruction, CAD and
-    dynamic global maps, plus ablations over gamma and the local objects.
+    dynamic global maps and the night queries, plus ablations over gamma and
+    the local objects.
     """
     need("bench", "bench", "sim")
     methods = ",".join(DEFAULT_METHODS) if methods is None else methods
@@ -93,6 +103,7 @@ def bench(
     if "semloc" not in chosen:
         overrides["ablation_starts"] = 0
     overrides["real_walks"] = real_walks
+    overrides["night"] = night
     config = BenchConfig.quick(**overrides) if quick else BenchConfig(**overrides)
     try:
         output = run_benchmark(config, out, scheduler, workers, progress=progress)

@@ -15,7 +15,7 @@ from semloc.cli.app import fail
 EXTRAS: dict[str, tuple[str, ...]] = {
     "viz": ("matplotlib", "rerun"),
     "sim": ("open3d",),
-    "bench": ("dask", "distributed", "sklearn", "matplotlib"),
+    "bench": ("dask", "distributed", "sklearn", "matplotlib", "cv2"),
     "train": ("torch",),
     "serve": ("fastapi", "uvicorn"),
     "ros": ("rosbags", "mcap"),

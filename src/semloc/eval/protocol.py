@@ -10,6 +10,15 @@ Every method receives every keyframe's new or re-detected objects, and is asked 
 answer=False)` only grows the Localizer's association sets (the baselines, which recompute
 everything from the local map, just remember the objects).  `ms` is the wall time of the
 update at the evaluation keyframe.
+
+Image methods (SIFT) receive every keyframe's colour image and depth instead
+(`update_frames`, same evaluation keyframes) and localize against the global map's keyframes
+(`semloc.eval.images`); their `n_local` is the number of local objects seen, like the others'.
+
+Day / night: the map kind `night` is the reconstruction map (made by day) with the query
+images relit at night (`semloc.sim.illumination.NIGHT`); the `reconstruction` rows are its day
+half.  Object methods get the same objects at night as by day (the paper's premise: instance
+segmentation is robust to the illumination), so their night rows repeat their day rows.
 """
 
 from __future__ import annotations
@@ -23,7 +32,8 @@ from typing import Any
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
-from semloc.baselines import DEFAULT_METHODS, make_method
+from semloc.baselines import DEFAULT_METHODS, METHODS, make_method
+from semloc.eval.images import keyframe_map, query_frame
 from semloc.eval.success import first_correct_rank
 from semloc.io.importers.rscan import load_rscan
 from semloc.io.importers.scan2cad import load_scan2cad
@@ -33,6 +43,13 @@ from semloc.sim.scenario import simulate_sequence
 from semloc.transforms import pose_error
 
 OFFSETS = (0, 15, 30)
+NIGHT = "night"
+"""The map kind of the night queries against the (day) reconstruction map."""
+
+
+def conditions(map_kind: str) -> tuple[str, str]:
+    """(global map kind, illumination of the queries) of a benchmark map kind."""
+    return ("reconstruction", "night") if map_kind == NIGHT else (map_kind, "day")
 
 
 class BenchConfig(BaseModel):
@@ -55,6 +72,10 @@ class BenchConfig(BaseModel):
     )
     ablation_starts: int = Field(4, ge=0, description="Starts per sequence of the γ ablation.")
     ablation_top_k: int = Field(20, ge=1, description="Hypotheses kept in the γ ablation.")
+    night: bool = Field(
+        True,
+        description="Add the day / night pair: the reconstruction map (day) with night queries.",
+    )
     real: bool = Field(True, description="Add the real-layout pairs when their data is present.")
     real_walks: bool = Field(
         False, description="Also walk through the real scans (eval.realwalks)."
@@ -69,6 +90,14 @@ class BenchConfig(BaseModel):
         base = dict(sequences=2, keyframes=60, starts=3, gammas=[0.5, 0.8, 0.95],
                     ablation_starts=2, real_walk_count=1, real_walk_starts=4)  # fmt: skip
         return cls(**{**base, **overrides})
+
+
+def bench_kinds(config: BenchConfig) -> list[str]:
+    """The map kinds of the comparison: the configured ones and, with `night`, `night`."""
+    kinds = list(config.map_kinds)
+    if config.night and "reconstruction" in kinds:
+        kinds.insert(kinds.index("reconstruction") + 1, NIGHT)
+    return kinds
 
 
 def sequence_seed(config: BenchConfig, index: int) -> int:
@@ -156,12 +185,14 @@ def run_attempts(seq, attempt: Attempt) -> tuple[list[dict], list[dict]]:
     """One start, one map kind, one method: rows of results.csv and hypotheses.csv.
 
     Every keyframe's new or re-detected objects go to the method; only the evaluation
-    keyframes ask for an answer."""
+    keyframes ask for an answer (image methods: `run_image_attempts`)."""
+    if METHODS[attempt.method].images:
+        return run_image_attempts(seq, attempt)
     replay = replayed(seq, attempt.start, min(len(seq.recording.detections), attempt.start + 70))
     truth = replay.T_global_local
     method = make_method(
-        attempt.method, replay.global_maps[attempt.map_kind], replay.local_map.up,
-        attempt.settings,
+        attempt.method, replay.global_maps[conditions(attempt.map_kind)[0]],
+        replay.local_map.up, attempt.settings,
     )  # fmt: skip
     targets = _targets(replay.keyframes)
     rows, hyps = [], []
@@ -176,6 +207,37 @@ def run_attempts(seq, attempt: Attempt) -> tuple[list[dict], list[dict]]:
         result = method.update(kf.objects)
         ms = (time.perf_counter() - tick) * 1e3
         row, hyp_rows = attempt_rows(result, truth, {**base, "offset": targets[kf.index]}, ms)
+        rows.append(row)
+        hyps += hyp_rows
+    return rows, hyps
+
+
+def run_image_attempts(seq, attempt: Attempt) -> tuple[list[dict], list[dict]]:
+    """`run_attempts` for an image method: every keyframe's colour image and depth (lit as the
+    map kind says) until the last evaluation keyframe, answers at the evaluation keyframes."""
+    replay = replayed(seq, attempt.start, min(len(seq.recording.detections), attempt.start + 70))
+    kind, light = conditions(attempt.map_kind)
+    method = make_method(attempt.method, keyframe_map(seq.world, kind), replay.local_map.up,
+                         attempt.settings)  # fmt: skip
+    targets = _targets(replay.keyframes)
+    rows, hyps = [], []
+    base = dict(method=attempt.name, map_kind=attempt.map_kind, sequence=f"seq{attempt.sequence}",
+                start=attempt.start)  # fmt: skip
+    seen: set[str] = set()
+    for kf in replay.keyframes:
+        if not targets or kf.index > max(targets):
+            break
+        seen.update(o.id for o in kf.objects)
+        frame = query_frame(seq.world, kf, light)
+        if kf.index not in targets:
+            method.update_frames([frame], answer=False)
+            continue
+        tick = time.perf_counter()
+        result = method.update_frames([frame])
+        ms = (time.perf_counter() - tick) * 1e3
+        base_row = {**base, "offset": targets[kf.index]}
+        row, hyp_rows = attempt_rows(result, replay.T_global_local, base_row, ms)
+        row["n_local"] = len(seen)
         rows.append(row)
         hyps += hyp_rows
     return rows, hyps
@@ -209,7 +271,8 @@ def real_maps(data: str, pair: str):
 
 
 def run_real_attempt(data: str, pair: str, method: str) -> tuple[list[dict], list[dict]]:
-    """One real pair, one method: the whole local map at once (map_kind 'real')."""
+    """One real pair, one method: the whole local map at once (map_kind 'real').  The pairs
+    are object maps without images: image methods are not run on them."""
     gmap, local, truth = real_maps(data, pair)
     loc = make_method(method, gmap, local.up)
     tick = time.perf_counter()

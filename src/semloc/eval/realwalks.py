@@ -4,9 +4,12 @@ For each real scene (ScanNet scene0000_00: its reconstruction map; Scan2CAD scen
 scan-derived reconstruction map and its CAD map) `real_walk_count` walks are rendered, detected
 and fused (`semloc.sim.realscan.simulate_walk`); from `real_walk_starts` random start keyframes
 of each walk every method relocalizes as in the simulated protocol (`run_attempts`: when more
-than 2 objects are seen, then +15 and +30 keyframes).  Rows carry the map kind as "real reconstruction" or
-"real cad" and the walk as the sequence.  Besides the attempts, semloc runs incrementally over
-the first walk of each scene for the top-2 score plot.
+than 2 objects are seen, then +15 and +30 keyframes).  Rows carry the map kind as "real
+reconstruction", "real night" (the reconstruction map with the query images at night, with
+`config.night`) or "real cad" and the walk as the sequence.  Image methods (SIFT) see the
+scans' vertex colours and run against the reconstruction maps only (the CAD models have no
+colours).  Besides the attempts, semloc runs incrementally over the first walk of each scene
+for the top-2 score plot.
 
 Outputs: real_walks.csv and real_walks_hypotheses.csv (the results/hypotheses columns),
 real_walks.png (recall vs translation tolerance at top-10 and vs k), real_walks_scores.png and
@@ -22,8 +25,17 @@ from types import SimpleNamespace
 from dask.distributed import as_completed
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn
 
+from semloc.baselines import METHODS
 from semloc.eval.datasets import real_data_dir
-from semloc.eval.protocol import Attempt, BenchConfig, run_attempts, start_keyframes
+from semloc.eval.images import has_images
+from semloc.eval.protocol import (
+    NIGHT,
+    Attempt,
+    BenchConfig,
+    conditions,
+    run_attempts,
+    start_keyframes,
+)
 from semloc.eval.recall import HYPOTHESIS_COLUMNS, RESULT_COLUMNS, format_rows
 from semloc.eval.report import comparison_figure, summary_table
 from semloc.io import write_atomic
@@ -65,7 +77,10 @@ def walk_sequence(data: str, scene: str, seed: int, n_keyframes: int):
 def run_walk_attempts(
     seq, scene: str, walk: int, start: int, kind: str, method: str
 ) -> tuple[list[dict], list[dict]]:
-    """`run_attempts` on a walk; rows name the walk and the map kind as "real <kind>"."""
+    """`run_attempts` on a walk; rows name the walk and the map kind as "real <kind>" (no
+    rows for an image method on a scan without vertex colours)."""
+    if METHODS[method].images and not has_images(seq.world, conditions(kind)[0]):
+        return [], []
     rows, hyps = run_attempts(seq, Attempt(walk, start, kind, method))
     for row in rows + hyps:
         row["sequence"], row["map_kind"] = f"{scene}/walk{walk}", PREFIX + kind
@@ -86,16 +101,20 @@ def score_trace(seq, kind: str, gamma: float) -> dict:
 
 
 def plan(config: BenchConfig) -> list[tuple[str, int, int, str, str]]:
-    """All chains: (scene, walk, start, map kind, method)."""
+    """All chains: (scene, walk, start, map kind, method); with `config.night` also the night
+    queries against the reconstruction map (`night`); image methods on the reconstruction maps
+    only (the scans' vertex colours; CAD models have none)."""
     jobs = []
-    for scene, (_, kinds) in SCENES.items():
+    for scene, (_, scene_kinds) in SCENES.items():
+        kinds = [*scene_kinds, NIGHT] if config.night else list(scene_kinds)
         for walk in range(config.real_walk_count):
             index = 500 + 10 * list(SCENES).index(scene) + walk
             for start in start_keyframes(
                 config, index, config.real_walk_keyframes, config.real_walk_starts
             ):
-                jobs += [(scene, walk, start, kind, method)
-                         for kind in kinds for method in config.methods]  # fmt: skip
+                jobs += [(scene, walk, start, kind, method) for kind in kinds
+                         for method in config.methods
+                         if kind != "cad" or not METHODS[method].images]  # fmt: skip
     return jobs
 
 
@@ -139,7 +158,7 @@ def _order(row: dict, methods: list[str]) -> tuple:
 
 
 def kinds_of(rows: list[dict]) -> list[str]:
-    return [PREFIX + k for k in ("reconstruction", "cad") if any(
+    return [PREFIX + k for k in ("reconstruction", NIGHT, "cad") if any(
         r["map_kind"] == PREFIX + k for r in rows)]  # fmt: skip
 
 
@@ -181,7 +200,9 @@ def write_outputs(
         f"{config.real_walk_count} camera walks of {config.real_walk_keyframes} keyframes "
         f"through each real scan ({', '.join(SCENES)}), {config.real_walk_starts} random starts "
         "per walk, attempts when more than 2 objects are seen, then +15 and +30 keyframes; "
-        f"{len(attempts)} attempts per method. Success: 15° / 0.5 m.\n\n"
+        f"{len(attempts)} attempts in all. Success: 15° / 0.5 m. 'real night': the "
+        "reconstruction map with the query images at night (object methods see the same "
+        "objects as by day); SIFT runs on the scans' vertex colours, not against CAD maps.\n\n"
         "## Recall (top-1 / top-10) and time per update\n\n"
         + table_text(rows, methods)
         + "\n![real_walks.png](real_walks.png)\n\n![real_walks_scores.png](real_walks_scores.png)\n"

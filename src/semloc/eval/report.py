@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from semloc.baselines import METHODS
+from semloc.eval.protocol import NIGHT, bench_kinds
 from semloc.eval.recall import (
     HYPOTHESIS_COLUMNS,
     RESULT_COLUMNS,
@@ -30,8 +31,11 @@ from semloc.sim.mapkinds import MAP_KINDS
 
 TOLERANCES = np.round(np.arange(0.05, 1.501, 0.05), 3)
 KS = list(range(1, 21))
-_KIND_ORDER = {kind: i for i, kind in enumerate([*MAP_KINDS, *(f"real {k}" for k in MAP_KINDS)])}
-"""Simulated map kinds first, then those of the real walks (eval.realwalks) in the same order."""
+_SIMULATED_ORDER = ["reconstruction", NIGHT, *list(MAP_KINDS)[1:]]
+_KIND_ORDER = {kind: i for i, kind in enumerate(
+    [*_SIMULATED_ORDER, *(f"real {k}" for k in _SIMULATED_ORDER)])}  # fmt: skip
+"""Simulated map kinds first (the night queries beside their day half, reconstruction), then
+those of the real walks (eval.realwalks) in the same order."""
 OBJECT_BINS = [(3, 4), (5, 6), (7, 9), (10, 14), (15, 19), (20, 29), (30, 1000)]
 
 
@@ -192,7 +196,7 @@ def write_outputs(out: Path, config, rows, hyps, ablation, seconds: float) -> li
     ):
         files.append(write_atomic(out / name, format_rows(data, columns)))
     methods = [m for m in config.methods if any(r["method"] == m for r in rows)]
-    kinds = [k for k in config.map_kinds if any(r["map_kind"] == k for r in rows)]
+    kinds = [k for k in bench_kinds(config) if any(r["map_kind"] == k for r in rows)]
     figures = []
     if kinds:  # simulated rows (none with --sequences 0)
         figures.append(save_figure(comparison_figure(rows, hyps, methods, kinds),
@@ -261,7 +265,11 @@ def report_text(config, rows, ablation, methods, seconds: float, figures: list[s
         "Success: the pose is within 15° and 0.5 m. top-k: one of the first k hypotheses is. "
         "All methods recover poses with the same `semloc.pose.estimate_pose`. The column "
         "'real' (when the importers' samples are present) holds one attempt per pair: 3RScan "
-        "scene_2 in scene_1 and the Scan2CAD scan map of scene0470_00 in its CAD map.\n\n",
+        "scene_2 in scene_1 and the Scan2CAD scan map of scene0470_00 in its CAD map "
+        "(object maps: image methods such as SIFT have no images there, '–'). The column "
+        "'night' is the day / night pair: the reconstruction map, made by day, with the "
+        "query images relit at night; object methods see the same objects at night, so "
+        "their night rows repeat their reconstruction rows.\n\n",
         "## Recall (top-1 / top-10) and time per update\n\n",
         summary_table(rows, methods),
         "\n## Can `localized` be trusted? Claims and coverage per map kind\n\n",

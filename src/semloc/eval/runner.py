@@ -26,11 +26,14 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+from semloc.baselines import METHODS
 from semloc.eval.datasets import real_data_dir
 from semloc.eval.protocol import (
     REAL_PAIRS,
     Attempt,
     BenchConfig,
+    bench_kinds,
+    conditions,
     run_attempts,
     run_real_attempt,
     simulate,
@@ -56,7 +59,8 @@ class BenchOutput:
 # Rough relative cost of one chain per method (seconds per attempt on the quick run): chains
 # are started longest first, so that the last ones to finish are short and the workers end
 # together instead of one long FPFH chain running alone at the end.
-_COST = {"fpfh-ransac": 10.0, "clipper": 1.2, "random-walk": 1.2, "segmatch": 1.0, "semloc": 0.6}
+_COST = {"fpfh-ransac": 10.0, "sift": 2.0, "clipper": 1.2, "random-walk": 1.2, "segmatch": 1.0,
+         "semloc": 0.6}  # fmt: skip
 
 
 def _cost(method: str) -> float:
@@ -79,7 +83,8 @@ def _fpfh_index_task(seq, kind: str):
 def _fpfh_chain_task(seq, job: Attempt, index):
     from semloc.baselines.fpfh import FpfhConfig, share_index
 
-    share_index(seq.global_maps[job.map_kind], index, FpfhConfig(**job.settings))
+    kind = conditions(job.map_kind)[0]  # the night queries use the reconstruction map
+    share_index(seq.global_maps[kind], index, FpfhConfig(**job.settings))
     return run_attempts(seq, job)
 
 
@@ -101,12 +106,13 @@ def _order(row: dict, methods: list[str]) -> tuple:
 
 
 def plan(config: BenchConfig, n_keyframes: int) -> list[Attempt]:
-    """All chains of attempts: the comparison, then the γ ablation (semloc only)."""
+    """All chains of attempts: the comparison (with the night queries: `bench_kinds`), then
+    the γ ablation (semloc only)."""
     jobs = []
     for index in range(config.sequences):
         starts = start_keyframes(config, index, n_keyframes, config.starts)
         for start in starts:
-            for kind in config.map_kinds:
+            for kind in bench_kinds(config):
                 for method in config.methods:
                     jobs.append(Attempt(index, start, kind, method))
         ablation = start_keyframes(config, index, n_keyframes, config.ablation_starts)
@@ -184,7 +190,7 @@ def run_benchmark(
         for job in sorted(plan(config, config.keyframes), key=lambda j: -_cost(j.method)):
             seq, cost = sequences[job.sequence], _cost(job.method)
             if job.method == "fpfh-ransac" and not job.settings:
-                index = indices[job.sequence, job.map_kind]
+                index = indices[job.sequence, conditions(job.map_kind)[0]]
                 future = client.submit(_fpfh_chain_task, seq, job, index, pure=False,
                                        priority=cost)  # fmt: skip
             else:
@@ -192,7 +198,7 @@ def run_benchmark(
             futures[future] = job.ablation
         data = _real_data() if config.real else None
         for pair in REAL_PAIRS if data else []:
-            for method in config.methods:
+            for method in (m for m in config.methods if not METHODS[m].images):  # no images
                 future = client.submit(run_real_attempt, data, pair, method, pure=False,
                                        priority=_cost(method))  # fmt: skip
                 futures[future] = False

@@ -211,3 +211,17 @@ def global_map(world: World, kind: str) -> ObjectMap:
     if kind not in MAP_KINDS:
         raise ValueError(f"unknown map kind {kind!r}; use one of {list(MAP_KINDS)}")
     return MAP_KINDS[kind](world)
+
+
+def map_world(world: World, kind: str) -> World:
+    """The world as the global map `kind` shows it (for rendering its images): the world
+    itself for `reconstruction`; for `cad` every object in its replacement style; for
+    `dynamic` the changed world in the replacement styles."""
+    if kind not in MAP_KINDS:
+        raise ValueError(f"unknown map kind {kind!r}; use one of {list(MAP_KINDS)}")
+    if kind == "reconstruction":
+        return world
+    source = dynamic_world(world)[0] if kind == "dynamic" else world
+    return source.with_objects(
+        replace(inst, style=_cad_style(world, inst)) for inst in source.objects
+    )

@@ -9,6 +9,11 @@ maps of the scene as the importers build them (ScanNet: `reconstruction`; Scan2C
 `reconstruction` from the labelled scan and `cad` from the aligned models).  Instance `i` of
 the images is `scan.objects[i]`, whose `id` is the object's id in those maps.
 
+Scans whose mesh has vertex colours (ScanNet's `_vh_clean_2.ply`) keep them (`colours`):
+`colour_sensor` renders colour images of the scan for the image methods, and
+`map_keyframes(scan)` the scan's reconstruction map as keyframes: a mapping walk of its own
+(seed `MAP_WALK_SEED`), rendered by day.
+
 `walk_path(scan, n_keyframes, seed)` is a path a person would take: waypoints spread over the
 free floor (floor below, nothing between knee and head height within `clearance`), joined by
 shortest grid paths, at eye height, heading between the way ahead and the middle of the room
@@ -31,12 +36,14 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import shortest_path
 from scipy.spatial import cKDTree
 
+from semloc.frontend.frames import KeyframeMap
 from semloc.frontend.fusion import FusionConfig
 from semloc.io.importers.scan2cad import load_scan2cad
 from semloc.io.importers.scannet import load_scannet, scene_files
 from semloc.io.ply import read_ply
 from semloc.maps import MapError, ObjectMap
 from semloc.pointsets import voxel_downsample
+from semloc.sim.colour import ColourSensor, VertexColours
 from semloc.sim.noise import Detection, DetectionNoise, detect, drift
 from semloc.sim.scenario import Recording, SimulatedSequence
 from semloc.sim.sensor import DepthSensor, Intrinsics
@@ -45,6 +52,8 @@ from semloc.sim.trajectory import keyframes_from_samples, odometry_origin
 
 CELL = 0.1
 """Edge of the free-space grid cells (m)."""
+MAP_WALK_SEED = 9001
+"""Seed of the walk whose keyframes make a scan's keyframe map (not one of the query walks)."""
 
 
 @dataclass(frozen=True)
@@ -65,6 +74,7 @@ class RealScan:
     face_instance: np.ndarray = field(repr=False)  # (F,) index into `objects`, -1 background
     objects: tuple[ScanInstance, ...]
     global_maps: dict[str, ObjectMap] = field(repr=False)
+    colours: np.ndarray | None = field(default=None, repr=False)  # (V, 3) in [0, 1]
 
     @property
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
@@ -80,6 +90,13 @@ class RealScan:
         meshes = [self._submesh(self.face_instance == i) for i in range(len(self.objects))]
         background = [self._submesh(self.face_instance < 0)]
         return DepthSensor(intrinsics=intrinsics, meshes=meshes, background=background, **kwargs)
+
+    def colour_sensor(self, intrinsics: Intrinsics | None = None, **kwargs) -> ColourSensor:
+        """A sensor of colour (the vertex colours) and depth; MapError without colours."""
+        if self.colours is None:
+            raise MapError(f"{self.name}: the scan's mesh has no vertex colours")
+        surface = VertexColours(self.colours, self.mesh.triangles)
+        return ColourSensor.of_meshes([self.mesh], [surface], intrinsics, **kwargs)
 
     def _submesh(self, faces: np.ndarray) -> Mesh:
         triangles = self.mesh.triangles[faces]
@@ -142,7 +159,11 @@ def _labelled(
     a, b, c = (owner[ply.faces[:, i]] for i in range(3))
     faces = np.where((a == b) | (a == c), a, np.where(b == c, b, -1))
     objects = tuple(ScanInstance(o.id, o.label) for o in full)
-    return RealScan(name, source, Mesh(vertices, ply.faces), faces, objects, maps)
+    colours = None
+    names = ply.vertices.dtype.names or ()
+    if not mesh_path.name.endswith(".labels.ply") and {"red", "green", "blue"} <= set(names):
+        colours = np.column_stack([ply.vertices[c] for c in ("red", "green", "blue")]) / 255.0
+    return RealScan(name, source, Mesh(vertices, ply.faces), faces, objects, maps, colours)
 
 
 # Camera paths ----------------------------------------------------------------------------------
@@ -301,6 +322,17 @@ def simulate_walk(
         scan, scan.global_maps, [], ObjectMap([]), np.eye(4), {}, None, recording
     )  # type: ignore[arg-type]  # noqa: E501
     return empty.replay(0, name=f"{scan.name}-walk{seed}-local")
+
+
+def map_keyframes(
+    scan: RealScan, n_keyframes: int = 60, resolution: tuple[int, int] = (240, 180)
+) -> KeyframeMap:
+    """The scan's reconstruction map as day keyframes of a mapping walk (mesh frame)."""
+    sensor = scan.colour_sensor(Intrinsics.scannet(*resolution))
+    rng = np.random.default_rng([MAP_WALK_SEED, 37])
+    poses = walk_path(scan, n_keyframes, MAP_WALK_SEED)
+    frames = [sensor.render(T, i, rng) for i, T in enumerate(poses)]
+    return KeyframeMap.of(frames, up=(0, 0, 1), name=f"{scan.name}-keyframes")
 
 
 def _thinned(det: Detection) -> Detection:

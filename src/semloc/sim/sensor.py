@@ -140,8 +140,12 @@ class DepthSensor:
             mesh.vertices.astype(np.float32), mesh.triangles.astype(np.uint32)
         )
 
-    def render(self, T_world_camera: np.ndarray, rng: np.random.Generator | None = None) -> Frame:
-        """Depth and instance image from `T_world_camera`; with `rng`, depth noise is added."""
+    def cast(self, T_world_camera: np.ndarray) -> dict[str, np.ndarray]:
+        """The raw ray cast of every pixel (row-major, flat): `depth` (0 = no return),
+        `geometry` (index of the mesh hit in the order added: the world's objects, then its
+        background; `len(meshes)` for no return), `primitive` (triangle index, its mesh's),
+        `uv` (barycentric coordinates in it), `normal` (world frame) and `dirs` (world-frame
+        ray directions with camera z = 1)."""
         R, t = T_world_camera[:3, :3], T_world_camera[:3, 3]
         dirs = self._dirs @ R.T
         rays = np.concatenate([np.broadcast_to(t, dirs.shape), dirs], axis=1).astype(np.float32)
@@ -151,11 +155,23 @@ class DepthSensor:
         invalid = ~np.isfinite(depth) | (depth > self.max_depth)
         geometry[invalid] = len(self._lookup) - 1
         depth[invalid] = 0.0
-        if rng is not None and self.noise != (0.0, 0.0):
-            a, b = self.noise
-            sigma = a + b * (depth - 0.4) ** 2
-            depth = np.where(depth > 0, depth + rng.normal(size=depth.shape) * sigma, 0.0).astype(
-                np.float32
-            )
+        return {"depth": depth, "geometry": geometry, "dirs": dirs,
+                "primitive": hits["primitive_ids"].numpy().astype(np.int64),
+                "uv": hits["primitive_uvs"].numpy(),
+                "normal": hits["primitive_normals"].numpy()}  # fmt: skip
+
+    def noisy(self, depth: np.ndarray, rng: np.random.Generator | None) -> np.ndarray:
+        """`depth` with the sensor's noise drawn from `rng` (unchanged without `rng`)."""
+        if rng is None or self.noise == (0.0, 0.0):
+            return depth
+        a, b = self.noise
+        sigma = a + b * (depth - 0.4) ** 2
+        noisy = np.where(depth > 0, depth + rng.normal(size=depth.shape) * sigma, 0.0)
+        return noisy.astype(np.float32)
+
+    def render(self, T_world_camera: np.ndarray, rng: np.random.Generator | None = None) -> Frame:
+        """Depth and instance image from `T_world_camera`; with `rng`, depth noise is added."""
+        hits = self.cast(T_world_camera)
+        depth, geometry = self.noisy(hits["depth"], rng), hits["geometry"]
         H, W = self.K.height, self.K.width
         return Frame(depth.reshape(H, W), self._lookup[geometry].reshape(H, W), T_world_camera)
