@@ -121,6 +121,7 @@ JOBS = {
         "semloc+voxnet --out {out}",
         report="report.md",
     ),
+    "bench-learned": Job("semloc bench --methods svl,fcgf-dense --out {out}", report="report.md"),
 }
 
 TABLES = {
@@ -152,6 +153,8 @@ TABLES = {
     "vocabulary-all": TableSpec("vocab", 0, file="docs/vocabulary.md"),
     "recall": TableSpec("bench", 0, file="docs/benchmark.md"),
     "claims": TableSpec("bench", 1, file="docs/benchmark.md"),
+    "learned-recall": TableSpec("bench-learned", 0, file="docs/benchmark.md"),
+    "learned-claims": TableSpec("bench-learned", 1, file="docs/benchmark.md"),
 }
 
 

@@ -17,9 +17,11 @@ from typing import Any
 from semloc.association import DESCRIBERS
 from semloc.baselines.base import BaselineConfig, ObjectBaseline, Relocalizer
 from semloc.baselines.clipper import ClipperBaseline
+from semloc.baselines.fcgf import FcgfDenseBaseline
 from semloc.baselines.fpfh import FpfhRansacBaseline
 from semloc.baselines.randomwalk import RandomWalkBaseline
 from semloc.baselines.segmatch import SegMatchBaseline
+from semloc.baselines.svl import SvlBaseline
 from semloc.localizer import Localizer, LocalizerConfig
 from semloc.maps import ObjectMap
 
@@ -57,6 +59,8 @@ METHODS: dict[str, Method] = {
         Method("random-walk", _baseline(RandomWalkBaseline), "C1"),
         Method("segmatch", _baseline(SegMatchBaseline), "C2"),
         Method("fpfh-ransac", _baseline(FpfhRansacBaseline), "C3"),
+        Method("svl", _baseline(SvlBaseline), "C8"),
+        Method("fcgf-dense", _baseline(FcgfDenseBaseline), "C9"),
         *(
             Method(f"semloc+{kind}", _semloc(descriptor=kind), f"C{4 + i}", default=False)
             for i, kind in enumerate(DESCRIBERS)
@@ -83,11 +87,13 @@ __all__ = [
     "VARIANTS",
     "BaselineConfig",
     "ClipperBaseline",
+    "FcgfDenseBaseline",
     "FpfhRansacBaseline",
     "Method",
     "ObjectBaseline",
     "RandomWalkBaseline",
     "Relocalizer",
     "SegMatchBaseline",
+    "SvlBaseline",
     "make_method",
 ]
