@@ -18,7 +18,7 @@ def walk():
                              resolution=(96, 72), noise=DetectionNoise.perfect())  # fmt: skip
 
 
-@pytest.mark.parametrize("name", ["svl"])
+@pytest.mark.parametrize("name", ["svl", "fcgf-dense"])
 def test_learned_baseline_localizes_a_clean_walk(walk, name):
     gmap = walk.global_maps["reconstruction"]
     method = make_method(name, gmap, walk.local_map.up)

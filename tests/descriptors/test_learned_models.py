@@ -87,7 +87,7 @@ def test_svl_numpy_encoder_equals_torch():
 
 def test_fcgf_numpy_features_equal_the_dense_torch_network():
     torch = pytest.importorskip("torch")
-    from semloc.eval.descriptors.train_fcgf import build_model, load_into
+    from semloc.eval.descriptors.train_fcgf import build_model, grid_inputs, load_into
 
     net = build_model()
     load_into(net, fcgf.load_weights())
@@ -95,7 +95,7 @@ def test_fcgf_numpy_features_equal_the_dense_torch_network():
     grid[2:-2, 2:-2, 2:-2] = np.random.default_rng(3).random((14, 16, 12)) > 0.9
     cells = np.argwhere(grid > 0)
     with torch.no_grad():
-        dense = net(torch.from_numpy(grid)[None, None])[0].numpy()
+        dense = net(torch.from_numpy(grid_inputs(grid[None])))[0].numpy()
     expected = dense[:, cells[:, 0], cells[:, 1], cells[:, 2]].T
     np.testing.assert_allclose(fcgf.cell_features(cells), expected, atol=1e-5)
 

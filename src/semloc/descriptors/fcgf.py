@@ -6,10 +6,13 @@ network (MinkowskiEngine, which needs CUDA).  This is the same idea with ordinar
 convolutions: the cloud becomes an occupancy grid of `VOXEL` = 0.1 m cells, and every layer is
 a 3^3 convolution whose output is kept in a band around the surfaces (the cells within
 `SPREAD` = 2 cells of an occupied one; zero elsewhere), so that context spreads along and
-between nearby surfaces while empty space stays empty; dilations 1, 2, 4, 1.  The features of
+between nearby surfaces while empty space stays empty; dilations 1, 2, 4, 1.  Besides
+occupancy, each occupied cell's input holds its height above the lowest occupied cell (the
+floor, in a room's map): gravity is known, as for every method here, and a seat and a table
+top of the same shape are not the same place.  The features of
 the occupied cells are unit vectors of 32 dimensions:
 
-    conv1  1 -> 16, dilation 1, ReLU
+    conv1  2 -> 16, dilation 1, ReLU        (inputs: 1, height above the lowest cell / 2.4 m)
     conv2 16 -> 32, dilation 2, ReLU
     conv3 32 -> 32, dilation 4, ReLU
     conv4 32 -> 32, dilation 1, L2 normalisation
@@ -33,10 +36,11 @@ from semloc.descriptors.layers import read_weights
 
 VOXEL = 0.1
 SPREAD = 2  # the layers run at cells within 2 cells of an occupied one
+HEIGHT = 2.4  # the height input is metres above the lowest occupied cell / HEIGHT
 FEATURE = 32
 WEIGHTS_FILE = Path(__file__).with_name("fcgf_weights.npz")
 LAYERS = {  # name: (in, out, dilation)
-    "conv1": (1, 16, 1),
+    "conv1": (2, 16, 1),
     "conv2": (16, 32, 2),
     "conv3": (32, 32, 4),
     "conv4": (32, FEATURE, 1),
@@ -92,15 +96,22 @@ def _neighbours(cells: np.ndarray, dilation: int) -> np.ndarray:
     return index[at[..., 0], at[..., 1], at[..., 2]]
 
 
+def cell_inputs(cells: np.ndarray) -> np.ndarray:
+    """The input channels (M, 2) of occupied cells: 1, and the height above the lowest one."""
+    height = (cells[:, 2] - cells[:, 2].min()) * (VOXEL / HEIGHT)
+    return np.stack([np.ones(len(cells)), height], axis=1).astype(np.float32)
+
+
 def cell_features(cells: np.ndarray, weights: dict[str, np.ndarray] | None = None) -> np.ndarray:
     """Unit features (M, 32) float32 of distinct occupied cells (M, 3) (the dense network's
     output there)."""
     weights = weights if weights is not None else load_weights()
     if len(cells) == 0:
         return np.zeros((0, FEATURE), np.float32)
-    active = active_cells(np.asarray(cells, dtype=np.int64))
-    x = np.zeros((len(active), 1), dtype=np.float32)
-    x[: len(cells)] = 1.0
+    cells = np.asarray(cells, dtype=np.int64)
+    active = active_cells(cells)
+    x = np.zeros((len(active), 2), dtype=np.float32)
+    x[: len(cells)] = cell_inputs(cells)
     for i, (name, (in_c, out_c, dilation)) in enumerate(LAYERS.items()):
         rows = _neighbours(active, dilation)
         padded = np.vstack([x, np.zeros((1, in_c), np.float32)])

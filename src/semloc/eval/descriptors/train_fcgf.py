@@ -25,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from semloc.descriptors.fcgf import LAYERS, SPREAD, VOXEL
+from semloc.descriptors.fcgf import LAYERS, SPREAD, VOXEL, cell_inputs
 from semloc.eval.descriptors.train import TORCH_HINT
 from semloc.eval.descriptors.worlds import TrainingMap, local_view, training_maps
 
@@ -49,7 +49,7 @@ class FcgfTrainConfig:
 
 
 def build_model():
-    """The dense torch network; `forward(occupancy)` gives (B, 32, D, H, W) unit features at
+    """The dense torch network; `forward(grid_inputs(...))` gives (B, 32, D, H, W) unit features at
     occupied cells, zeros elsewhere (the layers run in the band of cells within `SPREAD` of
     an occupied one)."""
     import torch
@@ -62,9 +62,9 @@ def build_model():
                 conv = nn.Conv3d(in_c, out_c, 3, padding=dilation, dilation=dilation)
                 setattr(self, name, conv)
 
-        def forward(self, occupancy):
+        def forward(self, x):
+            occupancy = x[:, :1]
             band = torch.nn.functional.max_pool3d(occupancy, 2 * SPREAD + 1, 1, SPREAD)
-            x = occupancy
             for i, name in enumerate(LAYERS):
                 x = getattr(self, name)(x) * band
                 if i < len(LAYERS) - 1:
@@ -72,6 +72,18 @@ def build_model():
             return torch.nn.functional.normalize(x * occupancy, dim=1)
 
     return DenseFcgf()
+
+
+def grid_inputs(grids: np.ndarray) -> np.ndarray:
+    """The network's input (B, 2, D, H, W) of occupancy grids (B, D, H, W): occupancy, and
+    at occupied cells the height above the grid's lowest occupied cell (`fcgf.cell_inputs`)."""
+    grids = np.asarray(grids, dtype=np.float32)
+    out = np.zeros((len(grids), 2, *grids.shape[1:]), dtype=np.float32)
+    for i, grid in enumerate(grids):
+        cells = np.argwhere(grid > 0)
+        if len(cells):
+            out[i, :, cells[:, 0], cells[:, 1], cells[:, 2]] = cell_inputs(cells)
+    return out
 
 
 def state_to_numpy(net) -> dict[str, np.ndarray]:
@@ -192,7 +204,7 @@ def train(
         totals = np.zeros(2)
         for _ in range(config.batches_per_epoch):
             samples = [sampler.one() for _ in range(config.pairs)]
-            grids = np.stack([c.grid for s in samples for c in s[:2]])[:, None]
+            grids = grid_inputs(np.stack([c.grid for s in samples for c in s[:2]]))
             features = net(torch.from_numpy(grids))
             loss = torch.zeros(())
             distance = 0.0
