@@ -5,7 +5,7 @@ Each table of README.md and of the docs pages sits between `<!-- table: NAME -->
 it feeds several tables), takes the table from the benchmark's markdown output (some rows and
 columns of it, or a table built from several of its tables: the README's headline) and writes
 it back between the markers with the command that reproduces it, so the pages are current
-after every change without hand-editing.  Everything: about 25 minutes on 2 cores.
+after every change without hand-editing.  Everything: about 32 minutes on 2 cores.
 
     python benchmarks/readme_tables.py [--only real-layouts trust ...] [--dry-run]
 
