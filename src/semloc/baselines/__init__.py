@@ -21,10 +21,12 @@ from typing import Any
 from semloc.association import DESCRIBERS
 from semloc.baselines.base import BaselineConfig, ImageRelocalizer, ObjectBaseline, Relocalizer
 from semloc.baselines.clipper import ClipperBaseline
+from semloc.baselines.fcgf import FcgfDenseBaseline
 from semloc.baselines.fpfh import FpfhRansacBaseline
 from semloc.baselines.randomwalk import RandomWalkBaseline
 from semloc.baselines.segmatch import SegMatchBaseline
 from semloc.baselines.sift import SiftBaseline
+from semloc.baselines.svl import SvlBaseline
 from semloc.frontend.frames import KeyframeMap
 from semloc.localizer import Localizer, LocalizerConfig
 from semloc.maps import ObjectMap
@@ -73,6 +75,8 @@ METHODS: dict[str, Method] = {
         Method("random-walk", _baseline(RandomWalkBaseline), "C1"),
         Method("segmatch", _baseline(SegMatchBaseline), "C2"),
         Method("fpfh-ransac", _baseline(FpfhRansacBaseline), "C3"),
+        Method("svl", _baseline(SvlBaseline), "C6"),
+        Method("fcgf-dense", _baseline(FcgfDenseBaseline), "C9"),
         Method("sift", _image_baseline(SiftBaseline), "C8", images=True),
         *(
             Method(f"semloc+{kind}", _semloc(descriptor=kind), f"C{4 + i}", default=False)
@@ -118,6 +122,7 @@ __all__ = [
     "VARIANTS",
     "BaselineConfig",
     "ClipperBaseline",
+    "FcgfDenseBaseline",
     "FpfhRansacBaseline",
     "ImageRelocalizer",
     "Method",
@@ -126,5 +131,6 @@ __all__ = [
     "Relocalizer",
     "SegMatchBaseline",
     "SiftBaseline",
+    "SvlBaseline",
     "make_method",
 ]

@@ -56,6 +56,16 @@ class FpfhConfig(BaselineConfig):
     fitness_radius: float = Field(0.1, gt=0, description="Inlier distance (m) of the ranking.")
     seed: int = Field(0, description="Seed of the vocabulary and RANSAC.")
 
+    def features(self, pcd) -> np.ndarray:
+        """The point features (N, 33) of a downsampled Open3D cloud with normals: FPFH (a
+        subclass with other features keeps the rest of the pipeline)."""
+        import open3d as o3d
+
+        feature = o3d.pipelines.registration.compute_fpfh_feature(
+            pcd, o3d.geometry.KDTreeSearchParamHybrid(self.feature_radius, 100)
+        )
+        return np.asarray(feature.data).T.copy()
+
 
 def _cloud(points: np.ndarray, cfg: FpfhConfig):
     import open3d as o3d
@@ -63,10 +73,7 @@ def _cloud(points: np.ndarray, cfg: FpfhConfig):
     pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.asarray(points, dtype=float)))
     pcd = pcd.voxel_down_sample(cfg.voxel)
     pcd.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(cfg.normal_radius, 30))
-    feature = o3d.pipelines.registration.compute_fpfh_feature(
-        pcd, o3d.geometry.KDTreeSearchParamHybrid(cfg.feature_radius, 100)
-    )
-    return pcd, np.asarray(feature.data).T.copy()
+    return pcd, cfg.features(pcd)
 
 
 _LOCAL_CACHE: OrderedDict[str, tuple] = OrderedDict()
@@ -77,7 +84,7 @@ def _local_cloud(points: np.ndarray, cfg: FpfhConfig):
     """`_cloud(points, cfg)`, remembered for the last few local clouds of the process: the
     same local map is registered against every map kind (features are deterministic, and
     registration only reads the cloud)."""
-    digest = hashlib.sha1(f"{cfg.voxel}/{cfg.normal_radius}/{cfg.feature_radius}".encode())
+    digest = hashlib.sha1(f"{type(cfg).__name__}/{cfg.model_dump_json()}".encode())
     points = np.ascontiguousarray(points, dtype=float)
     digest.update(str(points.shape).encode())
     digest.update(points.tobytes())
@@ -167,7 +174,7 @@ def _normalise(hist: np.ndarray, idf: np.ndarray) -> np.ndarray:
 
 
 def _fingerprint(global_map, cfg: FpfhConfig) -> str:
-    digest = hashlib.sha1(cfg.model_dump_json().encode())
+    digest = hashlib.sha1(f"{type(cfg).__name__}/{cfg.model_dump_json()}".encode())
     digest.update(np.ascontiguousarray(global_map.positions).tobytes())
     for obj in global_map:
         if obj.points is not None:

@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from semloc.descriptors.frame import canonical
+from semloc.descriptors.layers import conv3d, maxpool3d, read_weights
 
 GRID = 32
 VOXEL = 0.07
@@ -65,37 +66,7 @@ def _shipped() -> dict[str, np.ndarray]:
 
 
 def _read(path: Path) -> dict[str, np.ndarray]:
-    try:
-        with np.load(path, allow_pickle=False) as data:
-            weights = {k: np.asarray(data[k], dtype=np.float32) for k in data.files}
-    except FileNotFoundError:
-        raise FileNotFoundError(
-            f"{path}: VoxNet weights not found (run `semloc train-descriptor`)"
-        ) from None
-    missing = [k for k in PARAMETERS if k not in weights]
-    if missing:
-        raise ValueError(f"{path}: not VoxNet weights (missing {', '.join(missing)})")
-    return weights
-
-
-def _conv3d(x: np.ndarray, weight: np.ndarray, bias: np.ndarray, stride: int, pad: int):
-    """3D convolution (cross-correlation, like torch) of x (N, C, D, H, W)."""
-    out_c, in_c, k = weight.shape[0], weight.shape[1], weight.shape[2]
-    x = np.pad(x, ((0, 0), (0, 0), (pad, pad), (pad, pad), (pad, pad)))
-    windows = np.lib.stride_tricks.sliding_window_view(x, (k, k, k), axis=(2, 3, 4))
-    windows = windows[:, :, ::stride, ::stride, ::stride]
-    n, _, d, h, w = windows.shape[:5]
-    cols = windows.transpose(0, 2, 3, 4, 1, 5, 6, 7).reshape(n * d * h * w, in_c * k**3)
-    out = cols @ weight.reshape(out_c, -1).T + bias
-    return out.reshape(n, d, h, w, out_c).transpose(0, 4, 1, 2, 3)
-
-
-def _maxpool(x: np.ndarray, size: int) -> np.ndarray:
-    if size == 1:
-        return x
-    n, c, d, h, w = x.shape
-    x = x.reshape(n, c, d // size, size, h // size, size, w // size, size)
-    return x.max(axis=(3, 5, 7))
+    return read_weights(path, PARAMETERS, "VoxNet", "semloc train-descriptor")
 
 
 def forward(grids: np.ndarray, weights: dict[str, np.ndarray] | None = None) -> np.ndarray:
@@ -108,8 +79,8 @@ def forward(grids: np.ndarray, weights: dict[str, np.ndarray] | None = None) -> 
     for start in range(0, len(grids), 16):
         x = grids[start : start + 16, None]
         for name, (_, _, _, stride, pad, pool) in LAYERS.items():
-            x = _conv3d(x, weights[f"{name}.weight"], weights[f"{name}.bias"], stride, pad)
-            x = _maxpool(np.maximum(x, 0), pool)
+            x = conv3d(x, weights[f"{name}.weight"], weights[f"{name}.bias"], stride, pad)
+            x = maxpool3d(np.maximum(x, 0), pool)
         x = x.reshape(len(x), -1)
         x = np.maximum(x @ weights["fc1.weight"].T + weights["fc1.bias"], 0)
         x = x @ weights["fc2.weight"].T + weights["fc2.bias"]

@@ -59,8 +59,8 @@ class BenchOutput:
 # Rough relative cost of one chain per method (seconds per attempt on the quick run): chains
 # are started longest first, so that the last ones to finish are short and the workers end
 # together instead of one long FPFH chain running alone at the end.
-_COST = {"fpfh-ransac": 10.0, "sift": 2.0, "clipper": 1.2, "random-walk": 1.2, "segmatch": 1.0,
-         "semloc": 0.6}  # fmt: skip
+_COST = {"fpfh-ransac": 10.0, "fcgf-dense": 6.0, "sift": 2.0, "svl": 2.0, "clipper": 1.2,
+         "random-walk": 1.2, "segmatch": 1.0, "semloc": 0.6}  # fmt: skip
 
 
 def _cost(method: str) -> float:
