@@ -25,7 +25,7 @@ The CLIPPER-style baseline (`semloc.baselines.clipper`, B as one local map, unch
 every case of the real samples and on the first `--clipper-cases` scored cases of each size and
 variant on the buildings (its dense consistency graph of thousands of same-label candidates
 takes minutes there), each run in a forked process bounded by `--clipper-budget` CPU seconds
-(RLIMIT_CPU) and `--clipper-memory` MB (RLIMIT_AS): its time is process CPU time on the same
+(RLIMIT_CPU) and `--clipper-memory` MB of resident growth (watched every 10 ms): its time is process CPU time on the same
 core as semloc's, its peak MB the resident peak above the process' start.  A run over the
 budget counts as at least the time it took (the median reads `> t`, the ratio `< r`); a run
 stopped by the memory bound reads `out of memory`, its peak `> bound`.  The ratio is semloc's
@@ -187,68 +187,86 @@ def warm_clipper(full: ObjectMap) -> None:
 
 def run_clipper(case: Case, bound: Bound) -> ClipperRun:
     """The baseline on `case` (B as one local map) in a forked process bounded by `bound`: CPU
-    time as semloc's (process CPU time on the same core), peak memory as the resident peak."""
+    time as semloc's (process CPU time on the same core), peak memory as the resident peak.
+    The memory bound is watched from here, on the child's resident size: a limit on its address
+    space would miss the arrays it places in the free heap inherited from this process."""
     context = multiprocessing.get_context("fork")
     receive, send = context.Pipe(duplex=False)
     child = context.Process(target=_clipper_child, args=(case, bound, send), daemon=True)
     child.start()
     send.close()
     deadline = None if bound.seconds is None else 5 * bound.seconds + 60  # wall time: contention
-    started: float | None = None
+    began = time.monotonic()
+    started: tuple[float, float] | None = None  # the child's CPU seconds and resident bytes
     answer: ClipperRun | None = None
-    while True:  # messages: the CPU time at the start, then the answer
-        if not receive.poll(deadline):
+    while answer is None:  # messages: the start, then the answer
+        if deadline is not None and time.monotonic() - began > deadline:
             break
+        if not receive.poll(_WATCH_SECONDS):
+            if started is not None and bound.mb is not None:
+                answer = _over_memory(child.pid, started, bound.mb)
+            continue
         try:
             message = receive.recv()
         except EOFError:
             break
         if isinstance(message, ClipperRun):
             answer = message
-            break
-        started = message
+        else:
+            started = message
     if answer is None:  # killed by the CPU limit (SIGXCPU), or out of wall time
         cpu = _cpu_seconds(child.pid) if child.is_alive() else None
+        spent = cpu if cpu is not None else (bound.seconds or 0.0)
+        answer = ClipperRun((spent - (started[0] if started else 0.0)) * 1e3, over="time")
         if child.is_alive():
             child.kill()
         child.join()
-        spent = cpu if cpu is not None else (bound.seconds or 0.0)
-        answer = ClipperRun((spent - (started or 0.0)) * 1e3, over="time")
         if child.exitcode not in (-signal.SIGXCPU, -signal.SIGKILL):
             answer.over = f"exit {child.exitcode}"
+    if child.is_alive():  # stopped over the memory bound
+        child.kill()
     child.join()
     receive.close()
     return answer
+
+
+_WATCH_SECONDS = 0.01  # how often the child's resident size is read
+
+
+def _over_memory(pid: int, started: tuple[float, float], mb: float) -> ClipperRun | None:
+    """A run stopped over the memory bound when the child's resident size has grown by more
+    than `mb` since its start, else None."""
+    resident = _status("VmRSS", pid)
+    if not resident - started[1] > mb * 2**20:
+        return None
+    cpu = _cpu_seconds(pid)
+    ms = ((cpu if cpu is not None else started[0]) - started[0]) * 1e3
+    peak = (max(_status("VmHWM", pid), resident) - started[1]) / 2**20
+    return ClipperRun(ms, peak_mb=peak, over="memory", bound_mb=mb)
 
 
 def _clipper_child(case: Case, bound: Bound, send) -> None:
     if bound.seconds is not None:
         limit = math.ceil(time.process_time() + bound.seconds)
         resource.setrlimit(resource.RLIMIT_CPU, (limit, limit + 5))
-    if bound.mb is not None:  # address space: what the process has mapped so far and the bound
-        size = _status("VmSize") + bound.mb * 2**20
-        resource.setrlimit(resource.RLIMIT_AS, (int(size), int(size)))
     rss = _reset_peak()
     start = time.process_time()
-    send.send(start)
-    try:
-        answer = ClipperBaseline(case.first, local_up=case.second.up).update(list(case.second))
-    except MemoryError:
-        ms = (time.process_time() - start) * 1e3
-        peak = (_status("VmHWM") - rss) / 2**20
-        send.send(ClipperRun(ms, peak_mb=peak, over="memory", bound_mb=bound.mb or float("nan")))
-        return
+    send.send((start, rss))
+    answer = ClipperBaseline(case.first, local_up=case.second.up).update(list(case.second))
     ms = (time.process_time() - start) * 1e3
     success = answer.pose is not None and is_success(answer.pose, case.truth)
     send.send(ClipperRun(ms, success, (_status("VmHWM") - rss) / 2**20))
 
 
-def _status(key: str) -> float:
-    """A size (bytes) from /proc/self/status."""
-    with open("/proc/self/status") as status:
-        for line in status:
-            if line.startswith(key + ":"):
-                return float(line.split()[1]) * 1024
+def _status(key: str, pid: int | str = "self") -> float:
+    """A size (bytes) from /proc/<pid>/status (nan if unknown)."""
+    try:
+        with open(f"/proc/{pid}/status") as status:
+            for line in status:
+                if line.startswith(key + ":"):
+                    return float(line.split()[1]) * 1024
+    except OSError:
+        pass
     return float("nan")
 
 
