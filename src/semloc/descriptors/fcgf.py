@@ -26,13 +26,12 @@ Weights ship as `fcgf_weights.npz` beside this file (`allow_pickle=False`).
 
 from __future__ import annotations
 
-from functools import cache
 from pathlib import Path
 
 import numpy as np
 from scipy import ndimage
 
-from semloc.descriptors.layers import read_weights
+from semloc.descriptors.layers import WeightFile
 
 VOXEL = 0.1
 SPREAD = 2  # the layers run at cells within 2 cells of an occupied one
@@ -46,6 +45,9 @@ LAYERS = {  # name: (in, out, dilation)
     "conv4": (32, FEATURE, 1),
 }
 PARAMETERS = [f"{name}.{p}" for name in LAYERS for p in ("weight", "bias")]
+WEIGHTS = WeightFile(
+    WEIGHTS_FILE, tuple(PARAMETERS), "FCGF-style", "semloc train-descriptor --kind fcgf-dense"
+)
 OFFSETS = np.stack(np.meshgrid(*[np.arange(-1, 2)] * 3, indexing="ij"), axis=-1).reshape(-1, 3)
 """The 27 kernel offsets in the order of torch's weight[:, :, i, j, k]."""
 _ROWS = 8192
@@ -60,17 +62,7 @@ def voxelize(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def load_weights(path: str | Path | None = None) -> dict[str, np.ndarray]:
     """The network parameters (float32) from an `.npz` file (default: the shipped weights)."""
-    path = Path(path) if path is not None else WEIGHTS_FILE
-    return _shipped() if path == WEIGHTS_FILE else _read(path)
-
-
-@cache
-def _shipped() -> dict[str, np.ndarray]:
-    return _read(WEIGHTS_FILE)
-
-
-def _read(path: Path) -> dict[str, np.ndarray]:
-    return read_weights(path, PARAMETERS, "FCGF-style", "semloc train-descriptor --kind fcgf-dense")
+    return WEIGHTS.load(path)
 
 
 def active_cells(cells: np.ndarray) -> np.ndarray:

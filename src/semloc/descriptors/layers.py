@@ -8,6 +8,8 @@ Every learned model of the package (VoxNet, SVL, FCGF-style) is trained in torch
 from __future__ import annotations
 
 from collections.abc import Iterable
+from dataclasses import dataclass
+from functools import cache
 from pathlib import Path
 
 import numpy as np
@@ -58,3 +60,27 @@ def read_weights(
     if missing:
         raise ValueError(f"{path}: not {what} weights (missing {', '.join(missing)})")
     return weights
+
+
+@dataclass(frozen=True)
+class WeightFile:
+    """A model's weights: the shipped file (read once per process), its parameter names, the
+    model's name in messages and the command that makes the file."""
+
+    shipped: Path
+    parameters: tuple[str, ...]
+    what: str
+    command: str
+
+    def load(self, path: str | Path | None = None) -> dict[str, np.ndarray]:
+        """The parameters (float32) from `path` (default: the shipped file, read once)."""
+        path = Path(path) if path is not None else self.shipped
+        return _shipped(self) if path == self.shipped else self.read(path)
+
+    def read(self, path: str | Path) -> dict[str, np.ndarray]:
+        return read_weights(path, self.parameters, self.what, self.command)
+
+
+@cache
+def _shipped(weights: WeightFile) -> dict[str, np.ndarray]:
+    return weights.read(weights.shipped)

@@ -22,13 +22,12 @@ Weights ship as `svl_weights.npz` beside this file (encoder only; `allow_pickle=
 from __future__ import annotations
 
 from collections.abc import Sequence
-from functools import cache
 from pathlib import Path
 
 import numpy as np
 from scipy.spatial import cKDTree
 
-from semloc.descriptors.layers import conv3d, read_weights
+from semloc.descriptors.layers import WeightFile, conv3d
 
 CLASSES: tuple[str, ...] = (
     "armchair", "bed", "bookshelf", "cabinet", "chair", "coffee_table", "desk", "lamp",
@@ -48,6 +47,7 @@ LAYERS = {  # name: (in, out, kernel, stride, pad)
 }
 FLAT = 64 * 5 * 5 * 3
 PARAMETERS = [f"{name}.{p}" for name in [*LAYERS, "mu"] for p in ("weight", "bias")]
+WEIGHTS = WeightFile(WEIGHTS_FILE, tuple(PARAMETERS), "SVL", "semloc train-descriptor --kind svl")
 _CHANNEL = {name: i for i, name in enumerate(CLASSES)}
 
 
@@ -121,17 +121,7 @@ def volumes(
 
 def load_weights(path: str | Path | None = None) -> dict[str, np.ndarray]:
     """The encoder's parameters (float32) from an `.npz` file (default: the shipped weights)."""
-    path = Path(path) if path is not None else WEIGHTS_FILE
-    return _shipped() if path == WEIGHTS_FILE else _read(path)
-
-
-@cache
-def _shipped() -> dict[str, np.ndarray]:
-    return _read(WEIGHTS_FILE)
-
-
-def _read(path: Path) -> dict[str, np.ndarray]:
-    return read_weights(path, PARAMETERS, "SVL", "semloc train-descriptor --kind svl")
+    return WEIGHTS.load(path)
 
 
 def encode(vols: np.ndarray, weights: dict[str, np.ndarray] | None = None) -> np.ndarray:

@@ -19,13 +19,12 @@ torch at run time.  Weights ship as `voxnet_weights.npz` beside this file (read 
 
 from __future__ import annotations
 
-from functools import cache
 from pathlib import Path
 
 import numpy as np
 
 from semloc.descriptors.frame import canonical
-from semloc.descriptors.layers import conv3d, maxpool3d, read_weights
+from semloc.descriptors.layers import WeightFile, conv3d, maxpool3d
 
 GRID = 32
 VOXEL = 0.07
@@ -38,6 +37,7 @@ LAYERS = {  # name: (in, out, kernel, stride, pad, pool)
 }
 FC = {"fc1": (32 * 4**3, 128), "fc2": (128, EMBEDDING)}
 PARAMETERS = [f"{name}.{p}" for name in [*LAYERS, *FC] for p in ("weight", "bias")]
+WEIGHTS = WeightFile(WEIGHTS_FILE, tuple(PARAMETERS), "VoxNet", "semloc train-descriptor")
 
 
 def occupancy_grid(points: np.ndarray) -> np.ndarray:
@@ -54,19 +54,7 @@ def occupancy_grid(points: np.ndarray) -> np.ndarray:
 
 def load_weights(path: str | Path | None = None) -> dict[str, np.ndarray]:
     """The network parameters (float32) from an `.npz` file (default: the shipped weights)."""
-    path = Path(path) if path is not None else WEIGHTS_FILE
-    if path == WEIGHTS_FILE:
-        return _shipped()
-    return _read(path)
-
-
-@cache
-def _shipped() -> dict[str, np.ndarray]:
-    return _read(WEIGHTS_FILE)
-
-
-def _read(path: Path) -> dict[str, np.ndarray]:
-    return read_weights(path, PARAMETERS, "VoxNet", "semloc train-descriptor")
+    return WEIGHTS.load(path)
 
 
 def forward(grids: np.ndarray, weights: dict[str, np.ndarray] | None = None) -> np.ndarray:

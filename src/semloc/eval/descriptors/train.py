@@ -30,6 +30,19 @@ from semloc.io import write_atomic
 TORCH_HINT = "training needs torch: pip install 'semloc[train]'"
 
 
+def seeded_torch(seed: int, threads: int):
+    """torch, seeded and deterministic on `threads` threads (an ImportError with the install
+    hint when it is missing): what every training command starts with."""
+    try:
+        import torch
+    except ImportError as exc:
+        raise ImportError(TORCH_HINT) from exc
+    torch.manual_seed(seed)
+    torch.set_num_threads(threads)
+    torch.use_deterministic_algorithms(True)
+    return torch
+
+
 @dataclass(frozen=True)
 class TrainConfig:
     seed: int = 0
@@ -124,15 +137,8 @@ def train(
     config: TrainConfig, log: Callable[[str], None] = print
 ) -> tuple[dict[str, np.ndarray], dict]:
     """Train; return the numpy weights and a summary (loss per epoch, time, data sizes)."""
-    try:
-        import torch
-    except ImportError as exc:
-        raise ImportError(TORCH_HINT) from exc
-
+    torch = seeded_torch(config.seed, config.threads)
     start = time.perf_counter()
-    torch.manual_seed(config.seed)
-    torch.set_num_threads(config.threads)
-    torch.use_deterministic_algorithms(True)
     grids, owner, full, insts = make_dataset(config.seed, config.views, config.full_views)
     log(f"data: {len(grids)} grids of {len(insts)} instances ({time.perf_counter() - start:.0f} s)")
     rng = np.random.default_rng([config.seed, 202])

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from semloc.descriptors.fcgf import LAYERS, SPREAD, VOXEL, cell_inputs
-from semloc.eval.descriptors.train import TORCH_HINT
+from semloc.eval.descriptors.train import seeded_torch
 from semloc.eval.descriptors.worlds import TrainingMap, local_view, training_maps
 
 CROP = 24  # cells per side of a training crop
@@ -186,15 +186,8 @@ def train(
     config: FcgfTrainConfig, log: Callable[[str], None] = print
 ) -> tuple[dict[str, np.ndarray], dict]:
     """Train; return the numpy weights and a summary (losses, time)."""
-    try:
-        import torch
-    except ImportError as exc:
-        raise ImportError(TORCH_HINT) from exc
-
+    torch = seeded_torch(config.seed, config.threads)
     start = time.perf_counter()
-    torch.manual_seed(config.seed)
-    torch.set_num_threads(config.threads)
-    torch.use_deterministic_algorithms(True)
     sampler = PairSampler(training_maps(config.worlds, log), config)
     log(f"data: {len(sampler.maps)} maps ({time.perf_counter() - start:.0f} s)")
     net = build_model()

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from semloc.descriptors.svl import CHANNELS, FLAT, LATENT, LAYERS, scene_points, volumes
-from semloc.eval.descriptors.train import TORCH_HINT
+from semloc.eval.descriptors.train import seeded_torch
 from semloc.eval.descriptors.worlds import TrainingMap, local_view, training_maps
 
 
@@ -130,15 +130,8 @@ def train(
     config: SvlTrainConfig, log: Callable[[str], None] = print
 ) -> tuple[dict[str, np.ndarray], dict]:
     """Train; return the encoder's numpy weights and a summary (losses, time)."""
-    try:
-        import torch
-    except ImportError as exc:
-        raise ImportError(TORCH_HINT) from exc
-
+    torch = seeded_torch(config.seed, config.threads)
     start = time.perf_counter()
-    torch.manual_seed(config.seed)
-    torch.set_num_threads(config.threads)
-    torch.use_deterministic_algorithms(True)
     sampler = Sampler(training_maps(config.worlds, log), config)
     log(f"data: {len(sampler.maps)} maps ({time.perf_counter() - start:.0f} s)")
     net = build_model()
