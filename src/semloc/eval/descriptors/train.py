@@ -56,6 +56,27 @@ class TrainConfig:
     threads: int = 2
 
 
+def layer_weights(net, layers) -> dict[str, np.ndarray]:
+    """The weight and bias (float32 numpy) of each named layer of a torch model, as
+    `<layer>.weight` / `<layer>.bias`: the names the numpy models read."""
+    return {
+        f"{name}.{p}": getattr(getattr(net, name), p).detach().cpu().numpy().astype(np.float32)
+        for name in layers
+        for p in ("weight", "bias")
+    }
+
+
+def load_layer_weights(net, weights: dict[str, np.ndarray]) -> None:
+    """Copy `layer_weights`-named numpy arrays into a torch model (the numpy-versus-torch
+    tests)."""
+    import torch
+
+    with torch.no_grad():
+        for key, value in weights.items():
+            name, p = key.split(".")
+            getattr(getattr(net, name), p).copy_(torch.from_numpy(value))
+
+
 def make_dataset(seed: int, views: int, full_views: int, split: str = "train"):
     """Grids (M, 32, 32, 32) uint8, instance index (M,), is-full flag (M,), instance list."""
     rng = np.random.default_rng([seed, 101])

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from semloc.descriptors.fcgf import LAYERS, SPREAD, VOXEL, cell_inputs
-from semloc.eval.descriptors.train import seeded_torch
+from semloc.eval.descriptors.train import layer_weights, load_layer_weights, seeded_torch
 from semloc.eval.descriptors.worlds import TrainingMap, local_view, training_maps
 
 CROP = 24  # cells per side of a training crop
@@ -88,21 +88,10 @@ def grid_inputs(grids: np.ndarray) -> np.ndarray:
 
 def state_to_numpy(net) -> dict[str, np.ndarray]:
     """Parameters under the names `fcgf.cell_features` uses."""
-    return {
-        f"{name}.{p}": getattr(getattr(net, name), p).detach().numpy().astype(np.float32)
-        for name in LAYERS
-        for p in ("weight", "bias")
-    }
+    return layer_weights(net, LAYERS)
 
 
-def load_into(net, weights: dict[str, np.ndarray]) -> None:
-    """Copy numpy weights into a torch model (for the numpy-versus-torch test)."""
-    import torch
-
-    with torch.no_grad():
-        for key, value in weights.items():
-            name, p = key.split(".")
-            getattr(getattr(net, name), p).copy_(torch.from_numpy(value))
+load_into = load_layer_weights  # numpy weights into a torch model (the numpy-versus-torch test)
 
 
 @dataclass(frozen=True)

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from semloc.descriptors.svl import CHANNELS, FLAT, LATENT, LAYERS, scene_points, volumes
-from semloc.eval.descriptors.train import seeded_torch
+from semloc.eval.descriptors.train import layer_weights, load_layer_weights, seeded_torch
 from semloc.eval.descriptors.worlds import TrainingMap, local_view, training_maps
 
 
@@ -78,21 +78,10 @@ def build_model():
 
 def state_to_numpy(net) -> dict[str, np.ndarray]:
     """The encoder's parameters under the names `svl.encode` uses."""
-    return {
-        f"{name}.{p}": getattr(getattr(net, name), p).detach().numpy().astype(np.float32)
-        for name in [*LAYERS, "mu"]
-        for p in ("weight", "bias")
-    }
+    return layer_weights(net, [*LAYERS, "mu"])
 
 
-def load_into(net, weights: dict[str, np.ndarray]) -> None:
-    """Copy numpy encoder weights into a torch model (for the numpy-versus-torch test)."""
-    import torch
-
-    with torch.no_grad():
-        for key, value in weights.items():
-            name, p = key.split(".")
-            getattr(getattr(net, name), p).copy_(torch.from_numpy(value))
+load_into = load_layer_weights  # numpy weights into a torch model (the numpy-versus-torch test)
 
 
 class Sampler:
