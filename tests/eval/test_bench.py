@@ -236,15 +236,21 @@ def test_replays_are_shared_per_sequence_object_start_and_stop():
     assert a.calls == [(3, 40), (4, 40)] and b.calls == [(3, 40)]
 
 
-def test_night_queries_are_planned_for_every_method_beside_reconstruction():
-    from semloc.eval.protocol import BenchConfig, bench_kinds, conditions
+def test_night_queries_are_run_for_image_methods_and_copied_for_object_methods():
+    from semloc.eval.protocol import BenchConfig, bench_kinds, conditions, with_night_rows
     from semloc.eval.runner import plan
 
     config = BenchConfig(sequences=1, starts=1, ablation_starts=0, methods=["semloc", "sift"],
                          map_kinds=["cad", "reconstruction", "dynamic"])  # fmt: skip
     assert bench_kinds(config) == ["cad", "reconstruction", "night", "dynamic"]
     assert [(j.map_kind, j.method) for j in plan(config, 80) if j.map_kind == "night"] == [
-        ("night", "semloc"), ("night", "sift")]  # fmt: skip
+        ("night", "sift")]  # fmt: skip
+    rows = [{"method": "semloc", "map_kind": "reconstruction", "ms": 3.0},
+            {"method": "semloc", "map_kind": "cad", "ms": 4.0},
+            {"method": "sift", "map_kind": "reconstruction", "ms": 5.0},
+            {"method": "sift", "map_kind": "night", "ms": 6.0}]  # fmt: skip
+    assert with_night_rows(rows, "reconstruction", "night") == [
+        *rows, {"method": "semloc", "map_kind": "night", "ms": 3.0}]  # fmt: skip
     assert conditions("night") == ("reconstruction", "night")
     assert conditions("cad") == ("cad", "day")
     assert bench_kinds(config.model_copy(update={"night": False})) == config.map_kinds
@@ -258,4 +264,4 @@ def test_image_methods_are_planned_on_the_real_scans_colours_not_on_cad_maps():
     config = BenchConfig(methods=["semloc", "sift"], real_walk_count=1, real_walk_starts=1)
     kinds = {(job[-1], job[3]) for job in realwalks.plan(config)}
     assert {k for m, k in kinds if m == "sift"} == {"reconstruction", "night"}
-    assert {k for m, k in kinds if m == "semloc"} == {"reconstruction", "night", "cad"}
+    assert {k for m, k in kinds if m == "semloc"} == {"reconstruction", "cad"}  # night: copied

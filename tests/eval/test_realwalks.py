@@ -20,12 +20,16 @@ def test_plan_covers_every_scene_walk_start_kind_and_method():
     config = BenchConfig(real_walks=True, real_walk_count=2, real_walk_starts=3,
                          methods=["semloc", "clipper"])  # fmt: skip
     jobs = plan(config)
-    # scene0000_00: reconstruction + night, scene0470_00: + cad; 2 walks x 3 starts x 2 methods
-    assert len(jobs) == (2 + 3) * 2 * 3 * 2
+    # scene0000_00: reconstruction, scene0470_00: + cad; 2 walks x 3 starts x 2 methods (object
+    # methods: their night rows are copies of their reconstruction rows, not run again)
+    assert len(jobs) == (1 + 2) * 2 * 3 * 2
     assert {(s, k) for s, _, _, k, _ in jobs} == {(s, k) for s, (_, ks) in SCENES.items()
-                                                  for k in (*ks, "night")}  # fmt: skip
-    no_night = plan(config.model_copy(update={"night": False}))
-    assert len(no_night) == (1 + 2) * 2 * 3 * 2
+                                                  for k in ks}  # fmt: skip
+    with_sift = plan(config.model_copy(update={"methods": ["semloc", "sift"]}))
+    assert {(s, k) for s, _, _, k, m in with_sift if m == "sift"} == {
+        (s, k) for s in SCENES for k in ("reconstruction", "night")}  # fmt: skip
+    no_night = plan(config.model_copy(update={"night": False, "methods": ["semloc", "sift"]}))
+    assert all(k != "night" for _, _, _, k, _ in no_night)
     assert all(0 <= start < config.real_walk_keyframes - 35 for _, _, start, _, _ in jobs)
     assert len({(s, w, st) for s, w, st, _, _ in jobs}) == 2 * 2 * 3  # distinct starts per walk
     assert BenchConfig.quick().real_walks is False

@@ -18,7 +18,8 @@ Image methods (SIFT) receive every keyframe's colour image and depth instead
 Day / night: the map kind `night` is the reconstruction map (made by day) with the query
 images relit at night (`semloc.sim.illumination.NIGHT`); the `reconstruction` rows are its day
 half.  Object methods get the same objects at night as by day (the paper's premise: instance
-segmentation is robust to the illumination), so their night rows repeat their day rows.
+segmentation is robust to the illumination), so their night rows are their day rows (copied,
+not run again: `with_night_rows`).
 """
 
 from __future__ import annotations
@@ -90,6 +91,21 @@ class BenchConfig(BaseModel):
         base = dict(sequences=2, keyframes=60, starts=3, gammas=[0.5, 0.8, 0.95],
                     ablation_starts=2, real_walk_count=1, real_walk_starts=4)  # fmt: skip
         return cls(**{**base, **overrides})
+
+
+def run_at_night(method: str) -> bool:
+    """Whether the night queries are run for `method`: image methods only.  An object method
+    gets the same objects at night as by day, so its night rows are its day rows
+    (`with_night_rows`), not the same work done twice."""
+    found = METHODS.get(method)
+    return found is not None and found.images
+
+
+def with_night_rows(rows: list[dict], day: str, night: str) -> list[dict]:
+    """`rows` and a copy, as map kind `night`, of every object method's row of map kind `day`."""
+    copies = [{**r, "map_kind": night} for r in rows
+              if r["map_kind"] == day and not run_at_night(r["method"])]  # fmt: skip
+    return rows + copies
 
 
 def bench_kinds(config: BenchConfig) -> list[str]:

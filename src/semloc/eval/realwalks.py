@@ -33,8 +33,10 @@ from semloc.eval.protocol import (
     Attempt,
     BenchConfig,
     conditions,
+    run_at_night,
     run_attempts,
     start_keyframes,
+    with_night_rows,
 )
 from semloc.eval.recall import HYPOTHESIS_COLUMNS, RESULT_COLUMNS, format_rows
 from semloc.eval.report import comparison_figure, summary_table
@@ -102,8 +104,9 @@ def score_trace(seq, kind: str, gamma: float) -> dict:
 
 def plan(config: BenchConfig) -> list[tuple[str, int, int, str, str]]:
     """All chains: (scene, walk, start, map kind, method); with `config.night` also the night
-    queries against the reconstruction map (`night`); image methods on the reconstruction maps
-    only (the scans' vertex colours; CAD models have none)."""
+    queries of the image methods against the reconstruction map (`night`; the object methods'
+    night rows are copies of their day rows); image methods on the reconstruction maps only
+    (the scans' vertex colours; CAD models have none)."""
     jobs = []
     for scene, (_, scene_kinds) in SCENES.items():
         kinds = [*scene_kinds, NIGHT] if config.night else list(scene_kinds)
@@ -114,7 +117,8 @@ def plan(config: BenchConfig) -> list[tuple[str, int, int, str, str]]:
             ):
                 jobs += [(scene, walk, start, kind, method) for kind in kinds
                          for method in config.methods
-                         if kind != "cad" or not METHODS[method].images]  # fmt: skip
+                         if (kind != "cad" or not METHODS[method].images)
+                         and (kind != NIGHT or run_at_night(method))]  # fmt: skip
     return jobs
 
 
@@ -146,6 +150,9 @@ def run_real_walks(client, config: BenchConfig, progress: bool = True) -> dict:
             rows += chain_rows
             hyps += chain_hyps
             bar.advance(task)
+    if config.night:
+        day, night = PREFIX + "reconstruction", PREFIX + NIGHT
+        rows, hyps = (with_night_rows(r, day, night) for r in (rows, hyps))
     rows.sort(key=lambda r: _order(r, config.methods))
     hyps.sort(key=lambda r: _order(r, config.methods))
     return {"rows": rows, "hypotheses": hyps, "traces": {s: f.result() for s, f in traces.items()}}

@@ -29,15 +29,18 @@ from pathlib import Path
 from semloc.baselines import METHODS
 from semloc.eval.datasets import real_data_dir
 from semloc.eval.protocol import (
+    NIGHT,
     REAL_PAIRS,
     Attempt,
     BenchConfig,
     bench_kinds,
     conditions,
+    run_at_night,
     run_attempts,
     run_real_attempt,
     simulate,
     start_keyframes,
+    with_night_rows,
 )  # fmt: skip
 from semloc.eval.report import write_outputs
 from semloc.io.interrupts import interrupts_deferred
@@ -106,15 +109,16 @@ def _order(row: dict, methods: list[str]) -> tuple:
 
 
 def plan(config: BenchConfig, n_keyframes: int) -> list[Attempt]:
-    """All chains of attempts: the comparison (with the night queries: `bench_kinds`), then
-    the γ ablation (semloc only)."""
+    """All chains of attempts: the comparison (with the night queries of the image methods:
+    `bench_kinds`, `run_at_night`), then the γ ablation (semloc only)."""
     jobs = []
     for index in range(config.sequences):
         starts = start_keyframes(config, index, n_keyframes, config.starts)
         for start in starts:
             for kind in bench_kinds(config):
                 for method in config.methods:
-                    jobs.append(Attempt(index, start, kind, method))
+                    if kind != NIGHT or run_at_night(method):
+                        jobs.append(Attempt(index, start, kind, method))
         ablation = start_keyframes(config, index, n_keyframes, config.ablation_starts)
         kind = "reconstruction" if "reconstruction" in config.map_kinds else config.map_kinds[0]
         for start in ablation if config.ablation_starts else []:
@@ -227,6 +231,8 @@ def run_benchmark(
                 client.close()
             if cluster is not None:
                 cluster.close()
+    if NIGHT in bench_kinds(config):
+        rows, hyps = (with_night_rows(r, "reconstruction", NIGHT) for r in (rows, hyps))
     rows.sort(key=lambda r: _order(r, config.methods))
     hyps.sort(key=lambda r: _order(r, config.methods))
     ablation_rows.sort(key=lambda r: _order(r, config.methods))
