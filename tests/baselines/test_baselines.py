@@ -148,11 +148,11 @@ def test_fpfh_index_shared_through_pickle_gives_the_same_answer(easy):
     from semloc.baselines import fpfh
 
     gmap, local, _ = easy
-    fpfh._GLOBAL_CACHE.clear()
+    fpfh._GLOBAL_INDICES.clear()
     fresh = _answers(FpfhRansacBaseline(gmap, local_up=local.up).update(local))
     index = pickle.loads(pickle.dumps(fpfh.global_index(gmap)))  # as from another worker
-    fpfh._GLOBAL_CACHE.clear()
-    fpfh._LOCAL_CACHE.clear()
+    fpfh._GLOBAL_INDICES.clear()
+    fpfh._LOCAL_CLOUDS.clear()
     fpfh.share_index(gmap, index)
     method = FpfhRansacBaseline(gmap, local_up=local.up)
     assert method._hist is index.hist
@@ -196,3 +196,21 @@ def test_fpfh_matches_over_shared_sub_maps_equal_one_sub_map_at_a_time(n_local):
         assert pairs.dtype == np.int32 and np.array_equal(pairs, alone)
         if n_local <= 40:
             assert [tuple(p) for p in pairs.tolist()] == _brute_mutual(local, features[subset])
+
+
+def test_recent_keeps_the_last_values_and_knows_their_owner():
+    from semloc.baselines.recent import Recent
+
+    made = []
+    recent = Recent(2)
+
+    def make(key):
+        made.append(key)
+        return key * 10
+
+    assert [recent.get(k, lambda k=k: make(k)) for k in (1, 2, 1, 3, 2)] == [10, 20, 10, 30, 20]
+    assert made == [1, 2, 3, 2]  # 2 was dropped when 3 came (1 had been used since)
+    first, second = object(), object()
+    assert recent.get("map", lambda: "a", owner=first) == "a"
+    assert recent.get("map", lambda: "b", owner=second) == "b"  # the same key, another object
+    assert recent.get("map", lambda: "c", owner=second) == "b"

@@ -28,7 +28,6 @@ local cloud to a sub-map, the pose is then checked against the whole map.
 from __future__ import annotations
 
 import hashlib
-from collections import OrderedDict
 
 import numpy as np
 from numba import njit
@@ -37,6 +36,7 @@ from scipy.spatial import cKDTree
 
 from semloc.association import canonical_label
 from semloc.baselines.base import BaselineConfig, Group, ObjectBaseline
+from semloc.baselines.recent import Recent, map_fingerprint
 from semloc.decision import distinct
 from semloc.maps import SemanticObject
 from semloc.results import Hypothesis
@@ -76,8 +76,7 @@ def _cloud(points: np.ndarray, cfg: FpfhConfig):
     return pcd, cfg.features(pcd)
 
 
-_LOCAL_CACHE: OrderedDict[str, tuple] = OrderedDict()
-_LOCAL_CACHE_SIZE = 16
+_LOCAL_CLOUDS = Recent(16)
 
 
 def _local_cloud(points: np.ndarray, cfg: FpfhConfig):
@@ -88,12 +87,7 @@ def _local_cloud(points: np.ndarray, cfg: FpfhConfig):
     points = np.ascontiguousarray(points, dtype=float)
     digest.update(str(points.shape).encode())
     digest.update(points.tobytes())
-    key = digest.hexdigest()
-    cloud = _LOCAL_CACHE.pop(key, None) or _cloud(points, cfg)
-    _LOCAL_CACHE[key] = cloud  # most recently used last
-    while len(_LOCAL_CACHE) > _LOCAL_CACHE_SIZE:
-        _LOCAL_CACHE.popitem(last=False)
-    return cloud
+    return _LOCAL_CLOUDS.get(digest.hexdigest(), lambda: _cloud(points, cfg))
 
 
 _MATCH_ROWS = 256  # local features compared with the sub-maps' at once (a block stays in cache)
@@ -174,12 +168,7 @@ def _normalise(hist: np.ndarray, idf: np.ndarray) -> np.ndarray:
 
 
 def _fingerprint(global_map, cfg: FpfhConfig) -> str:
-    digest = hashlib.sha1(f"{type(cfg).__name__}/{cfg.model_dump_json()}".encode())
-    digest.update(np.ascontiguousarray(global_map.positions).tobytes())
-    for obj in global_map:
-        if obj.points is not None:
-            digest.update(np.ascontiguousarray(obj.points[:50]).tobytes())
-    return digest.hexdigest()
+    return map_fingerprint(global_map, type(cfg).__name__, cfg.model_dump_json())
 
 
 class _GlobalIndex:
@@ -229,27 +218,19 @@ class _GlobalIndex:
         self.pcd.normals = o3d.utility.Vector3dVector(normals)
 
 
-_GLOBAL_CACHE: dict[str, _GlobalIndex] = {}
-_CACHE_SIZE = 8
+_GLOBAL_INDICES = Recent(8)
 
 
 def global_index(global_map, config: FpfhConfig | None = None) -> _GlobalIndex:
     """What the baseline computes from `global_map` alone (cached per process; picklable)."""
     cfg = config or FpfhConfig()
-    key = _fingerprint(global_map, cfg)
-    index = _GLOBAL_CACHE.pop(key, None) or _GlobalIndex(global_map, cfg)
-    _GLOBAL_CACHE[key] = index  # most recently used last
-    while len(_GLOBAL_CACHE) > _CACHE_SIZE:
-        _GLOBAL_CACHE.pop(next(iter(_GLOBAL_CACHE)))
-    return index
+    return _GLOBAL_INDICES.get(_fingerprint(global_map, cfg), lambda: _GlobalIndex(global_map, cfg))
 
 
 def share_index(global_map, index: _GlobalIndex, config: FpfhConfig | None = None) -> None:
     """Use `index` (from `global_index(global_map, config)`, maybe in another process) for
     `global_map` in this process."""
-    _GLOBAL_CACHE[_fingerprint(global_map, config or FpfhConfig())] = index
-    while len(_GLOBAL_CACHE) > _CACHE_SIZE:
-        _GLOBAL_CACHE.pop(next(iter(_GLOBAL_CACHE)))
+    _GLOBAL_INDICES.put(_fingerprint(global_map, config or FpfhConfig()), index)
 
 
 class FpfhRansacBaseline(ObjectBaseline):

@@ -22,7 +22,6 @@ features of the query frames (by index) within one baseline.  OpenCV is imported
 from __future__ import annotations
 
 import time
-from collections import OrderedDict
 from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Any
@@ -31,6 +30,7 @@ import numpy as np
 from pydantic import Field
 
 from semloc.baselines.base import BaselineConfig
+from semloc.baselines.recent import Recent
 from semloc.decision import decide, distinct
 from semloc.frontend.frames import KeyframeMap, RGBDFrame
 from semloc.maps import MapError
@@ -91,19 +91,13 @@ class MapIndex:
         return slice(int(self.starts[keyframe]), int(self.starts[keyframe + 1]))
 
 
-_INDICES: OrderedDict[tuple, tuple[KeyframeMap, MapIndex]] = OrderedDict()
+_INDICES = Recent(4)
 
 
 def map_index(keyframe_map: KeyframeMap, config: SiftConfig) -> MapIndex:
     """The `MapIndex` of a map, cached per process (the last 4 maps)."""
     key = (id(keyframe_map), config.features, config.contrast_threshold)
-    hit = _INDICES.pop(key, None)
-    if hit is None or hit[0] is not keyframe_map:
-        hit = (keyframe_map, MapIndex(keyframe_map, config))
-    _INDICES[key] = hit
-    while len(_INDICES) > 4:
-        _INDICES.popitem(last=False)
-    return hit[1]
+    return _INDICES.get(key, lambda: MapIndex(keyframe_map, config), owner=keyframe_map)
 
 
 def nearest_votes(query: np.ndarray, index: MapIndex, chunk: int = 256) -> np.ndarray:

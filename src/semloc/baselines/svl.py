@@ -18,14 +18,12 @@ The descriptor is trained on simulated worlds (`semloc train-descriptor --kind s
 
 from __future__ import annotations
 
-import hashlib
-from collections import OrderedDict
-
 import numpy as np
 from pydantic import Field
 
 from semloc.association import canonical_label
 from semloc.baselines.base import BaselineConfig, Group, ObjectBaseline, consistency_groups
+from semloc.baselines.recent import Recent, map_fingerprint
 from semloc.descriptors import svl
 from semloc.maps import ObjectMap, SemanticObject
 
@@ -45,31 +43,14 @@ def describe(objects: list[SemanticObject], up: np.ndarray | None, yaws: int = 1
     return codes.reshape(len(objects), yaws, -1)
 
 
-_GLOBAL: OrderedDict[str, np.ndarray] = OrderedDict()
-_CACHE_SIZE = 32
-
-
-def _fingerprint(global_map: ObjectMap) -> str:
-    digest = hashlib.sha1(np.ascontiguousarray(global_map.positions).tobytes())
-    digest.update("/".join(global_map.labels).encode())
-    digest.update(np.asarray(global_map.up if global_map.up is not None else []).tobytes())
-    for obj in global_map:
-        if obj.points is not None:
-            digest.update(np.ascontiguousarray(obj.points[:50]).tobytes())
-    return digest.hexdigest()
+_GLOBAL = Recent(32)
 
 
 def global_descriptors(global_map: ObjectMap) -> np.ndarray:
     """(N, 8, 32) descriptors of a global map's objects (remembered for the last maps of the
     process, by content: a benchmark worker sees the same maps in many chains)."""
-    key = _fingerprint(global_map)
-    codes = _GLOBAL.pop(key, None)
-    if codes is None:
-        codes = describe(list(global_map), global_map.up, svl.YAWS)
-    _GLOBAL[key] = codes  # most recently used last
-    while len(_GLOBAL) > _CACHE_SIZE:
-        _GLOBAL.popitem(last=False)
-    return codes
+    key = map_fingerprint(global_map)
+    return _GLOBAL.get(key, lambda: describe(list(global_map), global_map.up, svl.YAWS))
 
 
 class SvlBaseline(ObjectBaseline):

@@ -14,12 +14,12 @@ daylight keyframes: the last 400; relighting is cheap and not cached).
 
 from __future__ import annotations
 
-from collections import OrderedDict
 from dataclasses import replace
 from typing import Any
 
 import numpy as np
 
+from semloc.baselines.recent import Recent
 from semloc.frontend.frames import KeyframeMap, RGBDFrame
 from semloc.maps import MapError
 from semloc.sim import realscan
@@ -30,19 +30,9 @@ from semloc.sim.world import World
 
 Scene = World | RealScan
 
-_MAPS: OrderedDict[tuple, tuple[World, KeyframeMap]] = OrderedDict()
-_SENSORS: OrderedDict[int, tuple[World, ColourSensor]] = OrderedDict()
-_FRAMES: OrderedDict[tuple, tuple[World, RGBDFrame]] = OrderedDict()
-
-
-def _cached(cache: OrderedDict, key: Any, world: Scene, make, size: int):
-    hit = cache.pop(key, None)
-    if hit is None or hit[0] is not world:  # an id can be reused by a new object
-        hit = (world, make())
-    cache[key] = hit
-    while len(cache) > size:
-        cache.popitem(last=False)
-    return hit[1]
+_MAPS = Recent(6)  # (world, map kind) -> its keyframes
+_SENSORS = Recent(2)  # world -> its colour sensor
+_FRAMES = Recent(400)  # (world, keyframe) -> the daylight frame
 
 
 def has_images(world: Any, kind: str) -> bool:
@@ -65,7 +55,7 @@ def keyframe_map(world: Scene, kind: str) -> KeyframeMap:
         make = lambda: realscan.map_keyframes(world)  # noqa: E731
     else:
         make = lambda: map_keyframes(world, kind)  # noqa: E731
-    return _cached(_MAPS, (id(world), kind), world, make, 6)
+    return _MAPS.get((id(world), kind), make, owner=world)
 
 
 def _sensor(world: Scene) -> ColourSensor:
@@ -73,13 +63,13 @@ def _sensor(world: Scene) -> ColourSensor:
 
 
 def _daylight(world: Scene, index: int, T_world_camera: np.ndarray) -> RGBDFrame:
-    sensor = _cached(_SENSORS, id(world), world, lambda: _sensor(world), 2)
+    sensor = _SENSORS.get(id(world), lambda: _sensor(world), owner=world)
 
     def render() -> RGBDFrame:
         rng = np.random.default_rng([_seed(world), index, 31])
         return sensor.render(T_world_camera, index, rng)
 
-    return _cached(_FRAMES, (id(world), index), world, render, 400)
+    return _FRAMES.get((id(world), index), render, owner=world)
 
 
 def query_frame(world: Scene, keyframe, light: str = "day") -> RGBDFrame:
