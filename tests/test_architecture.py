@@ -19,7 +19,7 @@ PACKAGE = Path(semloc.__file__).parent
 CORE = {"maps", "pointsets", "transforms", "association", "clustering", "pose", "neighbours",
         "registration", "closed_form", "digests", "verification", "results", "decision", "localizer",
         "confidence_model", "_clustering_fast", "_verification_fast", "_decision_fast",
-        "_alignment_fast", "alignment", "changes",
+        "_alignment_fast", "alignment", "changes", "window", "tracking",
         "semantics", "compiling"}  # fmt: skip
 APPLICATIONS = {"tools", "cli"}
 """The applications: nothing below them imports them."""

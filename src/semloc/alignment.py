@@ -76,6 +76,7 @@ from semloc.maps import ObjectMap
 from semloc.pose import z_up_rotations
 from semloc.results import Hypothesis, Result, Step
 from semloc.transforms import centre_residual
+from semloc.window import WindowConfig
 
 
 class AlignmentConfig(BaseModel):
@@ -241,7 +242,7 @@ class _Aligner:
     ) -> Result:
         """One Localizer update of the objects `view` of B against A (`places`: how many
         distinct places it reports, from four times as many screened sets)."""
-        config = self.config
+        config = self.config.model_copy(update={"window": WindowConfig.unbounded()})
         if places is not None and places > config.top_k:
             screened = max(config.screened_sets, 4 * places)
             config = config.model_copy(update={"top_k": places, "screened_sets": screened})

@@ -21,6 +21,7 @@ once per object (`pose.cached_cloud`), so all Localizers of one map share them.
 from __future__ import annotations
 
 import time
+from collections import deque
 from collections.abc import Callable, Iterable
 from typing import Any
 
@@ -47,8 +48,9 @@ from semloc.decision import (
 )
 from semloc.maps import MapError, ObjectMap, SemanticObject, unit_vector
 from semloc.pose import PoseConfig, PoseEstimate, cached_cloud, estimate_pose
-from semloc.results import Hypothesis, Result, Status, Step
+from semloc.results import Hypothesis, Result, Status, Step, Support
 from semloc.semantics import pair_weight
+from semloc.tracking import CONTRADICTED, Track, TrackingConfig, check
 from semloc.transforms import centre_residual
 from semloc.verification import (
     Evidence,
@@ -57,6 +59,7 @@ from semloc.verification import (
     Verified,
     verify_sets,
 )
+from semloc.window import LocalWindow, WindowConfig
 
 _COMPONENTS: dict[str, type[BaseModel]] = {
     "association": AssociationConfig,
@@ -65,6 +68,8 @@ _COMPONENTS: dict[str, type[BaseModel]] = {
     "verification": VerificationConfig,
     "decision": DecisionConfig,
     "changes": ChangesConfig,
+    "window": WindowConfig,
+    "tracking": TrackingConfig,
 }
 
 
@@ -80,6 +85,8 @@ class LocalizerConfig(BaseModel):
     verification: VerificationConfig = Field(default_factory=VerificationConfig)
     decision: DecisionConfig = Field(default_factory=DecisionConfig)
     changes: ChangesConfig = Field(default_factory=ChangesConfig)
+    window: WindowConfig = Field(default_factory=WindowConfig)
+    tracking: TrackingConfig = Field(default_factory=TrackingConfig)
     top_k: int = Field(10, ge=1, description="How many distinct hypotheses are reported.")
     screened_sets: int = Field(
         60, ge=1, description="Association sets screened by closed-form pose for hypotheses."
@@ -159,6 +166,17 @@ class Localizer:
         self.descriptor_gate = config.association.gate(self._describer)
         self._candidates = CandidateIndex(global_map, config.association, self.descriptor_gate)
         self._pose_unrefined = config.pose.model_copy(update={"refine": False})
+        self.window = LocalWindow(config.window)
+        self._track: Track | None = None
+        self._found: dict[str, tuple[SemanticObject, np.ndarray, np.ndarray]] = {}
+        self._reset_search()
+        self._steps: deque[Step] = deque(maxlen=config.window.steps)
+        self._n_steps = 0
+        self._timing = {"association": 0.0, "clustering": 0.0, "pose": 0.0, "total": 0.0}
+
+    def _reset_search(self) -> None:
+        """An empty search: no association sets, no local objects registered."""
+        global_map, config = self.global_map, self.config
         self._poses: dict[_PoseKey, PoseEstimate | None] = {}  # of the last answer's sets
         self._clustering = HierarchicalClustering(
             global_map.positions,
@@ -174,13 +192,65 @@ class Localizer:
         self._support = MapSupport(
             [], global_map.positions, config.verification, axis=global_map.sweep_order.axis
         )
-        self._steps: list[Step] = []
-        self._timing = {"association": 0.0, "clustering": 0.0, "pose": 0.0, "total": 0.0}
+        self._search_stale = False  # the window changed without the search seeing it
 
     @property
     def local_map(self) -> ObjectMap:
-        """The local objects received so far (latest version of each)."""
-        return ObjectMap(self._local.values(), up=self.local_up, name="local")
+        """The local objects of the window (latest version of each, oldest detection first)."""
+        return ObjectMap(self.window.objects, up=self.local_up, name="local")
+
+    def state(self) -> dict[str, Any]:
+        """What rebuilds this Localizer besides its window's objects (`local_map`), in JSON
+        types: the window's bookkeeping, the tracked place, the kept steps and timing.
+        `Localizer.restore` takes it back; the restored Localizer answers as this one would
+        while it tracks a place, and otherwise clusters its window anew at its next update
+        (the same objects in one batch instead of the updates they came in)."""
+        track = None if self._track is None else self._track.state(list(self.global_map.ids))
+        return {
+            "version": STATE_VERSION,
+            "window": self.window.state(),
+            "track": track,
+            "steps": [s.to_dict() for s in self._steps],
+            "n_steps": self._n_steps,
+            "timing": dict(self._timing),
+        }
+
+    @classmethod
+    def restore(
+        cls,
+        global_map: ObjectMap,
+        state: dict[str, Any],
+        objects: Iterable[SemanticObject],
+        config: LocalizerConfig | None = None,
+        local_up: Any = None,
+    ) -> Localizer:
+        """A Localizer from `state()` and the window's objects (the latest version of each);
+        `ValueError` when they do not fit together."""
+        if not isinstance(state, dict) or state.get("version") != STATE_VERSION:
+            raise ValueError(f"not a Localizer state of version {STATE_VERSION}")
+        localizer = cls(global_map, config, local_up=local_up)
+        try:
+            objects = localizer._described(list(objects))
+            localizer.window = LocalWindow.restored(
+                localizer.config.window, state["window"], objects
+            )
+            localizer._register(objects)
+            if state["track"] is not None:
+                localizer._track = Track.restored(
+                    state["track"], localizer.global_map.index_of, localizer.config.tracking
+                )
+            localizer._steps.extend(Step(**s) for s in state["steps"])
+            localizer._n_steps = int(state["n_steps"])
+            localizer._timing.update({k: float(v) for k, v in state["timing"].items()})
+        except (KeyError, TypeError, IndexError) as exc:
+            raise ValueError(f"the Localizer state is malformed ({exc!r})") from None
+        localizer._search_stale = True
+        return localizer
+
+    @property
+    def tracking(self) -> bool:
+        """Whether a found place is being tracked (the last answer was `localized`)."""
+        return self._track is not None
 
     @property
     def n_sets(self) -> int:
@@ -198,26 +268,44 @@ class Localizer:
         return self
 
     def update(
-        self, objects: Iterable[SemanticObject] | ObjectMap, answer: bool = True
+        self,
+        objects: Iterable[SemanticObject] | ObjectMap,
+        answer: bool = True,
+        *,
+        position: Any = None,
     ) -> Result | None:
         """Add new or re-detected local objects and return the current answer.
 
+        `position`: where the robot is now in the local (odometry) frame, a point or a 4x4
+        pose; it measures the travel that bounds the window (`config.window.distance`).
         With `answer=False` only the association sets grow (no hypotheses, no pose recovery,
         no decision) and None is returned; a later update with an answer sees the same sets.
         """
         start = time.perf_counter()
         if isinstance(objects, ObjectMap) and objects.up is not None and self.local_up is None:
             self.local_up = objects.up
-        if isinstance(objects, (str, bytes)) or not isinstance(objects, Iterable):
-            raise TypeError(f"update() takes SemanticObjects, got {type(objects).__name__}")
-        objects = list(objects)
-        ids: set[str] = set()
-        for obj in objects:
-            if not isinstance(obj, SemanticObject):
-                raise MapError(f"update() takes SemanticObject items, got {type(obj).__name__}")
-            if obj.id in ids:
-                raise MapError(f"update(): object '{obj.id}' occurs more than once")
-            ids.add(obj.id)
+        objects = self._described(_checked_objects(objects))
+        self.window.advance(_robot_position(position))
+        self.window.add(objects)
+        retired = self.window.retire()
+        for object_id in retired:
+            self._found.pop(object_id, None)
+        if retired:
+            self._search_stale = True
+        self._register(objects)
+        if self._track is not None:
+            self._track.keep_only(self._found)
+            return self._track_update(objects, answer, start)
+        return self._search_update(objects, answer, start)
+
+    def _search_update(
+        self, objects: list[SemanticObject], answer: bool, start: float, reason: str = ""
+    ) -> Result | None:
+        """Grow the association sets of the window and decide (the paper's method).  A given
+        `reason` overrides a `localized` decision (the answer that ended a tracked claim)."""
+        if self._search_stale:  # objects retired: the sets are grown again from the window
+            self._reset_search()
+            objects = self.window.objects
         detections = self._associate(objects)
         tick = time.perf_counter()
         if detections:
@@ -228,41 +316,167 @@ class Localizer:
             )
         tock = time.perf_counter()
         status: Status | None = None
-        reason = ""
         hypotheses: list[Hypothesis] = []
         if answer:
             hypotheses = self._hypotheses()
-            status, reason = decide(hypotheses, self.config.decision, self.config.rank_by)
+            status, why = decide(hypotheses, self.config.decision, self.config.rank_by)
             if not hypotheses:
-                reason = self._why_no_sets()
+                why = self._why_no_sets()
+            if reason:
+                status, why = "ambiguous", reason
+            reason = why
             scores = [h.score for h in hypotheses]
         else:
             scores = self._clustering.top_scores(self.config.top_k, min_size=2)
         end = time.perf_counter()
         self._add_timing(tick - start, tock - tick, end - tock)
+        self._add_step(scores, end - start, status)
+        if status is None:
+            return None
+        if status == "localized" and self.config.tracking.track:
+            self._start_track(hypotheses[0])
+        return self._result(status, hypotheses, reason, self._changes(hypotheses))
+
+    def _track_update(self, objects: list[SemanticObject], answer: bool, start: float):
+        """Check the tracked place on the new objects; follow it, or end the claim."""
+        track = self._track
+        assert track is not None
+        candidates = {o.id: self._found[o.id][1] for o in objects}
+        verdict = check(
+            track.pose, objects, candidates, self.global_map.positions,
+            self.config.tracking.track_tolerance,
+        )  # fmt: skip
+        against = track.contradicted(verdict)
+        if against:  # a fresh window of the contradicting updates' objects
+            self._end_track()
+            self.window.keep_only(self.window.since(self.window.updates - against + 1))
+            self._found = {i: f for i, f in self._found.items() if i in self.window}
+            return self._search_update(objects, answer, start, reason=CONTRADICTED)
+        track.accept(verdict)
+        self._search_stale = True  # the search did not see these objects
+        estimate = self._follow(track) if len(track.pairs) >= self._min_track_pairs() else None
+        if estimate is None:  # too little evidence left in the window: search it again
+            self._end_track()
+            return self._search_update(objects, answer, start)
+        end = time.perf_counter()
+        self._add_timing(0.0, 0.0, end - start)
+        hypothesis = self._tracked_hypothesis(track, estimate)
+        self._add_step([hypothesis.score], end - start, "localized" if answer else None)
+        if not answer:
+            return None
+        return self._result("localized", [hypothesis], "", self._changes([hypothesis]))
+
+    def _min_track_pairs(self) -> int:
+        return max(self.config.tracking.track_min_pairs, self.config.decision.min_pairs)
+
+    def _follow(self, track: Track) -> PoseEstimate | None:
+        """The tracked pose refitted to its newest supporting pairs (None: it no longer fits)."""
+        pairs = track.newest(self.config.tracking.track_pairs)
+        locals_ = [self._found[l][0] for _, l in pairs]
+        globals_ = [self.global_map[g] for g, _ in pairs]
+        l_xyz = np.array([o.position for o in locals_])
+        g_xyz = np.array([o.position for o in globals_])
+        cfg = self.config.pose
+        estimate = estimate_pose(
+            l_xyz, g_xyz, [cached_cloud(o, cfg) for o in locals_],
+            [cached_cloud(o, cfg) for o in globals_], self.local_up, self.global_map.up, cfg,
+            init=track.pose,
+        )  # fmt: skip
+        if estimate is None:
+            return None
+        if centre_residual(estimate.T, l_xyz, g_xyz) > self.config.tracking.track_tolerance:
+            return None
+        track.pose = estimate.T
+        return estimate
+
+    def _tracked_hypothesis(self, track: Track, estimate: PoseEstimate) -> Hypothesis:
+        pairs = track.newest(self.config.tracking.track_pairs)
+        l_xyz = np.array([self._found[l][0].position for _, l in pairs])
+        g_xyz = self.global_map.positions[[g for g, _ in pairs]]
+        return Hypothesis(
+            rank=1,
+            score=track.score,
+            pairs=[(str(self.global_map.ids[g]), l) for g, l in pairs],
+            pose=estimate.T,
+            fitness=estimate.fitness,
+            rmse=estimate.rmse,
+            residual=centre_residual(estimate.T, l_xyz, g_xyz),
+            method=f"tracked/{estimate.method}",
+            confidence=track.confidence,
+        )
+
+    def _start_track(self, best: Hypothesis) -> None:
+        """Track the place found; the search's sets are let go (grown again from the window
+        if the claim ends)."""
+        assert best.pose is not None
+        pairs = [(self.global_map.index_of(g), l) for g, l in best.pairs]
+        self._track = Track(best.pose, pairs, best.confidence, best.score, self.config.tracking)
+        self._reset_search()
+        self._search_stale = True
+
+    def _end_track(self) -> None:
+        self._track = None
+        self._search_stale = True
+
+    def _result(self, status: Status, hypotheses: list[Hypothesis], reason: str, explain) -> Result:
+        result = Result.of(status, hypotheses, self._steps, self._timing, reason, explain)
+        result.support = self._support_of(hypotheses[0] if hypotheses else None)
+        return result
+
+    def _support_of(self, best: Hypothesis | None) -> Support | None:
+        """How recent the evidence of the best hypothesis is (its local objects' detections)."""
+        if best is None or best.pose is None:
+            return None
+        ids = [l for _, l in best.pairs if l in self.window]
+        if not ids:
+            return None
+        arrivals = [self.window.arrival(l) for l in ids]
+        seen = [self._found[l][0].seen for l in ids]
+        window = self.window
+        return Support(
+            pairs=len(ids),
+            seen=(min(seen), max(seen)),
+            updates_ago=window.updates - min(a.update for a in arrivals),
+            metres=window.travel - min(a.travel for a in arrivals),
+            tracked=self._track is not None,
+        )
+
+    def _add_step(self, scores: list[float], seconds: float, status: Status | None) -> None:
         self._steps.append(
             Step(
-                step=len(self._steps),
-                n_local=len(self._local),
+                step=self._n_steps,
+                n_local=len(self.window),
                 n_sets=self._clustering.n_sets,
                 top_scores=sorted(scores, reverse=True),
-                ms=(end - start) * 1e3,
+                ms=seconds * 1e3,
                 status=status,
             )
         )
-        if status is None:
-            return None
-        return Result.of(
-            status, hypotheses, self._steps, self._timing, reason, self._changes(hypotheses)
-        )
+        self._n_steps += 1
+
+    def _described(self, objects: list[SemanticObject]) -> list[SemanticObject]:
+        return objects if self._describer is None else list(self._describer.describe(objects))
+
+    def _register(self, objects: list[SemanticObject]) -> None:
+        """The candidates of each new object version (kept while it is in the window)."""
+        for obj in objects:
+            found, similarity = self._candidates.weighted(obj)
+            self._found[obj.id] = (obj, found, similarity)
 
     def _changes(self, hypotheses: list[Hypothesis]) -> Callable[[], Changes] | None:
         """What the best hypothesis says changed (`semloc.changes`), computed when first read:
-        the local objects and their candidates are taken now (later updates replace them)."""
+        the window's objects and their candidates are taken now (later updates replace them).
+        A tracked place is judged on the objects detected since its oldest pair used, as the
+        older ones drifted with the odometry."""
         if not hypotheses or hypotheses[0].pose is None:
             return None
-        candidates = {oid: self._candidates_of[i] for oid, i in self._local_index.items()}
-        local, best, config = list(self._local.values()), hypotheses[0], self.config.changes
+        local = self.window.objects
+        best, config = hypotheses[0], self.config.changes
+        if self._track is not None:
+            used = {l for _, l in best.pairs}
+            oldest = min(self.window.arrival(l).update for l in used)
+            local = [o for o in local if self.window.arrival(o.id).update >= oldest]
+        candidates = {o.id: self._found[o.id][1] for o in local}
         return lambda: explain(self.global_map, local, best.pose, best.pairs, candidates, config)
 
     def _why_no_sets(self) -> str:
@@ -288,10 +502,8 @@ class Localizer:
             self._timing[key] += seconds * 1e3
 
     def _associate(self, objects: list[SemanticObject]) -> dict[int, np.ndarray]:
-        """Register objects; return candidate global indices per local index."""
+        """Register objects with the search; return candidate global indices per local index."""
         detections: dict[int, np.ndarray] = {}
-        if self._describer is not None:
-            objects = self._describer.describe(objects)
         for obj in objects:
             index = self._local_index.setdefault(obj.id, len(self._local_index))
             if obj.id in self._local:  # re-detected: poses that used the old version are stale
@@ -299,7 +511,7 @@ class Localizer:
                     k: v for k, v in self._poses.items() if all(l != index for _, l in k[1])
                 }
             self._local[obj.id] = obj
-            detections[index], self._similarity_of[index] = self._candidates.weighted(obj)
+            _, detections[index], self._similarity_of[index] = self._found[obj.id]
             self._candidates_of[index] = detections[index]
             self._support.assign(index, detections[index])
         return detections
@@ -385,7 +597,7 @@ class Localizer:
 
     def label_report(self) -> dict[str, LabelResolution]:
         """How each label of the local objects so far was read against the map's labels."""
-        return label_report(self._candidates, self._local.values())
+        return label_report(self._candidates, self.window.objects)
 
     def _recover(
         self, pairs: list[tuple[int, int]], refine: bool, previous: dict, matched: tuple
@@ -416,6 +628,33 @@ class Localizer:
 _PoseKey = tuple[bool, frozenset[tuple[int, int]]]  # (refined, pairs)
 
 
+def _checked_objects(objects: Any) -> list[SemanticObject]:
+    """The objects of an update: SemanticObjects, each id once (else MapError / TypeError)."""
+    if isinstance(objects, (str, bytes)) or not isinstance(objects, Iterable):
+        raise TypeError(f"update() takes SemanticObjects, got {type(objects).__name__}")
+    objects = list(objects)
+    ids: set[str] = set()
+    for obj in objects:
+        if not isinstance(obj, SemanticObject):
+            raise MapError(f"update() takes SemanticObject items, got {type(obj).__name__}")
+        if obj.id in ids:
+            raise MapError(f"update(): object '{obj.id}' occurs more than once")
+        ids.add(obj.id)
+    return objects
+
+
+def _robot_position(position: Any) -> np.ndarray | None:
+    """The robot's position from a point (3,) or a pose (4, 4); None stays None."""
+    if position is None:
+        return None
+    array = np.asarray(position, dtype=float)
+    if array.shape == (4, 4):
+        array = array[:3, 3]
+    if array.shape != (3,) or not np.all(np.isfinite(array)):
+        raise ValueError(f"position must be a finite point (3,) or pose (4, 4), got {array.shape}")
+    return array
+
+
 def _warm_start(pairs: frozenset, previous: dict[_PoseKey, PoseEstimate | None]):
     """The pose of the largest recovered subset of `pairs` (refined first), or None."""
     subsets = [
@@ -427,6 +666,8 @@ def _warm_start(pairs: frozenset, previous: dict[_PoseKey, PoseEstimate | None])
 
 
 EMPTY_LOCAL_MAP = "the local map has no objects"
+STATE_VERSION = 1
+"""The layout of `Localizer.state()`."""
 
 
 def localize(

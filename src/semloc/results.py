@@ -87,6 +87,41 @@ class Step:
         }
 
 
+@dataclass(frozen=True)
+class Support:
+    """How recent the evidence of an answer's pose is: its local objects' pairs, the span of
+    their `seen` keyframes, how many updates and metres of odometry ago the oldest of them was
+    last detected (metres: 0 without robot positions), and whether the place is tracked."""
+
+    pairs: int
+    seen: tuple[int, int]
+    updates_ago: int
+    metres: float
+    tracked: bool = False
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "pairs": self.pairs,
+            "seen": list(self.seen),
+            "updates_ago": self.updates_ago,
+            "metres": round(self.metres, 3),
+            "tracked": self.tracked,
+        }
+
+    @classmethod
+    def from_dict(cls, data: object) -> Support | None:
+        """The support of a result document (None when absent); `ValueError` when malformed."""
+        if data is None:
+            return None
+        try:
+            assert isinstance(data, dict)
+            seen = data["seen"]
+            return cls(int(data["pairs"]), (int(seen[0]), int(seen[1])),
+                       int(data["updates_ago"]), float(data["metres"]), bool(data["tracked"]))  # fmt: skip
+        except (AssertionError, KeyError, IndexError, TypeError, ValueError):
+            raise ValueError(f"'support' is not a support record: {_brief(data)}") from None
+
+
 @dataclass
 class Result:
     """The answer after an update: status, best pose, ranked hypotheses and per-step records.
@@ -103,6 +138,8 @@ class Result:
     reason: str = ""
     explain: Callable[[], Changes] | None = field(default=None, repr=False, compare=False)
     """Computes `changes` on first use (streaming updates whose changes nobody reads skip it)."""
+    support: Support | None = None
+    """How recent the evidence for the pose is (None without a pose)."""
 
     @classmethod
     def of(
@@ -156,7 +193,7 @@ class Result:
         return cls(
             saved.status or "failed", saved.pose, hypotheses, steps,
             dict(data.get("timing_ms") or {}), str(data.get("reason") or ""),
-            explain=lambda: changes,
+            explain=lambda: changes, support=Support.from_dict(data.get("support")),
         )  # fmt: skip
 
     def to_json(self, **extra: Any) -> str:
@@ -176,6 +213,7 @@ class Result:
             "steps": [s.to_dict() for s in self.steps],
             "timing_ms": {k: round(v, 3) for k, v in self.timing_ms.items()},
             "changes": self.changes.to_dict(),
+            "support": None if self.support is None else self.support.to_dict(),
         }
 
 

@@ -145,10 +145,10 @@ def test_descriptor_gate_removes_candidates():
                for i in range(6)]  # fmt: skip
     room = ObjectMap(objects, up=[0, 0, 1])
     local = local_view(room, ["c1", "c2", "c3"], yaw_pose(1.0, [0, 0, 0]))
-    loc = Localizer(room, LocalizerConfig(delta=0.5), local_up=local.up)
+    loc = Localizer(room, LocalizerConfig(delta=0.5, track=False), local_up=local.up)
     loc.update(list(local))
     assert loc._clustering.n_candidates == 3  # descriptors leave one candidate each
-    ungated = Localizer(room, LocalizerConfig(association={"use_descriptors": False}))
+    ungated = Localizer(room, LocalizerConfig(association={"use_descriptors": False}, track=False))
     ungated.update(list(local))
     assert ungated._clustering.n_candidates == 18
 
@@ -291,7 +291,7 @@ def test_unchanged_sets_reuse_their_pose(room_with_points, monkeypatch):
     spy = _Spy(monkeypatch)
     ids = [room_with_points[i].id for i in (2, 3, 4, 5, 6)]
     view = local_view(room_with_points, ids, yaw_pose(0.6, [1.0, -1.0, 0.0]))
-    localizer = Localizer(room_with_points, local_up=view.up)
+    localizer = Localizer(room_with_points, local_up=view.up, track=False)  # the search's cache
     first = localizer.update(list(view))
     computed = len(spy.inits)
     assert computed == len(first.hypotheses) > 0
@@ -329,7 +329,7 @@ def test_redetection_recomputes_the_sets_that_use_it(room_with_points, monkeypat
     spy = _Spy(monkeypatch)
     ids = [room_with_points[i].id for i in (2, 3, 4, 5, 6)]
     view = local_view(room_with_points, ids, yaw_pose(0.3, [0.0, 1.0, 0.0]))
-    localizer = Localizer(room_with_points, local_up=view.up)
+    localizer = Localizer(room_with_points, local_up=view.up, track=False)  # the search's cache
     first = localizer.update(list(view))
     computed = len(spy.inits)
     redetected = view.get("l0")

@@ -7,7 +7,8 @@ the points of each where the detector gives them) in one frame at one stamp.
 `StreamLocalizer.step(frame, T_odom_frame)` puts them into the odometry frame, fuses them
 into local objects with the front end (`semloc.frontend.ObjectFusion`: association by
 overlap and label) and, when local objects were added or changed, runs one incremental
-`Localizer.update` and returns its `Result`.  A detection without points is fused as points
+`Localizer.update` (with the frame's position, which measures the travel that bounds the
+Localizer's window) and returns its `Result`.  A detection without points is fused as points
 sampled on its box surface (so boxes associate by overlap; `box_surface`); when no detection of the run
 carries points (`use_points=False`) the local objects reach the Localizer as centres and boxes
 only.
@@ -123,7 +124,7 @@ class StreamLocalizer:
         if not self.use_points:
             objects = [boxed(o) for o in objects]
         self.updates += 1
-        return self.localizer.update(objects)
+        return self.localizer.update(objects, position=T_odom_frame)
 
     def local_map(self) -> ObjectMap:
         """The local objects as the Localizer has them (odometry frame)."""
