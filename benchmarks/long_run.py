@@ -197,6 +197,7 @@ def plot(path: Path, traces: dict[str, list[Trace]], kidnap: int | None) -> None
         if kidnap is not None:
             ax.axvline(kidnap, color="k", ls="--", lw=0.8)
         ax.set_yscale("symlog", linthresh=0.5)
+        ax.set_ylim(0, 25)
         ax.axhline(RIGHT_M, color="grey", lw=0.5)
         ax.set_title(f"{world}: error at the robot (m); semloc's status along the bottom")
         ax.set_xlabel("keyframe")

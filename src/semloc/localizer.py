@@ -50,7 +50,7 @@ from semloc.maps import MapError, ObjectMap, SemanticObject, unit_vector
 from semloc.pose import PoseConfig, PoseEstimate, cached_cloud, estimate_pose
 from semloc.results import Hypothesis, Result, Status, Step, Support
 from semloc.semantics import pair_weight
-from semloc.tracking import CONTRADICTED, Track, TrackingConfig, check
+from semloc.tracking import CONTRADICTED, Track, TrackingConfig, allowances, check
 from semloc.transforms import centre_residual
 from semloc.verification import (
     Evidence,
@@ -168,6 +168,7 @@ class Localizer:
         self._pose_unrefined = config.pose.model_copy(update={"refine": False})
         self.window = LocalWindow(config.window)
         self._track: Track | None = None
+        self._allowance: np.ndarray | None = None  # per map object, for tracking checks
         self._found: dict[str, tuple[SemanticObject, np.ndarray, np.ndarray]] = {}
         self._reset_search()
         self._steps: deque[Step] = deque(maxlen=config.window.steps)
@@ -333,9 +334,10 @@ class Localizer:
         self._add_step(scores, end - start, status)
         if status is None:
             return None
+        result = self._result(status, hypotheses, reason, self._changes(hypotheses))
         if status == "localized" and self.config.tracking.track:
             self._start_track(hypotheses[0])
-        return self._result(status, hypotheses, reason, self._changes(hypotheses))
+        return result
 
     def _track_update(self, objects: list[SemanticObject], answer: bool, start: float):
         """Check the tracked place on the new objects; follow it, or end the claim."""
@@ -343,9 +345,8 @@ class Localizer:
         assert track is not None
         candidates = {o.id: self._found[o.id][1] for o in objects}
         verdict = check(
-            track.pose, objects, candidates, self.global_map.positions,
-            self.config.tracking.track_tolerance,
-        )  # fmt: skip
+            track.pose, objects, candidates, self.global_map.positions, self._allowances()
+        )
         against = track.contradicted(verdict)
         if against:  # a fresh window of the contradicting updates' objects
             self._end_track()
@@ -365,6 +366,11 @@ class Localizer:
         if not answer:
             return None
         return self._result("localized", [hypothesis], "", self._changes([hypothesis]))
+
+    def _allowances(self) -> np.ndarray:
+        if self._allowance is None:
+            self._allowance = allowances(self.global_map, self.config.tracking.track_tolerance)
+        return self._allowance
 
     def _min_track_pairs(self) -> int:
         return max(self.config.tracking.track_min_pairs, self.config.decision.min_pairs)

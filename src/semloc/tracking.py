@@ -5,16 +5,17 @@ After a `localized` answer the Localizer tracks that place instead of searching 
 search's cost grows with the local objects; tracking costs a lookup per new object):
 
 * **Check.**  Each new or re-detected object with map candidates is put where the tracked pose
-  says it is; it *supports* the place when a candidate lies within `tolerance` of that point,
-  and *contradicts* it otherwise.  Objects without candidates say nothing.
+  says it is; it *supports* the place when a candidate lies within `track_tolerance` plus a
+  quarter of that candidate's diagonal (a partial view moves a large object's centre) of
+  that point, and *contradicts* it otherwise.  Objects without candidates say nothing.
 * **Follow.**  The supporting pairs are kept, newest last (one per map object and per local
   object); the pose is refitted to the newest `pairs` of them, warm-started from the tracked
   pose.  Odometry drift is slow, so the newest objects, seen near the robot, give the pose
   that is right *now* where the robot is.
 * **Contradiction.**  An update whose contradicting objects number at least `contradiction`
-  and outnumber its supporting ones, or the last `CONTRADICTION_UPDATES` updates together
-  holding more than twice as many contradicting as supporting objects (at least
-  `contradiction` + 1), end the claim at once (`ambiguous`, reason `"contradicted"`): the
+  and more than twice its supporting ones, or the last `CONTRADICTION_UPDATES` updates
+  together holding at least `contradiction` + 1 contradicting objects and more than twice as
+  many as supporting ones, end the claim at once (`ambiguous`, reason `"contradicted"`): the
   robot was carried elsewhere, its odometry jumped, or the place was a wrong one.  One moved
   chair among agreeing objects does not.
 * **Lapse.**  When fewer than `min_pairs` supporting pairs remain in the window (the robot saw
@@ -32,7 +33,7 @@ from typing import Any
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
-from semloc.maps import SemanticObject
+from semloc.maps import ObjectMap, SemanticObject
 
 CONTRADICTION_UPDATES = 3
 """How many of the latest updates are weighed together for a contradiction."""
@@ -53,7 +54,8 @@ class TrackingConfig(BaseModel):
         0.6,
         gt=0,
         description="A new object supports the tracked place when a map object it may be "
-        "lies within this distance (m) of where the pose puts it.",
+        "lies within this distance (m), plus a quarter of that object's diagonal, of where "
+        "the pose puts it.",
     )
     track_pairs: int = Field(
         12, ge=2, description="The tracked pose is refitted to this many newest supporting pairs."
@@ -65,7 +67,7 @@ class TrackingConfig(BaseModel):
         2,
         ge=1,
         description="Contradicting objects in one update that end the claim when they "
-        "outnumber the supporting ones.",
+        "are more than twice the supporting ones.",
     )
 
 
@@ -82,10 +84,10 @@ def check(
     objects: Iterable[SemanticObject],
     candidates: Mapping[str, np.ndarray],
     global_positions: np.ndarray,
-    tolerance: float,
+    allowance: np.ndarray,
 ) -> Verdict:
     """Each object with candidates, put by `pose` (T_global_local) into the global frame:
-    supported by its nearest candidate within `tolerance`, else contradicting."""
+    supported by its nearest candidate g within `allowance[g]` (metres), else contradicting."""
     supported, contradicting = [], []
     R, t = pose[:3, :3], pose[:3, 3]
     for obj in objects:
@@ -94,11 +96,25 @@ def check(
             continue
         gaps = np.linalg.norm(global_positions[found] - (R @ obj.position + t), axis=1)
         nearest = int(np.argmin(gaps))
-        if gaps[nearest] <= tolerance:
+        if gaps[nearest] <= allowance[found[nearest]]:
             supported.append((int(found[nearest]), obj.id))
         else:
             contradicting.append(obj.id)
     return Verdict(supported, contradicting)
+
+
+def allowances(global_map: ObjectMap, tolerance: float) -> np.ndarray:
+    """How far (m) from each map object a detection of it may land: `tolerance` plus a quarter
+    of the object's diagonal (its box, else its points), since a partial view moves a centre
+    towards the side seen, by up to about half the object's extent."""
+    sizes = global_map.sizes
+    diagonal = np.linalg.norm(sizes, axis=1)
+    for i in np.flatnonzero(np.isnan(diagonal)):
+        points = global_map[int(i)].points
+        diagonal[i] = (
+            0.0 if points is None or not len(points) else np.linalg.norm(np.ptp(points, axis=0))
+        )
+    return tolerance + 0.25 * diagonal
 
 
 class Track:
@@ -127,9 +143,8 @@ class Track:
         they do not."""
         self._verdicts.append(verdict)
         least = self.config.contradiction
-        if len(verdict.contradicting) >= least and len(verdict.contradicting) > len(
-            verdict.supported
-        ):
+        against = len(verdict.contradicting)
+        if against >= least and against > 2 * len(verdict.supported):
             return 1
         against = sum(len(v.contradicting) for v in self._verdicts)
         supporting = sum(len(v.supported) for v in self._verdicts)

@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 from semloc import Localizer, LocalizerConfig, ObjectMap, SemanticObject
 from semloc.sim.layouts import layout
 from semloc.sim.longwalk import Drift, LongWalk, WalkConfig
-from semloc.tracking import CONTRADICTED, Track, TrackingConfig, Verdict, check
+from semloc.tracking import CONTRADICTED, Track, TrackingConfig, Verdict, allowances, check
 from semloc.window import LocalWindow, WindowConfig
 
 
@@ -85,7 +85,7 @@ def test_check_supports_objects_that_land_on_a_same_label_candidate():
     pose[:3, 3] = [1.0, 0.0, 0.0]
     near, far = obj(1, x=-0.8), obj(2, x=2.0)
     verdict = check(pose, [near, far], {"o1": np.array([0, 1]), "o2": np.array([0])},
-                    globals_, tolerance=0.5)  # fmt: skip
+                    globals_, allowance=np.array([0.5, 0.5]))  # fmt: skip
     assert verdict.supported == [(0, "o1")] and verdict.contradicting == ["o2"]
 
 
@@ -94,7 +94,8 @@ def test_one_moved_object_does_not_end_a_claim_but_a_majority_does():
     track = Track(np.eye(4), [(0, "a"), (1, "b"), (2, "c")], 0.99, 3.0, config)
     assert track.contradicted(Verdict([(3, "d"), (4, "e")], ["f"])) == 0
     assert track.contradicted(Verdict([], ["g"])) == 0
-    assert track.contradicted(Verdict([(5, "h")], ["i", "j"])) == 1
+    assert track.contradicted(Verdict([(5, "h")], ["i", "j"])) == 0  # two mislabelled?
+    assert track.contradicted(Verdict([(5, "h")], ["i", "j", "k"])) == 1
     quiet = Track(np.eye(4), [(0, "a")], 0.99, 3.0, config)
     for k, verdict in enumerate([Verdict([], ["x"]), Verdict([], ["y"]), Verdict([], ["z"])]):
         assert quiet.contradicted(verdict) == (3 if k == 2 else 0)
@@ -194,3 +195,11 @@ def test_a_state_that_does_not_fit_its_objects_is_refused(building):
         Localizer.restore(building, localizer.state(), [], local_up=[0, 0, 1])
     with pytest.raises(ValueError, match="state"):
         Localizer.restore(building, {"version": 99}, [], local_up=[0, 0, 1])
+
+
+def test_large_objects_may_land_further_from_their_centre():
+    sofa = SemanticObject("s", "sofa", [0.0, 0.0, 0.4], size=[2.0, 1.0, 0.8])
+    cup = SemanticObject("c", "cup", [3.0, 0.0, 0.4], points=[[3.0, 0.0, 0.4], [3.1, 0.0, 0.4]])
+    bare = SemanticObject("b", "cup", [5.0, 0.0, 0.4])
+    found = allowances(ObjectMap([sofa, cup, bare]), tolerance=0.6)
+    np.testing.assert_allclose(found, [0.6 + 0.25 * np.linalg.norm([2, 1, 0.8]), 0.625, 0.6])

@@ -135,7 +135,7 @@ def localize_sequence(
         for kf in seq.keyframes:
             if not kf.objects:
                 continue
-            result = localizer.update(kf.objects)
+            result = localizer.update(kf.objects, position=kf.T_odom_camera)
             step = result.steps[-1]
             keyframes.append(kf.index)
             statuses.append(result.status)
