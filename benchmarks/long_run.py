@@ -189,17 +189,17 @@ def plot(path: Path, traces: dict[str, list[Trace]], kidnap: int | None) -> None
     fig, axes = plt.subplots(len(traces), 1, figsize=(11, 3.2 * len(traces)), squeeze=False)
     colours = {"localized": "tab:green", "ambiguous": "tab:orange", "failed": "tab:red"}
     for ax, (world, runs) in zip(axes[:, 0], traces.items()):
-        for trace in runs:
-            ax.plot(np.minimum(trace.error_m, 20), label=trace.name, lw=1)
+        for trace, colour in zip(runs, ("tab:blue", "tab:orange", "tab:grey")):
+            ax.plot(np.minimum(trace.error_m, 20), label=trace.name, lw=1, color=colour)
         semloc = runs[0]
         for k, status in enumerate(semloc.status):
-            ax.axvspan(k - 0.5, k + 0.5, ymin=0, ymax=0.03, color=colours[status], lw=0)
+            ax.axvspan(k - 0.5, k + 0.5, ymin=0.96, ymax=1.0, color=colours[status], lw=0)
         if kidnap is not None:
             ax.axvline(kidnap, color="k", ls="--", lw=0.8)
         ax.set_yscale("symlog", linthresh=0.5)
         ax.set_ylim(0, 25)
         ax.axhline(RIGHT_M, color="grey", lw=0.5)
-        ax.set_title(f"{world}: error at the robot (m); semloc's status along the bottom")
+        ax.set_title(f"{world}: error at the robot (m); semloc's status along the top")
         ax.set_xlabel("keyframe")
         ax.legend(loc="upper left")
     fig.tight_layout()

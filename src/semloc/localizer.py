@@ -291,8 +291,9 @@ class Localizer:
         retired = self.window.retire()
         for object_id in retired:
             self._found.pop(object_id, None)
-        if retired:
+        if retired:  # (an update larger than the window loses its oldest objects too)
             self._search_stale = True
+            objects = [o for o in objects if o.id in self.window]
         self._register(objects)
         if self._track is not None:
             self._track.keep_only(self._found)

@@ -203,3 +203,12 @@ def test_large_objects_may_land_further_from_their_centre():
     bare = SemanticObject("b", "cup", [5.0, 0.0, 0.4])
     found = allowances(ObjectMap([sofa, cup, bare]), tolerance=0.6)
     np.testing.assert_allclose(found, [0.6 + 0.25 * np.linalg.norm([2, 1, 0.8]), 0.625, 0.6])
+
+
+def test_an_update_larger_than_the_window_keeps_its_newest_objects(building):
+    localizer = Localizer(building, window={"objects": 8}, local_up=[0, 0, 1])
+    objects = [building[k].replace(id=f"l{k}") for k in range(20)]
+    result = localizer.update(objects)
+    assert [o.id for o in localizer.local_map] == [f"l{k}" for k in range(14, 20)]
+    assert result.status in ("localized", "ambiguous", "failed")
+    assert set(localizer._found) == {f"l{k}" for k in range(14, 20)}
