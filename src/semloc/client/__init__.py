@@ -21,7 +21,7 @@ import os
 import socket
 import threading
 import urllib.parse
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from typing import Any
 
 from semloc.io import load_map, map_from_dict, map_to_dict
@@ -158,11 +158,17 @@ class Session:
         self.client, self.session_id = client, session_id
 
     def update(
-        self, objects: Iterable[SemanticObject | dict[str, Any]], stamp: float = 0.0
+        self,
+        objects: Iterable[SemanticObject | dict[str, Any]],
+        stamp: float = 0.0,
+        position: Sequence[float] | None = None,
     ) -> dict[str, Any]:
         """The answer after these objects, with `stamp` echoed (the device adds its own motion
-        since `stamp` to the pose)."""
-        body = {"objects": _object_documents(objects), "stamp": float(stamp)}
+        since `stamp` to the pose).  `position`: the device in its own frame, [x, y, z] (it
+        measures the travel that bounds the session's window)."""
+        body: dict[str, Any] = {"objects": _object_documents(objects), "stamp": float(stamp)}
+        if position is not None:
+            body["position"] = [float(v) for v in position]
         return self.client.request("POST", f"/v1/sessions/{_quote(self.session_id)}/objects", body)
 
     def close(self) -> None:

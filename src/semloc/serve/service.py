@@ -1,10 +1,17 @@
 """What the service does, apart from HTTP: map versions, one-shot localizations, live sessions
 and change reports, over a `Store`.
 
-Any worker process can serve any request: a session's update batches are kept in the store,
-and a worker that does not hold the session's `Localizer` in memory rebuilds it by replaying
-the stored batches one update each, in order, so that its answers equal an uninterrupted
-session's.  Each session is pinned to the map version it was created on.  Parsed maps are kept
+Any worker process can serve any request.  A session keeps in the store its Localizer's state
+(`Localizer.state()`: a few kB) and the batches that hold the latest version of an object of
+its window or came after that state (older batches go), so what it keeps is bounded by the
+window, not by the session's length.  A worker that does not hold the session's `Localizer` in
+memory rebuilds it from that state and those objects (`Localizer.restore`) and then applies,
+one update each, the batches that came after the state.  The state is kept after every update
+while the session tracks a place, where it rebuilds the Localizer exactly, and while it
+searches only every `SEARCH_CHECKPOINT` updates: so a rebuilt session's answers equal an
+uninterrupted one's exactly, except after a search longer than that, whose rebuilt Localizer
+grows its association sets again from the same window objects at once (it may rank the
+candidate places differently until the search settles).  Each session is pinned to the map version it was created on.  Parsed maps are kept
 per (map, version) in a small cache (a version never changes once written).
 
 Errors are `ServiceError`s carrying the HTTP status the web layer answers with.
@@ -71,6 +78,20 @@ def _objects_map(objects: Any, up: list[float] | None, what: str) -> ObjectMap:
     return parse_map(document, what)
 
 
+def _position(value: Any) -> list[float] | None:
+    """An update's optional `position`: the device in its own frame, [x, y, z] metres."""
+    if value is None:
+        return None
+    if (
+        not isinstance(value, list)
+        or len(value) != 3
+        or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)
+        or not all(math.isfinite(v) for v in value)
+    ):
+        raise ServiceError(422, "invalid update", "'position' must be [x, y, z], finite numbers")
+    return [float(v) for v in value]
+
+
 def answer(result: Result, labels: dict, **extra: Any) -> dict[str, Any]:
     """The JSON of a result, as `semloc localize --format json` writes it, plus `extra`."""
     document = result.to_dict()
@@ -90,12 +111,16 @@ class _LiveSession:
     applied: int = 0
     lock: threading.Lock = field(default_factory=threading.Lock)
     answers: dict[int, Result] = field(default_factory=dict)
+    seq_of: dict[str, int] = field(default_factory=dict)  # object id -> batch of its version
+    saved: int = 0  # the batch after which the store has its state
 
 
 class Service:
     """The service over `store`; `config` holds the Localizer settings of every request."""
 
     MAP_CACHE = 16
+    SEARCH_CHECKPOINT = 25
+    """While a session searches, its state is kept every this many updates (see above)."""
     LIVE_SESSIONS = 4096
     EXPIRY_EVERY_S = 10.0
 
@@ -202,16 +227,17 @@ class Service:
             or not math.isfinite(stamp)
         ):
             raise ServiceError(422, "invalid update", "'stamp' must be a finite number")
+        position = _position(body.get("position"))
         objects = _objects_map(body["objects"], up, "objects")  # refused before it is stored
         seq = self.store.append_batch(
-            session_id, float(stamp), body["objects"], self.session_idle_s
+            session_id, float(stamp), body["objects"], self.session_idle_s, position
         )
         if seq is None:
             with self._lock:
                 self._live.pop(session_id, None)
             raise not_found(f"session {session_id!r}")
         live = self._live_session(session_id, map_id, version, up)
-        result = self._advance(session_id, live, seq, objects)
+        result = self._advance(session_id, live, seq, objects, position)
         document = answer(result, live.localizer.label_report(), map_version=version, stamp=stamp)
         document["session_id"], document["update"] = session_id, seq
         self.store.set_last(session_id, _summary(document))
@@ -226,37 +252,95 @@ class Service:
                 self._live.move_to_end(session_id)
                 return live
         _, global_map = self.object_map(map_id, version)
-        localizer = Localizer(global_map, self.config, local_up=up)
-        fresh = _LiveSession(localizer, map_id, version, up)
+        fresh = self._rebuilt(session_id, global_map, map_id, version, up)
         with self._lock:
             live = self._live.setdefault(session_id, fresh)
             while len(self._live) > self.LIVE_SESSIONS:
                 self._live.popitem(last=False)  # rebuilt from the store if it comes back
         return live
 
-    def _advance(self, session_id: str, live: _LiveSession, seq: int, objects: ObjectMap) -> Result:
+    def _rebuilt(
+        self, session_id: str, global_map: ObjectMap, map_id: str, version: int,
+        up: list[float] | None,
+    ) -> _LiveSession:  # fmt: skip
+        """The session from its kept state and window objects (fresh when it has none)."""
+        for _ in range(3):  # another worker may let batches go between the two reads
+            saved = self.store.session_state(session_id)
+            if saved is None:
+                return _LiveSession(Localizer(global_map, self.config, local_up=up), map_id,
+                                    version, up)  # fmt: skip
+            seq, state = saved
+            latest: dict[str, tuple[int, dict]] = {}
+            for batch in self.store.batches(session_id, 0, seq):
+                for raw in batch.objects:
+                    latest[str(raw["id"])] = (batch.seq, raw)
+            order = [str(i) for i in state["window"]["order"]]
+            if all(i in latest for i in order):
+                objects = _objects_map([latest[i][1] for i in order], up, "session state")
+                localizer = Localizer.restore(global_map, state, objects, self.config, up)
+                live = _LiveSession(localizer, map_id, version, up, applied=seq, saved=seq)
+                live.seq_of = {i: latest[i][0] for i in order}
+                return live
+        raise ServiceError(503, "session busy", "its state changed while it was read; retry")
+
+    def _advance(
+        self,
+        session_id: str,
+        live: _LiveSession,
+        seq: int,
+        objects: ObjectMap,
+        position: list[float] | None,
+    ) -> Result:
         """Apply the batches up to `seq` (whose objects are `objects`) not yet applied here, in
-        order (those of other workers read from the store); the answer after `seq`."""
+        order (those of other workers read from the store); the answer after `seq`.  The state
+        after them is kept in the store, with the batches its window needs."""
         with live.lock:
             if seq > live.applied:
                 if seq == live.applied + 1:
-                    pending = [(seq, objects)]
+                    pending = [(seq, objects, position)]
                 else:
-                    pending = [
-                        (b.seq, _objects_map(b.objects, live.up, f"batch {b.seq}"))
-                        for b in self.store.batches(session_id, live.applied, seq)
-                    ]
-                for number, batch in pending:
-                    result = live.localizer.update(list(batch))
+                    pending = self._pending(session_id, live, seq)
+                for number, batch, at in pending:
+                    result = live.localizer.update(list(batch), position=at)
                     assert result is not None
                     live.applied = number
                     live.answers[number] = result
+                    live.seq_of.update((o.id, number) for o in batch)
+                self._keep_state(session_id, live)
             result = live.answers.pop(seq, None)
             for old in [s for s in live.answers if s < seq - 64]:  # answers nobody came for
                 del live.answers[old]
         if result is None:
             raise ServiceError(409, "update superseded", f"update {seq} was answered already")
         return result
+
+    def _pending(self, session_id: str, live: _LiveSession, seq: int) -> list[tuple]:
+        """The batches after `live.applied` up to `seq`, parsed.  When another worker let
+        some of them go (its state is newer than this Localizer), the session is rebuilt
+        here from that state first."""
+        wanted = list(range(live.applied + 1, seq + 1))
+        batches = self.store.batches(session_id, live.applied, seq)
+        if [b.seq for b in batches] != wanted:
+            _, global_map = self.object_map(live.map_id, live.map_version)
+            fresh = self._rebuilt(session_id, global_map, live.map_id, live.map_version, live.up)
+            live.localizer, live.applied, live.saved = fresh.localizer, fresh.applied, fresh.saved
+            live.seq_of = fresh.seq_of
+            batches = self.store.batches(session_id, live.applied, seq)
+        return [(b.seq, _objects_map(b.objects, live.up, f"batch {b.seq}"), b.position)
+                for b in batches]  # fmt: skip
+
+    def _keep_state(self, session_id: str, live: _LiveSession) -> None:
+        """Store the Localizer's state and let go of the batches its window no longer needs:
+        after every update while the session tracks a place (a state then rebuilds it exactly),
+        and every `SEARCH_CHECKPOINT` updates while it searches (the batches since the last
+        state are replayed, which keeps a rebuild exact until then)."""
+        if not live.localizer.tracking and live.applied - live.saved < self.SEARCH_CHECKPOINT:
+            return
+        window = live.localizer.window
+        live.seq_of = {i: n for i, n in live.seq_of.items() if i in window}
+        state = live.localizer.state()
+        self.store.save_state(session_id, live.applied, state, set(live.seq_of.values()))
+        live.saved = live.applied
 
     def delete_session(self, session_id: str) -> None:
         with self._lock:
@@ -287,7 +371,8 @@ class Service:
                 self._live.pop(session_id, None)
 
     def session_objects(self, session_id: str) -> ObjectMap:
-        """Every object a session received (the latest version of each), in its frame."""
+        """The objects a session keeps (the latest version of each, the current window's among
+        them), in its frame."""
         row = self.store.session(session_id)
         if row is None:
             raise not_found(f"session {session_id!r}")

@@ -10,7 +10,8 @@ Tables:
     maps(map_id, latest)                                 the newest version of each map
     map_versions(map_id, version, created, source, document)   every version, JSON (zlib)
     sessions(session_id, map_id, map_version, up, created, touched, last)
-    session_batches(session_id, seq, stamp, objects)     every update a session received
+    session_batches(session_id, seq, stamp, objects)     the updates that rebuild its window
+    session_states(session_id, seq, state)               its Localizer's state after batch seq
     localizations(localization_id, map_id, created, local)     a one-shot localization's
                                                          local map and answer, for its change report
 
@@ -42,6 +43,8 @@ SCHEMA = (
     "touched DOUBLE PRECISION NOT NULL, last TEXT)",
     "CREATE TABLE IF NOT EXISTS session_batches (session_id TEXT NOT NULL, seq INTEGER NOT NULL, "
     "stamp DOUBLE PRECISION NOT NULL, objects {blob} NOT NULL, PRIMARY KEY (session_id, seq))",
+    "CREATE TABLE IF NOT EXISTS session_states (session_id TEXT PRIMARY KEY, "
+    "seq INTEGER NOT NULL, state {blob} NOT NULL)",
     "CREATE TABLE IF NOT EXISTS localizations (localization_id TEXT PRIMARY KEY, "
     "map_id TEXT NOT NULL, created DOUBLE PRECISION NOT NULL, local {blob} NOT NULL)",
 )
@@ -74,6 +77,7 @@ class Batch:
     seq: int
     stamp: float
     objects: list[dict[str, Any]]
+    position: list[float] | None = None  # the device in its frame, when it said
 
 
 def _pack(document: Any) -> bytes:
@@ -241,11 +245,17 @@ class Store:
         return [s for s in map(self.session, ids) if s is not None]
 
     def append_batch(
-        self, session_id: str, stamp: float, objects: list[dict], idle_seconds: float
+        self,
+        session_id: str,
+        stamp: float,
+        objects: list[dict],
+        idle_seconds: float,
+        position: list[float] | None = None,
     ) -> int | None:
         """Store the next batch of a session and touch it; its sequence number (from 1), or
         None when the session is gone or was idle for longer than `idle_seconds`."""
         now = time.time()
+        document: Any = objects if position is None else {"objects": objects, "position": position}
         with self._transaction(write=True, durable=False) as cur:
             # the row lock (PostgreSQL) serialises a session's appends
             cur.execute(
@@ -261,12 +271,12 @@ class Store:
             seq = int(cur.fetchone()[0]) + 1
             cur.execute(
                 self._sql("INSERT INTO session_batches VALUES (?, ?, ?, ?)"),
-                (session_id, seq, stamp, _pack(objects)),
+                (session_id, seq, stamp, _pack(document)),
             )
         return seq
 
     def batches(self, session_id: str, after: int = 0, upto: int | None = None) -> list[Batch]:
-        """The batches of a session with `after < seq <= upto`, in order."""
+        """The kept batches of a session with `after < seq <= upto`, in order."""
         with self._transaction() as cur:
             cur.execute(
                 self._sql(
@@ -275,7 +285,49 @@ class Store:
                 ),
                 (session_id, after, 2**62 if upto is None else upto),
             )
-            return [Batch(int(s), float(t), _unpack(o)) for s, t, o in cur.fetchall()]
+            rows = cur.fetchall()
+        batches = []
+        for seq, stamp, blob in rows:
+            document = _unpack(blob)
+            if isinstance(document, dict):
+                batches.append(
+                    Batch(int(seq), float(stamp), document["objects"], document["position"])
+                )
+            else:
+                batches.append(Batch(int(seq), float(stamp), document))
+        return batches
+
+    def save_state(self, session_id: str, seq: int, state: dict[str, Any], keep: set[int]) -> None:
+        """Keep a session's Localizer state after batch `seq` (unless a later one is kept) and
+        let go of the batches up to `seq` that it does not need (all but `keep` and `seq`)."""
+        kept = sorted({*keep, seq})
+        with self._transaction(write=True, durable=False) as cur:
+            cur.execute(
+                self._sql(
+                    "INSERT INTO session_states VALUES (?, ?, ?) ON CONFLICT (session_id) DO "
+                    "UPDATE SET seq = excluded.seq, state = excluded.state "
+                    "WHERE session_states.seq < excluded.seq"
+                ),
+                (session_id, seq, _pack(state)),
+            )
+            marks = ", ".join("?" * len(kept))
+            cur.execute(
+                self._sql(
+                    "DELETE FROM session_batches WHERE session_id = ? AND seq <= ? "
+                    f"AND seq NOT IN ({marks})"
+                ),
+                (session_id, seq, *kept),
+            )
+
+    def session_state(self, session_id: str) -> tuple[int, dict[str, Any]] | None:
+        """The latest kept Localizer state of a session and the batch it follows."""
+        with self._transaction() as cur:
+            cur.execute(
+                self._sql("SELECT seq, state FROM session_states WHERE session_id = ?"),
+                (session_id,),
+            )
+            row = cur.fetchone()
+        return None if row is None else (int(row[0]), _unpack(row[1]))
 
     def set_last(self, session_id: str, last: dict[str, Any]) -> None:
         with self._transaction(write=True, durable=False) as cur:
@@ -289,6 +341,7 @@ class Store:
             cur.execute(
                 self._sql("DELETE FROM session_batches WHERE session_id = ?"), (session_id,)
             )
+            cur.execute(self._sql("DELETE FROM session_states WHERE session_id = ?"), (session_id,))
             cur.execute(self._sql("DELETE FROM sessions WHERE session_id = ?"), (session_id,))
             return cur.rowcount > 0
 
@@ -322,6 +375,7 @@ class Store:
             gone = [r[0] for r in cur.fetchall()]
             for sid in gone:
                 cur.execute(self._sql("DELETE FROM session_batches WHERE session_id = ?"), (sid,))
+                cur.execute(self._sql("DELETE FROM session_states WHERE session_id = ?"), (sid,))
                 cur.execute(self._sql("DELETE FROM sessions WHERE session_id = ?"), (sid,))
         return gone
 
