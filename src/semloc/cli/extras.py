@@ -19,6 +19,7 @@ EXTRAS: dict[str, tuple[str, ...]] = {
     "train": ("torch",),
     "serve": ("fastapi", "uvicorn"),
     "ros": ("rosbags", "mcap"),
+    "ros2": ("cyclonedds", "rosbags"),
     "dsg": ("spark_dsg",),
 }
 """The top-level modules each extra of pyproject.toml brings."""

@@ -8,7 +8,8 @@
 - `/tf` (tf2_msgs/TFMessage): `map` -> odometry frame when localized, and the odometry frame
   -> the detections' frame at every answer;
 - `/semloc/status` (std_msgs/String): JSON `{"stamp", "status", "confidence", "reason",
-  "pose_is_answer", "n_local", "changes"}` at every answer;
+  "pose_is_answer", "n_local", "changes", "support", "hypotheses"}` at every answer (the best
+  three hypotheses: rank, confidence, pairs and the position of the local frame's origin);
 - `/semloc/map` (visualization_msgs/MarkerArray, once): the map's objects as label-coloured
   boxes with their labels;
 - `/semloc/matches` (MarkerArray, every answer): the best hypothesis's local objects placed in
@@ -40,6 +41,8 @@ OUTPUT_TOPICS = {POSE_TOPIC: msgs.POSE, TF_TOPIC: msgs.TF, STATUS_TOPIC: msgs.ST
                  MAP_TOPIC: msgs.MARKERS, MATCHES_TOPIC: msgs.MARKERS}  # fmt: skip
 """The topics `semloc bag localize` writes and their message types."""
 
+TOP_HYPOTHESES = 3
+"""How many of the best hypotheses `/semloc/status` lists."""
 STATUS_COLORS = {"localized": (0.1, 0.8, 0.2), "ambiguous": (1.0, 0.7, 0.0),
                  "failed": (0.9, 0.1, 0.1)}  # fmt: skip
 
@@ -163,4 +166,14 @@ def status(stamp: int, result: Result, n_local: int) -> dict[str, Any]:
         "pose_is_answer": result.pose_is_answer,
         "n_local": n_local,
         "changes": result.changes.to_dict(),
+        "support": None if result.support is None else result.support.to_dict(),
+        "hypotheses": [
+            {
+                "rank": h.rank,
+                "confidence": None if h.confidence is None else round(h.confidence, 6),
+                "pairs": len(h.pairs),
+                "position": None if h.pose is None else np.round(h.pose[:3, 3], 6).tolist(),
+            }
+            for h in result.hypotheses[:TOP_HYPOTHESES]
+        ],
     }

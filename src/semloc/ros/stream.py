@@ -103,9 +103,12 @@ class StreamLocalizer:
         fusion: FusionConfig | None = None,
         up: Sequence[float] | None = (0.0, 0.0, 1.0),
         use_points: bool = True,
+        localizer: Localizer | None = None,
     ) -> None:
+        """`localizer`: one to use instead of a new one (anything with `update(objects,
+        position=)`, `local_map` and `global_map`, e.g. `semloc.ros2.remote.RemoteLocalizer`)."""
         self.fusion = ObjectFusion(fusion, up=(0.0, 0.0, 1.0) if up is None else up)
-        self.localizer = Localizer(global_map, config, local_up=up)
+        self.localizer = localizer or Localizer(global_map, config, local_up=up)
         self.use_points = use_points
         self.updates = 0
 

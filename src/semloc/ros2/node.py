@@ -1,0 +1,251 @@
+"""The semloc node on a ROS 2 robot's DDS wire: detections and odometry in, answers out.
+
+`LiveNode` subscribes `vision_msgs/Detection3DArray` (`detections`) and `nav_msgs/Odometry`
+(`odom`), puts each detection message into the odometry frame, fuses and localizes it as
+`semloc bag localize` does (`semloc.ros.stream.StreamLocalizer`, with the long-run window and
+tracking of the `Localizer`), and publishes what `bag localize` writes to its MCAP file
+(`semloc.ros.answers.AnswerTopics`): `/semloc/pose`, `/tf` (`map` -> odometry frame),
+`/semloc/status` (the answer as JSON), `/semloc/markers` (the matches) and `/semloc/map`
+(the map's objects, latched).
+
+Frames, as in a bag: a message in the odometry's child (moving) frame is placed by the
+odometry at its stamp, interpolated between the odometry messages around it (the node waits
+for the first odometry message after the detection's stamp, at most `MAX_GAP_S`); a message in
+the odometry frame is used as it is; without odometry (`odom=None`) every message must be in
+one frame.
+
+QoS: subscriptions are best-effort with a deep history by default, which matches both the
+best-effort publishers of sensor drivers and reliable ones; `reliable=True` asks for reliable
+delivery (it then matches reliable publishers only).  Answers are published reliable; the map
+reliable and transient-local, so a viewer that starts later still gets it.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from semloc.localizer import LocalizerConfig
+from semloc.maps import ObjectMap
+from semloc.ros import messages as msgs
+from semloc.ros.answers import MAP_TOPIC, MATCHES_TOPIC, AnswerTopics, Frames
+from semloc.ros.bag import MAX_GAP_S, detection_from_msg
+from semloc.ros.frames import Trajectory
+from semloc.ros.replay import Answer
+from semloc.ros.stream import DetectionFrame, StreamLocalizer
+from semloc.ros2.wire import idl_type, to_wire, topic_name
+
+MARKERS_TOPIC = "/semloc/markers"
+TOPIC_RENAMES = {MATCHES_TOPIC: MARKERS_TOPIC}
+"""The bag's topic names that the node publishes under another name."""
+HISTORY = 200
+
+
+@dataclass(frozen=True)
+class NodeSettings:
+    """Topics, frames, the DDS domain and the subscriptions' reliability."""
+
+    detections: str = "/detections"
+    odom: str | None = "/odom"
+    domain: int = 0
+    map_frame: str = "map"
+    reliable: bool = False
+
+
+class Wire:
+    """One DDS participant with readers and writers of ROS 2 topics."""
+
+    def __init__(self, domain: int) -> None:
+        from cyclonedds.domain import DomainParticipant
+
+        self.participant = DomainParticipant(domain)
+        self._writers: dict[str, Any] = {}
+
+    @staticmethod
+    def qos(reliable: bool, latched: bool = False, depth: int = HISTORY) -> Any:
+        from cyclonedds.core import Policy, Qos
+        from cyclonedds.util import duration
+
+        reliability = (
+            Policy.Reliability.Reliable(duration(seconds=1))
+            if reliable
+            else Policy.Reliability.BestEffort
+        )
+        durability = Policy.Durability.TransientLocal if latched else Policy.Durability.Volatile
+        return Qos(reliability, durability, Policy.History.KeepLast(depth),
+                   Policy.DataRepresentation(use_cdrv0_representation=True))  # fmt: skip
+
+    def reader(self, topic: str, typename: str, reliable: bool) -> Any:
+        from cyclonedds.sub import DataReader
+        from cyclonedds.topic import Topic
+
+        dds_topic = Topic(self.participant, topic_name(topic), idl_type(typename))
+        return DataReader(self.participant, dds_topic, qos=self.qos(reliable))
+
+    def writer(self, topic: str, typename: str, latched: bool = False) -> Any:
+        from cyclonedds.pub import DataWriter
+        from cyclonedds.topic import Topic
+
+        if topic not in self._writers:
+            dds_topic = Topic(self.participant, topic_name(topic), idl_type(typename))
+            qos = self.qos(True, latched, depth=1 if latched else HISTORY)
+            self._writers[topic] = DataWriter(self.participant, dds_topic, qos=qos)
+        return self._writers[topic]
+
+    def publish(self, topic: str, typename: str, message: Any, latched: bool = False) -> None:
+        self.writer(topic, typename, latched).write(to_wire(message, typename))
+
+
+def samples(reader: Any) -> list[Any]:
+    """The messages a reader holds (taken), without the notices of writers that left."""
+    from cyclonedds.sub import InvalidSample
+
+    return [m for m in reader.take(N=HISTORY) if not isinstance(m, InvalidSample)]
+
+
+class WireSink:
+    """The `AnswerTopics` sink of the node: messages published instead of written to a file."""
+
+    def __init__(self, wire: Wire) -> None:
+        self.wire = wire
+        self.counts: dict[str, int] = {}
+
+    def write(self, topic: str, typename: str, stamp_ns: int, message: Any) -> None:
+        topic = TOPIC_RENAMES.get(topic, topic)
+        self.wire.publish(topic, typename, message, latched=topic == MAP_TOPIC)
+        self.counts[topic] = self.counts.get(topic, 0) + 1
+
+
+class LiveNode:
+    """Detections and odometry from the wire, answers onto it (see the module docstring)."""
+
+    def __init__(
+        self,
+        global_map: ObjectMap,
+        config: LocalizerConfig | None = None,
+        settings: NodeSettings | None = None,
+        wire: Wire | None = None,
+        localizer: Any = None,
+    ) -> None:
+        """`localizer`: what localizes instead of a new `Localizer` (e.g. a
+        `semloc.ros2.remote.RemoteLocalizer` for a `semloc serve` session)."""
+        self.settings = settings or NodeSettings()
+        self.wire = wire or Wire(self.settings.domain)
+        self.stream = StreamLocalizer(global_map, config, use_points=False, localizer=localizer)
+        self.global_map = global_map
+        self.sink = WireSink(self.wire)
+        self._topics: AnswerTopics | None = None
+        s = self.settings
+        self._detections = self.wire.reader(s.detections, msgs.DETECTIONS, s.reliable)
+        self._odom = None if s.odom is None else self.wire.reader(s.odom, msgs.ODOMETRY, s.reliable)
+        self._waiting: deque[tuple[float, DetectionFrame]] = deque()  # (received, frame)
+        self._stamps: list[int] = []
+        self._poses: list[np.ndarray] = []
+        self._odom_frames: tuple[str, str] | None = None
+        self._fixed: str | None = None
+        self.skipped: dict[str, int] = {}
+        self.answers = 0
+
+    def spin(self, until: Callable[[], bool], on_answer: Callable[[Answer], None] | None = None):
+        """Answer messages until `until()` is true (checked every millisecond or so)."""
+        while not until():
+            if not self.poll(on_answer):
+                time.sleep(0.001)
+
+    def poll(self, on_answer: Callable[[Answer], None] | None = None) -> int:
+        """Take what arrived and answer what can be placed; the number of answers."""
+        if self._odom is not None:
+            for message in samples(self._odom):
+                self._add_odometry(message)
+        for message in samples(self._detections):
+            self._waiting.append((time.monotonic(), self._frame(message)))
+        answered = 0
+        while self._waiting:
+            received, frame = self._waiting[0]
+            pose, ready = self._pose(frame, time.monotonic() - received)
+            if not ready:
+                break
+            self._waiting.popleft()
+            if pose is None:
+                continue
+            result = self.stream.step(frame, pose)
+            if result is None:
+                continue
+            answer = Answer(frame.stamp, frame.frame, self._odom_frame(frame), pose, result)
+            self._publish(answer)
+            answered += 1
+            if on_answer is not None:
+                on_answer(answer)
+        return answered
+
+    def _publish(self, answer: Answer) -> None:
+        if self._topics is None:
+            frames = Frames(self.settings.map_frame, answer.odom_frame, answer.frame)
+            self._topics = AnswerTopics(self.sink, self.global_map, frames)
+        self._topics.write(answer.stamp, answer.result, answer.T_odom_sensor,
+                           self.stream.local_map())  # fmt: skip
+        self.answers += 1
+
+    def _add_odometry(self, message: Any) -> None:
+        frames = (message.header.frame_id, message.child_frame_id)
+        if self._odom_frames is not None and frames != self._odom_frames:
+            self._skip("odometry messages in other frames than the first")
+            return
+        self._odom_frames = frames
+        try:
+            pose = msgs.matrix(message.pose.pose)
+        except ValueError:
+            self._skip("odometry messages without a valid pose")
+            return
+        self._stamps.append(msgs.stamp_ns(message.header.stamp))
+        self._poses.append(pose)
+        if len(self._stamps) > 4 * HISTORY:  # a bounded trajectory: the newest poses
+            del self._stamps[:HISTORY], self._poses[:HISTORY]
+
+    def _frame(self, message: Any) -> DetectionFrame:
+        stamp = msgs.stamp_ns(message.header.stamp)
+        frame = message.header.frame_id or next(
+            (d.header.frame_id for d in message.detections if d.header.frame_id), ""
+        )
+        detections = [found for found in map(detection_from_msg, message.detections) if found]
+        dropped = len(message.detections) - len(detections)
+        if dropped:
+            self._skip("detections without a class or a finite box", dropped)
+        return DetectionFrame(stamp, frame, detections)
+
+    def _pose(self, frame: DetectionFrame, waited_s: float) -> tuple[np.ndarray | None, bool]:
+        """(pose of the frame in the odometry frame or None to skip it, whether decided)."""
+        if self._odom is None:
+            self._fixed = self._fixed if self._fixed is not None else frame.frame
+            if frame.frame != self._fixed:
+                self._skip(f"messages not in the first frame '{self._fixed}' (no odometry)")
+                return None, True
+            return np.eye(4), True
+        if self._odom_frames is None:
+            if waited_s > MAX_GAP_S:
+                self._skip(f"detection messages without odometry within {MAX_GAP_S:g} s")
+                return None, True
+            return None, False
+        parent, child = self._odom_frames
+        if frame.frame == parent:
+            return np.eye(4), True
+        if frame.frame != child:
+            self._skip(f"messages in frame '{frame.frame}' (odometry: {parent} -> {child})")
+            return None, True
+        if self._stamps[-1] < frame.stamp and waited_s <= MAX_GAP_S:
+            return None, False  # the odometry after it has not arrived yet
+        pose = Trajectory(self._stamps, self._poses, int(MAX_GAP_S * 1e9)).at(frame.stamp)
+        if pose is None:
+            self._skip(f"detection messages without odometry within {MAX_GAP_S:g} s")
+        return pose, True
+
+    def _odom_frame(self, frame: DetectionFrame) -> str:
+        return frame.frame if self._odom_frames is None else self._odom_frames[0]
+
+    def _skip(self, why: str, count: int = 1) -> None:
+        self.skipped[why] = self.skipped.get(why, 0) + count

@@ -1,0 +1,47 @@
+"""Localizing through `semloc serve` instead of in-process: a `Localizer` stand-in for the node.
+
+`RemoteLocalizer(session)` takes the node's fused objects like `Localizer.update` and sends
+them as one update of a service session (`semloc.client.Session`, with the device's position),
+returning the service's answer as a `Result`; `local_map` holds the latest version of the
+objects it sent (at most `window` of them, newest kept), for the markers.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import OrderedDict
+from collections.abc import Iterable
+from typing import Any
+
+import numpy as np
+
+from semloc.maps import ObjectMap, SemanticObject
+from semloc.results import Result
+
+
+class RemoteLocalizer:
+    """Updates of a service session in place of a Localizer (see the module docstring)."""
+
+    def __init__(
+        self, session: Any, global_map: ObjectMap, window: int = 80, up: Any = (0.0, 0.0, 1.0)
+    ) -> None:
+        self.session, self.global_map, self.window, self.up = session, global_map, window, up
+        self._local: OrderedDict[str, SemanticObject] = OrderedDict()
+
+    def update(self, objects: Iterable[SemanticObject], *, position: Any = None) -> Result:
+        objects = list(objects)
+        for obj in objects:
+            self._local.pop(obj.id, None)
+            self._local[obj.id] = obj
+        while len(self._local) > self.window:
+            self._local.popitem(last=False)
+        at = None
+        if position is not None:
+            array = np.asarray(position, dtype=float)
+            at = (array[:3, 3] if array.shape == (4, 4) else array.reshape(3)).tolist()
+        answer = self.session.update(objects, stamp=time.time(), position=at)
+        return Result.from_dict(answer)
+
+    @property
+    def local_map(self) -> ObjectMap:
+        return ObjectMap(self._local.values(), up=self.up, name="local")

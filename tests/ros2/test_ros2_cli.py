@@ -1,0 +1,50 @@
+"""`semloc ros2 node | play | echo` as processes on the loopback DDS wire."""
+
+from __future__ import annotations
+
+import json
+import os
+import random
+import signal
+import subprocess
+import sys
+import time
+
+from test_live_node import walk  # noqa: F401  (the fixture)
+
+
+def semloc(*args: str, **options) -> subprocess.Popen:
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)}
+    return subprocess.Popen([sys.executable, "-m", "semloc", *args], env=env, text=True,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, **options)  # fmt: skip
+
+
+def test_node_play_and_echo_as_commands(walk):  # noqa: F811
+    domain = str(random.randrange(100, 200))
+    node = semloc("ros2", "node", "--map", str(walk / "global_reconstruction.json"),
+                  "--domain", domain, "--reliable")  # fmt: skip
+    echo = semloc("ros2", "echo", "/semloc/status", "--domain", domain, "--count", "3")
+    try:
+        first = node.stdout.readline()
+        assert "semloc node on domain" in first, first + node.stderr.read()
+        time.sleep(1.0)  # discovery
+        played = semloc("ros2", "play", str(walk / "walk.mcap"), "--domain", domain, "--rate", "4")
+        out, err = played.communicate(timeout=120)
+        assert played.returncode == 0, err
+        assert "/detections 24" in out and "/odom 24" in out
+        lines, _ = echo.communicate(timeout=60)
+        statuses = [json.loads(json.loads(line)["data"])["status"] for line in lines.splitlines()]
+        assert len(statuses) == 3 and set(statuses) <= {"localized", "ambiguous", "failed"}
+    finally:
+        echo.kill()
+        node.send_signal(signal.SIGINT)
+        out, err = node.communicate(timeout=30)
+    assert node.returncode == 130, err
+    assert err.strip().splitlines()[-1] == "semloc: interrupted" and "Traceback" not in err
+    assert any(s in out for s in ("localized", "ambiguous"))
+
+
+def test_echo_needs_a_type_for_an_unknown_topic():
+    run = semloc("ros2", "echo", "/somewhere")
+    _, err = run.communicate(timeout=60)
+    assert run.returncode == 2 and "give --type" in err
