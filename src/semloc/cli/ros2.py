@@ -24,6 +24,7 @@ from semloc.cli.files import read_config
 from semloc.client import Client, ServerError
 from semloc.io import load_map
 from semloc.localizer import LocalizerConfig
+from semloc.pictures.live import FoxgloveView
 from semloc.ros import messages as msgs
 from semloc.ros2.node import LiveNode, NodeSettings, Wire, samples
 from semloc.ros2.play import play
@@ -96,6 +97,16 @@ def node(
     token: Annotated[
         str | None, typer.Option(envvar="SEMLOC_TOKEN", help="The service's token.")
     ] = None,
+    foxglove: Annotated[
+        int | None,
+        typer.Option(
+            "--foxglove",
+            min=0,
+            max=65535,
+            metavar="PORT",
+            help="Also stream the answers live to Foxglove on this port (8765 when given alone).",
+        ),
+    ] = None,
 ) -> None:
     """Localize a robot's detections live: publish /semloc/pose, /tf, /semloc/status,
     /semloc/markers and /semloc/map on the DDS wire (Ctrl-C ends it)."""
@@ -117,6 +128,10 @@ def node(
         localizer = RemoteLocalizer(session, global_map)
     settings = NodeSettings(detections, None if odom.lower() == "none" else odom,
                             _domain(domain), map_frame, reliable)  # fmt: skip
+    view = None
+    if foxglove is not None:
+        need("ros2 node --foxglove", "viz", modules=("foxglove",))
+        view = FoxgloveView(global_map, port=foxglove, map_frame=map_frame)
     live = LiveNode(global_map, cfg, settings, localizer=localizer)
     console.print(
         f"semloc node on domain {settings.domain}: {detections} + {settings.odom or 'no odometry'}"
@@ -126,10 +141,16 @@ def node(
 
     def show(answer) -> None:
         result = answer.result
+        if view is not None:
+            view.update(answer.stamp, result, live.stream.local_map(), answer.T_odom_sensor)
         conf = "" if result.confidence is None else f" {result.confidence:.2f}"
         console.print(f"{answer.stamp / 1e9:.3f} {result.status}{conf} {result.reason}".rstrip())
 
-    live.spin(lambda: False, show)
+    try:
+        live.spin(lambda: False, show)
+    finally:
+        if view is not None:
+            view.close()
 
 
 @ros2_app.command("play")

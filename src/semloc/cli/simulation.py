@@ -91,6 +91,17 @@ def demo(
         Path | None,
         typer.Option("--rrd", help="Also write a 3D Rerun recording of the updates (rerun FILE)."),
     ] = None,
+    foxglove: Annotated[
+        int | None,
+        typer.Option(
+            "--foxglove",
+            min=0,
+            max=65535,
+            metavar="PORT",
+            help="Stream the run live to Foxglove on this port (8765 when given alone); the view "
+            "stays up after the run until Ctrl-C.",
+        ),
+    ] = None,
 ) -> None:
     """The main job: walk a camera through a generated world and relocalize incrementally.
 
@@ -102,8 +113,10 @@ def demo(
     check_finite(gamma=gamma, drift=drift)
     need("demo", "sim")
     need("demo", "viz", modules=("matplotlib",) if rrd is None else ("matplotlib", "rerun"))
-    if scan is not None and rrd is not None:
-        fail("--rrd is not available with --scan")
+    if foxglove is not None:
+        need("demo --foxglove", "viz", modules=("foxglove",))
+    if scan is not None and (rrd is not None or foxglove is not None):
+        fail("--rrd and --foxglove are not available with --scan")
     common = {"seed": seed, "resolution": parse_resolution(resolution), "gamma": gamma,
               "drift": drift, "out": out}  # fmt: skip
     if keyframes is not None:
@@ -115,7 +128,7 @@ def demo(
             run_scan_demo(config, console)
         else:
             run_demo(DemoConfig(size=size, map_kind=kind or "reconstruction", path=path.value,
-                                rooms=rooms, rrd=rrd, **common), console)  # fmt: skip
+                                rooms=rooms, rrd=rrd, foxglove=foxglove, **common), console)  # fmt: skip
     except ValidationError as exc:
         fail(f"invalid option: {first_error(exc)}")
     except ValueError as exc:

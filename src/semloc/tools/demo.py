@@ -30,6 +30,7 @@ from semloc.eval.success import is_success
 from semloc.io.native import save_map, staged_folder, write_atomic
 from semloc.localizer import Localizer, LocalizerConfig
 from semloc.pictures.display import for_rich
+from semloc.pictures.live import FoxgloveView
 from semloc.results import Result
 from semloc.sim.mapkinds import MAP_KINDS
 from semloc.sim.noise import DetectionNoise
@@ -59,6 +60,9 @@ class DemoConfig(BaseModel):
     drift: float = Field(0.0, ge=0, le=0.2, description="Odometry drift, metres per metre.")
     out: Path = Field(Path("demo_out"), description="Output folder.")
     rrd: Path | None = Field(None, description="Rerun recording of the updates to write.")
+    foxglove: int | None = Field(
+        None, ge=0, le=65535, description="Port of a live Foxglove view (foxglove-sdk)."
+    )
 
 
 @dataclass
@@ -121,11 +125,17 @@ def _score(value: float | None) -> str:
 
 
 def localize_sequence(
-    seq: SimulatedSequence, kind: str, gamma: float, console: Console, recording: Any = None
+    seq: SimulatedSequence,
+    kind: str,
+    gamma: float,
+    console: Console,
+    recording: Any = None,
+    view: Any = None,
 ) -> tuple[Result, list[int], list[str]]:
     """Run the Localizer over the keyframes (live table); the last Result, keyframes, statuses.
 
-    `recording` (a `semloc.pictures.viz3d.DemoRecording`) gets the state after every update."""
+    `recording` (a `semloc.pictures.viz3d.DemoRecording`) gets the state after every update,
+    `view` (a `semloc.pictures.live.FoxgloveView`) every answer."""
     localizer = Localizer(seq.global_maps[kind], LocalizerConfig(gamma=gamma), local_up=(0, 0, 1))
     result = Result(status="failed", pose=None, hypotheses=[])
     keyframes, statuses = [], []
@@ -141,6 +151,8 @@ def localize_sequence(
             statuses.append(result.status)
             if recording is not None:
                 recording.update(kf.index, localizer.local_map, result)
+            if view is not None:
+                view.update(kf.index, result, localizer.local_map, kf.T_odom_camera)
             top = [*step.top_scores[:2], None, None][:2]
             table.add_row(
                 str(kf.index), str(step.n_local), f"{len(kf.new)}/{len(kf.updated)}",
@@ -171,13 +183,19 @@ def run_demo(config: DemoConfig, console: Console | None = None) -> DemoResult:
         from semloc.pictures.viz3d import DemoRecording  # rerun
 
         recording = DemoRecording(config.rrd, gmap, seq.T_global_local, seq.local_map.labels)
+    view = None
+    if config.foxglove is not None:
+        view = FoxgloveView(gmap, port=config.foxglove)
+        console.print(f"Foxglove: open a connection to ws://localhost:{view.port}")
     try:
         result, keyframes, statuses = localize_sequence(
-            seq, config.map_kind, config.gamma, console, recording
+            seq, config.map_kind, config.gamma, console, recording, view
         )
     except BaseException:
         if recording is not None:
             recording.discard()
+        if view is not None:
+            view.close()
         raise
     t2 = time.perf_counter()
     rot = trans = None
@@ -193,7 +211,19 @@ def run_demo(config: DemoConfig, console: Console | None = None) -> DemoResult:
         demo.files.append(recording.close())
     demo.seconds["total"] = time.perf_counter() - t0
     _report(demo, config, console)
+    if view is not None:
+        _keep_serving(view, console)
     return demo
+
+
+def _keep_serving(view: Any, console: Console) -> None:
+    """Leave the live view up for a look at the last answer, until Ctrl-C."""
+    console.print(f"the Foxglove view stays up at ws://localhost:{view.port}: Ctrl-C ends it")
+    try:
+        while True:
+            time.sleep(0.2)
+    finally:
+        view.close()
 
 
 def write_outputs(
