@@ -34,7 +34,7 @@ from semloc.association import (
     LabelResolution,
     label_report,
 )
-from semloc.changes import Changes, ChangesConfig, explain
+from semloc.changes import Changes, ChangesConfig, answer_changes
 from semloc.clustering import ClusteringConfig, HierarchicalClustering, SetPairs
 from semloc.decision import (
     DecisionConfig,
@@ -263,7 +263,9 @@ class Localizer:
             return None
         candidates = {oid: self._candidates_of[i] for oid, i in self._local_index.items()}
         local, best, config = list(self._local.values()), hypotheses[0], self.config.changes
-        return lambda: explain(self.global_map, local, best.pose, best.pairs, candidates, config)
+        return lambda: answer_changes(
+            self.global_map, local, best.pose, best.pairs, config=config, candidates=candidates
+        )
 
     def _why_no_sets(self) -> str:
         """Why no association set has 2 pairs: too few objects, or too few with candidates."""

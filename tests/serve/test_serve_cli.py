@@ -86,12 +86,23 @@ def test_sigterm_stops_it_cleanly_and_the_store_survives(tmp_path):
     process.send_signal(signal.SIGTERM)
     _, stderr = process.communicate(timeout=20)
     assert "Traceback" not in stderr
+    assert process.returncode == 143 and stderr.strip().splitlines() == ["semloc: interrupted"]
     process, url = start(tmp_path)
     try:
         assert Client(url).get_map("m").get("1").label == "chair"
     finally:
         process.terminate()
         process.wait(20)
+
+
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
+def test_several_workers_stop_with_the_status_of_the_signal(tmp_path, signum):
+    """With worker processes (uvicorn's supervisor) as with one: 128 + the signal number."""
+    process, _ = start(tmp_path, "--workers", "2")
+    process.send_signal(signum)
+    _, stderr = process.communicate(timeout=30)
+    assert process.returncode == 128 + signum, stderr
+    assert stderr.strip().splitlines() == ["semloc: interrupted"]
 
 
 def _documents(rng: random.Random, n: int) -> list[dict]:

@@ -13,13 +13,18 @@ from typing import Annotated
 import typer
 from pydantic import ValidationError
 
-from semloc.cli.app import app, err_console, exit_statuses, fail, first_error
+from semloc.cli.app import app, err_console, fail, first_error
 from semloc.cli.extras import need
 from semloc.cli.files import read_config
 from semloc.localizer import LocalizerConfig
 
+SERVE_EXIT_STATUSES = (
+    "Exit status: 2 bad input or usage (nothing served); 130 stopped by Ctrl-C (SIGINT), 143 "
+    "stopped by SIGTERM: both stop the service cleanly, requests in flight are answered first."
+)
 
-@app.command(epilog=exit_statuses(done="stopped by SIGTERM"))
+
+@app.command(epilog=SERVE_EXIT_STATUSES)
 def serve(
     data: Annotated[
         Path, typer.Option("--data", help="Folder of the store (SQLite file semloc.sqlite3).")

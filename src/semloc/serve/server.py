@@ -12,6 +12,7 @@ from __future__ import annotations
 import ipaddress
 import json
 import os
+import signal
 import socket
 import threading
 import time
@@ -22,6 +23,7 @@ from pathlib import Path
 from pydantic import BaseModel, ConfigDict, Field
 
 from semloc.compiling import warm_up
+from semloc.io.interrupts import Interrupted
 from semloc.localizer import LocalizerConfig
 from semloc.serve.access import Access, TokenFileError
 from semloc.serve.app import DEFAULT_MAX_BODY, create_app
@@ -128,9 +130,9 @@ def serving(data: str | Path, **settings) -> Iterator[str]:
 
 
 def run(settings: ServeSettings, announce: Callable[[str], None] = print) -> None:
-    """Serve until interrupted (SIGINT / SIGTERM end it cleanly)."""
+    """Serve until SIGINT or SIGTERM, which end it cleanly (requests in flight are answered)
+    and then go on as the signal they are: `Interrupted` in the command (status 130, 143)."""
     import uvicorn
-    from uvicorn.supervisors import Multiprocess
 
     app = build_app(settings)  # checks the store and the token file before binding
     warm_up(lambda text: announce(f"{text}…"))  # compiled before the first request, not in it
@@ -154,4 +156,25 @@ def run(settings: ServeSettings, announce: Callable[[str], None] = print) -> Non
         access_log=False,
         timeout_keep_alive=30,
     )
-    Multiprocess(config, sockets=[sock]).run()
+    supervisor = _supervisor_class()(config, sockets=[sock])
+    supervisor.run()
+    if supervisor.stopped_by is not None:  # as the one-process server: the signal goes on
+        raise Interrupted(supervisor.stopped_by)
+
+
+def _supervisor_class():
+    """uvicorn's supervisor of worker processes, remembering the signal that stopped it."""
+    from uvicorn.supervisors import Multiprocess
+
+    class Supervisor(Multiprocess):
+        stopped_by: int | None = None
+
+        def handle_int(self) -> None:
+            self.stopped_by = signal.SIGINT
+            super().handle_int()
+
+        def handle_term(self) -> None:
+            self.stopped_by = signal.SIGTERM
+            super().handle_term()
+
+    return Supervisor

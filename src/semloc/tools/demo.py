@@ -27,7 +27,8 @@ from rich.table import Table
 
 from semloc.compiling import warm_up
 from semloc.eval.success import is_success
-from semloc.io.native import save_map, staged_folder, write_atomic
+from semloc.io.native import save_map
+from semloc.io.output import staged_folder, write_atomic
 from semloc.localizer import Localizer, LocalizerConfig
 from semloc.pictures.display import for_rich
 from semloc.results import Result
