@@ -33,10 +33,15 @@ def _spawned_by_multiprocessing() -> bool:
     return process is not None and bool(getattr(process.current_process(), "_inheriting", False))
 
 
-def main() -> int:
-    """Run the `semloc` command with the arguments of `sys.argv`."""
+def hold_signals() -> None:
+    """From now until the command's own handlers take over, keep SIGINT and SIGTERM."""
     for signum in (signal.SIGINT, signal.SIGTERM):
         signal.signal(signum, _keep)
+
+
+def main() -> int:
+    """Run the `semloc` command with the arguments of `sys.argv`."""
+    hold_signals()
     from semloc.cli import main as command  # the heavy import, signals kept meanwhile
 
     return command(early=_EARLY)

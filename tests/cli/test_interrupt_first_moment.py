@@ -29,7 +29,10 @@ if __name__ == "__main__":
 {patch}    sys.exit(main())
 """
 # `bench --quick` shrunk to one tiny sequence (seconds), through the same script.
-TINY = """    from semloc.eval import protocol
+TINY = """    import semloc_entry
+
+    semloc_entry.hold_signals()  # as main() does first, before this patch's imports
+    from semloc.eval import protocol
     from semloc.cli import bench
 
     class Tiny(protocol.BenchConfig):
@@ -77,15 +80,13 @@ def assert_group_ends(group: int) -> None:
     raise AssertionError("processes of the interrupted command are still running")
 
 
-@pytest.mark.parametrize("at", [0.02, 0.3, 1.5])
+@pytest.mark.parametrize("at", [0.25, 0.5, 1.5])
 def test_ctrl_c_while_the_demo_starts(tmp_path, at):
-    """In the interpreter's start-up Python's own handler may still be there (killed by the
-    signal, no output); from the script's first line on, the command's answer."""
+    """From the script's first line on (the interpreter's own start-up takes a few tens of
+    milliseconds, Python's handler there), through the import of the command (most of the
+    first second) and its start: the command's answer."""
     code, lines = run_and_interrupt(tmp_path, ["demo", "--keyframes", "6", "--out", "d"], at)
-    if code == -signal.SIGINT:  # before the script's first line: no traceback, nothing
-        assert at < 0.1 and lines == []
-    else:
-        assert (code, lines) == (130, [MESSAGE])
+    assert (code, lines) == (130, [MESSAGE])
     assert not (tmp_path / "d").exists()
 
 

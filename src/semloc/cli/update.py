@@ -57,7 +57,8 @@ def update_map(
 ) -> None:
     """Write GLOBAL with the changes LOCAL shows applied: moved, new, missing objects.
 
-    With --server, the changes become the next version of the map GLOBAL on that server."""
+    With --server, the changes become the next version of the map GLOBAL on that server (the
+    token needs `localize` and `write` on it; with -o also `read`)."""
     if server is not None:
         if result_file is not None:
             fail("--result: with --server the answer comes from the server (leave it out)")
