@@ -438,35 +438,6 @@ def test_an_interrupt_waits_while_numba_runs_its_own_python_code():
     assert caught.value.signum == signal.SIGTERM
 
 
-def test_an_interrupt_while_numba_compiles_is_raised_at_once():
-    """Compiling (the first use after an install: half a minute or more) is not waited for:
-    the interrupt cuts it (cold cache: 22 s from Ctrl-C to the exit before, 0.4-0.9 s now);
-    nothing of it is kept in the process."""
-    import numba
-    from numba.core import event
-
-    from semloc.io.interrupts import Interrupted, interrupts_raise
-
-    class SignalOnStart(event.Listener):
-        def on_start(self, ev):
-            os.kill(os.getpid(), signal.SIGINT)
-
-        def on_end(self, ev):
-            pass
-
-    @numba.njit(cache=False)
-    def plus_one(x):
-        return x + 1
-
-    with (
-        pytest.raises(Interrupted),
-        interrupts_raise(script=False),
-        event.install_listener("numba:compile", SignalOnStart()),
-    ):
-        plus_one(1)
-    assert plus_one.signatures == []  # cut before the compilation was done
-
-
 def test_an_interrupt_held_back_is_dropped_once_the_command_is_done():
     """A signal held back while numba's code ran is not sent again after the command's
     handlers are gone: it would reach the caller's handler (or Python's shutdown) late."""

@@ -5,10 +5,11 @@ The command (`semloc.cli.main`) runs inside `interrupts_raise()`: the two signal
 status 128 + the signal number (130, 143).  An interrupt is not raised where it could break
 something; it waits, and is sent to the process again a moment later:
 
-- inside numba's or llvmlite's own Python code (loading compiled code, boxing a compiled
-  function's results: an exception there left a tuple half-built, a crash), except while numba
-  compiles: the first use after an install compiles for half a minute or more, and Ctrl-C
-  then ends the command at once (what was compiled so far stays cached);
+- inside numba's or llvmlite's own Python code (compiling, loading compiled code, boxing a
+  compiled function's results: an exception there left a tuple half-built, a crash; one cut
+  in a compilation failed the next cache write with "no compiled object yet").  On the first
+  use after an install, Ctrl-C therefore ends the command when the function being compiled
+  is done (seconds, up to about twenty on 2 cores);
 - inside `interrupts_deferred()`: a block that must not be cut (a Dask cluster starting or
   closing), where nothing is blocked at the OS level;
 - inside `signals_held()`: renames of a group of files, the initialisation of an extension
@@ -38,8 +39,6 @@ import threading
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from types import FrameType
-
-from numba.core import event
 
 SIGNALS = (signal.SIGINT, signal.SIGTERM)
 MESSAGE = "semloc: interrupted"
@@ -121,23 +120,8 @@ def ignore_sigint() -> None:
         signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
-class _Compiling(event.Listener):
-    """How many numba compilations run now (nested ones count; a load from the cache is none)."""
-
-    depth = 0
-
-    def on_start(self, ev: event.Event) -> None:
-        _Compiling.depth += 1
-
-    def on_end(self, ev: event.Event) -> None:
-        _Compiling.depth = max(0, _Compiling.depth - 1)
-
-
-event.register("numba:compile", _Compiling())
-
-
 def _raise_interrupted(signum: int, frame: FrameType | None) -> None:
-    if (_inside_numba(frame) and not _Compiling.depth) or interrupts_wait():
+    if _inside_numba(frame) or interrupts_wait():
         with _State.lock:
             if interrupts_wait():
                 _State.arrived.append(signum)
