@@ -35,6 +35,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 from scipy.spatial import cKDTree
 
+from semloc.association import AssociationConfig, CandidateIndex
 from semloc.maps import ObjectMap, SemanticObject
 
 POINTS_PER_OBJECT = 48
@@ -108,6 +109,29 @@ class Changes:
                        [str(i) for i in data.get("missing") or []])  # fmt: skip
         except (KeyError, TypeError, ValueError, AttributeError) as exc:
             raise ValueError(f"'changes' is not a changes object ({exc})") from None
+
+
+def answer_changes(
+    global_map: ObjectMap,
+    local_objects: Sequence[SemanticObject],
+    pose: np.ndarray,
+    pairs: Sequence[tuple[str, str]],
+    association: AssociationConfig | None = None,
+    config: ChangesConfig | None = None,
+    candidates: Mapping[str, np.ndarray] | None = None,
+) -> Changes:
+    """The changes an answer implies: its best hypothesis' `pose` and `pairs` (global id,
+    local id) over `local_objects`, each local object's candidates by the Localizer's rule
+    (`CandidateIndex` with `association`, or the Localizer's own `candidates`).  Pairs naming
+    an object of neither map are left out (a saved or reported answer).  The one rule of the
+    Localizer's answers, `semloc update-map --result` and the service's change reports."""
+    local = list(local_objects)
+    if candidates is None:
+        index = CandidateIndex(global_map, association or AssociationConfig())
+        candidates = {o.id: index.candidates(o) for o in local}
+    known, local_ids = set(global_map.ids.tolist()), {o.id for o in local}
+    kept = [(g, l) for g, l in pairs if g in known and l in local_ids]
+    return explain(global_map, local, pose, kept, candidates, config)
 
 
 def explain(

@@ -35,7 +35,7 @@ from semloc.association import (
     LabelResolution,
     label_report,
 )
-from semloc.changes import Changes, ChangesConfig, explain
+from semloc.changes import Changes, ChangesConfig, answer_changes
 from semloc.clustering import ClusteringConfig, HierarchicalClustering, SetPairs
 from semloc.decision import (
     DecisionConfig,
@@ -484,7 +484,9 @@ class Localizer:
             oldest = min(self.window.arrival(l).update for l in used)
             local = [o for o in local if self.window.arrival(o.id).update >= oldest]
         candidates = {o.id: self._found[o.id][1] for o in local}
-        return lambda: explain(self.global_map, local, best.pose, best.pairs, candidates, config)
+        return lambda: answer_changes(
+            self.global_map, local, best.pose, best.pairs, config=config, candidates=candidates
+        )
 
     def _why_no_sets(self) -> str:
         """Why no association set has 2 pairs: too few objects, or too few with candidates."""

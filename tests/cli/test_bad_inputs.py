@@ -296,3 +296,13 @@ def test_not_a_map_gets_a_hint(tmp_path, good_map, capsys, name, content, hint):
         path.write_bytes(content if isinstance(content, bytes) else content.encode())
     assert main(["localize", str(path), str(good_map)]) == 2
     _one_error_line(capsys, name, hint)
+
+
+def test_an_option_with_an_optional_value_takes_its_default_alone():
+    from semloc.cli.app import with_optional_values
+
+    assert with_optional_values(["demo", "--foxglove"]) == ["demo", "--foxglove", "8765"]
+    assert with_optional_values(["demo", "--foxglove", "--size", "tiny"]) == [
+        "demo", "--foxglove", "8765", "--size", "tiny"]  # fmt: skip
+    assert with_optional_values(["demo", "--foxglove", "9000"]) == ["demo", "--foxglove", "9000"]
+    assert with_optional_values(["demo", "--foxglove", "-1"]) == ["demo", "--foxglove", "-1"]

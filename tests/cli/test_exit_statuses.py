@@ -27,9 +27,17 @@ COMMANDS = sorted(info.name or info.callback.__name__.replace("_", "-")
                   for info in app.registered_commands)  # fmt: skip
 
 
-@pytest.mark.parametrize("command", COMMANDS)
+@pytest.mark.parametrize("command", [c for c in COMMANDS if c != "serve"])
 def test_every_command_lists_its_exit_statuses_in_its_help(command):
     text = " ".join(CliRunner().invoke(app, [command, "--help"], terminal_width=200).output.split())
     assert "Exit status: 0 " in text and "; 2 bad input or usage" in text, text
     assert "; 130 interrupted" in text
     assert ("; 1 nothing written: the answer is not localized" in text) == (command == "update-map")
+
+
+def test_serve_lists_the_statuses_it_ends_with():
+    """The service runs until a signal stops it: 130 (Ctrl-C) or 143 (SIGTERM), never 0."""
+    text = " ".join(CliRunner().invoke(app, ["serve", "--help"], terminal_width=200).output.split())
+    assert "Exit status: 2 bad input or usage" in text
+    assert "130 stopped by Ctrl-C (SIGINT), 143 stopped by SIGTERM" in text
+    assert "Exit status: 0" not in text and "; 0 " not in text

@@ -20,8 +20,8 @@ from hypothesis import strategies as st
 import semloc
 from semloc.io import load_map, save_map, write_atomic, write_files
 from semloc.io.importers.scannet import read_segments
-from semloc.io.native import MAX_FILE_BYTES, MAX_JSON_BYTES, parse_json
 from semloc.io.ply import read_ply
+from semloc.io.reading import MAX_FILE_BYTES, MAX_JSON_BYTES, parse_json
 from semloc.localizer import Localizer, localize
 from semloc.maps import MAX_LABEL_LENGTH, MapError, ObjectMap, SemanticObject
 from semloc.pictures.display import DISPLAY_LENGTH, for_matplotlib, for_rich, printable, shorten

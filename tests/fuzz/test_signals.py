@@ -318,8 +318,8 @@ def test_an_interrupt_while_the_cluster_closes_lets_it_close(monkeypatch, tmp_pa
     the interpreter's exit could abort ("Fatal Python error: PyThreadState_Get ...")."""
     import dask.distributed
 
-    from semloc.cli import Interrupted, _interrupts_raise
     from semloc.eval import protocol, runner
+    from semloc.io.interrupts import Interrupted, interrupts_raise
 
     closed = []
 
@@ -347,7 +347,7 @@ def test_an_interrupt_while_the_cluster_closes_lets_it_close(monkeypatch, tmp_pa
     monkeypatch.setattr(dask.distributed, "Client", Client)
     config = protocol.BenchConfig.quick(size="tiny", keyframes=40, map_kinds=["cad"],
                                         ablation_starts=0, real=False)  # fmt: skip
-    with pytest.raises(Interrupted), _interrupts_raise(script=False):
+    with pytest.raises(Interrupted), interrupts_raise(script=False):
         try:
             runner.run_benchmark(config, tmp_path / "out", workers=1, progress=False)
         except ValueError:
@@ -374,13 +374,13 @@ def test_the_local_cluster_workers_ignore_sigint():
 def test_an_interrupt_swallowed_by_a_finaliser_is_delivered_again():
     """A signal that arrives while a finaliser or weakref callback runs raises there, where
     Python prints "Exception ignored" and goes on; it must still stop the command."""
-    from semloc.cli import Interrupted, _interrupts_raise
+    from semloc.io.interrupts import Interrupted, interrupts_raise
 
     class RaisesWhenCollected:
         def __del__(self):
             raise Interrupted(signal.SIGTERM)  # what the handler does inside a finaliser
 
-    with pytest.raises(Interrupted) as caught, _interrupts_raise(script=False):
+    with pytest.raises(Interrupted) as caught, interrupts_raise(script=False):
         RaisesWhenCollected()  # collected at once: its exception cannot propagate
         for _ in range(200):
             time.sleep(0.005)
@@ -391,10 +391,10 @@ def test_an_interrupt_sent_again_that_lands_in_the_hook_is_sent_once_more(monkey
     """On a busy machine the signal sent again can land while the hook still waits for its
     sending thread to start: raised there, it is swallowed too (seen once in the full suite);
     the hook then sends it once more, so the command still stops."""
-    from semloc import cli
-    from semloc.cli import Interrupted, _interrupts_raise
+    from semloc.io import interrupts
+    from semloc.io.interrupts import Interrupted, interrupts_raise
 
-    later = cli._Resend.later
+    later = interrupts._Resend.later
     calls = []
 
     def slow_start(signum):
@@ -407,8 +407,8 @@ def test_an_interrupt_sent_again_that_lands_in_the_hook_is_sent_once_more(monkey
         def __del__(self):
             raise Interrupted(signal.SIGTERM)
 
-    monkeypatch.setattr(cli._Resend, "later", slow_start)
-    with pytest.raises(Interrupted) as caught, _interrupts_raise(script=False):
+    monkeypatch.setattr(interrupts._Resend, "later", slow_start)
+    with pytest.raises(Interrupted) as caught, interrupts_raise(script=False):
         RaisesWhenCollected()
         for _ in range(200):
             time.sleep(0.005)
@@ -421,7 +421,7 @@ def test_an_interrupt_waits_while_numba_runs_its_own_python_code():
     raised in there, it left a returned tuple half-built and the process crashed."""
     import numba
 
-    from semloc.cli import Interrupted, _interrupts_raise
+    from semloc.io.interrupts import Interrupted, interrupts_raise
 
     numba_file = str(Path(numba.__file__).parent / "boxing_stand_in.py")
     source = (
@@ -430,7 +430,7 @@ def test_an_interrupt_waits_while_numba_runs_its_own_python_code():
     scope: dict = {}
     exec(compile(source, numba_file, "exec"), {"time": time}, scope)
     done: list[int] = []
-    with pytest.raises(Interrupted) as caught, _interrupts_raise(script=False):
+    with pytest.raises(Interrupted) as caught, interrupts_raise(script=False):
         scope["work"](lambda: os.kill(os.getpid(), signal.SIGTERM), done)
         for _ in range(200):
             time.sleep(0.005)
@@ -443,7 +443,7 @@ def test_an_interrupt_held_back_is_dropped_once_the_command_is_done():
     handlers are gone: it would reach the caller's handler (or Python's shutdown) late."""
     import numba
 
-    from semloc.cli import _interrupts_raise
+    from semloc.io.interrupts import interrupts_raise
 
     numba_file = str(Path(numba.__file__).parent / "boxing_stand_in.py")
     scope: dict = {}
@@ -451,7 +451,7 @@ def test_an_interrupt_held_back_is_dropped_once_the_command_is_done():
     received: list[int] = []
     before = signal.signal(signal.SIGINT, lambda signum, frame: received.append(signum))
     try:
-        with _interrupts_raise(script=False):
+        with interrupts_raise(script=False):
             scope["work"](lambda: os.kill(os.getpid(), signal.SIGINT))
         for _ in range(40):
             time.sleep(0.005)
@@ -463,11 +463,10 @@ def test_an_interrupt_held_back_is_dropped_once_the_command_is_done():
 def test_an_interrupt_waits_for_a_block_that_must_not_be_cut():
     """Inside `interrupts_deferred` a signal does not raise; it raises a moment after the
     block ends (nothing is blocked: processes started inside still get their signals)."""
-    from semloc.cli import Interrupted, _interrupts_raise
-    from semloc.io.interrupts import interrupts_deferred
+    from semloc.io.interrupts import Interrupted, interrupts_deferred, interrupts_raise
 
     finished = False
-    with pytest.raises(Interrupted) as caught, _interrupts_raise(script=False):
+    with pytest.raises(Interrupted) as caught, interrupts_raise(script=False):
         with interrupts_deferred():
             os.kill(os.getpid(), signal.SIGINT)
             for _ in range(20):
@@ -484,8 +483,8 @@ def test_an_interrupt_while_the_cluster_starts_closes_it(monkeypatch, tmp_path):
     worker watchers crashed the interpreter at exit once), with no output written."""
     import dask.distributed
 
-    from semloc.cli import Interrupted, _interrupts_raise
     from semloc.eval import protocol, runner
+    from semloc.io.interrupts import Interrupted, interrupts_raise
 
     closed = []
 
@@ -514,6 +513,6 @@ def test_an_interrupt_while_the_cluster_starts_closes_it(monkeypatch, tmp_path):
     monkeypatch.setattr(dask.distributed, "Client", Client)
     config = protocol.BenchConfig.quick(size="tiny", keyframes=40, map_kinds=["cad"],
                                         ablation_starts=0, real=False)  # fmt: skip
-    with pytest.raises(Interrupted), _interrupts_raise(script=False):
+    with pytest.raises(Interrupted), interrupts_raise(script=False):
         runner.run_benchmark(config, tmp_path / "out", workers=1, progress=False)
     assert closed == ["client", "cluster"] and not (tmp_path / "out").exists()

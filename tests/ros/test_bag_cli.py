@@ -238,3 +238,19 @@ def test_the_last_answer_agrees_with_semloc_localize_on_the_final_local_map(loca
     assert replayed["status"] == last["status"] == "localized"
     rotation, translation = pose_error(np.asarray(last["pose"]), np.asarray(replayed["pose"]))
     assert rotation < 0.5 and translation < 0.02
+
+
+def test_detections_in_a_moving_frame_without_odom_get_one_warning(walk, tmp_path, capsys):
+    """The simulated walk's detections are in the camera frame, which /odom moves: without
+    --odom the command says so in one line on stderr (and answers as before); with it, no
+    warning."""
+    capsys.readouterr()
+    out = tmp_path / "no_odom.mcap"
+    assert _localize(walk / "walk.mcap", walk, out, "--detections", "/detections") == 0
+    warnings = [line for line in capsys.readouterr().err.splitlines() if "warning" in line]
+    assert len(warnings) == 1, warnings
+    assert "which /odom moves" in warnings[0] and "give --odom /odom" in warnings[0]
+    out = tmp_path / "odom.mcap"
+    assert _localize(walk / "walk.mcap", walk, out, "--detections", "/detections",
+                     "--odom", "/odom") == 0  # fmt: skip
+    assert "warning" not in capsys.readouterr().err

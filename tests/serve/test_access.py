@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import time
 
 import pytest
 from conftest import T_TRUE, view
@@ -136,3 +137,35 @@ def test_yaml_token_files_and_hashes(tmp_path):
     access = Access.from_file(path)
     assert access.grant("robot-fleet-7").rights("any") == {"read"}
     assert access.grant("robot-fleet-8") is None and access.grant(None) is None
+
+
+def test_failed_logins_count_against_the_rate_of_their_address(serve, building, tmp_path):
+    """Guessing tokens goes no faster than the rate: past it, failed logins from the address
+    get 429 (not 401), while a valid token from the same address goes on; after a second of
+    rest a failed login is a 401 again."""
+    path = tmp_path / "tokens.json"
+    path.write_text(json.dumps(TOKENS))
+    server = serve(access=Access.from_file(path), rate=5)
+    guesses = [raw(server.url, "GET", "/v1/maps", None, f"guess-{i:04d}")[0] for i in range(30)]
+    assert guesses[:10] == [401] * 10 and guesses[-1] == 429
+    status, error = raw(server.url, "GET", "/v1/maps", None, "guess-last")
+    assert status == 429 and "failed logins" in error["detail"]
+    assert raw(server.url, "GET", "/v1/maps", None, READER)[0] == 200
+    time.sleep(1.0)
+    assert raw(server.url, "GET", "/v1/maps", None, "guess-rested")[0] == 401
+
+
+def test_the_gate_counts_requests_per_token_and_failures_per_address():
+    from semloc.serve.access import RIGHTS, Gate, Grant, Refused
+
+    gate = Gate(Access({digest(READER): Grant("r", {"*": frozenset(RIGHTS)})}), rate=1)
+    assert [gate.admit(READER, "10.0.0.1").name for _ in range(2)] == ["r", "r"]  # burst of 2
+    with pytest.raises(Refused, match="requests a second"):
+        gate.admit(READER, "10.0.0.2")  # the token's bucket, whatever the address
+    for _ in range(2):
+        with pytest.raises(Refused, match="unauthorized"):
+            gate.admit("wrong-token", "10.0.0.1")
+    with pytest.raises(Refused, match="failed logins"):
+        gate.admit(None, "10.0.0.1")
+    with pytest.raises(Refused, match="unauthorized"):
+        gate.admit(None, "10.0.0.3")  # another address has its own bucket

@@ -347,7 +347,8 @@ def test_two_workers_over_postgresql(serve, building, postgres_url):
     assert Client(second.url).report_changes("office", answer)["version"] == 2
     assert [v["version"] for v in client.versions("office")] == [1, 2]
     with first.service.store._transaction(write=True) as cur:
-        cur.execute("DROP TABLE maps, map_versions, sessions, session_batches")
+        cur.execute("DROP TABLE maps, map_versions, sessions, session_batches, localizations, "
+                    "schema_version")  # fmt: skip
 
 
 def test_replies_leave_without_waiting_for_an_acknowledgement():

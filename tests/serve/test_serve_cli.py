@@ -86,12 +86,23 @@ def test_sigterm_stops_it_cleanly_and_the_store_survives(tmp_path):
     process.send_signal(signal.SIGTERM)
     _, stderr = process.communicate(timeout=20)
     assert "Traceback" not in stderr
+    assert process.returncode == 143 and stderr.strip().splitlines() == ["semloc: interrupted"]
     process, url = start(tmp_path)
     try:
         assert Client(url).get_map("m").get("1").label == "chair"
     finally:
         process.terminate()
         process.wait(20)
+
+
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
+def test_several_workers_stop_with_the_status_of_the_signal(tmp_path, signum):
+    """With worker processes (uvicorn's supervisor) as with one: 128 + the signal number."""
+    process, _ = start(tmp_path, "--workers", "2")
+    process.send_signal(signum)
+    _, stderr = process.communicate(timeout=30)
+    assert process.returncode == 128 + signum, stderr
+    assert stderr.strip().splitlines() == ["semloc: interrupted"]
 
 
 def _documents(rng: random.Random, n: int) -> list[dict]:
@@ -171,3 +182,43 @@ def test_without_the_serve_extra_it_names_the_extra(tmp_path, monkeypatch, capsy
     assert main(["serve", "--data", str(tmp_path)]) == 2
     assert "needs the 'serve' extra (fastapi is not installed)" in capsys.readouterr().err
     assert list(tmp_path.iterdir()) == []  # no store was made
+
+
+def test_the_loopback_rule_and_the_store_are_the_settings_own(tmp_path):
+    """Whoever starts the server (`run`, `serving`, the command): no open API on a network
+    address, and a store is needed (a folder or a database, not both required)."""
+    from pydantic import ValidationError
+
+    from semloc.serve.server import ServeSettings, serving
+
+    for host in ("0.0.0.0", "192.168.1.10", "::"):
+        with pytest.raises(ValidationError, match="loopback address only"):
+            ServeSettings(data=tmp_path, host=host)
+    tokens = tmp_path / "tokens.json"
+    tokens.write_text('{"tokens": [{"token": "a-long-token", "maps": {"*": ["read"]}}]}')
+    assert ServeSettings(data=tmp_path, host="0.0.0.0", tokens=tokens).host == "0.0.0.0"
+    assert ServeSettings(data=tmp_path, host="::1").host == "::1"
+    with pytest.raises(ValidationError, match="a store is needed"):
+        ServeSettings()
+    with (
+        pytest.raises(ValidationError, match="loopback address only"),
+        serving(tmp_path, host="0.0.0.0"),
+    ):
+        pass
+    assert "a store is needed" in refused("--port", "0")
+
+
+def test_with_db_no_data_folder_is_needed(postgres_url, building):
+    from semloc.serve.server import serving
+    from semloc.serve.store import open_store
+
+    try:
+        with serving(None, db=postgres_url, db_pool=2) as url:
+            assert Client(url).put_map("m", building) >= 1
+            assert Client(url).get_map("m").get(building[0].id).label == building[0].label
+    finally:
+        store = open_store(None, postgres_url)
+        with store._transaction(write=True) as cur:
+            cur.execute("DROP TABLE maps, map_versions, sessions, session_batches, "
+                        "localizations, schema_version")  # fmt: skip
+        store.close()

@@ -33,7 +33,8 @@ from semloc.cli.files import (
 from semloc.cli.render import print_result
 from semloc.io import load_map
 from semloc.io.g2o import edge_line
-from semloc.io.native import map_files, write_files
+from semloc.io.native import map_files
+from semloc.io.output import write_files
 from semloc.localizer import LocalizerConfig
 from semloc.maps import ObjectMap
 from semloc.pictures.display import for_rich

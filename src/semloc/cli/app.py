@@ -14,6 +14,7 @@ from typing import Annotated
 import typer
 from pydantic import ValidationError
 from rich.console import Console
+from typer.core import TyperOption
 
 import semloc
 
@@ -26,6 +27,20 @@ app = typer.Typer(
 )
 console = Console()
 err_console = Console(stderr=True)
+
+
+def _flags_without_metavar() -> None:
+    """typer (0.29) shows a type beside every option in `--help`, `<bool>` also beside a flag
+    (`--help`, `--quick`, `--progress / --no-progress`), which takes no value: none there."""
+    shown = TyperOption.display_type_rich
+
+    def display_type_rich(self: TyperOption, ctx: object) -> str | None:
+        return None if self.is_flag else shown(self, ctx)
+
+    TyperOption.display_type_rich = display_type_rich  # type: ignore[method-assign]
+
+
+_flags_without_metavar()
 
 
 MAX_SEED = 2**32 - 1
@@ -55,7 +70,10 @@ def first_error(exc: ValidationError) -> str:
     """The first problem of a pydantic validation error, as `field: message`."""
     error = exc.errors()[0]
     where = ".".join(str(p) for p in error["loc"])
-    return f"{where}: {error['msg']}" if where else error["msg"]
+    message = error["msg"]
+    if error["type"] == "value_error" and "error" in error.get("ctx", {}):
+        message = str(error["ctx"]["error"])  # a validator's own words, without "Value error, "
+    return f"{where}: {message}" if where else message
 
 
 EXIT_STATUSES = {
@@ -99,3 +117,23 @@ def _root(
     ] = False,
 ) -> None:
     """semloc relocalizes a camera or robot against a prior map made of objects."""
+
+
+OPTIONAL_VALUES = {"--foxglove": "8765"}
+"""Options whose value may be left out (`--foxglove` alone is `--foxglove 8765`): click needs
+a value after an option that takes one, so the command line gets the default inserted."""
+
+
+def with_optional_values(args: list[str]) -> list[str]:
+    """`args` with the default value after each option of `OPTIONAL_VALUES` given alone (last,
+    or followed by another option; a negative number is a value, which click then checks)."""
+    out: list[str] = []
+    for i, arg in enumerate(args):
+        out.append(arg)
+        following = args[i + 1] if i + 1 < len(args) else None
+        alone = following is None or (
+            following.startswith("-") and not following[1:].replace(".", "", 1).isdigit()
+        )
+        if arg in OPTIONAL_VALUES and alone:
+            out.append(OPTIONAL_VALUES[arg])
+    return out

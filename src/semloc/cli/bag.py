@@ -16,7 +16,7 @@ import typer
 from pydantic import ValidationError
 from rich.table import Table
 
-from semloc.cli.app import app, console, fail, first_error
+from semloc.cli.app import app, console, err_console, fail, first_error
 from semloc.cli.extras import need
 from semloc.cli.files import (
     check_finite,
@@ -134,6 +134,8 @@ def localize(
     start = time.perf_counter()
     with opened(bag) as reader:
         run = Run(reader, bag, detections, odom, points)
+        if odom is None:
+            _warn_moving_frame(run)
         stream = StreamLocalizer(global_map, cfg, use_points=points is not None)
         sink = McapSink()
         writer: AnswerTopics | None = None
@@ -150,6 +152,21 @@ def localize(
     files = [] if jsonl is None else [(jsonl, "".join(lines))]
     write_files([*files, (output, sink.getvalue())])
     _report(run, last, stream, seconds, output, jsonl, sink.counts)
+
+
+def _warn_moving_frame(run: Run) -> None:
+    """One line on stderr when the detections' frame is one an odometry topic of the bag
+    moves but --odom was not given: the objects would be fused as if the sensor stood still
+    (the answer is then ambiguous or wrong, for no visible reason)."""
+    frame = run.first_frame()
+    topic = None if frame is None else run.odometry_moving(frame)
+    if topic is not None:
+        err_console.print(
+            f"[bold yellow]warning:[/] the detections are in frame {for_rich(frame, None)}, "
+            f"which {for_rich(topic, None)} moves; without --odom they are taken as fixed in "
+            f"one frame: give --odom {for_rich(topic, None)}",
+            soft_wrap=True,
+        )
 
 
 def _bag_files(bag: Path) -> dict[Path, str]:

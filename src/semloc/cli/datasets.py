@@ -22,7 +22,8 @@ from semloc.cli.files import (
 from semloc.cli.options import DescribeOption, with_descriptors
 from semloc.io import importers, load_map
 from semloc.io.importers import IMPORTERS
-from semloc.io.native import map_files, write_files
+from semloc.io.native import map_files
+from semloc.io.output import write_files
 from semloc.maps import MapError
 from semloc.pictures.display import for_rich
 from semloc.sim.crop import crop_truth_to_dict, crop_with_truth

@@ -13,7 +13,8 @@ import yaml
 
 from semloc.cli.app import fail
 from semloc.io import read_json, read_regular, write_atomic
-from semloc.io.native import MAX_JSON_BYTES, document_kind, points_path
+from semloc.io.native import document_kind, points_path
+from semloc.io.reading import MAX_JSON_BYTES
 from semloc.maps import ObjectMap
 from semloc.results import SavedResult, saved_pose, saved_result
 

@@ -18,7 +18,7 @@ import typer
 from pydantic import ValidationError
 from rich.console import Console
 
-from semloc.association import DESCRIBERS, CandidateIndex, label_report, labels_json
+from semloc.association import DESCRIBERS, CandidateIndex, label_report
 from semloc.cli import remote
 from semloc.cli.app import (
     app,
@@ -51,6 +51,7 @@ from semloc.cli.render import (
 from semloc.compiling import warm_up
 from semloc.eval.success import ground_truth_report
 from semloc.io import load_map, write_atomic
+from semloc.io.answers import answer_document, answer_text
 from semloc.localizer import LocalizerConfig
 from semloc.localizer import localize as run_localize
 
@@ -180,11 +181,10 @@ def localize(
     if len(global_objects):  # an empty map: the result's reason says so, once
         warn_unmatched(labels, err_console)
     if output_format is OutputFormat.json:
-        extra = {"warm_up_ms": round(warm.seconds * 1000, 3), "labels": labels_json(labels)}
+        extra = {"warm_up_ms": round(warm.seconds * 1000, 3)}
         if report is not None:
             extra["ground_truth"] = report
-        text = result.to_json(**extra)
-        emit(text, output)
+        emit(answer_text(answer_document(result, labels, **extra)), output)
         return
     target = console if output is None else Console(record=True, width=120, file=io.StringIO())
     print_result(result, target, warm)

@@ -1,5 +1,6 @@
 """`semloc localize --server URL` and `semloc update-map --server URL`: the same commands
-against a `semloc serve` server (`semloc.client`), where GLOBAL names the map on the server.
+against a `semloc serve` server (`semloc.client`), where GLOBAL names the map on the server;
+`connect` and `call` (one line for a refusal) also serve `semloc maps` (`cli/maps.py`).
 
 The localizer's settings are the server's there, so the options that change them are refused
 with `--server`.  A server's refusal is one line naming the server and what it said (exit 2);
@@ -51,7 +52,8 @@ def refuse_local_settings(**given: object) -> None:
                  "(semloc serve --config)")  # fmt: skip
 
 
-def _client(server: str, token: str | None) -> Client:
+def connect(server: str, token: str | None) -> Client:
+    """A client of `server` (one line and exit 2 for a URL that is not one)."""
     try:
         return Client(server, token)
     except ValueError as exc:
@@ -59,7 +61,8 @@ def _client(server: str, token: str | None) -> Client:
         raise  # unreachable: fail() raises
 
 
-def _call(server: str, what: str, function, *arguments):
+def call(server: str, what: str, function, *arguments):
+    """`function(*arguments)`; a server's refusal is one line naming `what` (exit 2)."""
     try:
         return function(*arguments)
     except ServerError as exc:
@@ -79,9 +82,9 @@ def localize(
     output: Path | None,
 ) -> None:  # fmt: skip
     """Localize LOCAL in the server's map `map_id`; print or write the answer."""
-    client = _client(server, token)
+    client = connect(server, token)
     local = load_map(local_map)
-    answer = _call(server, "localize", client.localize, map_id, local)
+    answer = call(server, "localize", client.localize, map_id, local)
     result = Result.from_dict(answer)
     report = None if truth is None else ground_truth_report(result.pose, result.hypotheses, truth)
     if as_json:
@@ -105,9 +108,9 @@ def update_map(
     accept_ambiguous: bool,
 ) -> None:  # fmt: skip
     """Localize LOCAL in the server's map and report its changes as the map's next version."""
-    client = _client(server, token)
+    client = connect(server, token)
     local = load_map(local_map)
-    answer = _call(server, "localize", client.localize, map_id, local)
+    answer = call(server, "localize", client.localize, map_id, local)
     status = answer.get("status")
     if not (status == "localized" or (accept_ambiguous and status == "ambiguous")):
         console.print(f"not localized (status {status}): no version written")
@@ -127,7 +130,7 @@ def update_map(
         raise typer.Exit(1)
     console.print(f"{map_id}: version {created['version']} written on {server}")
     if output is not None:
-        updated = _call(server, "reading the map", client.get_map, map_id, created["version"])
+        updated = call(server, "reading the map", client.get_map, map_id, created["version"])
         write_files(map_files(updated, output))
         console.print(f"wrote {output}")
 

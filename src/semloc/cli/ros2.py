@@ -103,7 +103,7 @@ def node(
             "--foxglove",
             min=0,
             max=65535,
-            metavar="PORT",
+            metavar="[PORT]",
             help="Also stream the answers live to Foxglove on this port (8765 when given alone).",
         ),
     ] = None,

@@ -2,7 +2,8 @@
 
 Everything is checked before the socket is bound (the extra, the token file, the store, the
 settings file), so that a bad start is one line and exit status 2.  Without `--tokens` the
-server answers everyone, so it only listens on a loopback address.
+server answers everyone, so it only listens on a loopback address (a rule of the server's
+settings, `semloc.serve.server.ServeSettings`, whoever starts it).
 """
 
 from __future__ import annotations
@@ -13,17 +14,25 @@ from typing import Annotated
 import typer
 from pydantic import ValidationError
 
-from semloc.cli.app import app, err_console, exit_statuses, fail, first_error
+from semloc.cli.app import app, err_console, fail, first_error
 from semloc.cli.extras import need
 from semloc.cli.files import read_config
 from semloc.localizer import LocalizerConfig
 
+SERVE_EXIT_STATUSES = (
+    "Exit status: 2 bad input or usage (nothing served); 130 stopped by Ctrl-C (SIGINT), 143 "
+    "stopped by SIGTERM: both stop the service cleanly, requests in flight are answered first."
+)
 
-@app.command(epilog=exit_statuses(done="stopped by SIGTERM"))
+
+@app.command(epilog=SERVE_EXIT_STATUSES)
 def serve(
     data: Annotated[
-        Path, typer.Option("--data", help="Folder of the store (SQLite file semloc.sqlite3).")
-    ],
+        Path | None,
+        typer.Option(
+            "--data", help="Folder of the store (SQLite file semloc.sqlite3); not needed with --db."
+        ),
+    ] = None,
     host: Annotated[str, typer.Option(help="Address to listen on.")] = "127.0.0.1",
     port: Annotated[
         int, typer.Option(min=0, max=65535, help="Port (0: any free port, printed).")
@@ -45,6 +54,15 @@ def serve(
             "postgresql://host/db."
         ),
     ] = None,
+    db_pool: Annotated[
+        int,
+        typer.Option(
+            "--db-pool",
+            min=1,
+            max=1000,
+            help="With --db: PostgreSQL connections per worker process, at most (a pool).",
+        ),
+    ] = 10,
     session_idle: Annotated[
         float,
         typer.Option(
@@ -72,9 +90,6 @@ def serve(
     need("serve", "serve")
     from semloc.serve import server  # the serve extra: imported only here
 
-    if tokens is None and not server.is_loopback(host):
-        fail(f"--host {host}: without --tokens the server answers anyone, so it listens on a "
-             "loopback address only (127.0.0.1, ::1); give --tokens FILE to serve a network")  # fmt: skip
     if tokens is not None:
         try:
             server.Access.from_file(tokens)
@@ -82,14 +97,14 @@ def serve(
             fail(str(exc))
     try:
         settings = server.ServeSettings(
-            data=data, db=db, host=host, port=port, workers=workers, tokens=tokens,
-            session_idle_s=session_idle, rate=rate, max_body=int(max_body_mb * 2**20),
-            localizer=read_config(config),
+            data=data, db=db, db_pool=db_pool, host=host, port=port, workers=workers,
+            tokens=tokens, session_idle_s=session_idle, rate=rate,
+            max_body=int(max_body_mb * 2**20), localizer=read_config(config),
         )  # fmt: skip
         LocalizerConfig(**settings.localizer)
     except ValidationError as exc:
         fail(f"invalid settings: {first_error(exc)}")
-    if data.exists() and not data.is_dir():
+    if data is not None and data.exists() and not data.is_dir():
         fail(f"{data}: is a file; --data takes a folder")
     try:
         server.run(settings, announce=lambda line: err_console.print(line, soft_wrap=True))

@@ -97,7 +97,7 @@ def demo(
             "--foxglove",
             min=0,
             max=65535,
-            metavar="PORT",
+            metavar="[PORT]",
             help="Stream the run live to Foxglove on this port (8765 when given alone); the view "
             "stays up after the run until Ctrl-C.",
         ),

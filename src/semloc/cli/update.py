@@ -18,16 +18,15 @@ from typing import Annotated
 
 import typer
 
-from semloc.association import CandidateIndex
-from semloc.changes import Changes, apply_changes, explain
+from semloc.changes import Changes, answer_changes, apply_changes
 from semloc.cli import remote
 from semloc.cli.app import app, console, exit_statuses, fail
 from semloc.cli.files import check_output, check_separate, map_outputs, map_paths, read_result
 from semloc.cli.render import print_centres_only, print_changes
 from semloc.io import load_map
-from semloc.io.native import map_files, write_files
-from semloc.localizer import LocalizerConfig, localize
-from semloc.maps import ObjectMap
+from semloc.io.native import map_files
+from semloc.io.output import write_files
+from semloc.localizer import localize
 
 
 @app.command("update-map", epilog=exit_statuses(not_localized=True))
@@ -58,7 +57,8 @@ def update_map(
 ) -> None:
     """Write GLOBAL with the changes LOCAL shows applied: moved, new, missing objects.
 
-    With --server, the changes become the next version of the map GLOBAL on that server."""
+    With --server, the changes become the next version of the map GLOBAL on that server (the
+    token needs `localize` and `write` on it; with -o also `read`)."""
     if server is not None:
         if result_file is not None:
             fail("--result: with --server the answer comes from the server (leave it out)")
@@ -80,7 +80,7 @@ def update_map(
     else:
         saved = read_result(result_file)
         status, pose = saved.status, saved.pose
-        changes = Changes() if pose is None else _explained(prior, local, pose, saved.pairs)
+        changes = Changes() if pose is None else answer_changes(prior, local, pose, saved.pairs)
     if pose is None or not (status == "localized" or (accept_ambiguous and status == "ambiguous")):
         console.print(f"not localized (status {status}): no map written")
         raise typer.Exit(1)
@@ -92,11 +92,3 @@ def update_map(
         f"wrote {output}: {len(changes.moved)} moved, {len(changes.new)} new, "
         f"{len(changes.missing)} flagged missing"
     )
-
-
-def _explained(prior: ObjectMap, local: ObjectMap, pose, pairs) -> Changes:
-    """The changes of a saved answer, with the Localizer's candidate rule."""
-    config = LocalizerConfig()
-    index = CandidateIndex(prior, config.association)
-    candidates = {o.id: index.candidates(o) for o in local}
-    return explain(prior, list(local), pose, pairs, candidates, config.changes)

@@ -19,8 +19,6 @@ from __future__ import annotations
 
 import logging
 import os
-import signal
-import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -43,7 +41,7 @@ from semloc.eval.protocol import (
     with_night_rows,
 )  # fmt: skip
 from semloc.eval.report import write_outputs
-from semloc.io.interrupts import interrupts_deferred
+from semloc.io.interrupts import ignore_sigint, interrupts_deferred
 from semloc.io.output import staged_folder
 
 _ONE_THREAD = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
@@ -138,8 +136,7 @@ def dask_setup(worker: object) -> None:
     it printed a KeyboardInterrupt traceback; the command closes its workers itself."""
     for name in ("", "distributed"):  # the root logger, and distributed's own level
         logging.getLogger(name).setLevel(logging.CRITICAL)
-    if threading.current_thread() is threading.main_thread():
-        signal.signal(signal.SIGINT, signal.SIG_IGN)
+    ignore_sigint()
 
 
 def run_benchmark(
@@ -174,7 +171,10 @@ def run_benchmark(
                 raise ValueError(message) from None
         else:
             # an interrupt waits until the cluster is up: cut half-way, its worker processes
-            # and their watcher threads could not be closed (a crash at interpreter exit)
+            # and their watcher threads could not be closed (a crash at interpreter exit).
+            # A terminal's Ctrl-C also reaches the workers while they start: one cut in its
+            # start fails the cluster ("Nanny failed to start"), which the deferral reports
+            # as the interrupt it is (`semloc_entry` keeps it from the script's workers)
             with interrupts_deferred():
                 cluster = LocalCluster(
                     n_workers=workers or os.cpu_count() or 1, threads_per_worker=1,

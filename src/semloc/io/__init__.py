@@ -1,9 +1,10 @@
 """Reading and writing maps: the native semloc format, and importers for public datasets.
 
 One module per concern: `native` (the map file), `reading` (guarded reading of input files:
-size limits, strict JSON, `.npy` headers), `output` (files written all or none), `interrupts`
-(keeping a group of file operations whole against SIGINT / SIGTERM), `ply`, `labels`, `g2o`,
-`geometry`, and `importers/`.  The names below stay importable from here.
+size limits, strict JSON, `.npy` headers), `output` (files written all or none), `answers`
+(the JSON document of a localization answer), `interrupts` (all handling of SIGINT and
+SIGTERM), `ply`, `labels`, `g2o`, `geometry`, and `importers/`.  The names below are the
+package's own API.
 
 The dataset importers (`semloc.io.importers`, one registry; `load_scannet`, `load_scan2cad`,
 `load_replica`, `load_rscan` here) are imported on first use, so that `import semloc` stays
@@ -12,18 +13,9 @@ light.
 
 from typing import Any
 
-from semloc.io.native import (
-    load_map,
-    map_files,
-    map_from_dict,
-    map_to_dict,
-    read_json,
-    read_regular,
-    save_map,
-    staged_folder,
-    write_atomic,
-    write_files,
-)
+from semloc.io.native import load_map, map_files, map_from_dict, map_to_dict, save_map
+from semloc.io.output import staged_folder, write_atomic, write_files
+from semloc.io.reading import read_json, read_regular
 
 _LOADERS = ("load_scannet", "load_scan2cad", "load_replica", "load_rscan")
 

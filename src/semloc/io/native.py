@@ -6,10 +6,6 @@ unknown keys that were read, so a load/save round trip loses nothing.  `.npz` fi
 with `allow_pickle=False`, only inside the map's folder, and only the members the map names,
 each checked from its header before it is read (`semloc.io.reading`).  `document_kind` says
 what a JSON document that is not a map looks like (a result, an annotation, settings).
-
-The guarded reading (`semloc.io.reading`), the atomic output (`semloc.io.output`) and the
-interrupt deferral (`semloc.io.interrupts`) that lived here are imported below and stay
-importable from this module.
 """
 
 from __future__ import annotations
@@ -23,18 +19,12 @@ from typing import Any
 
 import numpy as np
 
-from semloc.io.interrupts import interrupts_deferred, interrupts_wait, signals_held
-from semloc.io.output import staged_folder, write_atomic, write_files
+from semloc.io.output import write_files
 from semloc.io.reading import (
     MAX_FILE_BYTES,
-    MAX_JSON_BYTES,
     check_regular,
     npy_header,
-    parse_json,
     read_json,
-    read_npy,
-    read_regular,
-    require_keys,
 )
 from semloc.maps import (
     MAX_EMBEDDING_LENGTH,
@@ -47,12 +37,9 @@ from semloc.maps import (
     SemanticObject,
 )
 
-__all__ = [  # the map format, and the names that moved out of this module (still here)
-    "BINARY_HINTS", "EMBEDDING_MEMBER", "FORMAT", "KIND_HINTS", "MAX_FILE_BYTES",
-    "MAX_JSON_BYTES", "VERSION", "check_regular", "document_kind", "interrupts_deferred",
-    "interrupts_wait", "load_map", "map_files", "map_from_dict", "map_to_dict", "npy_header",
-    "parse_json", "points_path", "read_json", "read_npy", "read_regular", "require_keys",
-    "save_map", "signals_held", "staged_folder", "write_atomic", "write_files",
+__all__ = [
+    "BINARY_HINTS", "EMBEDDING_MEMBER", "FORMAT", "KIND_HINTS", "VERSION", "document_kind",
+    "load_map", "map_files", "map_from_dict", "map_to_dict", "points_path", "save_map",
 ]  # fmt: skip
 
 FORMAT = "semloc-map"

@@ -18,6 +18,7 @@ the `viz` extra), in Foxglove's own schemas, so the Foxglove app shows it withou
 
 from __future__ import annotations
 
+import logging
 from typing import Any
 
 import numpy as np
@@ -50,6 +51,8 @@ class FoxgloveView:
             SceneUpdateChannel,
         )
 
+        # a viewer that goes away is not an error of the run (the SDK logs it as one)
+        logging.getLogger("foxglove.websocket").setLevel(logging.CRITICAL)
         self.m = foxglove.messages
         self.global_map, self.map_frame, self.odom_frame = global_map, map_frame, odom_frame
         self.colors = {k: rgb(v) for k, v in label_colors(global_map.labels).items()}

@@ -160,6 +160,26 @@ class Run:
         frame, child = frames.pop()
         return Odometry(frame, child, Trajectory(stamps, poses, int(MAX_GAP_S * 1e9)))
 
+    def first_frame(self) -> str | None:
+        """The frame of the first detection message (None for a run without one)."""
+        for frame in self.frames():
+            return frame.frame
+        return None
+
+    def odometry_moving(self, frame: str) -> str | None:
+        """An odometry topic of the bag (not read for the run) whose moving (child) frame is
+        `frame`, from its first message: detections in `frame` move with the sensor, and
+        without that odometry they are taken as fixed in one frame.  None when no odometry
+        topic of the bag moves `frame`."""
+        for conn in self.reader.connections:
+            if conn.msgtype != msgs.ODOMETRY or not conn.msgcount:
+                continue
+            for _, _, message in self.messages([conn]):
+                if message.child_frame_id == frame:
+                    return conn.topic
+                break
+        return None
+
     def frames(self) -> Iterator[DetectionFrame]:
         """The detection messages in log-time order (with their points when `--points`)."""
         conns = self.detections + (self.points or [])

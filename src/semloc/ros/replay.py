@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from semloc.association import labels_json
+from semloc.io.answers import answer_document
 from semloc.results import Result
 from semloc.ros.bag import MAX_GAP_S, BagError, Odometry, Run
 from semloc.ros.stream import DetectionFrame, StreamLocalizer
@@ -87,7 +87,5 @@ def sensor_pose(run: Run, frame: DetectionFrame, odometry: Odometry) -> np.ndarr
 def answer_json(answer: Answer, stream: StreamLocalizer) -> dict[str, Any]:
     """One line of `--jsonl`: `{"stamp": seconds, "result": the localize JSON}`; its `steps`
     hold this update's step only (the earlier ones are on the lines before)."""
-    document = answer.result.to_dict()
-    document["steps"] = document["steps"][-1:]
-    document["labels"] = labels_json(stream.localizer.label_report())
-    return {"stamp": answer.stamp / 1e9, "result": document}
+    labels = stream.localizer.label_report()
+    return {"stamp": answer.stamp / 1e9, "result": answer_document(answer.result, labels, 1)}

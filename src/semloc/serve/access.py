@@ -1,4 +1,4 @@
-"""Who may do what: the token file, rights per map, and the per-token request rate.
+"""Who may do what: the token file, rights per map, and the request rates.
 
 The token file (JSON, or YAML for .yaml/.yml):
 
@@ -10,6 +10,11 @@ Only SHA-256 digests are kept in memory.  Rights: `read` (maps, versions, the pa
 entries of one token for a map and for `*` add up.  A token without any right on a map does
 not see it (the service answers 404, as for a map that does not exist); a token that sees a
 map but lacks the right gets 403; no token or an unknown one gets 401.
+
+`Gate.admit(token, address)` says who asks, within their rate: a known token's requests count
+against its own bucket; a failed login (no token, or an unknown one) counts against the bucket
+of failed logins of the address it came from, so that guessing tokens goes no faster than the
+rate, and a device with a valid token behind the same address is not held up by it.
 """
 
 from __future__ import annotations
@@ -154,3 +159,36 @@ class RateLimiter:
             if len(self._buckets) > 100_000:  # forget full buckets (idle clients)
                 self._buckets = {k: v for k, v in self._buckets.items() if v[0] < self.burst}
             return allowed
+
+
+class Refused(Exception):
+    """A request refused before its rights are looked at: `reason` is "unauthorized" (no token
+    or an unknown one) or "too many requests" (past the rate); the web layer picks the
+    status."""
+
+    def __init__(self, reason: str, detail: str) -> None:
+        super().__init__(f"{reason}: {detail}")
+        self.reason, self.detail = reason, detail
+
+
+class Gate:
+    """Who asks, within their rate: `rate` requests a second per token (per address without
+    token file), and as many failed logins a second per address (0: no limits)."""
+
+    def __init__(self, access: Access, rate: float) -> None:
+        self.access, self.rate = access, rate
+        self._requests = RateLimiter(rate)
+        self._failures = RateLimiter(rate)
+
+    def admit(self, token: str | None, address: str) -> Grant:
+        """The grant of `token`; `Refused` without a valid one or past the rate."""
+        grant = self.access.grant(token)
+        if grant is None:
+            if not self._failures.allow(address):
+                raise Refused("too many requests",
+                              f"more than {self.rate:g} failed logins a second from {address}")  # fmt: skip
+            raise Refused("unauthorized", "a valid token is needed (Authorization: Bearer)")
+        client = grant.name if self.access.required else address
+        if not self._requests.allow(client):
+            raise Refused("too many requests", f"more than {self.rate:g} requests a second")
+        return grant

@@ -23,7 +23,7 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 
 import semloc
 from semloc.io.reading import parse_json
-from semloc.serve.access import Access, Grant, RateLimiter
+from semloc.serve.access import Access, Gate, Grant, Refused
 from semloc.serve.service import Service, ServiceError, not_found
 
 log = logging.getLogger("semloc.serve")
@@ -38,7 +38,7 @@ def create_app(
 ) -> FastAPI:
     """The ASGI app over `service`; `rate` requests per second per token (0: no limit)."""
     access = access or Access.open()
-    limiter = RateLimiter(rate)
+    gate = Gate(access, rate)
     app = FastAPI(
         title="semloc",
         version=semloc.__version__,
@@ -50,16 +50,13 @@ def create_app(
     app.state.service, app.state.access = service, access
 
     def identify(request: Request) -> Grant:
-        """The caller's grant (401 without a valid token), within its request rate (429)."""
-        grant = access.grant(_token(request))
-        if grant is None:
-            raise ServiceError(
-                401, "unauthorized", "a valid token is needed (Authorization: Bearer)"
-            )
-        client = grant.name if access.required else (request.client.host if request.client else "")
-        if not limiter.allow(client):
-            raise ServiceError(429, "too many requests", f"more than {rate:g} requests a second")
-        return grant
+        """The caller's grant (401 without a valid token), within its request rate and, for
+        failed logins, its address's rate (429)."""
+        try:
+            return gate.admit(_token(request), request.client.host if request.client else "")
+        except Refused as exc:
+            status = 401 if exc.reason == "unauthorized" else 429
+            raise ServiceError(status, exc.reason, exc.detail) from None
 
     def check(grant: Grant, map_id: str, right: str) -> None:
         """404 for a map the grant may not see (as for one that does not exist), 403 for a

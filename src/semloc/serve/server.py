@@ -12,6 +12,7 @@ from __future__ import annotations
 import ipaddress
 import json
 import os
+import signal
 import socket
 import threading
 import time
@@ -19,9 +20,10 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from semloc.compiling import warm_up
+from semloc.io.interrupts import Interrupted
 from semloc.localizer import LocalizerConfig
 from semloc.serve.access import Access, TokenFileError
 from semloc.serve.app import DEFAULT_MAX_BODY, create_app
@@ -34,12 +36,17 @@ __all__ = ["Access", "ServeSettings", "ThreadedServer", "TokenFileError", "build
 
 
 class ServeSettings(BaseModel):
-    """The settings of `semloc serve`."""
+    """The settings of `semloc serve`.  Checked here, whoever starts the server (the command,
+    `run`, `serving`): a store (`data` or `db`), and tokens unless it listens on a loopback
+    address only (without tokens it answers anyone)."""
 
     model_config = ConfigDict(extra="forbid")
 
-    data: Path = Field(description="Folder of the SQLite store (created if absent).")
+    data: Path | None = Field(None, description="Folder of the SQLite store (created if absent).")
     db: str | None = Field(None, description="A postgresql:// URL: the store instead of SQLite.")
+    db_pool: int = Field(
+        10, ge=1, le=1000, description="PostgreSQL connections per worker process, at most."
+    )
     host: str = "127.0.0.1"
     port: int = Field(8765, ge=0, le=65535)
     workers: int = Field(1, ge=1, le=64)
@@ -48,6 +55,20 @@ class ServeSettings(BaseModel):
     rate: float = Field(100.0, ge=0, description="Requests a second per token (0: no limit).")
     max_body: int = Field(DEFAULT_MAX_BODY, gt=0, description="Largest request body (bytes).")
     localizer: dict = Field(default_factory=dict, description="LocalizerConfig settings.")
+
+    @model_validator(mode="after")
+    def _store_and_access(self) -> ServeSettings:
+        if self.data is None and self.db is None:
+            raise ValueError("a store is needed: --data DIR (SQLite) or --db URL (PostgreSQL)")
+        if self.tokens is None and not is_loopback(self.host):
+            raise ValueError(LOOPBACK_ONLY.format(host=self.host))
+        return self
+
+
+LOOPBACK_ONLY = (
+    "--host {host}: without --tokens the server answers anyone, so it listens on a loopback "
+    "address only (127.0.0.1, ::1); give --tokens FILE to serve a network"
+)
 
 
 def is_loopback(host: str) -> bool:
@@ -62,7 +83,7 @@ def is_loopback(host: str) -> bool:
 def build_app(settings: ServeSettings):
     """The app of one worker: its own store connection, the token file, the settings."""
     access = Access.from_file(settings.tokens) if settings.tokens else Access.open()
-    store = open_store(settings.data, settings.db)
+    store = open_store(settings.data, settings.db, settings.db_pool)
     service = Service(store, LocalizerConfig(**settings.localizer), settings.session_idle_s)
     return create_app(service, access, settings.rate, settings.max_body)
 
@@ -117,10 +138,12 @@ class ThreadedServer:
 
 
 @contextmanager
-def serving(data: str | Path, **settings) -> Iterator[str]:
-    """The service over the store in `data` (other `ServeSettings` as keywords), served from a
-    thread of this process on a free loopback port while the block runs; yields its URL."""
-    server = ThreadedServer(build_app(ServeSettings(data=Path(data), port=0, **settings)))
+def serving(data: str | Path | None, **settings) -> Iterator[str]:
+    """The service over the store in `data` (or `db=URL`; other `ServeSettings` as keywords),
+    served from a thread of this process on a free loopback port while the block runs; yields
+    its URL."""
+    folder = None if data is None else Path(data)
+    server = ThreadedServer(build_app(ServeSettings(data=folder, port=0, **settings)))
     try:
         yield server.url
     finally:
@@ -128,9 +151,9 @@ def serving(data: str | Path, **settings) -> Iterator[str]:
 
 
 def run(settings: ServeSettings, announce: Callable[[str], None] = print) -> None:
-    """Serve until interrupted (SIGINT / SIGTERM end it cleanly)."""
+    """Serve until SIGINT or SIGTERM, which end it cleanly (requests in flight are answered)
+    and then go on as the signal they are: `Interrupted` in the command (status 130, 143)."""
     import uvicorn
-    from uvicorn.supervisors import Multiprocess
 
     app = build_app(settings)  # checks the store and the token file before binding
     warm_up(lambda text: announce(f"{text}…"))  # compiled before the first request, not in it
@@ -154,4 +177,25 @@ def run(settings: ServeSettings, announce: Callable[[str], None] = print) -> Non
         access_log=False,
         timeout_keep_alive=30,
     )
-    Multiprocess(config, sockets=[sock]).run()
+    supervisor = _supervisor_class()(config, sockets=[sock])
+    supervisor.run()
+    if supervisor.stopped_by is not None:  # as the one-process server: the signal goes on
+        raise Interrupted(supervisor.stopped_by)
+
+
+def _supervisor_class():
+    """uvicorn's supervisor of worker processes, remembering the signal that stopped it."""
+    from uvicorn.supervisors import Multiprocess
+
+    class Supervisor(Multiprocess):
+        stopped_by: int | None = None
+
+        def handle_int(self) -> None:
+            self.stopped_by = signal.SIGINT
+            super().handle_int()
+
+        def handle_term(self) -> None:
+            self.stopped_by = signal.SIGTERM
+            super().handle_term()
+
+    return Supervisor

@@ -29,9 +29,10 @@ from typing import Any
 
 import numpy as np
 
-from semloc.association import CandidateIndex, label_report, labels_json
-from semloc.changes import Changes, apply_changes, explain
+from semloc.association import CandidateIndex, label_report
+from semloc.changes import Changes, answer_changes, apply_changes
 from semloc.io import map_from_dict, map_to_dict
+from semloc.io.answers import answer_document
 from semloc.localizer import Localizer, LocalizerConfig, localize
 from semloc.maps import MapError, ObjectMap
 from semloc.results import Result
@@ -90,14 +91,6 @@ def _position(value: Any) -> list[float] | None:
     ):
         raise ServiceError(422, "invalid update", "'position' must be [x, y, z], finite numbers")
     return [float(v) for v in value]
-
-
-def answer(result: Result, labels: dict, **extra: Any) -> dict[str, Any]:
-    """The JSON of a result, as `semloc localize --format json` writes it, plus `extra`."""
-    document = result.to_dict()
-    document["labels"] = labels_json(labels)
-    document.update(extra)
-    return document
 
 
 @dataclass
@@ -176,7 +169,7 @@ class Service:
         local = parse_map(document)
         result = localize(global_map, local, self.config)
         labels = label_report(CandidateIndex(global_map, self.config.association), local)
-        document = answer(result, labels, map_version=version)
+        document = answer_document(result, labels, map_version=version)
         document["localization_id"] = secrets.token_urlsafe(18)
         kept = {"local": map_to_dict(local), "answer": _answer_record(document)}
         self.store.put_localization(document["localization_id"], map_id, kept)
@@ -238,7 +231,9 @@ class Service:
             raise not_found(f"session {session_id!r}")
         live = self._live_session(session_id, map_id, version, up)
         result = self._advance(session_id, live, seq, objects, position)
-        document = answer(result, live.localizer.label_report(), map_version=version, stamp=stamp)
+        document = answer_document(
+            result, live.localizer.label_report(), map_version=version, stamp=stamp
+        )
         document["session_id"], document["update"] = session_id, seq
         self.store.set_last(session_id, _summary(document))
         return document
@@ -400,7 +395,9 @@ class Service:
             raise ServiceError(422, "invalid change report", f"no version {base_version}")
         base = map_from_dict(found[1])
         pose, pairs = _reported_answer(reported)
-        changes = self._explain(base, local, pose, pairs)
+        changes = answer_changes(
+            base, local, pose, pairs, self.config.association, self.config.changes
+        )  # the report's own `changes` are not trusted: they are recomputed here
         if not (changes.moved or changes.new or changes.missing or _flagged(base, changes)):
             return self.store.latest_version(map_id) or base_version, False
 
@@ -445,16 +442,6 @@ class Service:
             "the local objects are needed: 'local' (a semloc map), or the answer's "
             "'localization_id' or 'session_id'",
         )
-
-    def _explain(self, base: ObjectMap, local: ObjectMap, pose, pairs) -> Changes:
-        """The changes under the reported pose and pairs, by the Localizer's candidate rule (the
-        report's own `changes` are not trusted: they are recomputed on the server)."""
-        index = CandidateIndex(base, self.config.association)
-        known = set(base.ids.tolist())
-        local_ids = {o.id for o in local}
-        pairs = [(g, l) for g, l in pairs if g in known and l in local_ids]
-        candidates = {o.id: index.candidates(o) for o in local}
-        return explain(base, list(local), pose, pairs, candidates, self.config.changes)
 
 
 def _reported_answer(body: dict) -> tuple[np.ndarray, list[tuple[str, str]]]:

@@ -15,9 +15,22 @@ Tables:
     localizations(localization_id, map_id, created, local)     a one-shot localization's
                                                          local map and answer, for its change report
 
+    schema_version(version, applied, description)        the migrations applied, in order
+
 Map versions are integers from 1.  `derive_map` runs a caller's function on the latest version
 while holding that map's write lock (SQLite: the database's; PostgreSQL: the `maps` row's), so
 that two writers of one map are serialised: each sees the other's version or gets a conflict.
+
+The layout is versioned: `MIGRATIONS` are applied in order, each once and in its own
+transaction with its row in `schema_version`, when a store is opened (by the first of several
+workers that open it at once; the others wait and find them applied).  A store written before
+`schema_version` existed is version 1.  A store of a newer semloc is refused (`StoreError`),
+never changed.  Inserts name their columns, so that a column added by a migration (with a
+default) does not shift them.  `ping()` is the cheap check that the store answers.
+
+A PostgreSQL store keeps a pool of connections per process (`psycopg_pool`, at most
+`pool_size`, opened on demand) shared by the threads of the worker: 40 threads of a worker use
+a handful, not 40, of the server's (by default 100) connections.
 """
 
 from __future__ import annotations
@@ -33,21 +46,50 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-SCHEMA = (
-    "CREATE TABLE IF NOT EXISTS maps (map_id TEXT PRIMARY KEY, latest INTEGER NOT NULL)",
-    "CREATE TABLE IF NOT EXISTS map_versions (map_id TEXT NOT NULL, version INTEGER NOT NULL, "
-    "created DOUBLE PRECISION NOT NULL, source TEXT NOT NULL, document {blob} NOT NULL, "
-    "PRIMARY KEY (map_id, version))",
-    "CREATE TABLE IF NOT EXISTS sessions (session_id TEXT PRIMARY KEY, map_id TEXT NOT NULL, "
-    "map_version INTEGER NOT NULL, up TEXT, created DOUBLE PRECISION NOT NULL, "
-    "touched DOUBLE PRECISION NOT NULL, last TEXT)",
-    "CREATE TABLE IF NOT EXISTS session_batches (session_id TEXT NOT NULL, seq INTEGER NOT NULL, "
-    "stamp DOUBLE PRECISION NOT NULL, objects {blob} NOT NULL, PRIMARY KEY (session_id, seq))",
-    "CREATE TABLE IF NOT EXISTS session_states (session_id TEXT PRIMARY KEY, "
-    "seq INTEGER NOT NULL, state {blob} NOT NULL)",
-    "CREATE TABLE IF NOT EXISTS localizations (localization_id TEXT PRIMARY KEY, "
-    "map_id TEXT NOT NULL, created DOUBLE PRECISION NOT NULL, local {blob} NOT NULL)",
-)
+
+@dataclass(frozen=True)
+class Migration:
+    """One step of the store's layout: `version` (from 1, in order), what it does, and its
+    statements (`{blob}`: the database's binary type)."""
+
+    version: int
+    description: str
+    statements: tuple[str, ...]
+
+
+MIGRATIONS = (
+    Migration(1, "maps, versions, sessions, update batches, one-shot localizations", (
+        "CREATE TABLE IF NOT EXISTS maps (map_id TEXT PRIMARY KEY, latest INTEGER NOT NULL)",
+        "CREATE TABLE IF NOT EXISTS map_versions (map_id TEXT NOT NULL, version INTEGER NOT NULL, "
+        "created DOUBLE PRECISION NOT NULL, source TEXT NOT NULL, document {blob} NOT NULL, "
+        "PRIMARY KEY (map_id, version))",
+        "CREATE TABLE IF NOT EXISTS sessions (session_id TEXT PRIMARY KEY, map_id TEXT NOT NULL, "
+        "map_version INTEGER NOT NULL, up TEXT, created DOUBLE PRECISION NOT NULL, "
+        "touched DOUBLE PRECISION NOT NULL, last TEXT)",
+        "CREATE TABLE IF NOT EXISTS session_batches (session_id TEXT NOT NULL, "
+        "seq INTEGER NOT NULL, stamp DOUBLE PRECISION NOT NULL, objects {blob} NOT NULL, "
+        "PRIMARY KEY (session_id, seq))",
+        "CREATE TABLE IF NOT EXISTS localizations (localization_id TEXT PRIMARY KEY, "
+        "map_id TEXT NOT NULL, created DOUBLE PRECISION NOT NULL, local {blob} NOT NULL)",
+    )),
+    Migration(2, "indexes: sessions by map and by idle time, localizations by age", (
+        "CREATE INDEX IF NOT EXISTS sessions_by_map ON sessions (map_id, created)",
+        "CREATE INDEX IF NOT EXISTS sessions_by_touched ON sessions (touched)",
+        "CREATE INDEX IF NOT EXISTS localizations_by_created ON localizations (created)",
+    )),
+    Migration(3, "a session's Localizer state, which rebuilds its window", (
+        "CREATE TABLE IF NOT EXISTS session_states (session_id TEXT PRIMARY KEY, "
+        "seq INTEGER NOT NULL, state {blob} NOT NULL)",
+    )),
+)  # fmt: skip
+"""The store's layout, oldest first; a new step goes at the end with the next version."""
+
+SCHEMA_VERSION = MIGRATIONS[-1].version
+
+
+class StoreError(ValueError):
+    """The store cannot be used: written by a newer semloc, or not reachable (the message
+    says which store and why)."""
 
 
 class Conflict(Exception):
@@ -96,9 +138,68 @@ class Store:
 
     def __init__(self) -> None:
         self._local = threading.local()
-        with self._transaction(write=True) as cur:
-            for statement in SCHEMA:
-                cur.execute(statement.format(blob=self.blob))
+        self.migrate()
+
+    # the layout -------------------------------------------------------------------------------
+    def migrate(self) -> list[int]:
+        """Apply the migrations this store lacks, in order, each in its own transaction; the
+        versions applied.  `StoreError` for a store of a newer semloc."""
+        applied = []
+        for migration in MIGRATIONS:
+            with self._transaction(write=True) as cur:
+                self._lock_schema(cur)
+                cur.execute(
+                    "CREATE TABLE IF NOT EXISTS schema_version (version INTEGER PRIMARY KEY, "
+                    "applied DOUBLE PRECISION NOT NULL, description TEXT NOT NULL)"
+                )
+                current = self._schema_version(cur)
+                if current > SCHEMA_VERSION:
+                    raise StoreError(
+                        f"the store's layout is version {current}, newer than this semloc's "
+                        f"({SCHEMA_VERSION}): upgrade semloc to use it"
+                    )
+                if migration.version <= current:
+                    continue
+                for statement in migration.statements:
+                    cur.execute(statement.format(blob=self.blob))
+                cur.execute(
+                    self._sql("INSERT INTO schema_version (version, applied, description) "
+                              "VALUES (?, ?, ?)"),
+                    (migration.version, time.time(), migration.description),
+                )  # fmt: skip
+                applied.append(migration.version)
+        return applied
+
+    def schema_version(self) -> int:
+        """The version of the store's layout (0: an empty store)."""
+        with self._transaction() as cur:
+            return self._schema_version(cur)
+
+    def _schema_version(self, cur: Any) -> int:
+        """Inside a transaction: the layout's version; a store without `schema_version` rows
+        but with `maps` is version 1 (written before the layout was versioned)."""
+        if self._has_table(cur, "schema_version"):
+            cur.execute("SELECT MAX(version) FROM schema_version")
+            found = cur.fetchone()[0]
+            if found is not None:
+                return int(found)
+        return 1 if self._has_table(cur, "maps") else 0
+
+    def _has_table(self, cur: Any, name: str) -> bool:
+        raise NotImplementedError
+
+    def _lock_schema(self, cur: Any) -> None:
+        """Inside a write transaction: hold off other processes migrating the same store
+        (SQLite's write transaction already does)."""
+
+    def ping(self) -> bool:
+        """Whether the store answers a trivial query now (for a readiness check); never raises."""
+        try:
+            with self._transaction() as cur:
+                cur.execute("SELECT 1")
+                return cur.fetchone()[0] == 1
+        except Exception:
+            return False
 
     # connections and transactions (per thread) ------------------------------------------------
     def _connect(self) -> Any:
@@ -157,13 +258,18 @@ class Store:
             blob_out = _pack(build(latest, old))
             version = 1 if latest is None else latest + 1
             if latest is None:
-                cur.execute(self._sql("INSERT INTO maps VALUES (?, ?)"), (map_id, version))
+                cur.execute(
+                    self._sql("INSERT INTO maps (map_id, latest) VALUES (?, ?)"), (map_id, version)
+                )
             else:
                 cur.execute(
                     self._sql("UPDATE maps SET latest = ? WHERE map_id = ?"), (version, map_id)
                 )
             cur.execute(
-                self._sql("INSERT INTO map_versions VALUES (?, ?, ?, ?, ?)"),
+                self._sql(
+                    "INSERT INTO map_versions (map_id, version, created, source, document) "
+                    "VALUES (?, ?, ?, ?, ?)"
+                ),
                 (map_id, version, time.time(), source, blob_out),
             )
         return version
@@ -218,14 +324,19 @@ class Store:
         now = time.time()
         with self._transaction(write=True, durable=False) as cur:
             cur.execute(
-                self._sql("INSERT INTO sessions VALUES (?, ?, ?, ?, ?, ?, ?)"),
+                self._sql("INSERT INTO sessions (session_id, map_id, map_version, up, created, "
+                          "touched, last) VALUES (?, ?, ?, ?, ?, ?, ?)"),
                 (session_id, map_id, map_version, None if up is None else json.dumps(up),
                  now, now, None),
             )  # fmt: skip
 
     def session(self, session_id: str) -> SessionRow | None:
         with self._transaction() as cur:
-            cur.execute(self._sql("SELECT * FROM sessions WHERE session_id = ?"), (session_id,))
+            cur.execute(
+                self._sql("SELECT session_id, map_id, map_version, up, created, touched, last "
+                          "FROM sessions WHERE session_id = ?"),
+                (session_id,),
+            )  # fmt: skip
             row = cur.fetchone()
         if row is None:
             return None
@@ -270,7 +381,10 @@ class Store:
             )
             seq = int(cur.fetchone()[0]) + 1
             cur.execute(
-                self._sql("INSERT INTO session_batches VALUES (?, ?, ?, ?)"),
+                self._sql(
+                    "INSERT INTO session_batches (session_id, seq, stamp, objects) "
+                    "VALUES (?, ?, ?, ?)"
+                ),
                 (session_id, seq, stamp, _pack(document)),
             )
         return seq
@@ -304,7 +418,8 @@ class Store:
         with self._transaction(write=True, durable=False) as cur:
             cur.execute(
                 self._sql(
-                    "INSERT INTO session_states VALUES (?, ?, ?) ON CONFLICT (session_id) DO "
+                    "INSERT INTO session_states (session_id, seq, state) VALUES (?, ?, ?) "
+                    "ON CONFLICT (session_id) DO "
                     "UPDATE SET seq = excluded.seq, state = excluded.state "
                     "WHERE session_states.seq < excluded.seq"
                 ),
@@ -349,7 +464,10 @@ class Store:
     def put_localization(self, localization_id: str, map_id: str, local: dict) -> None:
         with self._transaction(write=True, durable=False) as cur:
             cur.execute(
-                self._sql("INSERT INTO localizations VALUES (?, ?, ?, ?)"),
+                self._sql(
+                    "INSERT INTO localizations (localization_id, map_id, created, local) "
+                    "VALUES (?, ?, ?, ?)"
+                ),
                 (localization_id, map_id, time.time(), _pack(local)),
             )
 
@@ -405,6 +523,10 @@ class SQLiteStore(Store):
         self._local.durable = True
         return connection
 
+    def _has_table(self, cur: Any, name: str) -> bool:
+        cur.execute("SELECT 1 FROM sqlite_master WHERE type = 'table' AND name = ?", (name,))
+        return cur.fetchone() is not None
+
     def _retry(self, step: Callable[[], object]) -> None:
         """`step()`, again every millisecond while the database is locked (up to 30 s)."""
         give_up = time.monotonic() + self.LOCKED_GIVE_UP_S
@@ -449,20 +571,38 @@ class SQLiteStore(Store):
 
 class PostgresStore(Store):
     """The shared store: a PostgreSQL database (`postgresql://user@host:port/db`), for several
-    worker processes or machines.  Needs `psycopg` (the `serve` extra)."""
+    worker processes or machines, through a pool of at most `pool_size` connections per
+    process.  Needs `psycopg` and `psycopg_pool` (the `serve` extra)."""
 
     placeholder = "%s"
     blob = "BYTEA"
+    CONNECT_TIMEOUT_S = 10.0
+    PING_TIMEOUT_S = 2.0
 
-    def __init__(self, url: str) -> None:
-        import psycopg  # the serve extra; only a PostgreSQL store needs it
+    def __init__(self, url: str, pool_size: int = 10) -> None:
+        import psycopg_pool  # the serve extra; only a PostgreSQL store needs it
 
-        self._psycopg = psycopg
         self.url = url
+        self._pool = psycopg_pool.ConnectionPool(
+            url, min_size=1, max_size=pool_size, open=False, name="semloc",
+            timeout=self.CONNECT_TIMEOUT_S, check=psycopg_pool.ConnectionPool.check_connection,
+            kwargs={"autocommit": False, "connect_timeout": int(self.CONNECT_TIMEOUT_S)},
+        )  # fmt: skip
+        try:
+            self._pool.open(wait=True, timeout=self.CONNECT_TIMEOUT_S)
+        except psycopg_pool.PoolTimeout:
+            self._pool.close()
+            where = url.split("@")[-1]
+            raise StoreError(f"--db {where}: PostgreSQL does not answer (no connection "
+                             f"within {self.CONNECT_TIMEOUT_S:g} s)") from None  # fmt: skip
         super().__init__()
 
-    def _connect(self) -> Any:
-        return self._psycopg.connect(self.url, autocommit=False)
+    def _has_table(self, cur: Any, name: str) -> bool:
+        cur.execute("SELECT to_regclass(%s) IS NOT NULL", (name,))
+        return bool(cur.fetchone()[0])
+
+    def _lock_schema(self, cur: Any) -> None:
+        cur.execute("SELECT pg_advisory_xact_lock(hashtext('semloc schema'))")
 
     def _lock_map(self, cur: Any, map_id: str) -> int | None:
         cur.execute("SELECT latest FROM maps WHERE map_id = %s FOR UPDATE", (map_id,))
@@ -477,13 +617,15 @@ class PostgresStore(Store):
 
     @contextmanager
     def _transaction(self, write: bool = False, durable: bool = True) -> Iterator[Any]:
-        connection = self._connection()
-        if connection.closed or connection.broken:
-            connection = self._local.connection = self._connect()
+        with self._pool.connection() as connection, self._transaction_on(connection) as cur:
+            if write and not durable:
+                cur.execute("SET LOCAL synchronous_commit = off")
+            yield cur
+
+    @contextmanager
+    def _transaction_on(self, connection: Any) -> Iterator[Any]:
         try:
             with connection.cursor() as cur:
-                if write and not durable:
-                    cur.execute("SET LOCAL synchronous_commit = off")
                 yield cur
         except BaseException:
             connection.rollback()
@@ -491,13 +633,27 @@ class PostgresStore(Store):
         else:
             connection.commit()
 
+    def ping(self) -> bool:
+        """Whether PostgreSQL answers within `PING_TIMEOUT_S` (a pooled connection)."""
+        try:
+            with self._pool.connection(timeout=self.PING_TIMEOUT_S) as connection:
+                return connection.execute("SELECT 1").fetchone()[0] == 1
+        except Exception:
+            return False
 
-def open_store(data_dir: str | Path, url: str | None = None) -> Store:
-    """The store of `url` (`postgresql://…`), or SQLite in `data_dir` without one."""
+    def close(self) -> None:
+        self._pool.close()
+
+
+def open_store(data_dir: str | Path | None, url: str | None = None, pool_size: int = 10) -> Store:
+    """The store of `url` (`postgresql://…`, a pool of `pool_size` connections), or SQLite in
+    the folder `data_dir` without one."""
     if url is not None and url.startswith(("postgresql://", "postgres://")):
-        return PostgresStore(url)
+        return PostgresStore(url, pool_size)
     if url is not None:
         raise ValueError(f"--db takes a postgresql:// URL, got {url[:60]!r}")
+    if data_dir is None:
+        raise ValueError("a store needs a folder (--data DIR) or a database (--db URL)")
     folder = Path(data_dir)
     folder.mkdir(parents=True, exist_ok=True)
     return SQLiteStore(folder / "semloc.sqlite3")

@@ -21,7 +21,8 @@ from pathlib import Path
 import numpy as np
 
 from semloc.descriptors import described
-from semloc.io.native import save_map, write_atomic
+from semloc.io.native import save_map
+from semloc.io.output import write_atomic
 from semloc.sim.scenario import SimulatedSequence
 
 

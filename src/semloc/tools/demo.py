@@ -25,9 +25,10 @@ from rich.live import Live
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
-from semloc.compiling import warm_up
+from semloc.compiling import warmup
 from semloc.eval.success import is_success
-from semloc.io.native import save_map, staged_folder, write_atomic
+from semloc.io.native import save_map
+from semloc.io.output import staged_folder, write_atomic
 from semloc.localizer import Localizer, LocalizerConfig
 from semloc.pictures.display import for_rich
 from semloc.pictures.live import FoxgloveView
@@ -139,7 +140,9 @@ def localize_sequence(
     localizer = Localizer(seq.global_maps[kind], LocalizerConfig(gamma=gamma), local_up=(0, 0, 1))
     result = Result(status="failed", pose=None, hypotheses=[])
     keyframes, statuses = [], []
-    warm_up(lambda text: console.print(f"[dim]{text}…[/]"))  # not inside the timed updates
+    # every compiled loop, not only localization's (the first command of a new install: then
+    # `align`, `serve` and `bag` find nothing left to compile); not inside the timed updates
+    warmup(lambda text: console.print(f"[dim]{text}…[/]"))
     table = _table()
     with Live(table, console=console, refresh_per_second=8, vertical_overflow="visible"):
         for kf in seq.keyframes:

@@ -23,7 +23,8 @@ from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
 from semloc.eval.datasets import real_data_dir
-from semloc.io.native import save_map, staged_folder, write_atomic
+from semloc.io.native import save_map
+from semloc.io.output import staged_folder, write_atomic
 from semloc.maps import MapError
 from semloc.sim.noise import DetectionNoise
 from semloc.sim.realscan import RealScan, load_real_scan, simulate_walk
