@@ -23,6 +23,10 @@ since nothing says whether they are still there.  A local object without points 
 nothing, so with centres only a moved object reads as `new` and nothing is `missing`.  Greedy and one to one (matches nearest first, moved objects by box agreement,
 then nearest), so that a moved object and a new one of the same class are not both explained
 by one map object.  Pure computation on numpy arrays.
+
+A report of changes against a map that moved on since (the service's change reports) still
+applies unless the versions written since touched what it changes or relies on
+(`check_still_applies`, `ReportConflict`).
 """
 
 from __future__ import annotations
@@ -290,4 +294,55 @@ def _moved(obj: SemanticObject, observed: SemanticObject, change: Moved) -> Sema
         position=observed.position,
         points=points,
         extra={**obj.extra, "moved_from": obj.position.tolist(), "moved_m": change.offset_m},
+    )
+
+
+# Reports of changes against a map that moved on ---------------------------------------------
+class ReportConflict(Exception):
+    """A change report no longer applies: the versions written since its base changed what it
+    changes or relies on."""
+
+
+def flags_to_clear(base: ObjectMap, changes: Changes) -> bool:
+    """Whether a matched object carries a `missing` flag the report would clear (a change even
+    when nothing moved, appeared or vanished)."""
+    matched = set(changes.matched)
+    return any(o.id in matched and "missing" in o.extra for o in base)
+
+
+def check_still_applies(
+    base: ObjectMap, current: ObjectMap, local: ObjectMap, pose: np.ndarray, changes: Changes
+) -> None:
+    """Raise `ReportConflict` when the versions written since `base` (the report's version; the
+    latest is `current`) touched what the report changes or relies on: an object it moves,
+    flags missing or matched was changed or removed, or an object added since lies within
+    1 m of where the report adds one (two devices reporting one new chair)."""
+    before = {o.id: o for o in base}
+    after = {o.id: o for o in current}
+    touched = {i for i, o in before.items() if i not in after or not _same(o, after[i])}
+    relied = {m.global_id for m in changes.moved} | set(changes.missing) | set(changes.matched)
+    clash = sorted(relied & touched)
+    if clash:
+        raise ReportConflict(f"objects changed since the report's version: {', '.join(clash[:10])}")
+    added = [o for i, o in after.items() if i not in before]
+    if added and changes.new:
+        R, t = pose[:3, :3], pose[:3, 3]
+        placed = {o.id: R @ o.position + t for o in local}
+        for local_id in changes.new:
+            for other in added:
+                if np.linalg.norm(other.position - placed[local_id]) < NEW_CLASH_M:
+                    raise ReportConflict(
+                        f"new object {local_id} lies where object {other.id} was added since"
+                    )
+
+
+NEW_CLASH_M = 1.0
+"""Two reports adding an object within this distance (m) of each other add the same object."""
+
+
+def _same(a: SemanticObject, b: SemanticObject) -> bool:
+    return (
+        a.label == b.label
+        and np.allclose(a.position, b.position, atol=1e-6)
+        and (a.extra.get("missing") == b.extra.get("missing"))
     )

@@ -1,0 +1,274 @@
+"""The shapes of the HTTP API of `semloc serve`: one pydantic model per request body and answer.
+
+These models are what `/openapi.json` declares, so that tools can test the service and
+generate clients from it.  Request bodies are checked against them strictly (JSON types as
+they are: no string for a number, no boolean for an integer) after semloc's own JSON reader
+has refused NaN, duplicate keys and oversized input; a map's deeper rules (unique ids, proper
+rotations, non-zero directions) are `semloc.io.map_from_dict`'s, which a JSON Schema cannot
+state and the descriptions do.  Answers allow extra keys (later versions may add some).
+
+The shapes follow docs/format.md (a semloc map) and the JSON of `semloc localize --format json`.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, TypeAdapter
+
+from semloc.maps import (
+    MAX_COORDINATE,
+    MAX_DESCRIPTOR_LENGTH,
+    MAX_EMBEDDING_LENGTH,
+    MAX_ID_LENGTH,
+    MAX_LABEL_LENGTH,
+    MAX_OBJECTS,
+    MAX_SEEN,
+)
+
+ID_PATTERN = r"^[^\x00-\x1f\x7f-\x9f/]+$"
+"""A map id: 1 to 200 characters, no control character and no '/'."""
+TEXT_PATTERN = (
+    r"[^\t\n\x0b\x0c\r\x1c-\x1f \x85\xa0\u1680\u2000-\u200a\u2028\u2029\u202f\u205f\u3000]"
+)
+"""A label holds at least one character that is not white space (Python's `str.strip`)."""
+
+Coordinate = Annotated[float, Field(ge=-MAX_COORDINATE, le=MAX_COORDINATE)]
+Vector3 = Annotated[list[Coordinate], Field(min_length=3, max_length=3)]
+Direction = Annotated[
+    list[Coordinate],
+    Field(min_length=3, max_length=3, description="A direction (3 numbers, not all zero)."),
+]
+Unit = Annotated[float, Field(ge=-2.0, le=2.0)]
+Pose = Annotated[
+    list[Annotated[list[float], Field(min_length=4, max_length=4)]],
+    Field(
+        min_length=4,
+        max_length=4,
+        description="T_global_local, 4 rows of 4 numbers: p_global = R @ p_local + t.",
+    ),
+]
+MapId = Annotated[str, Field(min_length=1, max_length=MAX_ID_LENGTH, pattern=ID_PATTERN)]
+
+
+class _Request(BaseModel):
+    """A request body: JSON types as they are; unknown keys kept (and ignored)."""
+
+    model_config = ConfigDict(strict=True, extra="allow")
+
+
+class _Answer(BaseModel):
+    """An answer: later versions may add keys."""
+
+    model_config = ConfigDict(extra="allow")
+
+
+# Maps ---------------------------------------------------------------------------------------
+class MapObject(_Request):
+    """One object of a semloc map (docs/format.md)."""
+
+    id: (
+        Annotated[str, Field(min_length=1, max_length=MAX_ID_LENGTH)]
+        | Annotated[int, Field(ge=-(2**63), le=2**63 - 1)]
+    ) = Field(description="Unique within its map; an integer is taken as its decimal string.")
+    label: str = Field(
+        min_length=1, max_length=MAX_LABEL_LENGTH, pattern=TEXT_PATTERN, description="Its class."
+    )
+    position: Vector3 = Field(description="The object's centre (m).")
+    size: (
+        Annotated[
+            list[Annotated[float, Field(ge=0, le=MAX_COORDINATE)]],
+            Field(min_length=3, max_length=3),
+        ]
+        | None
+    ) = Field(  # fmt: skip
+        None, description="Extents of its box (m)."
+    )
+    rotation: (
+        Annotated[
+            list[Annotated[list[Unit], Field(min_length=3, max_length=3)]],
+            Field(min_length=3, max_length=3),
+        ]
+        | None
+    ) = Field(  # fmt: skip
+        None, description="Orientation of its box: a proper rotation matrix, row-major."
+    )
+    points: list[Annotated[list[Coordinate], Field(min_length=3, max_length=3)]] | None = Field(
+        None, description="Its points (m), inline."
+    )
+    descriptor: Annotated[list[float], Field(min_length=1, max_length=MAX_DESCRIPTOR_LENGTH)] | None = None  # fmt: skip
+    embedding: (
+        Annotated[list[float], Field(min_length=1, max_length=MAX_EMBEDDING_LENGTH)] | None
+    ) = Field(  # fmt: skip
+        None, description="A semantic feature vector (not all zero; one length per map)."
+    )
+    seen: int = Field(0, ge=0, le=MAX_SEEN, description="Keyframe of its first detection.")
+    score: float | None = Field(None, description="Detection confidence.")
+
+
+class SemlocMap(_Request):
+    """A semloc map (docs/format.md); points travel inline (no `points_file`)."""
+
+    format: Literal["semloc-map"]
+    version: Literal[1]
+    name: str = ""
+    up: Direction | None = Field(None, description="Gravity-up in this map's frame.")
+    objects: list[MapObject] = Field(
+        max_length=MAX_OBJECTS, description="Ids unique within the map."
+    )
+
+
+class MapVersion(_Answer):
+    map_id: str
+    version: int = Field(ge=1)
+
+
+class VersionInfo(_Answer):
+    version: int = Field(ge=1)
+    created: str = Field(description="ISO 8601, UTC.")
+    source: str = Field(description='"upload" or "changes (from version N)".')
+
+
+# Answers of a localization ------------------------------------------------------------------
+class Pair(_Answer):
+    global_: str = Field(alias="global")
+    local: str
+
+
+class Hypothesis(_Answer):
+    rank: int
+    score: float
+    pairs: list[Pair]
+    pose: Pose | None
+    fitness: float | None = None
+    confidence: float | None = None
+
+
+class Step(_Answer):
+    step: int
+    n_local: int
+    n_sets: int
+    top_scores: list[float]
+    ms: float
+
+
+class Moved(_Answer):
+    global_: str = Field(alias="global")
+    local: str
+    offset_m: float
+
+
+class Changes(_Answer):
+    moved: list[Moved]
+    new: list[str] = Field(description="Local ids.")
+    missing: list[str] = Field(description="Global ids.")
+
+
+class LabelMatch(_Answer):
+    resolved: str
+    map_labels: list[str]
+
+
+class Answer(_Answer):
+    """The JSON of `semloc localize --format json` with the map version it used."""
+
+    status: Literal["localized", "ambiguous", "failed"]
+    reason: str
+    confidence: float | None
+    pose: Pose | None
+    hypotheses: list[Hypothesis]
+    steps: list[Step]
+    timing_ms: dict[str, float]
+    changes: Changes
+    labels: dict[str, LabelMatch]
+    map_version: int
+
+
+class LocalizeAnswer(Answer):
+    localization_id: str = Field(description="Names the local objects kept for a change report.")
+
+
+class SessionAnswer(Answer):
+    session_id: str
+    update: int = Field(ge=1, description="This update's number in the session.")
+    stamp: float = Field(description="The update's stamp, echoed.")
+
+
+# Sessions -----------------------------------------------------------------------------------
+class SessionCreate(_Request):
+    """Optional: the device frame's up (without it, no gravity prior)."""
+
+    model_config = ConfigDict(strict=True, extra="forbid")
+    up: Direction | None = None
+
+
+class SessionCreated(_Answer):
+    session_id: str = Field(description="A capability: only its owner may use it.")
+
+
+class SessionUpdate(_Request):
+    objects: list[MapObject] = Field(
+        max_length=MAX_OBJECTS,
+        description="New or re-detected objects (an id sent again replaces its object); "
+        "ids unique within the update.",
+    )
+    stamp: float = Field(0.0, description="The device's time of the observation, echoed.")
+
+
+class SessionInfo(_Answer):
+    session_id: str | None = Field(description="Only for the caller's own sessions.")
+    mine: bool
+    map_version: int
+    up: list[float] | None
+    idle_s: float
+    last: dict[str, Any] | None = Field(description="Status, pose and stamp of its latest answer.")
+
+
+# Change reports -----------------------------------------------------------------------------
+class ReportedPair(_Request):
+    global_: str | int = Field(alias="global")
+    local: str | int
+
+
+class ReportedHypothesis(_Request):
+    pairs: list[ReportedPair] = []
+
+
+class ChangeReport(_Request):
+    """An answer of this map as it came (its `localization_id` or `session_id` names the local
+    objects the server kept), or with `local`; only a `localized` answer is applied unless
+    `accept_ambiguous`."""
+
+    status: Literal["localized", "ambiguous", "failed"]
+    map_version: int = Field(ge=1, le=2**62)
+    pose: Pose = Field(description="A rigid transform (proper rotation, last row 0 0 0 1).")
+    hypotheses: list[ReportedHypothesis] = []
+    local: SemlocMap | None = None
+    localization_id: str | None = None
+    session_id: str | None = None
+    accept_ambiguous: bool = False
+
+
+class ChangeResult(_Answer):
+    version: int = Field(description="The map's version after the report.")
+    changed: bool = Field(description="Whether the report wrote that version.")
+
+
+# Service ------------------------------------------------------------------------------------
+class Health(_Answer):
+    status: Literal["ok"]
+    version: str
+    store: str
+    tokens: bool
+
+
+class Error(BaseModel):
+    """Every refusal: a short `error` and a `detail` (text, or a list of problems)."""
+
+    error: str
+    detail: Any = None
+
+
+REQUESTS: dict[type[BaseModel], TypeAdapter] = {
+    model: TypeAdapter(model) for model in (SemlocMap, SessionCreate, SessionUpdate, ChangeReport)
+}
