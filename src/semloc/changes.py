@@ -39,7 +39,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 from scipy.spatial import cKDTree
 
-from semloc.maps import ObjectMap, SemanticObject
+from semloc.maps import MAX_ID_LENGTH, ObjectMap, SemanticObject
 
 POINTS_PER_OBJECT = 48
 """Observed surfaces are sampled to about this many points per local object: the radii asked
@@ -262,7 +262,7 @@ def apply_changes(
 ) -> ObjectMap:
     """`prior` with `changes` applied: a moved object is put where it was observed (its points
     shifted with it, its other fields kept, `moved_from` / `moved_m` noted), a new object is added
-    in the global frame (its id prefixed `new:` when taken, `new: true`), a missing one is flagged
+    in the global frame (its id prefixed `new:` when taken, `new2:` ... when that is, `new: true`), a missing one is flagged
     `missing: true` (kept: one look is no proof that it is gone); the flag goes when a later view
     sees the object again, where it was or moved."""
     seen = {o.id: o.transformed(pose) for o in local}
@@ -281,10 +281,20 @@ def apply_changes(
     taken = {o.id for o in objects}
     for local_id in changes.new:
         new = seen[local_id]
-        new_id = local_id if local_id not in taken else f"new:{local_id}"
+        new_id = _free_id(local_id, taken)
         taken.add(new_id)
         objects.append(new.replace(id=new_id, extra={**new.extra, "new": True}))
     return prior.with_objects(objects)
+
+
+def _free_id(local_id: str, taken: set[str]) -> str:
+    """`local_id`, else `new:local_id` (then `new2:`, `new3:`, ...), within the id length."""
+    candidate, number = local_id, 1
+    while candidate in taken:
+        prefix = "new:" if number == 1 else f"new{number}:"
+        candidate = (prefix + local_id)[:MAX_ID_LENGTH]
+        number += 1
+    return candidate
 
 
 def _moved(obj: SemanticObject, observed: SemanticObject, change: Moved) -> SemanticObject:

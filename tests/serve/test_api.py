@@ -170,7 +170,7 @@ def test_a_change_report_becomes_a_new_version(serve, building):
     assert [m["global"] for m in answer["changes"]["moved"]] == ["7"]
     status, refused = raw(client.url, "POST", "/v1/maps/office/changes",
                           json.dumps({**answer, "localization_id": "unknown"}).encode())  # fmt: skip
-    assert status == 422 and "localization_id" in refused["detail"]
+    assert status == 404 and "localization_id" in refused["detail"]
     # the answer as it came: the server kept the local objects under its localization_id
     status, created = raw(
         client.url, "POST", "/v1/maps/office/changes", json.dumps(answer).encode()
@@ -230,13 +230,16 @@ def test_change_reports_need_a_localized_answer_and_the_local_objects(serve, bui
     local = view(building, [0, 1, 2], T_TRUE)
     answer = client.localize("office", local)
     assert answer["status"] == "ambiguous"
-    for body, status in ((answer, 422), ({**answer, "status": "localized"}, 422),
+    # the answer as it came (ambiguous); one that says `localized` although the server's own
+    # record of it (its localization_id) says otherwise: a conflict with what the server kept
+    for body, status in ((answer, 422), ({**answer, "status": "localized"}, 409),
                          ({"map_version": 1}, 422), ([1, 2], 422)):  # fmt: skip
         code, error = raw(server.url, "POST", "/v1/maps/office/changes", json.dumps(body).encode())
         assert code == status and set(error) == {"error", "detail"}, (body, error)
     with pytest.raises(ServerError) as refused:
-        client.report_changes("office", {**answer, "map_version": 7}, local=local)
-    assert refused.value.status == 422 and "version 7" in refused.value.detail
+        client.report_changes("office", {**answer, "map_version": 7, "accept_ambiguous": True},
+                              local=local)  # fmt: skip
+    assert refused.value.status == 404 and "version 7" in refused.value.detail
 
 
 def test_a_session_reports_its_own_changes(serve, building):

@@ -61,7 +61,6 @@ STATUS: dict[type[ServiceError], int] = {
     PreconditionFailed: 412,
 }
 """The HTTP status of each kind of refusal of the service."""
-MAX_VERSION = 2**62
 
 
 class Refused(Exception):
@@ -228,7 +227,10 @@ def create_app(
 
     @app.exception_handler(StarletteHTTPException)
     async def _http_error(request: Request, exc: StarletteHTTPException) -> JSONResponse:
-        return _error(exc.status_code, str(exc.detail).lower(), None, exc.headers)
+        headers = dict(exc.headers or {})
+        if exc.status_code == 405:  # every method of the path, not only the first route's
+            headers["Allow"] = ", ".join(_methods(app, request.url.path))
+        return _error(exc.status_code, str(exc.detail).lower(), None, headers or None)
 
     @app.exception_handler(RequestValidationError)
     async def _validation_error(request: Request, exc: RequestValidationError) -> JSONResponse:
@@ -291,7 +293,7 @@ def create_app(
     async def get_map(
         map_id: MapPath,
         who: Annotated[Caller, Depends(may("read"))],
-        version: Annotated[int | None, Query(ge=1, le=MAX_VERSION)] = None,
+        version: Annotated[int | None, Query(ge=1, le=models.SAFE_INTEGER)] = None,
     ) -> Response:
         """A map: the latest version, or `version`."""
         number, document = await run_in_threadpool(service.map_document, map_id, version)
@@ -430,6 +432,16 @@ def _declare_bodies(app: FastAPI) -> None:
     app.openapi = openapi  # type: ignore[method-assign]
 
 
+def _methods(app: FastAPI, path: str) -> list[str]:
+    """The methods the routes of `path` take."""
+    found: set[str] = set()
+    for route in app.routes:
+        regex, methods = getattr(route, "path_regex", None), getattr(route, "methods", None)
+        if regex is not None and methods and regex.match(path):
+            found |= set(methods)
+    return sorted(found)
+
+
 # Reading bodies -----------------------------------------------------------------------------
 async def _read(request: Request, max_body: int) -> bytes:
     declared = request.headers.get("content-length")
@@ -457,10 +469,9 @@ def _parsed(raw: bytes, model: type[BaseModel], optional: bool) -> Any:
     except ValueError as exc:
         raise Refused(400, "bad JSON", str(exc)[:200]) from None
     try:
-        models.REQUESTS[model].validate_python(document)
+        return models.checked(model, document)
     except ValidationError as exc:
         raise Refused(422, f"invalid {model.__name__}", _problems(exc.errors())) from None
-    return document
 
 
 def _problems(errors: Any) -> list[dict[str, Any]]:

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, TypeAdapter
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, model_validator
 
 from semloc.maps import (
     MAX_COORDINATE,
@@ -26,12 +26,26 @@ from semloc.maps import (
     MAX_SEEN,
 )
 
+SAFE_INTEGER = 2**53 - 1
+"""Integers in requests stay within what every JSON reader holds exactly (I-JSON, RFC 7493)."""
 ID_PATTERN = r"^[^\x00-\x1f\x7f-\x9f/]+$"
 """A map id: 1 to 200 characters, no control character and no '/'."""
 TEXT_PATTERN = (
     r"[^\t\n\x0b\x0c\r\x1c-\x1f \x85\xa0\u1680\u2000-\u200a\u2028\u2029\u202f\u205f\u3000]"
 )
 """A label holds at least one character that is not white space (Python's `str.strip`)."""
+
+
+def _integral(value: Any) -> Any:
+    """JSON Schema counts 3.0 as an integer: so does the service."""
+    return int(value) if isinstance(value, float) and value.is_integer() else value
+
+
+def Integer(low: int, high: int) -> Any:  # noqa: N802 (a type)
+    """An integer from `low` to `high` (bounds before the conversion, or the schema loses
+    them)."""
+    return Annotated[int, Field(ge=low, le=high), BeforeValidator(_integral)]
+
 
 Coordinate = Annotated[float, Field(ge=-MAX_COORDINATE, le=MAX_COORDINATE)]
 Vector3 = Annotated[list[Coordinate], Field(min_length=3, max_length=3)]
@@ -67,9 +81,8 @@ class _Answer(BaseModel):
 class MapObject(_Request):
     """One object of a semloc map (docs/format.md)."""
 
-    id: (
-        Annotated[str, Field(min_length=1, max_length=MAX_ID_LENGTH)]
-        | Annotated[int, Field(ge=-(2**63), le=2**63 - 1)]
+    id: Annotated[str, Field(min_length=1, max_length=MAX_ID_LENGTH)] | Integer(
+        -SAFE_INTEGER, SAFE_INTEGER
     ) = Field(description="Unique within its map; an integer is taken as its decimal string.")
     label: str = Field(
         min_length=1, max_length=MAX_LABEL_LENGTH, pattern=TEXT_PATTERN, description="Its class."
@@ -102,7 +115,7 @@ class MapObject(_Request):
     ) = Field(  # fmt: skip
         None, description="A semantic feature vector (not all zero; one length per map)."
     )
-    seen: int = Field(0, ge=0, le=MAX_SEEN, description="Keyframe of its first detection.")
+    seen: Integer(0, MAX_SEEN) = Field(0, description="Keyframe of its first detection.")
     score: float | None = Field(None, description="Detection confidence.")
 
 
@@ -110,7 +123,7 @@ class SemlocMap(_Request):
     """A semloc map (docs/format.md); points travel inline (no `points_file`)."""
 
     format: Literal["semloc-map"]
-    version: Literal[1]
+    version: Annotated[Literal[1], BeforeValidator(_integral)]
     name: str = ""
     up: Direction | None = Field(None, description="Gravity-up in this map's frame.")
     objects: list[MapObject] = Field(
@@ -226,12 +239,25 @@ class SessionInfo(_Answer):
 
 # Change reports -----------------------------------------------------------------------------
 class ReportedPair(_Request):
-    global_: str | int = Field(alias="global")
-    local: str | int
+    global_: str | Integer(-SAFE_INTEGER, SAFE_INTEGER) = Field(alias="global")
+    local: str | Integer(-SAFE_INTEGER, SAFE_INTEGER)
 
 
 class ReportedHypothesis(_Request):
     pairs: list[ReportedPair] = []
+
+
+def _report_rules(schema: dict[str, Any]) -> None:
+    """What a change report needs besides its fields' shapes: the local objects (one of
+    `local`, `localization_id`, `session_id`) and a localized answer (or `accept_ambiguous`)."""
+    for name in ("local", "localization_id", "session_id"):
+        schema["properties"][name].pop("default", None)  # absent, never null
+    schema["allOf"] = [
+        {"anyOf": [{"required": [name]} for name in ("local", "localization_id", "session_id")]},
+        {"anyOf": [{"properties": {"status": {"const": "localized"}}},
+                   {"properties": {"accept_ambiguous": {"const": True}},
+                    "required": ["accept_ambiguous"]}]},
+    ]  # fmt: skip
 
 
 class ChangeReport(_Request):
@@ -239,14 +265,31 @@ class ChangeReport(_Request):
     objects the server kept), or with `local`; only a `localized` answer is applied unless
     `accept_ambiguous`."""
 
+    model_config = ConfigDict(strict=True, extra="allow", json_schema_extra=_report_rules)
+
     status: Literal["localized", "ambiguous", "failed"]
-    map_version: int = Field(ge=1, le=2**62)
+    map_version: Integer(1, SAFE_INTEGER) = Field(description="The version the answer used.")
     pose: Pose = Field(description="A rigid transform (proper rotation, last row 0 0 0 1).")
     hypotheses: list[ReportedHypothesis] = []
-    local: SemlocMap | None = None
-    localization_id: str | None = None
-    session_id: str | None = None
+    local: SemlocMap = Field(None, description="The local objects (a semloc map).")  # type: ignore[assignment]
+    localization_id: str = Field(None, description="Of a one-shot localization's answer.")  # type: ignore[assignment]
+    session_id: str = Field(None, description="Of a session's latest answer.")  # type: ignore[assignment]
     accept_ambiguous: bool = False
+
+    @model_validator(mode="after")
+    def _needs_local_objects_and_a_localized_answer(self) -> ChangeReport:
+        given = self.model_fields_set
+        if not given & {"local", "localization_id", "session_id"}:
+            raise ValueError(
+                "the local objects are needed: 'local' (a semloc map), or the answer's "
+                "'localization_id' or 'session_id'"
+            )
+        if self.status != "localized" and not self.accept_ambiguous:
+            raise ValueError(
+                f"status {self.status!r}: only a localized answer's changes are applied (or "
+                "set accept_ambiguous)"
+            )
+        return self
 
 
 class ChangeResult(_Answer):
@@ -269,6 +312,11 @@ class Error(BaseModel):
     detail: Any = None
 
 
-REQUESTS: dict[type[BaseModel], TypeAdapter] = {
-    model: TypeAdapter(model) for model in (SemlocMap, SessionCreate, SessionUpdate, ChangeReport)
-}
+REQUESTS: tuple[type[BaseModel], ...] = (SemlocMap, SessionCreate, SessionUpdate, ChangeReport)
+"""The request bodies the routes read themselves (declared as OpenAPI components)."""
+
+
+def checked(model: type[BaseModel], document: Any) -> Any:
+    """`document` checked against `model` (pydantic's ValidationError if not), as the service
+    takes it: the keys given, integers as integers."""
+    return model.model_validate(document).model_dump(by_alias=True, exclude_unset=True)

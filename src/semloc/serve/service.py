@@ -22,6 +22,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+import re
 import secrets
 import threading
 import time
@@ -79,9 +80,14 @@ def not_found(what: str) -> NotFound:
     return NotFound("not found", what)
 
 
+ID = re.compile(rf"[^\x00-\x1f\x7f-\x9f/]{{1,{MAX_ID_LENGTH}}}")
+"""A map id: 1 to 200 characters, none of them a control character or '/'."""
+
+
 def check_id(value: str, what: str) -> str:
-    if not value or len(value) > MAX_ID_LENGTH or not value.isprintable() or "/" in value:
-        raise Invalid(f"invalid {what}", f"1 to {MAX_ID_LENGTH} printable characters")
+    if not ID.fullmatch(value):
+        raise Invalid(f"invalid {what}", f"1 to {MAX_ID_LENGTH} characters, no control "
+                      "character and no '/'")  # fmt: skip
     return value
 
 
@@ -467,9 +473,15 @@ class Service:
             raise Invalid("invalid change report", "'map_version' must be an integer")
         found = None if abs(base_version) > 2**62 else self.store.get_map(map_id, base_version)
         if found is None:
-            raise Invalid("invalid change report", f"no version {base_version}")
+            raise not_found(f"map {map_id!r} has no version {base_version}")
         base = map_from_dict(found[1])
-        pose, pairs = _reported_answer(reported)
+        try:
+            pose, pairs = _reported_answer(reported)
+        except Invalid as exc:
+            if not kept:
+                raise
+            # the body is well formed; the server's own record of its answer is not appliable
+            raise Conflict("answer not appliable", f"the kept answer: {exc.detail}") from None
         changes = self._explain(base, local, pose, pairs)
         if not (changes.moved or changes.new or changes.missing or flags_to_clear(base, changes)):
             latest = self.store.latest_version(map_id) or base_version
@@ -483,7 +495,10 @@ class Service:
             current = map_from_dict(document)
             if latest != base_version:
                 check_still_applies(base, current, local, pose, changes)
-            return map_to_dict(apply_changes(current, local, pose, changes))
+            try:
+                return map_to_dict(apply_changes(current, local, pose, changes))
+            except MapError as exc:  # e.g. a new object's embedding of another length
+                raise ReportConflict(f"the map cannot take these changes: {exc}") from None
 
         try:
             version = self.store.derive_map(
@@ -501,19 +516,17 @@ class Service:
         kept one: the objects sent along (`local`: the body's answer is taken as it is), or
         those of the answer's one-shot localization (`localization_id`) or session
         (`session_id`, its latest answer)."""
-        if "local" in body:
+        if body.get("local") is not None:
             return parse_map(body["local"], "local"), {}
         if isinstance(body.get("localization_id"), str):
             found = self.store.localization(body["localization_id"])
             if found is None or found[0] != map_id:
-                raise Invalid("invalid change report",
-                              "unknown or expired localization_id: send 'local'")  # fmt: skip
+                raise not_found("unknown or expired localization_id: send 'local'")
             return map_from_dict(found[2]["local"]), found[2]["answer"]
         if isinstance(body.get("session_id"), str):
             row = self.store.session(body["session_id"])
             if row is None or row.map_id != map_id or row.last is None:
-                raise Invalid("invalid change report",
-                              "unknown or expired session_id: send 'local'")  # fmt: skip
+                raise not_found("unknown or expired session_id: send 'local'")
             kept = {key: row.last[key] for key in ANSWER_KEYS if key in row.last}
             return self.session_objects(body["session_id"]), kept
         raise Invalid(
@@ -539,6 +552,8 @@ def _reported_answer(body: dict) -> tuple[np.ndarray, list[tuple[str, str]]]:
             "not localized", f"status {body.get('status')!r}: only a localized answer's "
             "changes are applied (or set accept_ambiguous)",
         )  # fmt: skip
+    if body.get("pose") is None:
+        raise Invalid("no pose", "the answer found no pose: there is nothing to apply")
     try:
         pose = as_pose(body.get("pose"), "pose")
     except (ValueError, TypeError) as exc:
