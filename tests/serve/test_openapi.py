@@ -62,7 +62,7 @@ def test_every_route_declares_its_body_answers_errors_and_security(server):
               ("post", "/v1/sessions/{session_id}/objects"): "SessionUpdate",
               ("post", "/v1/maps/{map_id}/changes"): "ChangeReport"}  # fmt: skip
     operations = [(m, p, o) for p, ops in spec["paths"].items() for m, o in ops.items()]
-    assert len(operations) == 11
+    assert len(operations) == 13
     for method, path, operation in operations:
         body = operation.get("requestBody")
         if (method, path) in bodies:
@@ -74,13 +74,16 @@ def test_every_route_declares_its_body_answers_errors_and_security(server):
         for code, answer in operation["responses"].items():
             if code == "204":
                 continue
-            schema = answer["content"]["application/json"]["schema"]
+            media = "text/plain" if path == "/metrics" and code == "200" else "application/json"
+            schema = answer["content"][media]["schema"]
             assert schema != {}, (method, path, code)
             if int(code) >= 400:
                 assert schema == {"$ref": "#/components/schemas/Error"}, (method, path, code)
-        if path != "/v1/health":
-            assert operation["security"] == [{"HTTPBearer": []}], (method, path)
-            assert {"401", "429"} <= set(operation["responses"]), (method, path)
+        if path not in ("/v1/health", "/v1/ready"):
+            optional = [{}] if path == "/metrics" else []  # loopback: no token needed
+            assert operation["security"] == [*optional, {"HTTPBearer": []}], (method, path)
+            needed = {"401", "403"} if path == "/metrics" else {"401", "429"}  # no rate there
+            assert needed <= set(operation["responses"]), (method, path)
 
 
 def test_schemathesis_finds_nothing(server, tmp_path):

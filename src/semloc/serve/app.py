@@ -15,12 +15,17 @@ Bodies are read with a size limit and parsed with semloc's JSON reader (no NaN, 
 keys), then checked against the route's model, in the server's thread pool like the
 localization itself, so one process serves many devices at once.  Who may do what is a
 dependency of each route (`Depends`): the bearer token, its rights on the map, its rate.
-`GET /` is a read-only page (maps, versions, live sessions).
+`GET /` is a read-only page (maps, versions, live sessions); `GET /v1/ready` says whether the
+store answers (503 if not); `GET /metrics` gives the Prometheus metrics of `semloc.serve.observe`
+to a loopback client or a token with a right on every map (`*`).
 """
 
+import asyncio
 import datetime
+import ipaddress
 import logging
 import math
+import sqlite3
 from collections.abc import AsyncIterator, Callable
 from contextlib import asynccontextmanager
 from dataclasses import dataclass
@@ -29,7 +34,7 @@ from typing import Annotated, Any
 
 from fastapi import Depends, FastAPI, Header, Path, Query, Request
 from fastapi.exceptions import RequestValidationError
-from fastapi.responses import HTMLResponse, JSONResponse, Response
+from fastapi.responses import HTMLResponse, JSONResponse, PlainTextResponse, Response
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 from pydantic import BaseModel, ValidationError
 from starlette.concurrency import run_in_threadpool
@@ -38,7 +43,8 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 import semloc
 from semloc.io.reading import parse_json
 from semloc.serve import models
-from semloc.serve.access import Access, Grant, RateLimiter, digest
+from semloc.serve.access import ANY_MAP, Access, Grant, RateLimiter, digest
+from semloc.serve.observe import ObserveMiddleware, Observer
 from semloc.serve.service import (
     Conflict,
     Expected,
@@ -54,6 +60,7 @@ from semloc.serve.service import (
 
 log = logging.getLogger("semloc.serve")
 DEFAULT_MAX_BODY = 64 * 2**20
+READY_TIMEOUT_S = 5.0
 STATUS: dict[type[ServiceError], int] = {
     Invalid: 422,
     NotFound: 404,
@@ -135,10 +142,13 @@ def create_app(
     access: Access | None = None,
     rate: float = 100.0,
     max_body: int = DEFAULT_MAX_BODY,
+    access_log: bool = False,
 ) -> FastAPI:
-    """The ASGI app over `service`; `rate` requests per second per token (0: no limit)."""
+    """The ASGI app over `service`; `rate` requests per second per token (0: no limit);
+    `access_log`: one JSON line per request on the `semloc.serve.access` logger."""
     access = access or Access.open()
     limiter = RateLimiter(rate)
+    observer = Observer(lambda: service.store.live_sessions(service.session_idle_s))
 
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
@@ -155,7 +165,8 @@ def create_app(
         lifespan=lifespan,
         separate_input_output_schemas=False,
     )
-    app.state.service, app.state.access = service, access
+    app.state.service, app.state.access, app.state.observer = service, access, observer
+    app.add_middleware(ObserveMiddleware, observer=observer, access_log=access_log)
     bearer = HTTPBearer(auto_error=False, description="A token of the server's token file.")
 
     # dependencies: who is asking, and may they ---------------------------------------------
@@ -169,6 +180,7 @@ def create_app(
         if grant is None:
             raise Refused(401, "unauthorized", "a valid token is needed (Authorization: Bearer)")
         client = grant.name if access.required else (request.client.host if request.client else "")
+        request.state.caller = grant.name  # for the access log: never the token
         if not limiter.allow(client):
             raise Refused(429, "too many requests", f"more than {rate:g} requests a second")
         return Caller(grant, digest(token) if access.required and token else "")
@@ -239,6 +251,8 @@ def create_app(
     @app.exception_handler(Exception)
     async def _internal_error(request: Request, exc: Exception) -> JSONResponse:
         log.exception("internal error on %s %s", request.method, request.url.path)
+        if _store_error(exc):
+            observer.store_errors.inc()
         return _error(500, "internal error", type(exc).__name__)
 
     # routes ----------------------------------------------------------------------------------
@@ -247,6 +261,44 @@ def create_app(
         """The server answers (no token needed)."""
         return {"status": "ok", "version": semloc.__version__,
                 "store": type(service.store).__name__, "tokens": access.required}  # fmt: skip
+
+    @app.get(
+        "/v1/ready",
+        response_model=models.Ready,
+        tags=["service"],
+        responses={503: {"model": models.Error, "description": "The store does not answer."}},
+    )
+    async def ready() -> JSONResponse:
+        """The server can serve: its store answers (no token needed)."""
+        try:
+            await asyncio.wait_for(run_in_threadpool(service.store.ping), READY_TIMEOUT_S)
+        except Exception as exc:  # a dead database, a full disk, a timeout: not ready
+            observer.store_errors.inc()
+            return _error(503, "not ready", f"the store does not answer ({type(exc).__name__})")
+        return JSONResponse({"status": "ready"})
+
+    @app.get(
+        "/metrics",
+        response_class=PlainTextResponse,
+        tags=["service"],
+        responses={
+            200: {"description": "Prometheus text format.",
+                  "content": {"text/plain": {"schema": {"type": "string"}}}},
+            **{status: {"description": _ERRORS[status], "content": {"application/json": {
+                "schema": {"$ref": "#/components/schemas/Error"}}}} for status in (401, 403)},
+        },
+        openapi_extra={"security": [{}, {"HTTPBearer": []}]},  # no token from loopback
+    )  # fmt: skip
+    async def metrics(request: Request) -> Response:
+        """The Prometheus metrics: for a loopback client, or a token with a right on `*`."""
+        if not _loopback(request):
+            grant = access.grant(_bearer_token(request))
+            if grant is None:
+                raise Refused(401, "unauthorized", "a token with a right on '*', or loopback")
+            if not grant.maps.get(ANY_MAP):
+                raise Refused(403, "forbidden", "the metrics need a right on every map ('*')")
+        body, content_type = await run_in_threadpool(observer.exposition)
+        return Response(body, media_type=content_type)
 
     @app.get("/v1/maps", response_model=list[models.MapVersion], tags=["maps"],
              responses=_errors(401, 429))  # fmt: skip
@@ -325,7 +377,9 @@ def create_app(
         document: Annotated[Any, Depends(reader(models.SemlocMap))],
     ) -> JSONResponse:
         """Localize a local map (replayed by `seen`) in the latest version."""
-        return JSONResponse(await run_in_threadpool(service.localize, map_id, document))
+        answer = await run_in_threadpool(service.localize, map_id, document)
+        observer.answers.labels("one-shot", answer["status"]).inc()
+        return JSONResponse(answer)
 
     @app.post(
         "/v1/maps/{map_id}/sessions",
@@ -369,9 +423,9 @@ def create_app(
         meta = await run_in_threadpool(service.session_of, session_id, who.owner)
         check(who.grant, meta.map_id, "localize")
         key = idempotency_key and session_key(session_id, idempotency_key, document)
-        return JSONResponse(
-            await run_in_threadpool(service.update_session, session_id, document, key)
-        )
+        answer = await run_in_threadpool(service.update_session, session_id, document, key)
+        observer.answers.labels("session", answer["status"]).inc()
+        return JSONResponse(answer)
 
     @app.delete("/v1/sessions/{session_id}", status_code=204, tags=["sessions"],
                 responses=_errors(*AUTH, 403))  # fmt: skip
@@ -430,6 +484,24 @@ def _declare_bodies(app: FastAPI) -> None:
         return app.openapi_schema
 
     app.openapi = openapi  # type: ignore[method-assign]
+
+
+def _bearer_token(request: Request) -> str | None:
+    scheme, _, value = request.headers.get("authorization", "").partition(" ")
+    return value.strip() or None if scheme.lower() == "bearer" else None
+
+
+def _loopback(request: Request) -> bool:
+    host = request.client.host if request.client else ""
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
+
+
+def _store_error(exc: Exception) -> bool:
+    """Whether an exception came from the database (SQLite or psycopg)."""
+    return isinstance(exc, sqlite3.Error) or type(exc).__module__.startswith("psycopg")
 
 
 def _methods(app: FastAPI, path: str) -> list[str]:

@@ -305,6 +305,10 @@ class Health(_Answer):
     tokens: bool
 
 
+class Ready(_Answer):
+    status: Literal["ready"]
+
+
 class Error(BaseModel):
     """Every refusal: a short `error` and a `detail` (text, or a list of problems)."""
 

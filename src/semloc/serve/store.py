@@ -165,6 +165,21 @@ class Store:
         row = cur.fetchone()
         return None if row is None else int(row[0])
 
+    def ping(self) -> None:
+        """Raise unless the database answers a query."""
+        with self._transaction() as cur:
+            cur.execute("SELECT 1")
+            cur.fetchone()
+
+    def live_sessions(self, idle_seconds: float) -> int:
+        """How many sessions were touched within `idle_seconds`."""
+        with self._transaction() as cur:
+            cur.execute(
+                self._sql("SELECT COUNT(*) FROM sessions WHERE touched >= ?"),
+                (time.time() - idle_seconds,),
+            )
+            return int(cur.fetchone()[0])
+
     def close(self) -> None:
         connection = getattr(self._local, "connection", None)
         if connection is not None:
