@@ -484,7 +484,8 @@ def test_idempotency_keys_same_body_same_answer_another_body_422(serve, building
 def test_a_repeated_update_whose_first_answer_was_never_stored_is_replayed(tmp_path, building):
     """A worker died between storing a batch and storing its answer: the update sent again
     with its key is answered by replaying the session up to that batch, not applied twice."""
-    from semloc.serve.service import session_key
+    from semloc.serve.service import request_key
+    from semloc.serve.store import session_scope
 
     service = Service(open_store(tmp_path))
     service.put_map("office", map_to_dict(building))
@@ -493,9 +494,9 @@ def test_a_repeated_update_whose_first_answer_was_never_stored_is_replayed(tmp_p
     objects = map_to_dict(local)["objects"]
     service.update_session(session_id, {"objects": objects[:3], "stamp": 1.0})
     body = {"objects": objects[3:], "stamp": 2.0}
-    key = session_key(session_id, "k", body)
+    key = request_key(session_scope(session_id), "k", body)  # as the first request stored it
     assert service.store.append_batch(session_id, 2.0, body["objects"], 600.0, key) == 2
-    answer = service.update_session(session_id, body, key)
+    answer = service.update_session(session_id, body, "k")
     reference = semloc.Localizer(building, local_up=local.up)
     reference.update(list(local)[:3])
     same_answer(answer, reference.update(list(local)[3:]))

@@ -53,9 +53,7 @@ from semloc.serve.service import (
     PreconditionFailed,
     Service,
     ServiceError,
-    map_key,
     not_found,
-    session_key,
 )
 
 log = logging.getLogger("semloc.serve")
@@ -330,9 +328,8 @@ def create_app(
         ] = None,
     ) -> JSONResponse:
         """Upload a map: its next version (1 for a new map)."""
-        key = idempotency_key and map_key("upload", map_id, who.owner, idempotency_key, document)
         version = await run_in_threadpool(
-            service.put_map, map_id, document, _expected(if_match), key
+            service.put_map, map_id, document, _expected(if_match), idempotency_key, who.owner
         )
         return JSONResponse({"map_id": map_id, "version": version}, 201, _etag(version))
 
@@ -422,8 +419,9 @@ def create_app(
         """The answer after these objects (404 for a session of another token)."""
         meta = await run_in_threadpool(service.session_of, session_id, who.owner)
         check(who.grant, meta.map_id, "localize")
-        key = idempotency_key and session_key(session_id, idempotency_key, document)
-        answer = await run_in_threadpool(service.update_session, session_id, document, key)
+        answer = await run_in_threadpool(
+            service.update_session, session_id, document, idempotency_key
+        )
         observer.answers.labels("session", answer["status"]).inc()
         return JSONResponse(answer)
 
@@ -457,8 +455,9 @@ def create_app(
         idempotency_key: Key = None,
     ) -> JSONResponse:
         """Apply what an answer found changed: 201 a new version, 200 nothing changed."""
-        key = idempotency_key and map_key("changes", map_id, who.owner, idempotency_key, document)
-        found = await run_in_threadpool(service.report_changes, map_id, document, key)
+        found = await run_in_threadpool(
+            service.report_changes, map_id, document, idempotency_key, who.owner
+        )
         return JSONResponse(found, 201 if found["changed"] else 200)
 
     @app.get("/", include_in_schema=False)

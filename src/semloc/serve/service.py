@@ -95,18 +95,11 @@ Expected = list[int] | Literal["*"]
 """The versions a conditional upload expects to be the latest (`*`: any existing one)."""
 
 
-def map_key(kind: str, map_id: str, owner: str, key: str, body: Any) -> RequestKey:
-    """The request key of an upload or change report (`kind`) of `map_id` by `owner`."""
-    return _request_key(f"{kind} {owner} {map_id}", key, body)
-
-
-def session_key(session_id: str, key: str, body: Any) -> RequestKey:
-    """The request key of a session update (deleted with the session)."""
-    return _request_key(session_scope(session_id), key, body)
-
-
-def _request_key(scope: str, key: str, body: Any) -> RequestKey:
-    """A write's request key under `scope`, with the digest of its body (canonical JSON)."""
+def request_key(scope: str, key: str | None, body: Any) -> RequestKey | None:
+    """A write's request key under `scope` (whose, and what it writes: a session's keys are
+    deleted with it), with the digest of its body (canonical JSON); None without a key."""
+    if key is None:
+        return None
     if not key or len(key) > MAX_ID_LENGTH or not key.isprintable():
         raise Invalid("invalid Idempotency-Key", f"1 to {MAX_ID_LENGTH} printable characters")
     canonical = json.dumps(body, sort_keys=True, separators=(",", ":"), allow_nan=False)
@@ -195,12 +188,15 @@ class Service:
         map_id: str,
         document: Any,
         expected: Expected | None = None,
-        key: RequestKey | None = None,
+        idempotency_key: str | None = None,
+        owner: str = "",
     ) -> int:
-        """Store an upload as the next version of `map_id`; its number.  With `expected`, only
-        while the latest version is one of them (`PreconditionFailed` otherwise)."""
+        """Store an upload by `owner` as the next version of `map_id`; its number.  With
+        `expected`, only while the latest version is one of them (`PreconditionFailed`
+        otherwise); with an `idempotency_key`, once."""
         check_id(map_id, "map id")
         objmap = parse_map(document)
+        key = request_key(f"upload {owner} {map_id}", idempotency_key, document)
 
         def check(latest: int | None) -> None:
             if expected is None:
@@ -303,13 +299,14 @@ class Service:
         return SessionMeta(session_id, row.map_id, row.map_version, row.up, row.owner)
 
     def update_session(
-        self, session_id: str, body: Any, key: RequestKey | None = None
+        self, session_id: str, body: Any, idempotency_key: str | None = None
     ) -> dict[str, Any]:
         """The answer after one more batch of a session's objects (the caller checked that it
-        owns the session).  A batch sent again with its request key is answered as the first
-        time and not applied again."""
+        owns the session).  A batch sent again with its `idempotency_key` is answered as the
+        first time and not applied again."""
         self._expire()
         meta = self._session_meta(session_id)
+        key = request_key(session_scope(session_id), idempotency_key, body)
         if not isinstance(body, dict) or "objects" not in body:
             raise Invalid("invalid update", 'body: {"objects": [...], "stamp": float}')
         stamp = body.get("stamp", 0.0)
@@ -446,14 +443,15 @@ class Service:
 
     # change reports ---------------------------------------------------------------------------
     def report_changes(
-        self, map_id: str, body: Any, key: RequestKey | None = None
+        self, map_id: str, body: Any, idempotency_key: str | None = None, owner: str = ""
     ) -> dict[str, Any]:
         """Apply a localization result's changes as a new version: `{"version", "changed"}`.
         Nothing is written when the report changes nothing; `Conflict` when the map moved on
-        and the report no longer applies.  A report sent again with its request key gets the
-        first answer."""
+        and the report no longer applies.  A report sent again by `owner` with its
+        `idempotency_key` gets the first answer."""
         if not isinstance(body, dict):
             raise Invalid("invalid change report", "the body must be a result object")
+        key = request_key(f"changes {owner} {map_id}", idempotency_key, body)
         if self.store.latest_version(map_id) is None:
             raise not_found(f"map {map_id!r}")
         if key is not None and (found := self.store.recall(key)) is not None:
