@@ -129,5 +129,7 @@ def postgres_store(postgres_url) -> Iterator[Store]:
     store = open_store(".", postgres_url)
     yield store
     with store._transaction(write=True) as cur:
-        cur.execute("DROP TABLE maps, map_versions, sessions, session_batches")
+        cur.execute(
+            "DROP TABLE maps, map_versions, sessions, session_batches, session_owners, request_keys"
+        )
     store.close()

@@ -351,7 +351,9 @@ def test_two_workers_over_postgresql(serve, building, postgres_url):
     assert Client(second.url).report_changes("office", answer)["version"] == 2
     assert [v["version"] for v in client.versions("office")] == [1, 2]
     with first.service.store._transaction(write=True) as cur:
-        cur.execute("DROP TABLE maps, map_versions, sessions, session_batches")
+        cur.execute(
+            "DROP TABLE maps, map_versions, sessions, session_batches, session_owners, request_keys"
+        )
 
 
 def test_replies_leave_without_waiting_for_an_acknowledgement():
@@ -484,7 +486,7 @@ def test_idempotency_keys_same_body_same_answer_another_body_422(serve, building
 def test_a_repeated_update_whose_first_answer_was_never_stored_is_replayed(tmp_path, building):
     """A worker died between storing a batch and storing its answer: the update sent again
     with its key is answered by replaying the session up to that batch, not applied twice."""
-    from semloc.serve.service import request_key
+    from semloc.serve.service import Idempotency, request_key
     from semloc.serve.store import session_scope
 
     service = Service(open_store(tmp_path))
@@ -494,9 +496,10 @@ def test_a_repeated_update_whose_first_answer_was_never_stored_is_replayed(tmp_p
     objects = map_to_dict(local)["objects"]
     service.update_session(session_id, {"objects": objects[:3], "stamp": 1.0})
     body = {"objects": objects[3:], "stamp": 2.0}
-    key = request_key(session_scope(session_id), "k", body)  # as the first request stored it
+    sent = Idempotency.of("k", json.dumps(body).encode())
+    key = request_key(session_scope(session_id), sent)  # as the first request stored it
     assert service.store.append_batch(session_id, 2.0, body["objects"], 600.0, key) == 2
-    answer = service.update_session(session_id, body, "k")
+    answer = service.update_session(session_id, body, sent)
     reference = semloc.Localizer(building, local_up=local.up)
     reference.update(list(local)[:3])
     same_answer(answer, reference.update(list(local)[3:]))

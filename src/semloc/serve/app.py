@@ -48,6 +48,7 @@ from semloc.serve.observe import ObserveMiddleware, Observer
 from semloc.serve.service import (
     Conflict,
     Expected,
+    Idempotency,
     Invalid,
     NotFound,
     PreconditionFailed,
@@ -74,6 +75,14 @@ class Refused(Exception):
     def __init__(self, status: int, error: str, detail: Any = None) -> None:
         super().__init__(error)
         self.status, self.error, self.detail = status, error, detail
+
+
+@dataclass(frozen=True)
+class Body:
+    """A request body: its document (checked against the route's model) and its bytes."""
+
+    document: Any
+    raw: bytes
 
 
 @dataclass(frozen=True)
@@ -215,11 +224,11 @@ def create_app(
 
     def reader(model: type[BaseModel], optional: bool = False) -> Callable[..., Any]:
         """A dependency: the body read (size limit), parsed (semloc's JSON reader) and checked
-        against `model`, off the event loop; None for an empty optional body."""
+        against `model`, off the event loop; its document is None for an empty optional body."""
 
-        async def dependency(request: Request) -> Any:
+        async def dependency(request: Request) -> Body:
             raw = await _read(request, max_body)
-            return await run_in_threadpool(_parsed, raw, model, optional)
+            return Body(await run_in_threadpool(_parsed, raw, model, optional), raw)
 
         return dependency
 
@@ -316,7 +325,7 @@ def create_app(
     async def put_map(
         map_id: MapPath,
         who: Annotated[Caller, Depends(may("write"))],
-        document: Annotated[Any, Depends(reader(models.SemlocMap))],
+        body: Annotated[Body, Depends(reader(models.SemlocMap))],
         idempotency_key: Key = None,
         if_match: Annotated[
             str | None,
@@ -329,7 +338,12 @@ def create_app(
     ) -> JSONResponse:
         """Upload a map: its next version (1 for a new map)."""
         version = await run_in_threadpool(
-            service.put_map, map_id, document, _expected(if_match), idempotency_key, who.owner
+            service.put_map,
+            map_id,
+            body.document,
+            _expected(if_match),
+            Idempotency.of(idempotency_key, body.raw),
+            who.owner,
         )
         return JSONResponse({"map_id": map_id, "version": version}, 201, _etag(version))
 
@@ -371,10 +385,10 @@ def create_app(
     async def localize(
         map_id: MapPath,
         who: Annotated[Caller, Depends(may("localize"))],
-        document: Annotated[Any, Depends(reader(models.SemlocMap))],
+        body: Annotated[Body, Depends(reader(models.SemlocMap))],
     ) -> JSONResponse:
         """Localize a local map (replayed by `seen`) in the latest version."""
-        answer = await run_in_threadpool(service.localize, map_id, document)
+        answer = await run_in_threadpool(service.localize, map_id, body.document)
         observer.answers.labels("one-shot", answer["status"]).inc()
         return JSONResponse(answer)
 
@@ -389,10 +403,12 @@ def create_app(
     async def create_session(
         map_id: MapPath,
         who: Annotated[Caller, Depends(may("localize"))],
-        document: Annotated[Any, Depends(reader(models.SessionCreate, optional=True))],
+        body: Annotated[Body, Depends(reader(models.SessionCreate, optional=True))],
     ) -> dict[str, Any]:
         """Open a live session on the latest version; it belongs to this token."""
-        session_id = await run_in_threadpool(service.create_session, map_id, document, who.owner)
+        session_id = await run_in_threadpool(
+            service.create_session, map_id, body.document, who.owner
+        )
         return {"session_id": session_id}
 
     @app.get("/v1/maps/{map_id}/sessions", response_model=list[models.SessionInfo],
@@ -413,14 +429,17 @@ def create_app(
     async def update_session(
         session_id: SessionPath,
         who: Who,
-        document: Annotated[Any, Depends(reader(models.SessionUpdate))],
+        body: Annotated[Body, Depends(reader(models.SessionUpdate))],
         idempotency_key: Key = None,
     ) -> JSONResponse:
         """The answer after these objects (404 for a session of another token)."""
         meta = await run_in_threadpool(service.session_of, session_id, who.owner)
         check(who.grant, meta.map_id, "localize")
         answer = await run_in_threadpool(
-            service.update_session, session_id, document, idempotency_key
+            service.update_session,
+            session_id,
+            body.document,
+            Idempotency.of(idempotency_key, body.raw),
         )
         observer.answers.labels("session", answer["status"]).inc()
         return JSONResponse(answer)
@@ -451,12 +470,16 @@ def create_app(
     async def report_changes(
         map_id: MapPath,
         who: Annotated[Caller, Depends(may("write"))],
-        document: Annotated[Any, Depends(reader(models.ChangeReport))],
+        body: Annotated[Body, Depends(reader(models.ChangeReport))],
         idempotency_key: Key = None,
     ) -> JSONResponse:
         """Apply what an answer found changed: 201 a new version, 200 nothing changed."""
         found = await run_in_threadpool(
-            service.report_changes, map_id, document, idempotency_key, who.owner
+            service.report_changes,
+            map_id,
+            body.document,
+            Idempotency.of(idempotency_key, body.raw),
+            who.owner,
         )
         return JSONResponse(found, 201 if found["changed"] else 200)
 

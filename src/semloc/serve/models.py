@@ -322,5 +322,25 @@ REQUESTS: tuple[type[BaseModel], ...] = (SemlocMap, SessionCreate, SessionUpdate
 
 def checked(model: type[BaseModel], document: Any) -> Any:
     """`document` checked against `model` (pydantic's ValidationError if not), as the service
-    takes it: the keys given, integers as integers."""
-    return model.model_validate(document).model_dump(by_alias=True, exclude_unset=True)
+    takes it: integers as integers (JSON Schema's 3.0 is the integer 3)."""
+    _integers(document, model.model_validate(document))
+    return document
+
+
+def _integers(document: dict[str, Any], instance: BaseModel) -> None:
+    """Write the integer fields of a checked document back as the model read them (in place:
+    a few fields, where dumping the model would copy every point)."""
+    if isinstance(instance, SemlocMap):
+        document["version"] = instance.version
+    if isinstance(instance, (SemlocMap, SessionUpdate)):
+        for raw, obj in zip(document["objects"], instance.objects):
+            raw["id"] = obj.id
+            if "seen" in raw:
+                raw["seen"] = obj.seen
+    if isinstance(instance, ChangeReport):
+        document["map_version"] = instance.map_version
+        if instance.local is not None:
+            _integers(document["local"], instance.local)
+        for raw, hypothesis in zip(document.get("hypotheses", []), instance.hypotheses):
+            for raw_pair, pair in zip(raw.get("pairs", []), hypothesis.pairs):
+                raw_pair["global"], raw_pair["local"] = pair.global_, pair.local

@@ -20,7 +20,6 @@ Refusals are `ServiceError`s, one class per kind (`Invalid`, `NotFound`, `Confli
 from __future__ import annotations
 
 import hashlib
-import json
 import math
 import re
 import secrets
@@ -95,15 +94,28 @@ Expected = list[int] | Literal["*"]
 """The versions a conditional upload expects to be the latest (`*`: any existing one)."""
 
 
-def request_key(scope: str, key: str | None, body: Any) -> RequestKey | None:
+@dataclass(frozen=True)
+class Idempotency:
+    """A write's Idempotency-Key and the digest of its body as it was sent (the same key with
+    the same bytes is the same request)."""
+
+    key: str
+    digest: str
+
+    @classmethod
+    def of(cls, key: str | None, body: bytes) -> Idempotency | None:
+        return None if key is None else cls(key, hashlib.sha256(body).hexdigest())
+
+
+def request_key(scope: str, idempotency: Idempotency | None) -> RequestKey | None:
     """A write's request key under `scope` (whose, and what it writes: a session's keys are
-    deleted with it), with the digest of its body (canonical JSON); None without a key."""
-    if key is None:
+    deleted with it); None without one."""
+    if idempotency is None:
         return None
+    key = idempotency.key
     if not key or len(key) > MAX_ID_LENGTH or not key.isprintable():
         raise Invalid("invalid Idempotency-Key", f"1 to {MAX_ID_LENGTH} printable characters")
-    canonical = json.dumps(body, sort_keys=True, separators=(",", ":"), allow_nan=False)
-    return RequestKey(scope, key, hashlib.sha256(canonical.encode()).hexdigest())
+    return RequestKey(scope, key, idempotency.digest)
 
 
 def _same_body(key: RequestKey, remembered: Remembered) -> Remembered:
@@ -188,15 +200,15 @@ class Service:
         map_id: str,
         document: Any,
         expected: Expected | None = None,
-        idempotency_key: str | None = None,
+        idempotency: Idempotency | None = None,
         owner: str = "",
     ) -> int:
         """Store an upload by `owner` as the next version of `map_id`; its number.  With
         `expected`, only while the latest version is one of them (`PreconditionFailed`
-        otherwise); with an `idempotency_key`, once."""
+        otherwise); with an `idempotency` key, once."""
         check_id(map_id, "map id")
         objmap = parse_map(document)
-        key = request_key(f"upload {owner} {map_id}", idempotency_key, document)
+        key = request_key(f"upload {owner} {map_id}", idempotency)
 
         def check(latest: int | None) -> None:
             if expected is None:
@@ -299,14 +311,14 @@ class Service:
         return SessionMeta(session_id, row.map_id, row.map_version, row.up, row.owner)
 
     def update_session(
-        self, session_id: str, body: Any, idempotency_key: str | None = None
+        self, session_id: str, body: Any, idempotency: Idempotency | None = None
     ) -> dict[str, Any]:
         """The answer after one more batch of a session's objects (the caller checked that it
-        owns the session).  A batch sent again with its `idempotency_key` is answered as the
+        owns the session).  A batch sent again with its `idempotency` key is answered as the
         first time and not applied again."""
         self._expire()
         meta = self._session_meta(session_id)
-        key = request_key(session_scope(session_id), idempotency_key, body)
+        key = request_key(session_scope(session_id), idempotency)
         if not isinstance(body, dict) or "objects" not in body:
             raise Invalid("invalid update", 'body: {"objects": [...], "stamp": float}')
         stamp = body.get("stamp", 0.0)
@@ -443,15 +455,15 @@ class Service:
 
     # change reports ---------------------------------------------------------------------------
     def report_changes(
-        self, map_id: str, body: Any, idempotency_key: str | None = None, owner: str = ""
+        self, map_id: str, body: Any, idempotency: Idempotency | None = None, owner: str = ""
     ) -> dict[str, Any]:
         """Apply a localization result's changes as a new version: `{"version", "changed"}`.
         Nothing is written when the report changes nothing; `Conflict` when the map moved on
         and the report no longer applies.  A report sent again by `owner` with its
-        `idempotency_key` gets the first answer."""
+        `idempotency` key gets the first answer."""
         if not isinstance(body, dict):
             raise Invalid("invalid change report", "the body must be a result object")
-        key = request_key(f"changes {owner} {map_id}", idempotency_key, body)
+        key = request_key(f"changes {owner} {map_id}", idempotency)
         if self.store.latest_version(map_id) is None:
             raise not_found(f"map {map_id!r}")
         if key is not None and (found := self.store.recall(key)) is not None:
