@@ -329,9 +329,7 @@ class Service:
         ):
             raise Invalid("invalid update", "'stamp' must be a finite number")
         objects = _objects_map(body["objects"], meta.up, "objects")  # refused before it is stored
-        if key is not None and (found := self.store.recall(key)) is not None:
-            return self._answered(meta, _same_body(key, found))
-        try:
+        try:  # a key used before is found under the session's lock: nothing appended
             seq = self.store.append_batch(
                 session_id, float(stamp), body["objects"], self.session_idle_s, key
             )
