@@ -360,8 +360,8 @@ def create_app(
     ) -> Response:
         """A map: the latest version, or `version`."""
         number, document = await run_in_threadpool(service.map_document, map_id, version)
-        return JSONResponse(document, headers={"X-Semloc-Map-Version": str(number),
-                                               **_etag(number)})  # fmt: skip
+        headers = {"X-Semloc-Map-Version": str(number), **_etag(number)}
+        return await _json(document, headers=headers)
 
     @app.get("/v1/maps/{map_id}/versions", response_model=list[models.VersionInfo],
              tags=["maps"], responses=_errors(*AUTH, 403))  # fmt: skip
@@ -390,7 +390,7 @@ def create_app(
         """Localize a local map (replayed by `seen`) in the latest version."""
         answer = await run_in_threadpool(service.localize, map_id, body.document)
         observer.answers.labels("one-shot", answer["status"]).inc()
-        return JSONResponse(answer)
+        return await _json(answer)
 
     @app.post(
         "/v1/maps/{map_id}/sessions",
@@ -442,7 +442,7 @@ def create_app(
             Idempotency.of(idempotency_key, body.raw),
         )
         observer.answers.labels("session", answer["status"]).inc()
-        return JSONResponse(answer)
+        return await _json(answer)
 
     @app.delete("/v1/sessions/{session_id}", status_code=204, tags=["sessions"],
                 responses=_errors(*AUTH, 403))  # fmt: skip
@@ -585,6 +585,14 @@ def _expected(if_match: str | None) -> Expected | None:
         if tag.isascii() and tag.isdigit() and len(tag) < 20:
             versions.append(int(tag))
     return versions
+
+
+async def _json(
+    content: Any, status: int = 200, headers: dict[str, str] | None = None
+) -> JSONResponse:
+    """A JSON answer serialised in the thread pool (a map of many points takes a while: the
+    event loop goes on serving the other requests meanwhile)."""
+    return await run_in_threadpool(JSONResponse, content, status, headers)
 
 
 def _error(
