@@ -433,16 +433,16 @@ def create_app(
         idempotency_key: Key = None,
     ) -> JSONResponse:
         """The answer after these objects (404 for a session of another token)."""
-        meta = await run_in_threadpool(service.session_of, session_id, who.owner)
-        check(who.grant, meta.map_id, "localize")
-        answer = await run_in_threadpool(
-            service.update_session,
-            session_id,
-            body.document,
-            Idempotency.of(idempotency_key, body.raw),
-        )
-        observer.answers.labels("session", answer["status"]).inc()
-        return await _json(answer)
+
+        def update() -> JSONResponse:  # one trip to the thread pool: a device's every update
+            meta = service.session_of(session_id, who.owner)
+            check(who.grant, meta.map_id, "localize")
+            sent = Idempotency.of(idempotency_key, body.raw)
+            answer = service.update_session(session_id, body.document, sent)
+            observer.answers.labels("session", answer["status"]).inc()
+            return JSONResponse(answer)
+
+        return await run_in_threadpool(update)
 
     @app.delete("/v1/sessions/{session_id}", status_code=204, tags=["sessions"],
                 responses=_errors(*AUTH, 403))  # fmt: skip
