@@ -287,6 +287,9 @@ def test_bad_input_is_a_4xx_with_the_error_shape_and_the_server_goes_on(serve, b
         assert code == 422 and set(error) == {"error", "detail"}, (body, error)
     assert session.update([])["update"] == 1  # refused batches were not stored
     assert raw(url, "POST", "/v1/maps/a/sessions", b'{"up": [0, 0]}')[0] == 422
+    assert raw(url, "POST", "/v1/maps/a/sessions", b"\t")[0] == 400  # not JSON, not absent
+    assert raw(url, "POST", "/v1/maps/a/sessions", b"null")[0] == 422
+    assert raw(url, "POST", "/v1/maps/a/sessions", b"")[0] == 201  # absent: no up
     assert raw(url, "POST", "/v1/maps/a/sessions", b'{"down": 1}')[0] == 422
 
 
