@@ -15,7 +15,9 @@ temporary folder or `--db`) holds the three real maps (ScanNet scene0000_00, Rep
    Printed: per-update latency p50 / p95 / p99 / max, errors, updates a second, and updates per
    CPU-second of the server (its processes' CPU time over the run: updates a second per core
    it keeps busy).  Every answer is compared with an in-process `Localizer` fed the same
-   batches: status, pose (1e-9) and pairs must be identical.
+   batches: status, pose (1e-9) and pairs must be identical.  `/metrics` is scraped every 2 s
+   during each row, as a Prometheus server would: scrapes, their time, failures, and the
+   session updates the metrics counted (summed over the workers) against the devices' count.
 2. **Soak** (`--soak S`): 32 devices for S seconds; the server's resident memory sampled every
    10 s (first, last, largest): a leak shows as growth.
 3. **Faults** (`--faults K`): uploads and change reports from two threads while the server is
@@ -47,6 +49,7 @@ import sys
 import tempfile
 import threading
 import time
+import urllib.request
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -213,6 +216,15 @@ class LoadResult:
     mismatches: int
     seconds: float
     server_cpu_s: float
+    scrapes: list[float] = field(default_factory=list)  # ms each
+    scrape_failures: int = 0
+    counted_updates: float = float("nan")  # by the server's /metrics over the row
+
+    def metrics_line(self) -> str:
+        p99 = np.percentile(self.scrapes, 99) if self.scrapes else np.nan
+        return (f"metrics ({self.devices} devices): {len(self.scrapes)} scrapes, p99 {p99:.1f} ms, "
+                f"{self.scrape_failures} failed; session updates counted by /metrics "
+                f"{self.counted_updates:.0f}, by the devices {len(self.latencies_ms)}")  # fmt: skip
 
     def row(self) -> list[str]:
         q = np.percentile(self.latencies_ms, [50, 95, 99]) if self.latencies_ms else [np.nan] * 3
@@ -262,14 +274,57 @@ def load(server: Server, views: list[View], devices: int, seconds: float, hz: fl
                 session.close()
 
     threads = [threading.Thread(target=device, args=(i,), daemon=True) for i in range(devices)]
+    scraper = Scraper(server.url)
+    counted_before = scraper.updates()
     cpu_before, began = server.cpu_seconds(), time.monotonic()
-    for thread in threads:
+    for thread in [*threads, scraper]:
         thread.start()
     for thread in threads:
         thread.join(seconds + 120)
     elapsed = time.monotonic() - began
-    return LoadResult(devices, latencies, counters["errors"], counters["mismatches"], elapsed,
-                      server.cpu_seconds() - cpu_before)  # fmt: skip
+    cpu = server.cpu_seconds() - cpu_before
+    scraper.done.set()
+    scraper.join(30)
+    result = LoadResult(devices, latencies, counters["errors"], counters["mismatches"], elapsed,
+                        cpu, scraper.took_ms, scraper.failures)  # fmt: skip
+    result.counted_updates = scraper.updates() - counted_before
+    return result
+
+
+UPDATES = (
+    'semloc_requests_total{method="POST",route="/v1/sessions/{session_id}/objects",status="200"}'
+)
+
+
+class Scraper(threading.Thread):
+    """Scrapes `/metrics` every `every` seconds until `done` (a loopback client: no token)."""
+
+    def __init__(self, url: str, every: float = 2.0) -> None:
+        super().__init__(daemon=True)
+        self.url, self.every = url, every
+        self.done = threading.Event()
+        self.took_ms: list[float] = []
+        self.failures = 0
+
+    def run(self) -> None:
+        while not self.done.wait(self.every):
+            began = time.perf_counter()
+            try:
+                self.scrape()
+            except OSError:
+                self.failures += 1
+                continue
+            self.took_ms.append((time.perf_counter() - began) * 1e3)
+
+    def scrape(self) -> dict[str, float]:
+        with urllib.request.urlopen(self.url + "/metrics", timeout=10) as response:
+            text = response.read().decode()
+        lines = [line.rsplit(" ", 1) for line in text.splitlines() if line and line[0] != "#"]
+        return {name: float(value) for name, value in lines}
+
+    def updates(self) -> float:
+        """Successful session updates the server counted so far."""
+        return self.scrape().get(UPDATES, 0.0)
 
 
 # 2. soak ------------------------------------------------------------------------------------
@@ -570,6 +625,7 @@ def main(argv: list[str] | None = None) -> None:
             result = load(server, views, devices, args.seconds, args.hz, args.seed)
             rows.append(result.row())
             print(table(rows[-1:]).splitlines()[-1], flush=True)
+            print(result.metrics_line(), flush=True)
         text = table(rows)
         print(f"\nLoad: {args.hz:g} update/s per device, {args.seconds:g} s per row\n\n{text}")
         if args.markdown:

@@ -4,6 +4,8 @@ fixtures several test packages use.
 numba compiles into a folder named after a hash of the package's sources (`numba_cache.py`:
 numba's own cache check misses changes in other modules a cached kernel calls).
 
+DDS (Cyclone DDS, `tests/ros2`) is confined to loopback for every test (`CYCLONEDDS_URI`).
+
 Helper modules: `format_fixtures.py` writes small dataset files in each importer's format;
 `helpers.py` holds small functions (real-data lookup that skips with a reason).  Yaw rotations
 and poses come from `semloc.transforms` (`yaw_rotation`, `yaw_pose`, `rigid`).
@@ -11,6 +13,7 @@ and poses come from `semloc.transforms` (`yaw_rotation`, `yaw_pose`, `rigid`).
 
 from __future__ import annotations
 
+import os
 import sys
 from pathlib import Path
 
@@ -23,6 +26,14 @@ from numba_cache import use_fresh_cache  # noqa: E402
 NUMBA_CACHE = use_fresh_cache()  # before anything imports semloc (and so numba)
 
 from helpers import real_sample_or_skip  # noqa: E402
+
+LOOPBACK_DDS = (
+    '<CycloneDDS><Domain><General><Interfaces><NetworkInterface name="lo"/></Interfaces>'
+    "<AllowMulticast>false</AllowMulticast></General><Discovery><Peers>"
+    '<Peer address="127.0.0.1"/></Peers><ParticipantIndex>auto</ParticipantIndex>'
+    "<MaxAutoParticipantIndex>40</MaxAutoParticipantIndex></Discovery></Domain></CycloneDDS>"
+)
+os.environ["CYCLONEDDS_URI"] = LOOPBACK_DDS  # DDS stays on loopback (tests/ros2)
 
 
 @pytest.fixture

@@ -26,7 +26,8 @@ APPLICATIONS = {"tools", "cli"}
 BELOW_APPLICATIONS = ("io", "pictures", "sim", "eval", "baselines", "frontend", "descriptors")
 THIRD_PARTY_CORE = {"numpy", "scipy", "pydantic", "numba"}
 EXTRAS = ("open3d", "matplotlib", "dask", "distributed", "sklearn", "torch", "rerun", "fastapi", "cv2",
-          "uvicorn", "starlette", "psycopg", "rosbags", "mcap", "spark_dsg", "cyclonedds")  # fmt: skip
+          "uvicorn", "starlette", "psycopg", "prometheus_client", "rosbags", "mcap", "spark_dsg",
+          "cyclonedds")  # fmt: skip
 MAX_LOCAL_SEMLOC_IMPORTS = 11  # + `semloc serve` importing its extra when run
 
 

@@ -23,6 +23,10 @@ since nothing says whether they are still there.  A local object without points 
 nothing, so with centres only a moved object reads as `new` and nothing is `missing`.  Greedy and one to one (matches nearest first, moved objects by box agreement,
 then nearest), so that a moved object and a new one of the same class are not both explained
 by one map object.  Pure computation on numpy arrays.
+
+A report of changes against a map that moved on since (the service's change reports) still
+applies unless the versions written since touched what it changes or relies on
+(`check_still_applies`, `ReportConflict`).
 """
 
 from __future__ import annotations
@@ -36,7 +40,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from scipy.spatial import cKDTree
 
 from semloc.association import AssociationConfig, CandidateIndex
-from semloc.maps import ObjectMap, SemanticObject
+from semloc.maps import MAX_ID_LENGTH, ObjectMap, SemanticObject
 
 POINTS_PER_OBJECT = 48
 """Observed surfaces are sampled to about this many points per local object: the radii asked
@@ -282,7 +286,7 @@ def apply_changes(
 ) -> ObjectMap:
     """`prior` with `changes` applied: a moved object is put where it was observed (its points
     shifted with it, its other fields kept, `moved_from` / `moved_m` noted), a new object is added
-    in the global frame (its id prefixed `new:` when taken, `new: true`), a missing one is flagged
+    in the global frame (its id prefixed `new:` when taken, `new2:` ... when that is, `new: true`), a missing one is flagged
     `missing: true` (kept: one look is no proof that it is gone); the flag goes when a later view
     sees the object again, where it was or moved."""
     seen = {o.id: o.transformed(pose) for o in local}
@@ -301,10 +305,20 @@ def apply_changes(
     taken = {o.id for o in objects}
     for local_id in changes.new:
         new = seen[local_id]
-        new_id = local_id if local_id not in taken else f"new:{local_id}"
+        new_id = _free_id(local_id, taken)
         taken.add(new_id)
         objects.append(new.replace(id=new_id, extra={**new.extra, "new": True}))
     return prior.with_objects(objects)
+
+
+def _free_id(local_id: str, taken: set[str]) -> str:
+    """`local_id`, else `new:local_id` (then `new2:`, `new3:`, ...), within the id length."""
+    candidate, number = local_id, 1
+    while candidate in taken:
+        prefix = "new:" if number == 1 else f"new{number}:"
+        candidate = (prefix + local_id)[:MAX_ID_LENGTH]
+        number += 1
+    return candidate
 
 
 def _moved(obj: SemanticObject, observed: SemanticObject, change: Moved) -> SemanticObject:
@@ -314,4 +328,55 @@ def _moved(obj: SemanticObject, observed: SemanticObject, change: Moved) -> Sema
         position=observed.position,
         points=points,
         extra={**obj.extra, "moved_from": obj.position.tolist(), "moved_m": change.offset_m},
+    )
+
+
+# Reports of changes against a map that moved on ---------------------------------------------
+class ReportConflict(Exception):
+    """A change report no longer applies: the versions written since its base changed what it
+    changes or relies on."""
+
+
+def flags_to_clear(base: ObjectMap, changes: Changes) -> bool:
+    """Whether a matched object carries a `missing` flag the report would clear (a change even
+    when nothing moved, appeared or vanished)."""
+    matched = set(changes.matched)
+    return any(o.id in matched and "missing" in o.extra for o in base)
+
+
+def check_still_applies(
+    base: ObjectMap, current: ObjectMap, local: ObjectMap, pose: np.ndarray, changes: Changes
+) -> None:
+    """Raise `ReportConflict` when the versions written since `base` (the report's version; the
+    latest is `current`) touched what the report changes or relies on: an object it moves,
+    flags missing or matched was changed or removed, or an object added since lies within
+    1 m of where the report adds one (two devices reporting one new chair)."""
+    before = {o.id: o for o in base}
+    after = {o.id: o for o in current}
+    touched = {i for i, o in before.items() if i not in after or not _same(o, after[i])}
+    relied = {m.global_id for m in changes.moved} | set(changes.missing) | set(changes.matched)
+    clash = sorted(relied & touched)
+    if clash:
+        raise ReportConflict(f"objects changed since the report's version: {', '.join(clash[:10])}")
+    added = [o for i, o in after.items() if i not in before]
+    if added and changes.new:
+        R, t = pose[:3, :3], pose[:3, 3]
+        placed = {o.id: R @ o.position + t for o in local}
+        for local_id in changes.new:
+            for other in added:
+                if np.linalg.norm(other.position - placed[local_id]) < NEW_CLASH_M:
+                    raise ReportConflict(
+                        f"new object {local_id} lies where object {other.id} was added since"
+                    )
+
+
+NEW_CLASH_M = 1.0
+"""Two reports adding an object within this distance (m) of each other add the same object."""
+
+
+def _same(a: SemanticObject, b: SemanticObject) -> bool:
+    return (
+        a.label == b.label
+        and np.allclose(a.position, b.position, atol=1e-6)
+        and (a.extra.get("missing") == b.extra.get("missing"))
     )

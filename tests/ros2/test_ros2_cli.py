@@ -10,7 +10,11 @@ import subprocess
 import sys
 import time
 
+import pytest
 from test_live_node import walk  # noqa: F401  (the fixture)
+
+pytest.importorskip("cyclonedds", reason="the ros2 extra (cyclonedds) is not installed")
+pytest.importorskip("rosbags", reason="the ros extra is not installed")
 
 
 def semloc(*args: str, **options) -> subprocess.Popen:

@@ -129,6 +129,6 @@ def postgres_store(postgres_url) -> Iterator[Store]:
     store = open_store(".", postgres_url)
     yield store
     with store._transaction(write=True) as cur:
-        cur.execute("DROP TABLE IF EXISTS maps, map_versions, sessions, session_batches, session_states, "
-                    "localizations, schema_version")  # fmt: skip
+        cur.execute("DROP TABLE IF EXISTS maps, map_versions, sessions, session_batches, "
+                    "session_states, session_owners, request_keys, localizations, schema_version")  # fmt: skip
     store.close()

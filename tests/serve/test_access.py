@@ -9,12 +9,14 @@ import pytest
 from conftest import T_TRUE, view
 from test_api import raw
 
+import semloc
 from semloc.io import map_to_dict
 from semloc.serve.access import Access, TokenFileError, digest
 
 READER, LOCALIZER, WRITER, ADMIN, OTHER = (
     "reader-token-1", "localizer-token", "writer-token-1", "admin-token-1", "other-map-token",
 )  # fmt: skip
+DEVICE_A, DEVICE_B = "device-a-token", "device-b-token"  # the same rights, two devices
 TOKENS = {
     "tokens": [
         {"token": READER, "maps": {"office": ["read"]}},
@@ -22,6 +24,8 @@ TOKENS = {
         {"sha256": digest(WRITER), "maps": {"office": ["read", "write"]}},
         {"token": ADMIN, "maps": {"*": ["read", "localize", "write"]}},
         {"token": OTHER, "maps": {"lab": ["read", "localize", "write"]}},
+        {"token": DEVICE_A, "maps": {"office": ["read", "localize"]}},
+        {"token": DEVICE_B, "maps": {"office": ["read", "localize"]}},
     ]
 }
 
@@ -35,10 +39,6 @@ def secured(serve, building, tmp_path):
     assert raw(server.url, "PUT", "/v1/maps/office", document, ADMIN)[0] == 201
     assert raw(server.url, "PUT", "/v1/maps/lab", document, ADMIN)[0] == 201
     return server, document
-
-
-def _session(url: str) -> str:
-    return raw(url, "POST", "/v1/maps/office/sessions", None, ADMIN)[1]["session_id"]
 
 
 def test_the_auth_matrix(secured, building):
@@ -70,19 +70,63 @@ def test_the_auth_matrix(secured, building):
 def test_sessions_and_change_reports_follow_the_map_rights(secured, building):
     server, _ = secured
     url = server.url
-    session_id = _session(url)
+    opened = raw(url, "POST", "/v1/maps/office/sessions", None, LOCALIZER)
+    assert opened[0] == 201
+    path = f"/v1/sessions/{opened[1]['session_id']}/objects"
     update = b'{"objects": [], "stamp": 1.5}'
-    path = f"/v1/sessions/{session_id}/objects"
-    assert raw(url, "POST", path, update, READER)[0] == 403
-    assert raw(url, "POST", path, update, OTHER)[0] == 404
     assert raw(url, "POST", path, update)[0] == 401
     status, answer = raw(url, "POST", path, update, LOCALIZER)
     assert status == 200 and answer["stamp"] == 1.5
     report = json.dumps({**answer, "local": map_to_dict(view(building, [3], T_TRUE))}).encode()
     assert raw(url, "POST", "/v1/maps/office/changes", report, LOCALIZER)[0] == 403
     assert raw(url, "POST", "/v1/maps/office/changes", report, OTHER)[0] == 404
-    assert raw(url, "DELETE", f"/v1/sessions/{session_id}", None, WRITER)[0] == 403
-    assert raw(url, "DELETE", f"/v1/sessions/{session_id}", None, LOCALIZER)[0] == 204
+
+
+def test_a_session_belongs_to_the_token_that_opened_it(secured, building):
+    """The ownership matrix: every other token's update or deletion of device A's session is
+    refused with 404 (as for a session that does not exist), the session list never shows
+    another token's session id, and A's session goes on as if nobody had tried; a token with
+    `write` on the map may end it."""
+    server, _ = secured
+    url = server.url
+    local = view(building, [3, 4, 5, 6, 7, 8, 9], T_TRUE)
+    objects = map_to_dict(local)["objects"]
+    status, opened = raw(url, "POST", "/v1/maps/office/sessions",
+                         json.dumps({"up": local.up.tolist()}).encode(), DEVICE_A)  # fmt: skip
+    assert status == 201
+    session_id = opened["session_id"]
+    path = f"/v1/sessions/{session_id}/objects"
+    first = json.dumps({"objects": objects[:3], "stamp": 1.0}).encode()
+    assert raw(url, "POST", path, first, DEVICE_A)[0] == 200
+
+    fake = json.dumps({"objects": [{"id": "x", "label": "chair", "position": [0, 0, 0]}],
+                       "stamp": 2.0}).encode()  # fmt: skip
+    for token in (DEVICE_B, READER, LOCALIZER, WRITER, ADMIN, OTHER):
+        assert raw(url, "POST", path, fake, token)[0] == 404, token
+    for token in (DEVICE_B, READER, LOCALIZER, OTHER):
+        assert raw(url, "DELETE", f"/v1/sessions/{session_id}", None, token)[0] == 404, token
+    for token in (DEVICE_B, READER, LOCALIZER, WRITER, ADMIN):
+        status, listed = raw(url, "GET", "/v1/maps/office/sessions", None, token)
+        assert status == 200 and session_id not in json.dumps(listed), token
+        assert [(s["session_id"], s["mine"], s["last"]["update"]) for s in listed] == [
+            (None, False, 1)
+        ]
+    status, listed = raw(url, "GET", "/v1/maps/office/sessions", None, DEVICE_A)
+    assert [(s["session_id"], s["mine"]) for s in listed] == [(session_id, True)]
+
+    # A's session is as it was: its second update is update 2 and answers as a Localizer fed
+    # A's two batches only (the fake object never reached it)
+    rest = json.dumps({"objects": objects[3:], "stamp": 3.0}).encode()
+    status, answer = raw(url, "POST", path, rest, DEVICE_A)
+    reference = semloc.Localizer(building, local_up=local.up)
+    reference.update(list(local)[:3])
+    expected = reference.update(list(local)[3:])
+    assert status == 200 and answer["update"] == 2 and answer["status"] == expected.status
+    assert answer["status"] == "localized" and "x" not in json.dumps(answer["hypotheses"])
+
+    # a token that may write the map ends any of its sessions
+    assert raw(url, "DELETE", f"/v1/sessions/{session_id}", None, WRITER)[0] == 204
+    assert raw(url, "POST", path, rest, DEVICE_A)[0] == 404
 
 
 def test_the_map_list_shows_only_readable_maps(secured):

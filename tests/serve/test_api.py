@@ -11,6 +11,7 @@ import urllib.request
 import numpy as np
 import pytest
 from conftest import T_TRUE, view
+from proxy import DroppingProxy
 
 import semloc
 from semloc.client import Client, ServerError
@@ -169,7 +170,7 @@ def test_a_change_report_becomes_a_new_version(serve, building):
     assert [m["global"] for m in answer["changes"]["moved"]] == ["7"]
     status, refused = raw(client.url, "POST", "/v1/maps/office/changes",
                           json.dumps({**answer, "localization_id": "unknown"}).encode())  # fmt: skip
-    assert status == 422 and "localization_id" in refused["detail"]
+    assert status == 404 and "localization_id" in refused["detail"]
     # the answer as it came: the server kept the local objects under its localization_id
     status, created = raw(
         client.url, "POST", "/v1/maps/office/changes", json.dumps(answer).encode()
@@ -229,13 +230,16 @@ def test_change_reports_need_a_localized_answer_and_the_local_objects(serve, bui
     local = view(building, [0, 1, 2], T_TRUE)
     answer = client.localize("office", local)
     assert answer["status"] == "ambiguous"
-    for body, status in ((answer, 422), ({**answer, "status": "localized"}, 422),
+    # the answer as it came (ambiguous); one that says `localized` although the server's own
+    # record of it (its localization_id) says otherwise: a conflict with what the server kept
+    for body, status in ((answer, 422), ({**answer, "status": "localized"}, 409),
                          ({"map_version": 1}, 422), ([1, 2], 422)):  # fmt: skip
         code, error = raw(server.url, "POST", "/v1/maps/office/changes", json.dumps(body).encode())
         assert code == status and set(error) == {"error", "detail"}, (body, error)
     with pytest.raises(ServerError) as refused:
-        client.report_changes("office", {**answer, "map_version": 7}, local=local)
-    assert refused.value.status == 422 and "version 7" in refused.value.detail
+        client.report_changes("office", {**answer, "map_version": 7, "accept_ambiguous": True},
+                              local=local)  # fmt: skip
+    assert refused.value.status == 404 and "version 7" in refused.value.detail
 
 
 def test_a_session_reports_its_own_changes(serve, building):
@@ -283,6 +287,9 @@ def test_bad_input_is_a_4xx_with_the_error_shape_and_the_server_goes_on(serve, b
         assert code == 422 and set(error) == {"error", "detail"}, (body, error)
     assert session.update([])["update"] == 1  # refused batches were not stored
     assert raw(url, "POST", "/v1/maps/a/sessions", b'{"up": [0, 0]}')[0] == 422
+    assert raw(url, "POST", "/v1/maps/a/sessions", b"\t")[0] == 400  # not JSON, not absent
+    assert raw(url, "POST", "/v1/maps/a/sessions", b"null")[0] == 422
+    assert raw(url, "POST", "/v1/maps/a/sessions", b"")[0] == 201  # absent: no up
     assert raw(url, "POST", "/v1/maps/a/sessions", b'{"down": 1}')[0] == 422
 
 
@@ -347,8 +354,8 @@ def test_two_workers_over_postgresql(serve, building, postgres_url):
     assert Client(second.url).report_changes("office", answer)["version"] == 2
     assert [v["version"] for v in client.versions("office")] == [1, 2]
     with first.service.store._transaction(write=True) as cur:
-        cur.execute("DROP TABLE maps, map_versions, sessions, session_batches, localizations, "
-                    "schema_version")  # fmt: skip
+        cur.execute("DROP TABLE IF EXISTS maps, map_versions, sessions, session_batches, "
+                    "session_states, session_owners, request_keys, localizations, schema_version")  # fmt: skip
 
 
 def test_replies_leave_without_waiting_for_an_acknowledgement():
@@ -398,3 +405,148 @@ def test_racing_change_reports_of_one_object_give_one_version_and_one_409(serve,
     moved = client.get_map("office").get("7").position - building.get("7").position
     assert min(np.linalg.norm(moved - s) for s in ([0.9, 0.6, 0], [-0.8, -0.5, 0])) < 0.05
     assert [v["version"] for v in client.versions("office")] == [1, 2]
+
+
+# Safe retries -------------------------------------------------------------------------------
+def test_a_session_update_whose_answer_was_lost_is_answered_again_and_applied_once(serve, building):
+    """The proxy drops the answer of the first session update (served, then the connection
+    closes): the client sends it again with the same Idempotency-Key and gets the same answer;
+    the session holds one batch, and the next update is update 2."""
+    server = serve()
+    Client(server.url).put_map("office", building)
+    proxy = DroppingProxy(server.url, lambda method, path: path.endswith("/objects"))
+    local = view(building, TABLE, T_TRUE)
+    client = Client(proxy.url)
+    session = client.session("office", up=local.up.tolist())
+    reference = semloc.Localizer(building, local_up=local.up)
+    first = session.update(list(local)[:4], stamp=1.0)
+    assert proxy.dropped == [f"POST /v1/sessions/{session.session_id}/objects 200"]
+    assert first["update"] == 1 and first["stamp"] == 1.0
+    same_answer(first, reference.update(list(local)[:4]))
+    second = session.update(list(local)[4:], stamp=2.0)
+    assert second["update"] == 2 and second["status"] == "localized"
+    same_answer(second, reference.update(list(local)[4:]))
+    assert [b.seq for b in server.service.store.batches(session.session_id)] == [1, 2]
+    proxy.close()
+
+
+def test_a_change_report_whose_answer_was_lost_gets_its_answer_not_a_409(serve, building):
+    server = serve()
+    Client(server.url).put_map("office", building)
+    proxy = DroppingProxy(server.url, lambda method, path: path.endswith("/changes"))
+    client = Client(proxy.url)
+    local = _moved_view(building)
+    answer = client.localize("office", local)
+    assert client.report_changes("office", answer) == {"version": 2, "changed": True}
+    assert proxy.dropped == ["POST /v1/maps/office/changes 201"]
+    assert [v["version"] for v in client.versions("office")] == [1, 2]
+    proxy.close()
+
+
+def test_an_upload_whose_answer_was_lost_is_one_version(serve, building):
+    server = serve()
+    proxy = DroppingProxy(server.url, lambda method, path: method == "PUT")
+    client = Client(proxy.url)
+    assert client.put_map("office", building) == 1
+    assert proxy.dropped == ["PUT /v1/maps/office 201"]
+    assert [v["version"] for v in client.versions("office")] == [1]
+    proxy.close()
+
+
+def test_idempotency_keys_same_body_same_answer_another_body_422(serve, building):
+    server = serve()
+    url = server.url
+    Client(url).put_map("office", building)
+    local = view(building, TABLE, T_TRUE)
+    session = Client(url).session("office", up=local.up.tolist())
+    path = f"/v1/sessions/{session.session_id}/objects"
+    body = json.dumps({"objects": map_to_dict(local)["objects"][:3], "stamp": 5.0}).encode()
+    key = {"Idempotency-Key": "update-1"}
+    first = raw(url, "POST", path, body, headers=key)
+    assert first[0] == 200 and first[1]["update"] == 1
+    other = json.dumps({"objects": [], "stamp": 6.0}).encode()
+    assert raw(url, "POST", path, other, headers={"Idempotency-Key": "update-2"})[1]["update"] == 2
+    assert raw(url, "POST", path, body, headers=key) == first  # after another update, too
+    status, refused = raw(url, "POST", path, other, headers=key)
+    assert status == 422 and refused["error"] == "idempotency key reused"
+    assert [b.seq for b in server.service.store.batches(session.session_id)] == [1, 2]
+    # change reports: one version per key, its answer again for the same body
+    moved = _moved_view(building)
+    report = json.dumps({**Client(url).localize("office", moved)}).encode()
+    key = {"Idempotency-Key": "report-1"}
+    assert raw(url, "POST", "/v1/maps/office/changes", report, headers=key) == (
+        201, {"version": 2, "changed": True})  # fmt: skip
+    assert raw(url, "POST", "/v1/maps/office/changes", report, headers=key) == (
+        201, {"version": 2, "changed": True})  # fmt: skip
+    assert raw(url, "POST", "/v1/maps/office/changes", b'{"status": "localized"}',
+               headers=key)[0] == 422  # fmt: skip
+    assert [v["version"] for v in Client(url).versions("office")] == [1, 2]
+    for bad in ("", "x" * 201, "tab\there"):
+        assert raw(url, "POST", path, other, headers={"Idempotency-Key": bad})[0] in (400, 422)
+
+
+def test_a_repeated_update_whose_first_answer_was_never_stored_is_replayed(tmp_path, building):
+    """A worker died between storing a batch and storing its answer: the update sent again
+    with its key is answered by replaying the session up to that batch, not applied twice."""
+    from semloc.serve.service import Idempotency, request_key
+    from semloc.serve.store import session_scope
+
+    service = Service(open_store(tmp_path))
+    service.put_map("office", map_to_dict(building))
+    local = view(building, TABLE, T_TRUE)
+    session_id = service.create_session("office", {"up": local.up.tolist()})
+    objects = map_to_dict(local)["objects"]
+    service.update_session(session_id, {"objects": objects[:3], "stamp": 1.0})
+    body = {"objects": objects[3:], "stamp": 2.0}
+    sent = Idempotency.of("k", json.dumps(body).encode())
+    key = request_key(session_scope(session_id), sent)  # as the first request stored it
+    assert service.store.append_batch(session_id, 2.0, body["objects"], 600.0, key) == 2
+    answer = service.update_session(session_id, body, sent)
+    reference = semloc.Localizer(building, local_up=local.up)
+    reference.update(list(local)[:3])
+    same_answer(answer, reference.update(list(local)[3:]))
+    assert answer["update"] == 2 and answer["stamp"] == 2.0
+    assert [b.seq for b in service.store.batches(session_id)] == [1, 2]
+
+
+def test_if_match_and_etag(serve, building):
+    """PUT answers ETag "<version>"; with If-Match it writes only while the latest version is
+    the one named (412 otherwise, nothing written)."""
+    server = serve()
+    url = server.url
+    document = json.dumps(map_to_dict(building)).encode()
+    assert raw(url, "PUT", "/v1/maps/office", document, headers={"If-Match": '"1"'})[0] == 412
+    request = urllib.request.Request(url + "/v1/maps/office", data=document, method="PUT")
+    with urllib.request.urlopen(request, timeout=60) as response:
+        assert response.status == 201 and response.headers["ETag"] == '"1"'
+    for latest, tag in enumerate(('"1"', "2", 'W/"3"', '"7", "4"', "*"), start=1):
+        assert raw(url, "PUT", "/v1/maps/office", document, headers={"If-Match": tag}) == (
+            201, {"map_id": "office", "version": latest + 1}), tag  # fmt: skip
+        status, refused = raw(url, "PUT", "/v1/maps/office", document,
+                              headers={"If-Match": f'"{latest}"'})  # fmt: skip
+        assert status == 412 and refused["error"] == "precondition failed", tag
+    assert raw(url, "PUT", "/v1/maps/office", document, headers={"If-Match": "nonsense"})[0] == 412
+    client = Client(url)
+    assert client.put_map("office", building, if_match=6) == 7
+    with pytest.raises(ServerError) as error:
+        client.put_map("office", building, if_match=6)
+    assert error.value.status == 412
+    assert [v["version"] for v in client.versions("office")] == list(range(1, 8))
+    with urllib.request.urlopen(url + "/v1/maps/office?version=2", timeout=60) as response:
+        assert response.headers["ETag"] == '"2"'
+
+
+def test_the_client_waits_as_429_says_and_keeps_a_base_path(serve, building):
+    server = serve(rate=2)  # bursts of 4
+    proxy = DroppingProxy(server.url, prefix="/semloc")
+    client = Client(proxy.url)  # http://127.0.0.1:PORT/semloc
+    assert client.put_map("office", building) == 1
+    started = time.monotonic()
+    assert all(client.versions("office")[0]["version"] == 1 for _ in range(8))
+    assert time.monotonic() - started > 1.0  # it waited (Retry-After), then went on
+    impatient = Client(proxy.url, retries=0)
+    with pytest.raises(ServerError) as error:
+        for _ in range(10):
+            impatient.maps()
+    assert error.value.status == 429
+    proxy.close()

@@ -55,9 +55,10 @@ def test_the_page_shows_maps_versions_and_a_live_pose(serve, building, tmp_path)
     assert 'data-ready="yes"' in page
     assert re.findall(r'<li data-map="([^"]+)"', page) == ["office"]  # lab is not this token's
     assert page.count('class="object"') == len(building)
-    arrow = re.search(rf'<polygon class="device localized" data-session="{session.session_id}" '
+    # another token's session: shown with its pose, never with its id (a capability)
+    arrow = re.search(r'<polygon class="device localized" data-session="device 1" '
                       r'points="([^"]+)"', page)  # fmt: skip
-    assert arrow is not None
+    assert arrow is not None and session.session_id not in page
     tip = [float(v) for v in arrow.group(1).split()[0].split(",")]
     heading = T_TRUE[:2, 0]
     expected = T_TRUE[:2, 3] + 0.5 * heading / (heading**2).sum() ** 0.5

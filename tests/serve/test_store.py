@@ -8,7 +8,15 @@ import time
 
 import pytest
 
-from semloc.serve.store import Conflict, Store, open_store
+from semloc.serve.store import (
+    Conflict,
+    KeyTaken,
+    Remembered,
+    RequestKey,
+    Store,
+    open_store,
+    session_scope,
+)
 
 DOC = {"format": "semloc-map", "version": 1, "objects": []}
 
@@ -111,3 +119,36 @@ def test_idle_sessions_expire(store):
 def test_an_unknown_database_url_is_refused(tmp_path):
     with pytest.raises(ValueError, match="postgresql://"):
         open_store(tmp_path, "mysql://x")
+
+
+def test_request_keys_are_written_with_their_write_and_once(store):
+    """A version or a batch written with a request key stores the key in its transaction; the
+    same key again writes nothing (KeyTaken, with what the key wrote and answered)."""
+    key = RequestKey("upload owner m", "k1", "digest-1")
+    answer = lambda version: {"map_id": "m", "version": version}  # noqa: E731
+    assert store.put_map("m", DOC, "upload", key=key, answer=answer) == 1
+    with pytest.raises(KeyTaken) as taken:
+        store.put_map("m", {**DOC, "name": "again"}, "upload", key=key, answer=answer)
+    assert taken.value.remembered == Remembered("digest-1", 1, {"map_id": "m", "version": 1})
+    assert store.latest_version("m") == 1 and store.recall(key).ref == 1
+    assert store.recall(RequestKey("upload other m", "k1", "digest-1")) is None  # scoped
+
+    store.create_session("s1", "m", 1, None, owner="device-a")
+    assert store.session("s1").owner == "device-a"
+    batch = RequestKey(session_scope("s1"), "b1", "digest-b")
+    assert store.append_batch("s1", 1.0, [], 600.0, batch) == 1
+    assert store.recall(batch) == Remembered("digest-b", 1, None)  # answered later
+    store.set_last("s1", {"status": "failed"}, batch, {"update": 1})
+    with pytest.raises(KeyTaken) as taken:
+        store.append_batch("s1", 2.0, [], 600.0, batch)
+    assert taken.value.remembered == Remembered("digest-b", 1, {"update": 1})
+    assert [b.seq for b in store.batches("s1")] == [1]
+    assert store.remember(RequestKey("changes o m", "c", "d"), 1, {"changed": False}) is None
+    assert store.remember(RequestKey("changes o m", "c", "d"), 1, {"changed": True}).answer == {
+        "changed": False
+    }
+    assert store.live_sessions(600.0) == 1
+    assert store.ping()
+    assert store.delete_session("s1")
+    assert store.session("s1") is None and store.recall(batch) is None  # gone with it
+    assert store.live_sessions(600.0) == 0

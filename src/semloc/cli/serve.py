@@ -85,6 +85,12 @@ def serve(
         Path | None,
         typer.Option(help="Localizer settings file, JSON or .yaml (`semloc config --dump`)."),
     ] = None,
+    access_log: Annotated[
+        bool,
+        typer.Option(
+            "--access-log", help="One JSON line per request on stderr (request id, never a token)."
+        ),
+    ] = False,
 ) -> None:
     """Serve shared maps over HTTP: uploads, versions, localization, live sessions, changes."""
     need("serve", "serve")
@@ -99,7 +105,7 @@ def serve(
         settings = server.ServeSettings(
             data=data, db=db, db_pool=db_pool, host=host, port=port, workers=workers,
             tokens=tokens, session_idle_s=session_idle, rate=rate,
-            max_body=int(max_body_mb * 2**20), localizer=read_config(config),
+            max_body=int(max_body_mb * 2**20), localizer=read_config(config), access_log=access_log,
         )  # fmt: skip
         LocalizerConfig(**settings.localizer)
     except ValidationError as exc:

@@ -10,7 +10,15 @@
 
 Answers are the JSON documents of `semloc localize --format json` (dicts) plus `map_version`.
 Every refusal of the server raises `ServerError` with its status, error and detail.  One
-keep-alive connection per thread; a Client may be shared between threads.
+keep-alive connection per thread; a Client may be shared between threads.  The URL may carry a
+base path (`https://hub.example/semloc`: the API is then under `/semloc/v1`).
+
+Retries: a request is sent again (up to `retries` times) when the connection failed or the
+server answered 429 or 503 (after its `Retry-After`, at most `max_wait` seconds), but only when
+sending it twice cannot do it twice: reads, deletions, one-shot localizations, and the writes
+that carry an `Idempotency-Key` (uploads, change reports, session updates: the client sends a
+fresh key with each; the server answers a repeat with the first answer and writes once).
+Opening a session is not repeated after a lost answer (it would open a second one).
 """
 
 from __future__ import annotations
@@ -18,9 +26,12 @@ from __future__ import annotations
 import http.client
 import json
 import os
+import select
 import socket
 import threading
+import time
 import urllib.parse
+import uuid
 from collections.abc import Iterable, Sequence
 from typing import Any
 
@@ -43,12 +54,21 @@ class ServerError(Exception):
 class Client:
     """A connection to a semloc server at `url` (http://host:port) with a `token` (or none)."""
 
-    def __init__(self, url: str, token: str | None = None, timeout: float = 60.0) -> None:
+    def __init__(
+        self,
+        url: str,
+        token: str | None = None,
+        timeout: float = 60.0,
+        retries: int = 2,
+        max_wait: float = 30.0,
+    ) -> None:
         parts = urllib.parse.urlsplit(url)
-        if parts.scheme not in ("http", "https") or not parts.hostname:
-            raise ValueError(f"server URL must be http(s)://host[:port], got {url!r}")
+        if parts.scheme not in ("http", "https") or not parts.hostname or parts.query:
+            raise ValueError(f"server URL must be http(s)://host[:port][/base], got {url!r}")
         self.url, self.token, self.timeout = url.rstrip("/"), token, timeout
+        self.retries, self.max_wait = retries, max_wait
         self._parts = parts
+        self._base = parts.path.rstrip("/")
         self._local = threading.local()
 
     # maps -------------------------------------------------------------------------------------
@@ -59,9 +79,13 @@ class Client:
         """The maps this token may read, with their latest version."""
         return self.request("GET", "/v1/maps")
 
-    def put_map(self, map_id: str, objmap: MapLike) -> int:
-        """Upload a map (a new version if it exists); its version."""
-        return self.request("PUT", f"/v1/maps/{_quote(map_id)}", _map_document(objmap))["version"]
+    def put_map(self, map_id: str, objmap: MapLike, if_match: int | None = None) -> int:
+        """Upload a map (a new version if it exists); its version.  With `if_match`, only if
+        the map's latest version is still that one (ServerError 412 otherwise)."""
+        headers = {} if if_match is None else {"If-Match": f'"{int(if_match)}"'}
+        return self.request(
+            "PUT", f"/v1/maps/{_quote(map_id)}", _map_document(objmap), headers, key=True
+        )["version"]
 
     def get_map(self, map_id: str, version: int | None = None) -> ObjectMap:
         query = "" if version is None else f"?version={int(version)}"
@@ -97,40 +121,62 @@ class Client:
             body["local"] = _map_document(local)
         elif session_id is not None or "session_id" in answer:
             body["session_id"] = session_id or answer["session_id"]
-        return self.request("POST", f"/v1/maps/{_quote(map_id)}/changes", body)
+        return self.request("POST", f"/v1/maps/{_quote(map_id)}/changes", body, key=True)
 
     # HTTP -------------------------------------------------------------------------------------
-    def request(self, method: str, path: str, body: Any = None) -> Any:
-        """One request; the decoded JSON answer (None for 204), or ServerError."""
+    def request(
+        self,
+        method: str,
+        path: str,
+        body: Any = None,
+        headers: dict[str, str] | None = None,
+        key: bool = False,
+    ) -> Any:
+        """One request to `path` (below the URL's base path); the decoded JSON answer (None for
+        204), or ServerError.  `key`: send an Idempotency-Key, which makes a write safe to
+        retry.  Retried as the module says."""
         payload = None if body is None else json.dumps(body, allow_nan=False).encode()
-        headers = {"Accept": "application/json"}
+        sent = {"Accept": "application/json", **(headers or {})}
         if payload is not None:
-            headers["Content-Type"] = "application/json"
+            sent["Content-Type"] = "application/json"
         if self.token:
-            headers["Authorization"] = f"Bearer {self.token}"
-        for attempt in (0, 1):  # a kept-alive connection the server closed: one retry
+            sent["Authorization"] = f"Bearer {self.token}"
+        if key:
+            sent["Idempotency-Key"] = uuid.uuid4().hex
+        safe = key or method in ("GET", "HEAD", "DELETE") or path.endswith("/localize")
+        for attempt in range(self.retries + 1):
+            last = attempt == self.retries
             try:
-                connection = self._connection()
-                connection.request(method, path, payload, headers)
-                response = connection.getresponse()
-                data = response.read()
-                break
+                status, retry_after, data = self._send(method, self._base + path, payload, sent)
             except (ConnectionError, http.client.HTTPException, TimeoutError, OSError) as exc:
                 self.close()
-                if attempt:
+                if last or not safe:
                     raise ServerError(0, "unreachable", f"{self.url}: {exc}") from None
-        if response.status == 204 or not data:
-            _raise_for(response.status, None)
-            return None
-        try:
-            document = json.loads(data)
-        except ValueError:
-            document = {"error": data[:200].decode(errors="replace")}
-        _raise_for(response.status, document)
-        return document
+                time.sleep(min(self.max_wait, 0.1 * 2**attempt))
+                continue
+            if status in (429, 503) and not last and (safe or status == 429):
+                time.sleep(min(self.max_wait, retry_after))  # 429: nothing was done
+                continue
+            break
+        if method == "DELETE" and status == 404 and attempt > 0:
+            return None  # the first attempt did it; its answer was lost
+        return _decoded(status, data)
+
+    def _send(
+        self, method: str, path: str, payload: bytes | None, headers: dict[str, str]
+    ) -> tuple[int, float, bytes]:
+        """(status, Retry-After in seconds, body) of one exchange."""
+        connection = self._connection()
+        connection.request(method, path, payload, headers)
+        response = connection.getresponse()
+        data = response.read()
+        return response.status, _seconds(response.getheader("Retry-After")), data
 
     def _connection(self) -> http.client.HTTPConnection:
         connection = getattr(self._local, "connection", None)
+        if connection is not None and _dropped(connection):
+            connection.close()  # the server closed the kept-alive connection meanwhile
+            connection = self._local.connection = None
         if connection is None:
             kind = (
                 http.client.HTTPSConnection
@@ -169,7 +215,8 @@ class Session:
         body: dict[str, Any] = {"objects": _object_documents(objects), "stamp": float(stamp)}
         if position is not None:
             body["position"] = [float(v) for v in position]
-        return self.client.request("POST", f"/v1/sessions/{_quote(self.session_id)}/objects", body)
+        path = f"/v1/sessions/{_quote(self.session_id)}/objects"
+        return self.client.request("POST", path, body, key=True)
 
     def close(self) -> None:
         self.client.request("DELETE", f"/v1/sessions/{_quote(self.session_id)}")
@@ -183,6 +230,38 @@ class Session:
         except ServerError as error:
             if error.status != 404:  # expired already
                 raise
+
+
+def _decoded(status: int, data: bytes) -> Any:
+    """The JSON of an answer, or ServerError for a refusal."""
+    if status == 204 or not data:
+        _raise_for(status, None)
+        return None
+    try:
+        document = json.loads(data)
+    except ValueError:
+        document = {"error": data[:200].decode(errors="replace")}
+    _raise_for(status, document)
+    return document
+
+
+def _seconds(retry_after: str | None) -> float:
+    """A Retry-After header's delay (seconds; 1 when absent or an HTTP date)."""
+    try:
+        return max(0.0, float(retry_after)) if retry_after else 1.0
+    except ValueError:
+        return 1.0
+
+
+def _dropped(connection: http.client.HTTPConnection) -> bool:
+    """Whether a kept-alive connection was closed by the server (readable while idle: EOF)."""
+    sock = connection.sock
+    if sock is None:
+        return True
+    try:
+        return bool(select.select([sock], [], [], 0)[0])
+    except (OSError, ValueError):
+        return True
 
 
 def _raise_for(status: int, document: Any) -> None:

@@ -14,6 +14,7 @@ import json
 import os
 import signal
 import socket
+import tempfile
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -55,6 +56,7 @@ class ServeSettings(BaseModel):
     rate: float = Field(100.0, ge=0, description="Requests a second per token (0: no limit).")
     max_body: int = Field(DEFAULT_MAX_BODY, gt=0, description="Largest request body (bytes).")
     localizer: dict = Field(default_factory=dict, description="LocalizerConfig settings.")
+    access_log: bool = Field(False, description="One JSON line per request (semloc.serve.access).")
 
     @model_validator(mode="after")
     def _store_and_access(self) -> ServeSettings:
@@ -85,7 +87,7 @@ def build_app(settings: ServeSettings):
     access = Access.from_file(settings.tokens) if settings.tokens else Access.open()
     store = open_store(settings.data, settings.db, settings.db_pool)
     service = Service(store, LocalizerConfig(**settings.localizer), settings.session_idle_s)
-    return create_app(service, access, settings.rate, settings.max_body)
+    return create_app(service, access, settings.rate, settings.max_body, settings.access_log)
 
 
 def app_from_environment():
@@ -169,6 +171,9 @@ def run(settings: ServeSettings, announce: Callable[[str], None] = print) -> Non
         uvicorn.Server(config).run(sockets=[sock])
         return
     os.environ[ENVIRONMENT] = json.dumps(settings.model_dump(mode="json"))
+    # the workers' metrics in shared files, summed at each scrape (prometheus-client)
+    metrics = tempfile.TemporaryDirectory(prefix="semloc-metrics-")
+    os.environ.setdefault("PROMETHEUS_MULTIPROC_DIR", metrics.name)
     config = uvicorn.Config(
         "semloc.serve.server:app_from_environment",
         factory=True,

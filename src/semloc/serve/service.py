@@ -14,65 +14,139 @@ grows its association sets again from the same window objects at once (it may ra
 candidate places differently until the search settles).  Each session is pinned to the map version it was created on.  Parsed maps are kept
 per (map, version) in a small cache (a version never changes once written).
 
-Errors are `ServiceError`s carrying the HTTP status the web layer answers with.
+A session belongs to its owner, the token that opened it: to any other caller it is as good as
+absent (its id is a capability, never shown to another), except that a caller allowed to end
+any session of its map may end it.  Writes that a device retries after losing the answer (an
+upload, a change report, a session update) take a request key: the same key with the same body
+gets the answer of the first request and writes nothing more; with another body it is refused.
+
+Refusals are `ServiceError`s, one class per kind (`Invalid`, `NotFound`, `Conflict`,
+`PreconditionFailed`); the web layer maps each kind to its HTTP status.
 """
 
 from __future__ import annotations
 
+import hashlib
 import math
+import re
 import secrets
 import threading
 import time
 from collections import OrderedDict
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 
 from semloc.association import CandidateIndex, label_report
-from semloc.changes import Changes, answer_changes, apply_changes
+from semloc.changes import (
+    ReportConflict,
+    answer_changes,
+    apply_changes,
+    check_still_applies,
+    flags_to_clear,
+)
 from semloc.io import map_from_dict, map_to_dict
 from semloc.io.answers import answer_document
 from semloc.localizer import Localizer, LocalizerConfig, localize
 from semloc.maps import MapError, ObjectMap
 from semloc.results import Result
-from semloc.serve.store import Conflict, Store
+from semloc.serve.store import KeyTaken, Remembered, RequestKey, Store, session_scope
 from semloc.transforms import as_pose
 
 MAX_ID_LENGTH = 200
 
 
 class ServiceError(Exception):
-    """A request the service refuses: `status` (HTTP), a short `error` and a `detail`."""
+    """A request the service refuses: a short `error` and a `detail`; the class says which
+    kind of refusal it is."""
 
-    def __init__(self, status: int, error: str, detail: Any = None) -> None:
+    def __init__(self, error: str, detail: Any = None) -> None:
         super().__init__(error)
-        self.status, self.error, self.detail = status, error, detail
+        self.error, self.detail = error, detail
 
 
-def not_found(what: str) -> ServiceError:
-    return ServiceError(404, "not found", what)
+class Invalid(ServiceError):
+    """The request's content is not what the operation takes."""
+
+
+class NotFound(ServiceError):
+    """An unknown (or expired, or another owner's) map, version or session."""
+
+
+class Conflict(ServiceError):
+    """The write no longer applies: the map moved on, or the update was answered already."""
+
+
+class PreconditionFailed(ServiceError):
+    """The caller's condition on the map's latest version does not hold."""
+
+
+def not_found(what: str) -> NotFound:
+    return NotFound("not found", what)
+
+
+ID = re.compile(rf"[^\x00-\x1f\x7f-\x9f/]{{1,{MAX_ID_LENGTH}}}")
+"""A map id: 1 to 200 characters, none of them a control character or '/'."""
 
 
 def check_id(value: str, what: str) -> str:
-    if not value or len(value) > MAX_ID_LENGTH or not value.isprintable() or "/" in value:
-        raise ServiceError(422, f"invalid {what}", f"1 to {MAX_ID_LENGTH} printable characters")
+    if not ID.fullmatch(value):
+        raise Invalid(f"invalid {what}", f"1 to {MAX_ID_LENGTH} characters, no control "
+                      "character and no '/'")  # fmt: skip
     return value
+
+
+Expected = list[int] | Literal["*"]
+"""The versions a conditional upload expects to be the latest (`*`: any existing one)."""
+
+
+@dataclass(frozen=True)
+class Idempotency:
+    """A write's Idempotency-Key and the digest of its body as it was sent (the same key with
+    the same bytes is the same request)."""
+
+    key: str
+    digest: str
+
+    @classmethod
+    def of(cls, key: str | None, body: bytes) -> Idempotency | None:
+        return None if key is None else cls(key, hashlib.sha256(body).hexdigest())
+
+
+def request_key(scope: str, idempotency: Idempotency | None) -> RequestKey | None:
+    """A write's request key under `scope` (whose, and what it writes: a session's keys are
+    deleted with it); None without one."""
+    if idempotency is None:
+        return None
+    key = idempotency.key
+    if not key or len(key) > MAX_ID_LENGTH or not key.isprintable():
+        raise Invalid("invalid Idempotency-Key", f"1 to {MAX_ID_LENGTH} printable characters")
+    return RequestKey(scope, key, idempotency.digest)
+
+
+def _same_body(key: RequestKey, remembered: Remembered) -> Remembered:
+    if remembered.digest != key.digest:
+        raise Invalid(
+            "idempotency key reused",
+            "this Idempotency-Key was used with another body: use a new key for a new request",
+        )
+    return remembered
 
 
 def parse_map(document: Any, what: str = "body") -> ObjectMap:
     """A semloc map sent over HTTP (points inline: a `points_file` would name a server file)."""
     if isinstance(document, dict) and "points_file" in document:
-        raise ServiceError(422, "invalid map", f"{what}: points must be inline, not a points_file")
+        raise Invalid("invalid map", f"{what}: points must be inline, not a points_file")
     try:
         return map_from_dict(document)
     except MapError as exc:
-        raise ServiceError(422, "invalid map", f"{what}: {exc}") from None
+        raise Invalid("invalid map", f"{what}: {exc}") from None
 
 
 def _objects_map(objects: Any, up: list[float] | None, what: str) -> ObjectMap:
     if not isinstance(objects, list):
-        raise ServiceError(422, "invalid objects", f"{what}: 'objects' must be a list")
+        raise Invalid("invalid objects", f"{what}: 'objects' must be a list")
     document: dict[str, Any] = {"format": "semloc-map", "version": 1, "objects": objects}
     if up is not None:
         document["up"] = up
@@ -89,8 +163,19 @@ def _position(value: Any) -> list[float] | None:
         or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)
         or not all(math.isfinite(v) for v in value)
     ):
-        raise ServiceError(422, "invalid update", "'position' must be [x, y, z], finite numbers")
+        raise Invalid("invalid update", "'position' must be [x, y, z], finite numbers")
     return [float(v) for v in value]
+
+
+@dataclass(frozen=True)
+class SessionMeta:
+    """What a session is: its map and version, its device frame's up, its owner."""
+
+    session_id: str
+    map_id: str
+    map_version: int
+    up: list[float] | None
+    owner: str
 
 
 @dataclass
@@ -98,9 +183,7 @@ class _LiveSession:
     """A session's Localizer in this process and the answers not yet read, by batch number."""
 
     localizer: Localizer
-    map_id: str
-    map_version: int
-    up: list[float] | None
+    meta: SessionMeta
     applied: int = 0
     lock: threading.Lock = field(default_factory=threading.Lock)
     answers: dict[int, Result] = field(default_factory=dict)
@@ -129,10 +212,38 @@ class Service:
         self._next_expiry = 0.0
 
     # maps -------------------------------------------------------------------------------------
-    def put_map(self, map_id: str, document: Any) -> int:
+    def put_map(
+        self,
+        map_id: str,
+        document: Any,
+        expected: Expected | None = None,
+        idempotency: Idempotency | None = None,
+        owner: str = "",
+    ) -> int:
+        """Store an upload by `owner` as the next version of `map_id`; its number.  With
+        `expected`, only while the latest version is one of them (`PreconditionFailed`
+        otherwise); with an `idempotency` key, once."""
         check_id(map_id, "map id")
         objmap = parse_map(document)
-        return self.store.put_map(map_id, map_to_dict(objmap), "upload")
+        key = request_key(f"upload {owner} {map_id}", idempotency)
+
+        def check(latest: int | None) -> None:
+            if expected is None:
+                return
+            if latest is None or (expected != "*" and latest not in expected):
+                now = "no version" if latest is None else f"version {latest}"
+                raise PreconditionFailed("precondition failed", f"the map {map_id!r} has {now}")
+
+        if key is not None and (found := self.store.recall(key)) is not None:
+            return _same_body(key, found).ref
+        try:
+            return self.store.put_map(
+                map_id, map_to_dict(objmap), "upload", check, key,
+                lambda version: {"map_id": map_id, "version": version},
+            )  # fmt: skip
+        except KeyTaken as taken:
+            assert key is not None
+            return _same_body(key, taken.remembered).ref
 
     def map_document(self, map_id: str, version: int | None = None) -> tuple[int, dict]:
         found = self.store.get_map(map_id, version)
@@ -176,94 +287,133 @@ class Service:
         return document
 
     # sessions ---------------------------------------------------------------------------------
-    def create_session(self, map_id: str, body: Any) -> str:
+    def create_session(self, map_id: str, body: Any, owner: str = "") -> str:
+        """A new session on the latest version of `map_id`, owned by `owner`; its id."""
         self._expire()
         up = None
         if body is not None:
             if not isinstance(body, dict) or set(body) - {"up"}:
-                raise ServiceError(
-                    422, "invalid session", 'the body is optional: {"up": [x, y, z]}'
-                )
+                raise Invalid("invalid session", 'the body is optional: {"up": [x, y, z]}')
             up = body.get("up")
             if up is not None:
                 _objects_map([], up, "body")  # validates `up` as a map's
         version, _ = self.object_map(map_id)
         session_id = secrets.token_urlsafe(18)
-        self.store.create_session(session_id, map_id, version, up)
+        self.store.create_session(session_id, map_id, version, up, owner)
         return session_id
 
-    def session_map(self, session_id: str) -> str:
-        """The map a live session localizes in (404 for an unknown or expired one)."""
-        return self._session_meta(session_id)[0]
+    def session_of(self, session_id: str, owner: str, ends_any: bool = False) -> SessionMeta:
+        """The live session `owner` may use (`NotFound` for an unknown or expired one, and for
+        another owner's: its id is a capability).  `ends_any`: the caller may end any
+        session, a check the caller makes once it knows the session's map."""
+        meta = self._session_meta(session_id)
+        if meta.owner != owner and not ends_any:
+            raise not_found(f"session {session_id!r}")
+        return meta
 
-    def _session_meta(self, session_id: str) -> tuple[str, int, list[float] | None]:
-        """(map id, map version, up) of a session: from memory where it is live here (an
-        update still checks in the store that it exists), else from the store."""
+    def session_map(self, session_id: str) -> str:
+        """The map of a live session, whoever owns it (`NotFound` if unknown or expired)."""
+        return self._session_meta(session_id).map_id
+
+    def _session_meta(self, session_id: str) -> SessionMeta:
+        """What a session is: from memory where it is live here (an update still checks in the
+        store that it exists), else from the store."""
         with self._lock:
             live = self._live.get(session_id)
         if live is not None:
-            return live.map_id, live.map_version, live.up
+            return live.meta
         row = self.store.session(session_id)
         if row is None or time.time() - row.touched > self.session_idle_s:
             raise not_found(f"session {session_id!r}")
-        return row.map_id, row.map_version, row.up
+        return SessionMeta(session_id, row.map_id, row.map_version, row.up, row.owner)
 
-    def update_session(self, session_id: str, body: Any) -> dict[str, Any]:
+    def update_session(
+        self, session_id: str, body: Any, idempotency: Idempotency | None = None
+    ) -> dict[str, Any]:
+        """The answer after one more batch of a session's objects (the caller checked that it
+        owns the session).  A batch sent again with its `idempotency` key is answered as the
+        first time and not applied again."""
         self._expire()
-        map_id, version, up = self._session_meta(session_id)
+        meta = self._session_meta(session_id)
+        key = request_key(session_scope(session_id), idempotency)
         if not isinstance(body, dict) or "objects" not in body:
-            raise ServiceError(422, "invalid update", 'body: {"objects": [...], "stamp": float}')
+            raise Invalid("invalid update", 'body: {"objects": [...], "stamp": float}')
         stamp = body.get("stamp", 0.0)
         if (
             isinstance(stamp, bool)
             or not isinstance(stamp, (int, float))
             or not math.isfinite(stamp)
         ):
-            raise ServiceError(422, "invalid update", "'stamp' must be a finite number")
+            raise Invalid("invalid update", "'stamp' must be a finite number")
         position = _position(body.get("position"))
-        objects = _objects_map(body["objects"], up, "objects")  # refused before it is stored
-        seq = self.store.append_batch(
-            session_id, float(stamp), body["objects"], self.session_idle_s, position
-        )
+        objects = _objects_map(body["objects"], meta.up, "objects")  # refused before it is stored
+        try:  # a key used before is found under the session's lock: nothing appended
+            seq = self.store.append_batch(
+                session_id, float(stamp), body["objects"], self.session_idle_s, key, position
+            )
+        except KeyTaken as taken:
+            assert key is not None
+            return self._answered(meta, _same_body(key, taken.remembered))
         if seq is None:
             with self._lock:
                 self._live.pop(session_id, None)
             raise not_found(f"session {session_id!r}")
-        live = self._live_session(session_id, map_id, version, up)
+        live = self._live_session(meta)
         result = self._advance(session_id, live, seq, objects, position)
-        document = answer_document(
-            result, live.localizer.label_report(), map_version=version, stamp=stamp
-        )
-        document["session_id"], document["update"] = session_id, seq
-        self.store.set_last(session_id, _summary(document))
+        document = self._session_answer(result, live.localizer, meta, stamp, seq)
+        self.store.set_last(session_id, _summary(document), key, document)
         return document
 
-    def _live_session(
-        self, session_id: str, map_id: str, version: int, up: list[float] | None
-    ) -> _LiveSession:
+    @staticmethod
+    def _session_answer(
+        result: Result, localizer: Localizer, meta: SessionMeta, stamp: float, seq: int
+    ) -> dict[str, Any]:
+        document = answer_document(result, localizer.label_report(),
+                                   map_version=meta.map_version, stamp=stamp)  # fmt: skip
+        document["session_id"], document["update"] = meta.session_id, seq
+        return document
+
+    def _answered(self, meta: SessionMeta, remembered: Remembered) -> dict[str, Any]:
+        """The answer to a session update sent again: the stored one, or (when the first
+        request has not stored it yet, or died before) the session rebuilt from its kept state
+        and the batches after it, up to that update (409 when the kept state is already past
+        it: the answer is lost, the next update answers)."""
+        if remembered.answer is not None:
+            return remembered.answer
+        live = self._rebuilt(meta)
+        if live.applied >= remembered.ref:
+            raise Conflict("update superseded", f"update {remembered.ref} was answered already")
+        result, stamp = None, 0.0
+        for batch in self.store.batches(meta.session_id, live.applied, remembered.ref):
+            objects = _objects_map(batch.objects, meta.up, f"batch {batch.seq}")
+            result = live.localizer.update(list(objects), position=batch.position)
+            stamp = batch.stamp
+        if result is None:
+            raise not_found(f"session {meta.session_id!r}")
+        return self._session_answer(result, live.localizer, meta, stamp, remembered.ref)
+
+    def _live_session(self, meta: SessionMeta) -> _LiveSession:
+        session_id = meta.session_id
         with self._lock:
             live = self._live.get(session_id)
             if live is not None:
                 self._live.move_to_end(session_id)
                 return live
-        _, global_map = self.object_map(map_id, version)
-        fresh = self._rebuilt(session_id, global_map, map_id, version, up)
+        fresh = self._rebuilt(meta)
         with self._lock:
             live = self._live.setdefault(session_id, fresh)
             while len(self._live) > self.LIVE_SESSIONS:
                 self._live.popitem(last=False)  # rebuilt from the store if it comes back
         return live
 
-    def _rebuilt(
-        self, session_id: str, global_map: ObjectMap, map_id: str, version: int,
-        up: list[float] | None,
-    ) -> _LiveSession:  # fmt: skip
+    def _rebuilt(self, meta: SessionMeta) -> _LiveSession:
         """The session from its kept state and window objects (fresh when it has none)."""
+        session_id, up = meta.session_id, meta.up
+        _, global_map = self.object_map(meta.map_id, meta.map_version)
         for _ in range(3):  # another worker may let batches go between the two reads
             saved = self.store.session_state(session_id)
             if saved is None:
-                return _LiveSession(Localizer(global_map, self.config, local_up=up), map_id,
-                                    version, up)  # fmt: skip
+                return _LiveSession(Localizer(global_map, self.config, local_up=up), meta)
             seq, state = saved
             latest: dict[str, tuple[int, dict]] = {}
             for batch in self.store.batches(session_id, 0, seq):
@@ -273,10 +423,10 @@ class Service:
             if all(i in latest for i in order):
                 objects = _objects_map([latest[i][1] for i in order], up, "session state")
                 localizer = Localizer.restore(global_map, state, objects, self.config, up)
-                live = _LiveSession(localizer, map_id, version, up, applied=seq, saved=seq)
+                live = _LiveSession(localizer, meta, applied=seq, saved=seq)
                 live.seq_of = {i: latest[i][0] for i in order}
                 return live
-        raise ServiceError(503, "session busy", "its state changed while it was read; retry")
+        raise Conflict("session busy", "its kept state changed while it was read; retry")
 
     def _advance(
         self,
@@ -306,7 +456,7 @@ class Service:
             for old in [s for s in live.answers if s < seq - 64]:  # answers nobody came for
                 del live.answers[old]
         if result is None:
-            raise ServiceError(409, "update superseded", f"update {seq} was answered already")
+            raise Conflict("update superseded", f"update {seq} was answered already")
         return result
 
     def _pending(self, session_id: str, live: _LiveSession, seq: int) -> list[tuple]:
@@ -316,12 +466,11 @@ class Service:
         wanted = list(range(live.applied + 1, seq + 1))
         batches = self.store.batches(session_id, live.applied, seq)
         if [b.seq for b in batches] != wanted:
-            _, global_map = self.object_map(live.map_id, live.map_version)
-            fresh = self._rebuilt(session_id, global_map, live.map_id, live.map_version, live.up)
+            fresh = self._rebuilt(live.meta)
             live.localizer, live.applied, live.saved = fresh.localizer, fresh.applied, fresh.saved
             live.seq_of = fresh.seq_of
             batches = self.store.batches(session_id, live.applied, seq)
-        return [(b.seq, _objects_map(b.objects, live.up, f"batch {b.seq}"), b.position)
+        return [(b.seq, _objects_map(b.objects, live.meta.up, f"batch {b.seq}"), b.position)
                 for b in batches]  # fmt: skip
 
     def _keep_state(self, session_id: str, live: _LiveSession) -> None:
@@ -343,13 +492,15 @@ class Service:
         if not self.store.delete_session(session_id):
             raise not_found(f"session {session_id!r}")
 
-    def sessions(self, map_id: str) -> list[dict[str, Any]]:
-        """The live sessions of a map with their latest answer (for the page)."""
+    def sessions(self, map_id: str, owner: str = "") -> list[dict[str, Any]]:
+        """The live sessions of a map with their latest answer (for the page); the ids of
+        `owner`'s own sessions only (an id is a capability)."""
         if self.store.latest_version(map_id) is None:
             raise not_found(f"map {map_id!r}")
         now = time.time()
         return [
-            {"session_id": s.session_id, "map_version": s.map_version, "up": s.up,
+            {"session_id": s.session_id if s.owner == owner else None,
+             "mine": s.owner == owner, "map_version": s.map_version, "up": s.up,
              "idle_s": round(now - s.touched, 3), "last": s.last}
             for s in self.store.sessions_of(map_id)
             if now - s.touched <= self.session_idle_s
@@ -378,66 +529,94 @@ class Service:
         return _objects_map(list(latest.values()), row.up, f"session {session_id}")
 
     # change reports ---------------------------------------------------------------------------
-    def report_changes(self, map_id: str, body: Any) -> tuple[int, bool]:
-        """Apply a localization result's changes as a new version: (version, written).  Nothing
-        is written when the report changes nothing; `Conflict` (409) when the map moved on."""
+    def report_changes(
+        self, map_id: str, body: Any, idempotency: Idempotency | None = None, owner: str = ""
+    ) -> dict[str, Any]:
+        """Apply a localization result's changes as a new version: `{"version", "changed"}`.
+        Nothing is written when the report changes nothing; `Conflict` when the map moved on
+        and the report no longer applies.  A report sent again by `owner` with its
+        `idempotency` key gets the first answer."""
         if not isinstance(body, dict):
-            raise ServiceError(422, "invalid change report", "the body must be a result object")
+            raise Invalid("invalid change report", "the body must be a result object")
+        key = request_key(f"changes {owner} {map_id}", idempotency)
         if self.store.latest_version(map_id) is None:
             raise not_found(f"map {map_id!r}")
+        if key is not None and (found := self.store.recall(key)) is not None:
+            return _same_body(key, found).answer or {"version": found.ref, "changed": True}
+        try:
+            return self._report_changes(map_id, body, key)
+        except KeyTaken as taken:
+            assert key is not None
+            found = _same_body(key, taken.remembered)
+            return found.answer or {"version": found.ref, "changed": True}
+
+    def _report_changes(self, map_id: str, body: dict, key: RequestKey | None) -> dict[str, Any]:
         local, kept = self._reported_local(map_id, body)
         reported = {**body, **kept}  # the server's own record of the answer wins
         base_version = reported.get("map_version")
         if isinstance(base_version, bool) or not isinstance(base_version, int):
-            raise ServiceError(422, "invalid change report", "'map_version' must be an integer")
-        found = self.store.get_map(map_id, base_version)
+            raise Invalid("invalid change report", "'map_version' must be an integer")
+        found = None if abs(base_version) > 2**62 else self.store.get_map(map_id, base_version)
         if found is None:
-            raise ServiceError(422, "invalid change report", f"no version {base_version}")
+            raise not_found(f"map {map_id!r} has no version {base_version}")
         base = map_from_dict(found[1])
-        pose, pairs = _reported_answer(reported)
+        try:
+            pose, pairs = _reported_answer(reported)
+        except Invalid as exc:
+            if not kept:
+                raise
+            # the body is well formed; the server's own record of its answer is not appliable
+            raise Conflict("answer not appliable", f"the kept answer: {exc.detail}") from None
         changes = answer_changes(
             base, local, pose, pairs, self.config.association, self.config.changes
         )  # the report's own `changes` are not trusted: they are recomputed here
-        if not (changes.moved or changes.new or changes.missing or _flagged(base, changes)):
-            return self.store.latest_version(map_id) or base_version, False
+        if not (changes.moved or changes.new or changes.missing or flags_to_clear(base, changes)):
+            latest = self.store.latest_version(map_id) or base_version
+            unchanged = {"version": latest, "changed": False}
+            if key is not None and (taken := self.store.remember(key, latest, unchanged)):
+                raise KeyTaken(taken)
+            return unchanged
 
         def build(latest: int | None, document: dict | None) -> dict:
             assert latest is not None and document is not None
             current = map_from_dict(document)
             if latest != base_version:
-                _check_still_applies(base, current, local, pose, changes)
-            return map_to_dict(apply_changes(current, local, pose, changes))
+                check_still_applies(base, current, local, pose, changes)
+            try:
+                return map_to_dict(apply_changes(current, local, pose, changes))
+            except MapError as exc:  # e.g. a new object's embedding of another length
+                raise ReportConflict(f"the map cannot take these changes: {exc}") from None
 
         try:
-            version = self.store.derive_map(map_id, build, f"changes (from version {base_version})")
-        except Conflict as exc:
-            raise ServiceError(409, "conflict", str(exc)) from None
+            version = self.store.derive_map(
+                map_id, build, f"changes (from version {base_version})", key=key,
+                answer=lambda version: {"version": version, "changed": True},
+            )  # fmt: skip
+        except ReportConflict as exc:
+            raise Conflict("conflict", str(exc)) from None
         except KeyError:
             raise not_found(f"map {map_id!r}") from None
-        return version, True
+        return {"version": version, "changed": True}
 
     def _reported_local(self, map_id: str, body: dict) -> tuple[ObjectMap, dict[str, Any]]:
         """The local objects of a report, and the server's own record of the answer when it
         kept one: the objects sent along (`local`: the body's answer is taken as it is), or
         those of the answer's one-shot localization (`localization_id`) or session
         (`session_id`, its latest answer)."""
-        if "local" in body:
+        if body.get("local") is not None:
             return parse_map(body["local"], "local"), {}
         if isinstance(body.get("localization_id"), str):
             found = self.store.localization(body["localization_id"])
             if found is None or found[0] != map_id:
-                raise ServiceError(422, "invalid change report",
-                                   "unknown or expired localization_id: send 'local'")  # fmt: skip
+                raise not_found("unknown or expired localization_id: send 'local'")
             return map_from_dict(found[2]["local"]), found[2]["answer"]
         if isinstance(body.get("session_id"), str):
             row = self.store.session(body["session_id"])
             if row is None or row.map_id != map_id or row.last is None:
-                raise ServiceError(422, "invalid change report",
-                                   "unknown or expired session_id: send 'local'")  # fmt: skip
+                raise not_found("unknown or expired session_id: send 'local'")
             kept = {key: row.last[key] for key in ANSWER_KEYS if key in row.last}
             return self.session_objects(body["session_id"]), kept
-        raise ServiceError(
-            422,
+        raise Invalid(
             "invalid change report",
             "the local objects are needed: 'local' (a semloc map), or the answer's "
             "'localization_id' or 'session_id'",
@@ -446,14 +625,16 @@ class Service:
 
 def _reported_answer(body: dict) -> tuple[np.ndarray, list[tuple[str, str]]]:
     if body.get("status") != "localized" and not body.get("accept_ambiguous"):
-        raise ServiceError(
-            422, "not localized", f"status {body.get('status')!r}: only a localized answer's "
+        raise Invalid(
+            "not localized", f"status {body.get('status')!r}: only a localized answer's "
             "changes are applied (or set accept_ambiguous)",
         )  # fmt: skip
+    if body.get("pose") is None:
+        raise Invalid("no pose", "the answer found no pose: there is nothing to apply")
     try:
         pose = as_pose(body.get("pose"), "pose")
     except (ValueError, TypeError) as exc:
-        raise ServiceError(422, "invalid change report", str(exc)) from None
+        raise Invalid("invalid change report", str(exc)) from None
     hypotheses = body.get("hypotheses") or []
     pairs: list[tuple[str, str]] = []
     if isinstance(hypotheses, list) and hypotheses and isinstance(hypotheses[0], dict):
@@ -461,46 +642,6 @@ def _reported_answer(body: dict) -> tuple[np.ndarray, list[tuple[str, str]]]:
             if isinstance(pair, dict) and isinstance(pair.get("global"), (str, int)):
                 pairs.append((str(pair["global"]), str(pair.get("local"))))
     return pose, pairs
-
-
-def _flagged(base: ObjectMap, changes: Changes) -> bool:
-    """Whether a matched object carries a `missing` flag the report would clear."""
-    matched = set(changes.matched)
-    return any(o.id in matched and "missing" in o.extra for o in base)
-
-
-def _check_still_applies(base: ObjectMap, current: ObjectMap, local, pose, changes) -> None:
-    """Raise `Conflict` when the versions written since `base` touched what the report changes
-    or relies on: an object it moves, flags missing or matched was changed or removed, or an
-    object added since lies where the report adds one (two devices reporting one new chair)."""
-    before = {o.id: o for o in base}
-    after = {o.id: o for o in current}
-    touched = {
-        i for i, o in before.items()
-        if i not in after or not _same(o, after[i])
-    }  # fmt: skip
-    relied = {m.global_id for m in changes.moved} | set(changes.missing) | set(changes.matched)
-    clash = sorted(relied & touched)
-    if clash:
-        raise Conflict(f"objects changed since the report's version: {', '.join(clash[:10])}")
-    added = [o for i, o in after.items() if i not in before]
-    if added and changes.new:
-        R, t = pose[:3, :3], pose[:3, 3]
-        placed = {o.id: R @ o.position + t for o in local}
-        for local_id in changes.new:
-            for other in added:
-                if np.linalg.norm(other.position - placed[local_id]) < 1.0:
-                    raise Conflict(
-                        f"new object {local_id} lies where object {other.id} was added since"
-                    )
-
-
-def _same(a, b) -> bool:
-    return (
-        a.label == b.label
-        and np.allclose(a.position, b.position, atol=1e-6)
-        and (a.extra.get("missing") == b.extra.get("missing"))
-    )
 
 
 ANSWER_KEYS = ("status", "pose", "hypotheses", "map_version")

@@ -14,6 +14,10 @@ Tables:
     session_states(session_id, seq, state)               its Localizer's state after batch seq
     localizations(localization_id, map_id, created, local)     a one-shot localization's
                                                          local map and answer, for its change report
+    session_owners(session_id, owner)                    who opened a session (a token's digest)
+    request_keys(scope, key, digest, created, ref, answer)     the Idempotency-Key of a write,
+                                                         its body's digest, what it wrote (a
+                                                         version or a batch) and its answer
 
     schema_version(version, applied, description)        the migrations applied, in order
 
@@ -31,6 +35,9 @@ default) does not shift them.  `ping()` is the cheap check that the store answer
 A PostgreSQL store keeps a pool of connections per process (`psycopg_pool`, at most
 `pool_size`, opened on demand) shared by the threads of the worker: 40 threads of a worker use
 a handful, not 40, of the server's (by default 100) connections.
+
+A write with a request key stores the key in the same transaction, checked under that lock:
+the key is taken (`KeyTaken`, nothing written) or the write is stored with it, never twice.
 """
 
 from __future__ import annotations
@@ -81,6 +88,13 @@ MIGRATIONS = (
         "CREATE TABLE IF NOT EXISTS session_states (session_id TEXT PRIMARY KEY, "
         "seq INTEGER NOT NULL, state {blob} NOT NULL)",
     )),
+    Migration(4, "sessions' owners; request keys of writes that may be retried", (
+        "CREATE TABLE IF NOT EXISTS session_owners (session_id TEXT PRIMARY KEY, "
+        "owner TEXT NOT NULL)",
+        "CREATE TABLE IF NOT EXISTS request_keys (scope TEXT NOT NULL, key TEXT NOT NULL, "
+        "digest TEXT NOT NULL, created DOUBLE PRECISION NOT NULL, ref INTEGER NOT NULL, "
+        "answer {blob}, PRIMARY KEY (scope, key))",
+    )),
 )  # fmt: skip
 """The store's layout, oldest first; a new step goes at the end with the next version."""
 
@@ -90,6 +104,11 @@ SCHEMA_VERSION = MIGRATIONS[-1].version
 class StoreError(ValueError):
     """The store cannot be used: written by a newer semloc, or not reachable (the message
     says which store and why)."""
+
+
+REQUEST_KEY_TTL_S = 24 * 3600.0
+"""Request keys are kept this long (a retry comes within seconds; a day covers a device that
+lost its network for the night)."""
 
 
 class Conflict(Exception):
@@ -112,6 +131,35 @@ class SessionRow:
     created: float
     touched: float
     last: dict[str, Any] | None  # a summary of the latest answer (status, pose, stamp)
+    owner: str = ""  # who opened it (a token's digest; "" without tokens)
+
+
+@dataclass(frozen=True)
+class RequestKey:
+    """The Idempotency-Key of a write: `scope` (whose, and what it writes), the key, and the
+    digest of the request's body."""
+
+    scope: str
+    key: str
+    digest: str
+
+
+@dataclass(frozen=True)
+class Remembered:
+    """What a request key wrote: the body's digest, `ref` (the map version or the session's
+    batch number) and the answer (None until it was stored)."""
+
+    digest: str
+    ref: int
+    answer: dict[str, Any] | None
+
+
+class KeyTaken(Exception):
+    """A write's request key was used before: nothing written; `remembered` is what it wrote."""
+
+    def __init__(self, remembered: Remembered) -> None:
+        super().__init__("request key used before")
+        self.remembered = remembered
 
 
 @dataclass(frozen=True)
@@ -195,11 +243,17 @@ class Store:
     def ping(self) -> bool:
         """Whether the store answers a trivial query now (for a readiness check); never raises."""
         try:
-            with self._transaction() as cur:
-                cur.execute("SELECT 1")
-                return cur.fetchone()[0] == 1
+            self.check()
         except Exception:
             return False
+        return True
+
+    def check(self) -> None:
+        """Raise (the database's own error) unless the store answers a trivial query now."""
+        with self._transaction() as cur:
+            cur.execute("SELECT 1")
+            if cur.fetchone()[0] != 1:
+                raise StoreError("the store answered SELECT 1 with something else")
 
     # connections and transactions (per thread) ------------------------------------------------
     def _connect(self) -> Any:
@@ -228,6 +282,15 @@ class Store:
         row = cur.fetchone()
         return None if row is None else int(row[0])
 
+    def live_sessions(self, idle_seconds: float) -> int:
+        """How many sessions were touched within `idle_seconds`."""
+        with self._transaction() as cur:
+            cur.execute(
+                self._sql("SELECT COUNT(*) FROM sessions WHERE touched >= ?"),
+                (time.time() - idle_seconds,),
+            )
+            return int(cur.fetchone()[0])
+
     def close(self) -> None:
         connection = getattr(self._local, "connection", None)
         if connection is not None:
@@ -235,9 +298,24 @@ class Store:
             self._local.connection = None
 
     # maps -------------------------------------------------------------------------------------
-    def put_map(self, map_id: str, document: dict[str, Any], source: str) -> int:
-        """Store `document` as the next version of `map_id` (1 for a new map); its number."""
-        return self.derive_map(map_id, lambda latest, old: document, source, create=True)
+    def put_map(
+        self,
+        map_id: str,
+        document: dict[str, Any],
+        source: str,
+        check: Callable[[int | None], None] | None = None,
+        key: RequestKey | None = None,
+        answer: Callable[[int], dict[str, Any]] | None = None,
+    ) -> int:
+        """Store `document` as the next version of `map_id` (1 for a new map); its number.
+        `check(latest)` may refuse the write by raising (an If-Match that no longer holds)."""
+
+        def build(latest: int | None, old: dict | None) -> dict[str, Any]:
+            if check is not None:
+                check(latest)
+            return document
+
+        return self.derive_map(map_id, build, source, create=True, key=key, answer=answer)
 
     def derive_map(
         self,
@@ -245,13 +323,18 @@ class Store:
         build: Callable[[int | None, dict[str, Any] | None], dict[str, Any]],
         source: str,
         create: bool = False,
+        key: RequestKey | None = None,
+        answer: Callable[[int], dict[str, Any]] | None = None,
     ) -> int:
         """Write `build(latest_version, latest_document)` as the next version, all in one
         transaction holding the map's lock; `build` may raise `Conflict` (nothing written).
-        Without `create`, an unknown map raises KeyError."""
+        Without `create`, an unknown map raises KeyError.  With a request `key`, the key and
+        `answer(version)` are stored with the version (`KeyTaken` when the key was used)."""
         blob_out: bytes
         with self._transaction(write=True) as cur:
             latest = self._lock_map(cur, map_id)
+            if key is not None:
+                self._check_key(cur, key)
             if latest is None and not create:
                 raise KeyError(map_id)
             old = None if latest is None else self._document(cur, map_id, latest)
@@ -272,7 +355,51 @@ class Store:
                 ),
                 (map_id, version, time.time(), source, blob_out),
             )
+            if key is not None:
+                self._insert_key(cur, key, version, None if answer is None else answer(version))
         return version
+
+    # request keys ------------------------------------------------------------------------------
+    def _check_key(self, cur: Any, key: RequestKey) -> None:
+        """Inside a write transaction holding the lock of what the key writes: `KeyTaken` when
+        the key was used."""
+        found = self._recall(cur, key)
+        if found is not None:
+            raise KeyTaken(found)
+
+    def _recall(self, cur: Any, key: RequestKey) -> Remembered | None:
+        cur.execute(
+            self._sql("SELECT digest, ref, answer FROM request_keys WHERE scope = ? AND key = ?"),
+            (key.scope, key.key),
+        )
+        row = cur.fetchone()
+        if row is None:
+            return None
+        return Remembered(row[0], int(row[1]), None if row[2] is None else _unpack(row[2]))
+
+    def _insert_key(self, cur: Any, key: RequestKey, ref: int, answer: dict | None) -> None:
+        cur.execute(
+            self._sql(
+                "INSERT INTO request_keys (scope, key, digest, created, ref, answer) "
+                "VALUES (?, ?, ?, ?, ?, ?)"
+            ),
+            (key.scope, key.key, key.digest, time.time(), ref,
+             None if answer is None else _pack(answer)),
+        )  # fmt: skip
+
+    def recall(self, key: RequestKey) -> Remembered | None:
+        """What an earlier request with this key wrote and answered, or None."""
+        with self._transaction() as cur:
+            return self._recall(cur, key)
+
+    def remember(self, key: RequestKey, ref: int, answer: dict[str, Any]) -> Remembered | None:
+        """Store a key's answer of a request that wrote nothing (a report that changed
+        nothing); what the key holds when it was taken already, else None."""
+        with self._transaction(write=True, durable=False) as cur:
+            found = self._recall(cur, key)
+            if found is None:
+                self._insert_key(cur, key, ref, answer)
+        return found
 
     def _document(self, cur: Any, map_id: str, version: int) -> dict[str, Any] | None:
         cur.execute(
@@ -319,8 +446,9 @@ class Store:
 
     # sessions ---------------------------------------------------------------------------------
     def create_session(
-        self, session_id: str, map_id: str, map_version: int, up: list[float] | None
-    ) -> None:
+        self, session_id: str, map_id: str, map_version: int, up: list[float] | None,
+        owner: str = "",
+    ) -> None:  # fmt: skip
         now = time.time()
         with self._transaction(write=True, durable=False) as cur:
             cur.execute(
@@ -329,21 +457,29 @@ class Store:
                 (session_id, map_id, map_version, None if up is None else json.dumps(up),
                  now, now, None),
             )  # fmt: skip
+            cur.execute(
+                self._sql("INSERT INTO session_owners (session_id, owner) VALUES (?, ?)"),
+                (session_id, owner),
+            )
 
     def session(self, session_id: str) -> SessionRow | None:
         with self._transaction() as cur:
             cur.execute(
-                self._sql("SELECT session_id, map_id, map_version, up, created, touched, last "
-                          "FROM sessions WHERE session_id = ?"),
+                self._sql(
+                    "SELECT s.session_id, s.map_id, s.map_version, s.up, s.created, s.touched, "
+                    "s.last, o.owner FROM sessions s LEFT JOIN session_owners o "
+                    "ON o.session_id = s.session_id WHERE s.session_id = ?"
+                ),
                 (session_id,),
-            )  # fmt: skip
+            )
             row = cur.fetchone()
         if row is None:
             return None
-        sid, map_id, version, up, created, touched, last = row
+        sid, map_id, version, up, created, touched, last, owner = row
         return SessionRow(
             sid, map_id, int(version), None if up is None else json.loads(up),
             float(created), float(touched), None if last is None else json.loads(last),
+            owner or "",
         )  # fmt: skip
 
     def sessions_of(self, map_id: str) -> list[SessionRow]:
@@ -361,10 +497,12 @@ class Store:
         stamp: float,
         objects: list[dict],
         idle_seconds: float,
+        key: RequestKey | None = None,
         position: list[float] | None = None,
     ) -> int | None:
         """Store the next batch of a session and touch it; its sequence number (from 1), or
-        None when the session is gone or was idle for longer than `idle_seconds`."""
+        None when the session is gone or was idle for longer than `idle_seconds`.  With a
+        request `key`, the key is stored with the batch (`KeyTaken` when it was used)."""
         now = time.time()
         document: Any = objects if position is None else {"objects": objects, "position": position}
         with self._transaction(write=True, durable=False) as cur:
@@ -375,6 +513,8 @@ class Store:
             )
             if cur.rowcount != 1:
                 return None
+            if key is not None:
+                self._check_key(cur, key)
             cur.execute(
                 self._sql("SELECT COALESCE(MAX(seq), 0) FROM session_batches WHERE session_id = ?"),
                 (session_id,),
@@ -387,6 +527,8 @@ class Store:
                 ),
                 (session_id, seq, stamp, _pack(document)),
             )
+            if key is not None:
+                self._insert_key(cur, key, seq, None)
         return seq
 
     def batches(self, session_id: str, after: int = 0, upto: int | None = None) -> list[Batch]:
@@ -444,21 +586,36 @@ class Store:
             row = cur.fetchone()
         return None if row is None else (int(row[0]), _unpack(row[1]))
 
-    def set_last(self, session_id: str, last: dict[str, Any]) -> None:
+    def set_last(
+        self, session_id: str, last: dict[str, Any], key: RequestKey | None = None,
+        answer: dict[str, Any] | None = None,
+    ) -> None:  # fmt: skip
+        """Keep a summary of a session's latest answer (and the whole `answer` under the
+        update's request `key`)."""
         with self._transaction(write=True, durable=False) as cur:
             cur.execute(
                 self._sql("UPDATE sessions SET last = ? WHERE session_id = ?"),
                 (json.dumps(last, allow_nan=False), session_id),
             )
+            if key is not None and answer is not None:
+                cur.execute(
+                    self._sql("UPDATE request_keys SET answer = ? WHERE scope = ? AND key = ?"),
+                    (_pack(answer), key.scope, key.key),
+                )
 
     def delete_session(self, session_id: str) -> bool:
         with self._transaction(write=True) as cur:
-            cur.execute(
-                self._sql("DELETE FROM session_batches WHERE session_id = ?"), (session_id,)
-            )
-            cur.execute(self._sql("DELETE FROM session_states WHERE session_id = ?"), (session_id,))
-            cur.execute(self._sql("DELETE FROM sessions WHERE session_id = ?"), (session_id,))
-            return cur.rowcount > 0
+            return self._delete_session(cur, session_id)
+
+    def _delete_session(self, cur: Any, session_id: str) -> bool:
+        """Delete a session, its batches, its owner and its request keys."""
+        for table in ("session_batches", "session_states", "session_owners"):
+            cur.execute(self._sql(f"DELETE FROM {table} WHERE session_id = ?"), (session_id,))
+        cur.execute(
+            self._sql("DELETE FROM request_keys WHERE scope = ?"), (session_scope(session_id),)
+        )
+        cur.execute(self._sql("DELETE FROM sessions WHERE session_id = ?"), (session_id,))
+        return cur.rowcount > 0
 
     # one-shot localizations --------------------------------------------------------------------
     def put_localization(self, localization_id: str, map_id: str, local: dict) -> None:
@@ -485,17 +642,25 @@ class Store:
 
     def expire_sessions(self, idle_seconds: float) -> list[str]:
         """Delete the sessions idle for longer than `idle_seconds` (and the one-shot
-        localizations older than that); the sessions' ids."""
-        cutoff = time.time() - idle_seconds
+        localizations older than that, and request keys older than `REQUEST_KEY_TTL_S`); the
+        sessions' ids."""
+        now = time.time()
+        cutoff = now - idle_seconds
         with self._transaction(write=True, durable=False) as cur:
             cur.execute(self._sql("DELETE FROM localizations WHERE created < ?"), (cutoff,))
+            cur.execute(
+                self._sql("DELETE FROM request_keys WHERE created < ?"), (now - REQUEST_KEY_TTL_S,)
+            )
             cur.execute(self._sql("SELECT session_id FROM sessions WHERE touched < ?"), (cutoff,))
             gone = [r[0] for r in cur.fetchall()]
             for sid in gone:
-                cur.execute(self._sql("DELETE FROM session_batches WHERE session_id = ?"), (sid,))
-                cur.execute(self._sql("DELETE FROM session_states WHERE session_id = ?"), (sid,))
-                cur.execute(self._sql("DELETE FROM sessions WHERE session_id = ?"), (sid,))
+                self._delete_session(cur, sid)
         return gone
+
+
+def session_scope(session_id: str) -> str:
+    """The scope of a session's request keys (deleted with the session)."""
+    return f"session {session_id}"
 
 
 class SQLiteStore(Store):
