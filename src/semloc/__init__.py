@@ -4,6 +4,7 @@ import semloc
 g = semloc.load_map("global.json")
 l = semloc.load_map("local.json")
 r = semloc.localize(g, l)        # r.status, r.pose (4x4 T_global_local), r.hypotheses
+r = semloc.localize(g, l, prior=semloc.Prior(position=[x, y, z], radius=5.0))  # near there
 semloc.warmup()                  # compile the inner loops ahead (once after installing)
 """
 
@@ -14,6 +15,7 @@ from semloc.io import load_map, save_map
 from semloc.localizer import Localizer, LocalizerConfig, localize
 from semloc.maps import MapError, ObjectMap, SemanticObject
 from semloc.pictures import colors  # label colours of pictures, exports, recordings (no plotting)
+from semloc.priors import Prior
 from semloc.results import Hypothesis, Result, Step
 
 __version__ = "0.1.0"
@@ -24,6 +26,7 @@ __all__ = [
     "LocalizerConfig",
     "MapError",
     "ObjectMap",
+    "Prior",
     "Result",
     "SemanticObject",
     "Step",

@@ -20,7 +20,8 @@ is another distinct place that shares less than `rival_overlap` of the hypothesi
                 (more pairs or a clearly smaller residual; or a score / fitness larger by the
                 factor 1 + margin); a rival there has a different pose and shares less
                 than `rival_overlap` of the smaller one's pairs with the best one;
-    ambiguous   hypotheses exist (>= 2 pairs) but the best is not trusted; `reason` says why;
+    ambiguous   hypotheses exist (>= 2 pairs) but the best is not trusted (or its pose lies
+                outside the caller's position prior, `semloc.priors`); `reason` says why;
     failed      no association set has 2 or more pairs; `reason` says why.
 
 Hypotheses are distinct places: walking down the ranked candidates, one whose pose is within
@@ -41,6 +42,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from semloc._decision_fast import first_same_place
 from semloc.confidence_model import SHIPPED
+from semloc.priors import OUTSIDE_PRIOR
 from semloc.results import Hypothesis, Status
 from semloc.transforms import pose_error
 
@@ -339,6 +341,8 @@ def decide(hypotheses: Sequence[Hypothesis], config: DecisionConfig, rank_by: Ra
     best = hypotheses[0]
     if best.pose is None:
         return Decision("ambiguous", "the best hypothesis's pose is under-determined")
+    if best.outside_prior:
+        return Decision("ambiguous", OUTSIDE_PRIOR)
     if len(best.pairs) < config.min_pairs:
         return Decision(
             "ambiguous",
@@ -351,9 +355,10 @@ def decide(hypotheses: Sequence[Hypothesis], config: DecisionConfig, rank_by: Ra
             f"low fitness: {best.fitness:.2f} of the local points land on the map, "
             f"{config.min_fitness:.2f} needed",
         )
+    others = [h for h in hypotheses[1:] if not h.outside_prior]  # (a prior rules those out)
     if best.confidence is not None:
-        return _by_confidence(best, hypotheses[1:], config)
-    rivals = [h for h in hypotheses[1:] if _different(best, h, config.rival_overlap)]
+        return _by_confidence(best, others, config)
+    rivals = [h for h in others if _different(best, h, config.rival_overlap)]
     for rival in rivals:
         if not _dominates(best, rival, rank_by, config):
             return Decision(

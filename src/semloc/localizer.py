@@ -15,6 +15,10 @@ that grew is recovered warm-started from the pose of its largest kept subset; a 
 local object drops the kept poses that used it.  Object clouds for pose recovery are prepared
 once per object (`pose.cached_cloud`), so all Localizers of one map share them.
 
+A position prior (`semloc.priors.Prior`: `Localizer(..., prior=P)`, `set_prior`) gates the
+candidates of each local object and marks the hypotheses whose pose lies outside it, which
+cannot be `localized`; a tracked place that leaves it ends the claim.
+
 `localize(global_map, local_map)` replays a local map by its `seen` keyframes.
 """
 
@@ -44,10 +48,12 @@ from semloc.decision import (
     distinct,
     local_anchor,
     rank_places,
+    score_confidence,
     shipped_model,
 )
 from semloc.maps import MapError, ObjectMap, SemanticObject, unit_vector
 from semloc.pose import PoseConfig, PoseEstimate, cached_cloud, estimate_pose
+from semloc.priors import GATE_SLACK, OUTSIDE_PRIOR, Prior, checked_prior
 from semloc.results import Hypothesis, Result, Status, Step, Support
 from semloc.semantics import pair_weight
 from semloc.tracking import CONTRADICTED, Track, TrackingConfig, allowances, check
@@ -142,6 +148,7 @@ class Localizer:
         config: LocalizerConfig | None = None,
         local_up: Any = None,
         describer: Describer | None = None,
+        prior: Prior | None = None,
         **overrides: Any,
     ) -> None:
         if not isinstance(global_map, ObjectMap):
@@ -170,6 +177,8 @@ class Localizer:
         self._track: Track | None = None
         self._allowance: np.ndarray | None = None  # per map object, for tracking checks
         self._found: dict[str, tuple[SemanticObject, np.ndarray, np.ndarray]] = {}
+        self._prior = checked_prior(prior)
+        self._prior_slack: np.ndarray | None = None  # per map object, for the prior's gate
         self._reset_search()
         self._steps: deque[Step] = deque(maxlen=config.window.steps)
         self._n_steps = 0
@@ -189,6 +198,7 @@ class Localizer:
         self._local: dict[str, SemanticObject] = {}
         self._local_index: dict[str, int] = {}
         self._candidates_of: dict[int, np.ndarray] = {}  # local index -> global indices
+        self._gated_of: dict[int, int] = {}  # local index -> candidates kept by the prior
         self._similarity_of: dict[int, np.ndarray] = {}  # local index -> their similarity
         self._support = MapSupport(
             [], global_map.positions, config.verification, axis=global_map.sweep_order.axis
@@ -224,12 +234,13 @@ class Localizer:
         objects: Iterable[SemanticObject],
         config: LocalizerConfig | None = None,
         local_up: Any = None,
+        prior: Prior | None = None,
     ) -> Localizer:
         """A Localizer from `state()` and the window's objects (the latest version of each);
-        `ValueError` when they do not fit together."""
+        `ValueError` when they do not fit together.  The prior is not part of the state."""
         if not isinstance(state, dict) or state.get("version") != STATE_VERSION:
             raise ValueError(f"not a Localizer state of version {STATE_VERSION}")
-        localizer = cls(global_map, config, local_up=local_up)
+        localizer = cls(global_map, config, local_up=local_up, prior=prior)
         try:
             objects = localizer._described(list(objects))
             localizer.window = LocalWindow.restored(
@@ -252,6 +263,22 @@ class Localizer:
     def tracking(self) -> bool:
         """Whether a found place is being tracked (the last answer was `localized`)."""
         return self._track is not None
+
+    @property
+    def prior(self) -> Prior | None:
+        """The position prior in effect (None: none); `set_prior` changes it."""
+        return self._prior
+
+    def set_prior(self, prior: Prior | None) -> None:
+        """Use `prior` from the next update on (None removes it): the window's candidates are
+        gated anew and the search regrows; a tracked place outside the new prior is let go."""
+        self._prior = checked_prior(prior)
+        self._search_stale = True  # the search regrows from the window, gated anew
+        if self._track is not None and not self._within_prior(self._track.pose):
+            self._end_track()
+
+    def _within_prior(self, pose: np.ndarray) -> bool:
+        return self._prior is None or self._prior.admits(pose)
 
     @property
     def n_sets(self) -> int:
@@ -324,6 +351,8 @@ class Localizer:
             status, why = decide(hypotheses, self.config.decision, self.config.rank_by)
             if not hypotheses:
                 why = self._why_no_sets()
+            elif why == OUTSIDE_PRIOR and self._prior is not None:  # (the best has a pose)
+                why = self._prior.why_outside(np.asarray(hypotheses[0].pose))
             if reason:
                 status, why = "ambiguous", reason
             reason = why
@@ -357,7 +386,8 @@ class Localizer:
         track.accept(verdict)
         self._search_stale = True  # the search did not see these objects
         estimate = self._follow(track) if len(track.pairs) >= self._min_track_pairs() else None
-        if estimate is None:  # too little evidence left in the window: search it again
+        if estimate is None or not self._within_prior(track.pose):
+            # too little evidence left in the window, or the place left the prior: search again
             self._end_track()
             return self._search_update(objects, answer, start)
         end = time.perf_counter()
@@ -410,6 +440,7 @@ class Localizer:
             residual=centre_residual(estimate.T, l_xyz, g_xyz),
             method=f"tracked/{estimate.method}",
             confidence=track.confidence,
+            outside_prior=None if self._prior is None else False,
         )
 
     def _start_track(self, best: Hypothesis) -> None:
@@ -470,6 +501,20 @@ class Localizer:
             found, similarity = self._candidates.weighted(obj)
             self._found[obj.id] = (obj, found, similarity)
 
+    def _gated(self, obj: SemanticObject, found: np.ndarray) -> np.ndarray:
+        """The candidates the clustering gets: those the prior lets `obj` be (all without one).
+        Evidence, verification and tracking see all candidates, as without a prior."""
+        if self._prior is None:
+            return found
+        slack = self._gate_slack()[found]
+        return found[self._prior.gate(obj.position, self.global_map.positions[found], slack)]
+
+    def _gate_slack(self) -> np.ndarray:
+        """Per map object, how far its centre may lie from a detection's (the prior's gate)."""
+        if self._prior_slack is None:
+            self._prior_slack = allowances(self.global_map, GATE_SLACK)
+        return self._prior_slack
+
     def _changes(self, hypotheses: list[Hypothesis]) -> Callable[[], Changes] | None:
         """What the best hypothesis says changed (`semloc.changes`), computed when first read:
         the window's objects and their candidates are taken now (later updates replace them).
@@ -495,6 +540,8 @@ class Localizer:
             return "the global map has no objects"
         if len(self._local) < 2:
             return f"too few local objects: {len(self._local)} seen, 2 needed"
+        if self._prior is not None and sum(n > 0 for n in self._gated_of.values()) < 2 <= matched:
+            return "too few candidates within the prior: fewer than 2 local objects have one"
         if matched == 0:
             return "no candidates for these labels: no local object has a map object it could be"
         if matched == 1:
@@ -520,9 +567,11 @@ class Localizer:
                     k: v for k, v in self._poses.items() if all(l != index for _, l in k[1])
                 }
             self._local[obj.id] = obj
-            _, detections[index], self._similarity_of[index] = self._found[obj.id]
-            self._candidates_of[index] = detections[index]
-            self._support.assign(index, detections[index])
+            _, found, self._similarity_of[index] = self._found[obj.id]
+            self._candidates_of[index] = found
+            self._support.assign(index, found)
+            detections[index] = self._gated(obj, found)
+            self._gated_of[index] = len(detections[index])
         return detections
 
     # Hypotheses -------------------------------------------------------------------------
@@ -543,7 +592,13 @@ class Localizer:
         hypotheses = [
             self._hypothesis(rank, c, local_xyz, previous) for rank, c in enumerate(chosen, 1)
         ]
-        return rank_places(hypotheses, cfg.rank_by, cfg.decision, shipped_model(), anchor)
+        ranked = rank_places(hypotheses, cfg.rank_by, cfg.decision, shipped_model(), anchor)
+        if self._prior is not None:  # conditioned on the prior: rivals outside it do not count
+            for h in ranked:
+                h.outside_prior = h.pose is not None and not self._prior.admits(h.pose)
+            inside = [h for h in ranked if not h.outside_prior]
+            score_confidence(inside, shipped_model(), cfg.decision.rival_overlap)
+        return ranked
 
     def _verified_all(self, sets: SetPairs, local_xyz: np.ndarray) -> list[Verified]:
         """Each set verified against the map (`semloc.verification.verify_sets`)."""
@@ -685,16 +740,18 @@ def localize(
     config: LocalizerConfig | None = None,
     *,
     progress: Callable[[int, int], None] | None = None,
+    prior: Prior | None = None,
     **overrides: Any,
 ) -> Result:
     """Replay `local_map` by its `seen` keyframes (one update per keyframe); the last Result.
+    `prior`: where the local frame's origin lies in the global map (`semloc.Prior`).
 
     Only the last update builds hypotheses and recovers poses: the answers in between would
     not be read.  `progress(done, total)` is called after each update.
     """
     if not isinstance(local_map, ObjectMap):
         raise TypeError(f"localize needs an ObjectMap as local map, got {type(local_map).__name__}")
-    localizer = Localizer(global_map, config, local_up=local_map.up, **overrides)
+    localizer = Localizer(global_map, config, local_up=local_map.up, prior=prior, **overrides)
     keyframes = sorted(set(local_map.seen.tolist()))
     if not keyframes:
         return Result(status="failed", pose=None, hypotheses=[], reason=EMPTY_LOCAL_MAP)

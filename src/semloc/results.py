@@ -41,6 +41,7 @@ class Hypothesis:
     evidence: float | None = None  # the confidence model's evidence logit (ranks hypotheses)
     features: dict[str, float] | None = None  # its inputs (semloc.decision.FEATURES)
     rejected: list[tuple[str, str]] = field(default_factory=list)  # pairs that disagreed
+    outside_prior: bool | None = None  # its pose is outside the position prior (None: no prior)
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -58,7 +59,7 @@ class Hypothesis:
             if self.features is None
             else {k: round(v, 6) for k, v in self.features.items()},
             "rejected": [{"global": g, "local": l} for g, l in self.rejected],
-        }
+        } | ({} if self.outside_prior is None else {"outside_prior": self.outside_prior})
 
 
 @dataclass
@@ -266,12 +267,14 @@ def _hypothesis_from(
     rejected = [(str(p.get("global")), str(p.get("local"))) for p in raw.get("rejected") or []
                 if isinstance(p, dict)]  # fmt: skip
     features = raw.get("features")
+    outside = raw.get("outside_prior")
     return Hypothesis(
         rank=int(number("rank") or index + 1), score=number("score") or 0.0, pairs=pairs,
         pose=pose, fitness=number("fitness"), rmse=number("rmse"), residual=number("residual"),
         method=str(raw.get("method") or ""), confidence=number("confidence"),
         evidence=number("evidence"), rejected=rejected,
         features=dict(features) if isinstance(features, dict) else None,
+        outside_prior=outside if isinstance(outside, bool) else None,
     )  # fmt: skip
 
 

@@ -83,6 +83,7 @@ VALIDATED_ELSEWHERE = {
     ("demo", "gamma"),  # DemoConfig (pydantic)
     ("align", "gamma"),  # LocalizerConfig (pydantic)
     ("crop", "radius"), ("crop", "center"),  # positive / finite checks of the command
+    ("localize", "near"), ("localize", "radius"),  # the position prior (semloc.Prior) checks them
 }  # fmt: skip
 """Numeric options whose range a settings model or the command checks (tested below)."""
 
@@ -160,6 +161,23 @@ def test_localize_settings_options_are_checked(tmp_path_factory, option, value, 
     assert code in (0, 2)
     if code == 2:
         _one_error_line(capsys, option.removeprefix("--").replace("-", "_"))
+
+
+@settings(max_examples=25, deadline=None, suppress_health_check=CAPTURE)
+@given(
+    radius=st.floats() | st.integers(-(10**30), 10**30),
+    near=st.tuples(st.floats(), st.floats(), st.floats()),
+)
+def test_localize_prior_options_are_checked(tmp_path_factory, radius, near, capsys):
+    """--near X Y Z --radius R: any numbers run or are refused in one line naming them."""
+    folder = tmp_path_factory.mktemp("prior")
+    good = _write(folder / "m.json", valid_map(n=4, points=0))
+    capsys.readouterr()
+    argv = ["localize", str(good), str(good), "--near", *map(str, near), "--radius", str(radius)]
+    code = main([*argv, "--format", "json"])
+    assert code in (0, 2)
+    if code == 2:
+        _one_error_line(capsys, "--")
 
 
 def test_settings_file_seed_is_checked(tmp_path, good_map, capsys):

@@ -325,3 +325,42 @@ def test_label_map_files_are_a_mapping_of_strings_or_one_error(tmp_path_factory,
         return
     assert all(isinstance(k, str) and k.strip() and isinstance(v, str) and v.strip()
                for k, v in mapping.items())  # fmt: skip
+
+
+# ---------------------------------------------------------------- position prior (--near)
+def test_near_and_radius_narrow_the_answer_and_are_in_the_json(maps, capsys):
+    folder, obs = maps
+    args = ["localize", str(folder / "global.json"), str(folder / "local.json"), "--format", "json"]
+    x, y, z = (obs.T_global_local[:3, 3] + [0.5, -0.5, 0.0]).tolist()
+    assert main([*args, "--near", str(x), str(y), str(z), "--radius", "2"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["status"] == "localized"
+    assert out["prior"] == {"position": [x, y, z], "radius": 2.0}
+    assert out["hypotheses"][0]["outside_prior"] is False
+    np.testing.assert_allclose(out["pose"], obs.T_global_local, atol=0.5)
+    # a prior far from the true place: never localized there, and the JSON says why
+    x, y, z = (obs.T_global_local[:3, 3] + [40.0, 0.0, 0.0]).tolist()
+    assert main([*args, "--near", str(x), str(y), str(z), "--radius", "2"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["status"] != "localized" and "prior" in out["reason"]
+    assert all(h["outside_prior"] for h in out["hypotheses"])
+
+
+@pytest.mark.parametrize(
+    ("extra", "message"),
+    [
+        (["--near", "1", "2", "3"], "--near X Y Z and --radius R go together"),
+        (["--radius", "2"], "--near X Y Z and --radius R go together"),
+        (["--near", "1", "2", "3", "--radius", "0"], "radius must be > 0"),
+        (["--near", "1", "2", "3", "--radius", "-1"], "radius must be > 0"),
+        (["--near", "1", "nan", "3", "--radius", "1"], "--near must be a finite number"),
+        (["--near", "1", "2", "3", "--radius", "inf"], "--radius must be a finite number"),
+        (["--near", "1", "2", "--radius", "1"], "--near"),
+    ],
+)
+def test_bad_prior_options_exit_2_with_one_line(maps, capsys, extra, message):
+    folder, _ = maps
+    code = main(["localize", str(folder / "global.json"), str(folder / "local.json"), *extra])
+    err = capsys.readouterr().err.strip()
+    assert code == 2
+    assert len(err.splitlines()) == 1 and err.startswith("semloc: error:") and message in err

@@ -5,6 +5,10 @@ prints the pose error and the paper's success at 15° / 0.5 m, and adds `ground_
 JSON output.  It reports how each local label was read against the map's labels (exact,
 synonym, parent / child class, similar, embedding or unmatched: a table, or `labels` in the
 JSON); an unmatched label is a warning on stderr, never an error.  Long replays show a progress bar on stderr when it is a terminal.
+
+`--near X Y Z --radius R` (both or neither) is a position prior (`semloc.Prior`): the local
+frame's origin lies within R metres of (X, Y, Z) in the global map; the JSON output carries
+it as `prior`, and each hypothesis says whether it lies outside it (`outside_prior`).
 """
 
 from __future__ import annotations
@@ -54,6 +58,7 @@ from semloc.io import load_map, write_atomic
 from semloc.io.answers import answer_document, answer_text
 from semloc.localizer import LocalizerConfig
 from semloc.localizer import localize as run_localize
+from semloc.priors import Prior
 
 DescriptorKind = choices("DescriptorKind", DESCRIBERS)
 DEFAULTS = LocalizerConfig()
@@ -137,11 +142,27 @@ def localize(
     output: Annotated[
         Path | None, typer.Option("--output", "-o", help="Write the output to this file.")
     ] = None,
+    near: Annotated[
+        tuple[float, float, float] | None,
+        typer.Option(
+            "--near",
+            help="Position prior: the local frame's origin lies near X Y Z (global frame, m); "
+            "with --radius.",
+        ),
+    ] = None,
+    radius: Annotated[
+        float | None,
+        typer.Option(help="Position prior: within this many metres of --near (> 0)."),
+    ] = None,
     server: remote.ServerOption = None,
     token: remote.TokenOption = None,
 ) -> None:
     """Localize LOCAL in GLOBAL: association sets, hypotheses and the pose T_global_local."""
+    prior = _prior(near, radius)
     if server is not None:
+        if prior is not None:
+            fail("--near/--radius: a position prior is not sent to a server yet; run without "
+                 "--server")  # fmt: skip
         remote.refuse_local_settings(
             gamma=gamma, delta=delta, top_k=top_k, tolerance=tolerance, descriptor=descriptor,
             descriptor_delta=descriptor_delta, label_map=label_map, config=config,
@@ -175,7 +196,7 @@ def localize(
     check_separate({"--output": output}, inputs)
     warm = warm_up(lambda text: err_console.print(f"{text}…", style="dim"))
     with replay_progress(err_console, local_objects) as progress:
-        result = run_localize(global_objects, local_objects, cfg, progress=progress)
+        result = run_localize(global_objects, local_objects, cfg, progress=progress, prior=prior)
     report = None if truth is None else ground_truth_report(result.pose, result.hypotheses, truth)
     labels = label_report(CandidateIndex(global_objects, cfg.association), local_objects)
     if len(global_objects):  # an empty map: the result's reason says so, once
@@ -184,6 +205,8 @@ def localize(
         extra = {"warm_up_ms": round(warm.seconds * 1000, 3)}
         if report is not None:
             extra["ground_truth"] = report
+        if prior is not None:
+            extra["prior"] = prior.to_dict()
         emit(answer_text(answer_document(result, labels, **extra)), output)
         return
     target = console if output is None else Console(record=True, width=120, file=io.StringIO())
@@ -194,3 +217,17 @@ def localize(
         print_ground_truth(report, target)
     if output is not None:
         write_atomic(output, target.export_text())
+
+
+def _prior(near: tuple[float, float, float] | None, radius: float | None) -> Prior | None:
+    """The position prior of `--near X Y Z --radius R` (both or neither; one line, exit 2)."""
+    if near is None and radius is None:
+        return None
+    if near is None or radius is None:
+        fail("--near X Y Z and --radius R go together (a position prior needs both)")
+    check_finite(near=near, radius=radius)
+    try:
+        return Prior(position=near, radius=radius)
+    except ValueError as exc:
+        fail(f"--near/--radius: {exc}")
+        raise  # unreachable: fail() raises

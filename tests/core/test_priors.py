@@ -1,0 +1,240 @@
+"""Position priors (`semloc.priors`): validation, the candidate gate, outside-prior hypotheses,
+the two-copies map, tracking under a prior, and the Localizer / localize API."""
+
+from __future__ import annotations
+
+import math
+import re
+
+import numpy as np
+import pytest
+from helpers import room
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+import semloc
+from semloc import Localizer, ObjectMap, Prior
+from semloc.priors import OUTSIDE_PRIOR
+from semloc.results import Result
+from semloc.sim.layouts import layout, observe
+from semloc.transforms import pose_error, yaw_pose
+
+# ------------------------------------------------------------------------------ validation
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"position": [0, 0, 0], "radius": 0}, "radius must be > 0"),
+        ({"position": [0, 0, 0], "radius": -1}, "radius must be > 0"),
+        ({"position": [0, 0, 0], "radius": math.nan}, "radius must be finite"),
+        ({"position": [0, 0, 0], "radius": math.inf}, "radius must be finite"),
+        ({"position": [0, 0, 0], "radius": "far"}, "radius must be a number"),
+        ({"position": [0, 0, 0], "radius": True}, "radius must be a number"),
+        ({"position": [0, 0], "radius": 1}, "position must be [x, y, z]"),
+        ({"position": [0, math.nan, 0], "radius": 1}, "position must be finite"),
+        ({"position": "here", "radius": 1}, "position must be [x, y, z]"),
+        ({"position": [0, 0, 0], "radius": 1, "floor": (2, 1)}, "z_min <= z_max"),
+        ({"position": [0, 0, 0], "radius": 1, "floor": (0, math.inf)}, "must be finite"),
+        ({"position": [0, 0, 0], "radius": 1, "floor": (0,)}, "floor must be (z_min, z_max)"),
+        ({"position": [0, 0, 0], "radius": 1, "heading_tolerance": 10}, "needs a heading"),
+        ({"position": [0, 0, 0], "radius": 1, "heading": 0, "heading_tolerance": 0}, "(0, 180]"),
+        ({"position": [0, 0, 0], "radius": 1, "heading": math.nan}, "heading must be finite"),
+    ],
+)
+def test_invalid_priors_are_refused_clearly(kwargs, message):
+    with pytest.raises(ValueError, match=re.escape(message)):
+        Prior(**kwargs)
+
+
+def test_prior_round_trips_through_json_and_is_checked_by_the_api():
+    prior = Prior(position=[1, 2, 3], radius=4, floor=(-1, 1), heading=90, heading_tolerance=20)
+    assert Prior.from_dict(prior.to_dict()) == prior
+    assert Prior(position=[0, 0, 0], radius=1, heading=45).heading_tolerance == 30.0
+    with pytest.raises(ValueError, match="unknown field"):
+        Prior.from_dict({"position": [0, 0, 0], "radius": 1, "size": 2})
+    g = layout(20, seed=1)
+    with pytest.raises(TypeError, match="prior must be a semloc.Prior"):
+        Localizer(g, prior=[0, 0, 0])
+    with pytest.raises(TypeError, match="prior must be a semloc.Prior"):
+        semloc.localize(g, g, prior=5.0)
+
+
+def test_contains_checks_radius_floor_and_heading():
+    prior = Prior(position=[0, 0, 0], radius=2, floor=(-0.5, 0.5), heading=90, heading_tolerance=15)
+    assert prior.contains(yaw_pose(np.radians(90), [1, 1, 0]))
+    assert not prior.contains(yaw_pose(np.radians(90), [2, 1, 0]))  # beyond the radius
+    assert not prior.contains(yaw_pose(np.radians(90), [0, 0, 1]))  # above the floor band
+    assert not prior.contains(yaw_pose(np.radians(110), [0, 0, 0]))  # off the heading
+    assert prior.contains(yaw_pose(np.radians(-265), [0, 0, 0]))  # 95 deg, wrapped
+    # an estimate is admitted with the error of a right pose (0.5 m, 15 deg) beyond the bounds
+    assert prior.admits(yaw_pose(np.radians(110), [2.3, 0, 0.9]))
+    assert not prior.admits(yaw_pose(np.radians(90), [2.6, 0, 0]))
+
+
+# -------------------------------------------------------------------------------- the gate
+
+
+def test_gate_keeps_what_the_prior_allows_and_drops_the_far():
+    prior = Prior(position=[0, 0, 0], radius=2)
+    global_xyz = np.array([[0.0, 0, 0], [6.9, 0, 0], [7.1, 0, 0], [20, 0, 0]])
+    keep = prior.gate(np.array([0.0, 4.0, 0.0]), global_xyz, np.full(4, 1.0))
+    assert keep.tolist() == [True, True, False, False]  # reach 2 + 4 + 1 m
+
+
+@pytest.fixture(scope="module")
+def building() -> ObjectMap:
+    return layout(80, seed=11)
+
+
+@settings(
+    max_examples=25, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+)
+@given(
+    seed=st.integers(0, 10_000),
+    offset=st.tuples(st.floats(-1, 1), st.floats(-1, 1), st.floats(-1, 1)),
+    radius=st.floats(0.5, 6.0),
+)
+def test_a_true_prior_keeps_a_right_answer_and_never_loses_it(building, seed, offset, radius):
+    obs = observe(building, 6, seed=seed)
+    truth = obs.T_global_local
+    # a prior that holds: the true origin lies within `radius` of its position
+    position = truth[:3, 3] + np.asarray(offset) / max(np.linalg.norm(offset), 1.0) * 0.9 * radius
+    prior = Prior(position=position, radius=radius)
+    base = semloc.localize(building, obs.local_map)
+    narrowed = semloc.localize(building, obs.local_map, prior=prior)
+    assert all(h.outside_prior is None for h in base.hypotheses)
+    assert all(isinstance(h.outside_prior, bool) for h in narrowed.hypotheses)
+
+    def right(result: Result) -> bool:
+        if result.pose is None:
+            return False
+        rotation, translation = pose_error(result.pose, truth)
+        return rotation < 15 and translation < 0.5
+
+    if base.status == "localized" and right(base):  # the same answer, as sure
+        assert narrowed.status == "localized"
+        assert sorted(narrowed.hypotheses[0].pairs) == sorted(base.hypotheses[0].pairs)
+        np.testing.assert_allclose(narrowed.pose, base.pose, atol=1e-6)
+    if right(base):  # ... or better: a right best place stays right
+        assert right(narrowed)
+    if narrowed.status == "localized":  # never a wrong place, never outside the prior
+        assert right(narrowed)
+        assert prior.admits(narrowed.pose)
+
+
+# ------------------------------------------------------------------ two copies of one room
+SHIFT = np.array([30.0, 0.0, 0.0])
+TRUE_POSE = yaw_pose(0.7, [0.5, 0.5, 0.0])  # the local origin in copy A, near its corner
+
+
+@pytest.fixture(scope="module")
+def two_rooms() -> tuple[ObjectMap, ObjectMap]:
+    """A map holding two identical copies of one room 30 m apart, and a view of copy A."""
+    a = room(10)
+    b = [o.replace(id=o.id.replace("a", "b"), position=o.position + SHIFT) for o in a]
+    world = ObjectMap([*a, *b], up=[0, 0, 1], name="two rooms")
+    inverse = np.linalg.inv(TRUE_POSE)
+    view = [a[i].transformed(inverse).replace(id=f"l{k}", seen=k) for k, i in enumerate(range(7))]
+    return world, ObjectMap(view, up=[0, 0, 1], name="view of A")
+
+
+def test_two_copies_without_a_prior_are_ambiguous(two_rooms):
+    world, view = two_rooms
+    result = semloc.localize(world, view)
+    assert result.status == "ambiguous"
+    assert all(h.outside_prior is None for h in result.hypotheses)
+    assert "outside_prior" not in result.to_dict()["hypotheses"][0]  # no prior: JSON unchanged
+
+
+def test_two_copies_with_a_prior_around_the_true_copy_localize_there(two_rooms):
+    world, view = two_rooms
+    prior = Prior(position=TRUE_POSE[:3, 3] + [0.8, -0.5, 0.2], radius=1.5)
+    result = semloc.localize(world, view, prior=prior)
+    assert result.status == "localized", result.reason
+    np.testing.assert_allclose(result.pose, TRUE_POSE, atol=1e-6)
+    assert all(g.startswith("a") for g, _ in result.hypotheses[0].pairs)
+    assert result.hypotheses[0].outside_prior is False
+    assert result.to_dict()["hypotheses"][0]["outside_prior"] is False
+
+
+@pytest.mark.parametrize(
+    "prior",
+    [
+        Prior(position=[34.0, 4.0, 0.5], radius=2.0),  # the wrong room's middle
+        Prior(position=[33.0, 3.0, 0.5], radius=3.0),  # nearer, still not the copy's origin
+        Prior(position=[30.5, 0.5, 0.0], radius=1.0, floor=(1.0, 2.0)),  # the copy, a floor up
+        Prior(position=[30.5, 0.5, 0.0], radius=1.0, heading=-90.0, heading_tolerance=20),
+    ],
+)
+def test_a_prior_around_the_wrong_copy_never_localizes_there(two_rooms, prior):
+    world, view = two_rooms
+    result = semloc.localize(world, view, prior=prior)
+    assert result.status != "localized"
+    wrong = TRUE_POSE.copy()
+    wrong[:3, 3] += SHIFT
+    if result.hypotheses and result.hypotheses[0].pose is not None:
+        best = result.hypotheses[0]
+        assert best.outside_prior is True
+        assert result.reason.startswith(OUTSIDE_PRIOR)
+        assert result.pose_is_answer is False
+    for h in result.hypotheses:  # kept and marked, not dropped
+        if h.pose is not None and not prior.admits(h.pose):
+            assert h.outside_prior is True
+    assert Result.from_dict(result.to_dict()).hypotheses[0].outside_prior == (
+        result.hypotheses[0].outside_prior
+    )
+    assert any(pose_error(h.pose, wrong)[1] < 0.1 for h in result.hypotheses if h.pose is not None)
+
+
+def test_a_prior_far_from_both_copies_leaves_no_candidates(two_rooms):
+    world, view = two_rooms
+    result = semloc.localize(world, view, prior=Prior(position=[15.0, 0.5, 0.0], radius=1.0))
+    assert result.status == "failed" and not result.hypotheses
+    assert result.reason.startswith("too few candidates within the prior")
+
+
+def test_the_gate_narrows_the_candidates_in_a_large_map(two_rooms):
+    world, view = two_rooms
+    free = Localizer(world, local_up=[0, 0, 1])
+    near = Localizer(world, local_up=[0, 0, 1], prior=Prior(position=[0.5, 0.5, 0], radius=1))
+    free.update(list(view), answer=False)
+    near.update(list(view), answer=False)
+    assert near.n_sets < free.n_sets
+    gated = [near._gated(o, near._found[o.id][1]) for o in view]
+    assert all(world[int(g)].id.startswith("a") for found in gated for g in found)
+    assert sum(map(len, gated)) < sum(len(free._found[o.id][1]) for o in view)
+
+
+# ------------------------------------------------------------------ set_prior and tracking
+
+
+def test_set_prior_applies_next_update_and_ends_a_tracked_claim_outside_it(two_rooms):
+    world, view = two_rooms
+    objects = list(view)
+    localizer = Localizer(world, local_up=[0, 0, 1])
+    localizer.set_prior(Prior(position=[0.5, 0.5, 0], radius=1.0))
+    first = localizer.update(objects[:5])
+    assert first.status == "localized" and localizer.tracking
+    # the caller now says the robot is in copy B: the tracked place in A is let go
+    localizer.set_prior(Prior(position=[34.0, 4.0, 0.5], radius=2.0))
+    assert not localizer.tracking
+    moved = localizer.update(objects[5:])
+    assert moved.status != "localized"
+    assert moved.reason.startswith(OUTSIDE_PRIOR)
+    localizer.set_prior(None)  # removed: both copies again
+    assert localizer.prior is None
+    assert localizer.update([]).status == "ambiguous"
+
+
+def test_a_tracked_pose_that_leaves_the_prior_ends_the_claim(two_rooms, monkeypatch):
+    world, view = two_rooms
+    objects = list(view)
+    prior = Prior(position=[0.5, 0.5, 0], radius=1.0)
+    localizer = Localizer(world, local_up=[0, 0, 1], prior=prior)
+    assert localizer.update(objects[:5]).status == "localized" and localizer.tracking
+    # the followed pose drifts out of the prior (as a wrong odometry would carry it)
+    monkeypatch.setattr(Prior, "admits", lambda self, pose: False)
+    result = localizer.update(objects[5:])
+    assert not localizer.tracking
+    assert result.status == "ambiguous"
