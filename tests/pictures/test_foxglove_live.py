@@ -42,20 +42,26 @@ def frames(sock: socket.socket, count: int) -> list[dict]:
     return found
 
 
+def connected(port: int) -> tuple[socket.socket, bytes]:
+    """A WebSocket opened with Foxglove's subprotocol, and the server's handshake answer."""
+    sock = socket.create_connection(("127.0.0.1", port), timeout=10)
+    key = base64.b64encode(os.urandom(16)).decode()
+    sock.sendall(
+        f"GET / HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\nUpgrade: websocket\r\nConnection: Upgrade"
+        f"\r\nSec-WebSocket-Key: {key}\r\nSec-WebSocket-Version: 13\r\n"
+        "Sec-WebSocket-Protocol: foxglove.sdk.v1\r\n\r\n".encode()
+    )
+    head = b""
+    while b"\r\n\r\n" not in head:
+        head += sock.recv(1)
+    return sock, head
+
+
 def test_the_view_advertises_its_channels_and_takes_answers():
     building = layout(60, seed=2)
     view = FoxgloveView(building, port=0)
     try:
-        sock = socket.create_connection(("127.0.0.1", view.port), timeout=10)
-        key = base64.b64encode(os.urandom(16)).decode()
-        sock.sendall(
-            f"GET / HTTP/1.1\r\nHost: 127.0.0.1:{view.port}\r\nUpgrade: websocket\r\n"
-            f"Connection: Upgrade\r\nSec-WebSocket-Key: {key}\r\nSec-WebSocket-Version: 13\r\n"
-            "Sec-WebSocket-Protocol: foxglove.sdk.v1\r\n\r\n".encode()
-        )
-        head = b""
-        while b"\r\n\r\n" not in head:
-            head += sock.recv(1)
+        sock, head = connected(view.port)
         assert head.startswith(b"HTTP/1.1 101")
         info, advertise = frames(sock, 2)
         assert info["op"] == "serverInfo" and advertise["op"] == "advertise"
@@ -79,21 +85,6 @@ def test_the_view_advertises_its_channels_and_takes_answers():
         view.close()
 
 
-def handshake(port: int) -> bytes:
-    sock = socket.create_connection(("127.0.0.1", port), timeout=10)
-    key = base64.b64encode(os.urandom(16)).decode()
-    sock.sendall(
-        f"GET / HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\nUpgrade: websocket\r\nConnection: Upgrade"
-        f"\r\nSec-WebSocket-Key: {key}\r\nSec-WebSocket-Version: 13\r\n"
-        "Sec-WebSocket-Protocol: foxglove.sdk.v1\r\n\r\n".encode()
-    )
-    head = b""
-    while b"\r\n\r\n" not in head:
-        head += sock.recv(1)
-    sock.close()
-    return head
-
-
 def test_the_demo_streams_to_foxglove_and_stays_up_until_ctrl_c(tmp_path):
     pytest.importorskip("open3d", reason="the sim extra is not installed")
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(sys.path), "COLUMNS": "200"}
@@ -109,7 +100,9 @@ def test_the_demo_streams_to_foxglove_and_stays_up_until_ctrl_c(tmp_path):
                 port = int(line.split("ws://localhost:")[1].split(":")[0].split()[0])
                 break
         assert port is not None, demo.stderr.read()
-        assert handshake(port).startswith(b"HTTP/1.1 101")
+        sock, head = connected(port)
+        sock.close()
+        assert head.startswith(b"HTTP/1.1 101")
         assert (tmp_path / "out" / "result.json").is_file()
     finally:
         demo.send_signal(signal.SIGINT)

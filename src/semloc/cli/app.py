@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 from enum import StrEnum
-from typing import Annotated
+from typing import Annotated, Any
 
 import typer
 from pydantic import ValidationError
@@ -117,6 +117,17 @@ def _root(
     ] = False,
 ) -> None:
     """semloc relocalizes a camera or robot against a prior map made of objects."""
+
+
+FOXGLOVE_HELP = "Stream the answers live to Foxglove on this port (8765 when given alone)."
+
+
+def foxglove_option(help_text: str = FOXGLOVE_HELP) -> Any:
+    """The `--foxglove [PORT]` option of the commands that stream to Foxglove."""
+    return Annotated[
+        int | None,
+        typer.Option("--foxglove", min=0, max=65535, metavar="[PORT]", help=help_text),
+    ]
 
 
 OPTIONAL_VALUES = {"--foxglove": "8765"}

@@ -18,7 +18,7 @@ from typing import Annotated
 import typer
 from pydantic import ValidationError
 
-from semloc.cli.app import app, console, fail, first_error
+from semloc.cli.app import app, console, fail, first_error, foxglove_option
 from semloc.cli.extras import need
 from semloc.cli.files import read_config
 from semloc.client import Client, ServerError
@@ -48,6 +48,7 @@ KNOWN_TOPICS = {
 }
 """The topics `echo` knows the type of (others need `--type`)."""
 
+FoxgloveOption = foxglove_option()
 DomainOption = Annotated[
     int | None,
     typer.Option("--domain", min=0, max=232, help="DDS domain id [default: ROS_DOMAIN_ID or 0]."),
@@ -97,16 +98,7 @@ def node(
     token: Annotated[
         str | None, typer.Option(envvar="SEMLOC_TOKEN", help="The service's token.")
     ] = None,
-    foxglove: Annotated[
-        int | None,
-        typer.Option(
-            "--foxglove",
-            min=0,
-            max=65535,
-            metavar="[PORT]",
-            help="Also stream the answers live to Foxglove on this port (8765 when given alone).",
-        ),
-    ] = None,
+    foxglove: FoxgloveOption = None,
 ) -> None:
     """Localize a robot's detections live: publish /semloc/pose, /tf, /semloc/status,
     /semloc/markers and /semloc/map on the DDS wire (Ctrl-C ends it)."""

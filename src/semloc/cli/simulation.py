@@ -11,7 +11,7 @@ import typer
 from pydantic import ValidationError
 from rich.table import Table
 
-from semloc.cli.app import MAX_SEED, app, console, fail, first_error
+from semloc.cli.app import MAX_SEED, app, console, fail, first_error, foxglove_option
 from semloc.cli.extras import need
 from semloc.cli.files import (
     ResultFile,
@@ -48,6 +48,11 @@ from semloc.sim.world import MAX_ROOMS
 from semloc.tools.demo import DemoConfig, run_demo
 from semloc.tools.scandemo import ScanDemoConfig, run_scan_demo
 from semloc.transforms import pose_error
+
+DemoFoxglove = foxglove_option(
+    "Stream the run live to Foxglove on this port (8765 when given alone); the view stays up "
+    "after the run until Ctrl-C."
+)
 
 
 @app.command()
@@ -91,17 +96,7 @@ def demo(
         Path | None,
         typer.Option("--rrd", help="Also write a 3D Rerun recording of the updates (rerun FILE)."),
     ] = None,
-    foxglove: Annotated[
-        int | None,
-        typer.Option(
-            "--foxglove",
-            min=0,
-            max=65535,
-            metavar="[PORT]",
-            help="Stream the run live to Foxglove on this port (8765 when given alone); the view "
-            "stays up after the run until Ctrl-C.",
-        ),
-    ] = None,
+    foxglove: DemoFoxglove = None,
 ) -> None:
     """The main job: walk a camera through a generated world and relocalize incrementally.
 
