@@ -385,14 +385,14 @@ class Localizer:
             return self._search_update(objects, answer, start, reason=CONTRADICTED)
         track.accept(verdict)
         self._search_stale = True  # the search did not see these objects
-        estimate = self._follow(track) if len(track.pairs) >= self._min_track_pairs() else None
-        if estimate is None or not self._within_prior(track.pose):
+        followed = self._follow(track) if len(track.pairs) >= self._min_track_pairs() else None
+        if followed is None or not self._within_prior(track.pose):
             # too little evidence left in the window, or the place left the prior: search again
             self._end_track()
             return self._search_update(objects, answer, start)
         end = time.perf_counter()
         self._add_timing(0.0, 0.0, end - start)
-        hypothesis = self._tracked_hypothesis(track, estimate)
+        hypothesis = followed
         self._add_step([hypothesis.score], end - start, "localized" if answer else None)
         if not answer:
             return None
@@ -406,8 +406,9 @@ class Localizer:
     def _min_track_pairs(self) -> int:
         return max(self.config.tracking.track_min_pairs, self.config.decision.min_pairs)
 
-    def _follow(self, track: Track) -> PoseEstimate | None:
-        """The tracked pose refitted to its newest supporting pairs (None: it no longer fits)."""
+    def _follow(self, track: Track) -> Hypothesis | None:
+        """The tracked place refitted to its newest supporting pairs, as the answer's one
+        hypothesis (None: the pose no longer fits them)."""
         pairs = track.newest(self.config.tracking.track_pairs)
         locals_ = [self._found[l][0] for _, l in pairs]
         globals_ = [self.global_map[g] for g, _ in pairs]
@@ -421,23 +422,18 @@ class Localizer:
         )  # fmt: skip
         if estimate is None:
             return None
-        if centre_residual(estimate.T, l_xyz, g_xyz) > self.config.tracking.track_tolerance:
+        residual = centre_residual(estimate.T, l_xyz, g_xyz)
+        if residual > self.config.tracking.track_tolerance:
             return None
         track.pose = estimate.T
-        return estimate
-
-    def _tracked_hypothesis(self, track: Track, estimate: PoseEstimate) -> Hypothesis:
-        pairs = track.newest(self.config.tracking.track_pairs)
-        l_xyz = np.array([self._found[l][0].position for _, l in pairs])
-        g_xyz = self.global_map.positions[[g for g, _ in pairs]]
         return Hypothesis(
             rank=1,
             score=track.score,
-            pairs=[(str(self.global_map.ids[g]), l) for g, l in pairs],
+            pairs=[(g.id, l.id) for g, l in zip(globals_, locals_)],
             pose=estimate.T,
             fitness=estimate.fitness,
             rmse=estimate.rmse,
-            residual=centre_residual(estimate.T, l_xyz, g_xyz),
+            residual=residual,
             method=f"tracked/{estimate.method}",
             confidence=track.confidence,
             outside_prior=None if self._prior is None else False,

@@ -136,7 +136,6 @@ class Track:
         self.pairs: OrderedDict[str, int] = OrderedDict()  # local id -> global index
         self._verdicts: deque[Verdict] = deque(maxlen=CONTRADICTION_UPDATES)
         self.accept(Verdict(list(pairs), []))
-        self._verdicts.clear()
 
     def contradicted(self, verdict: Verdict) -> int:
         """How many of the latest updates (this one included) contradict the place: 0 when

@@ -18,6 +18,7 @@ from typing import Annotated
 import typer
 from pydantic import ValidationError
 
+from semloc.cli import remote
 from semloc.cli.app import app, console, fail, first_error, foxglove_option
 from semloc.cli.extras import need
 from semloc.cli.files import read_config
@@ -95,9 +96,7 @@ def node(
         str | None,
         typer.Option(help="Localize through this `semloc serve` (a session of map --map)."),
     ] = None,
-    token: Annotated[
-        str | None, typer.Option(envvar="SEMLOC_TOKEN", help="The service's token.")
-    ] = None,
+    token: remote.TokenOption = None,
     foxglove: FoxgloveOption = None,
 ) -> None:
     """Localize a robot's detections live: publish /semloc/pose, /tf, /semloc/status,
