@@ -12,7 +12,6 @@ messages per topic and a sample of each; a mismatch in names, layouts or represe
 as nothing received.
 """
 
-
 import argparse
 import json
 import os
