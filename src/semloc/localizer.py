@@ -52,6 +52,7 @@ from semloc.decision import (
     shipped_model,
 )
 from semloc.maps import MapError, ObjectMap, SemanticObject, unit_vector
+from semloc.places import PlaceIndex, RetrievalConfig, place_index
 from semloc.pose import PoseConfig, PoseEstimate, cached_cloud, estimate_pose
 from semloc.priors import GATE_SLACK, OUTSIDE_PRIOR, Prior, checked_prior
 from semloc.results import Hypothesis, Result, Status, Step, Support
@@ -76,6 +77,7 @@ _COMPONENTS: dict[str, type[BaseModel]] = {
     "changes": ChangesConfig,
     "window": WindowConfig,
     "tracking": TrackingConfig,
+    "retrieval": RetrievalConfig,
 }
 
 
@@ -93,6 +95,7 @@ class LocalizerConfig(BaseModel):
     changes: ChangesConfig = Field(default_factory=ChangesConfig)
     window: WindowConfig = Field(default_factory=WindowConfig)
     tracking: TrackingConfig = Field(default_factory=TrackingConfig)
+    retrieval: RetrievalConfig = Field(default_factory=RetrievalConfig)
     top_k: int = Field(10, ge=1, description="How many distinct hypotheses are reported.")
     screened_sets: int = Field(
         60, ge=1, description="Association sets screened by closed-form pose for hypotheses."
@@ -179,6 +182,13 @@ class Localizer:
         self._found: dict[str, tuple[SemanticObject, np.ndarray, np.ndarray]] = {}
         self._prior = checked_prior(prior)
         self._prior_slack: np.ndarray | None = None  # per map object, for the prior's gate
+        above = config.retrieval.above
+        self._places: PlaceIndex | None = (
+            place_index(global_map, config.retrieval)
+            if above is not None and len(global_map) >= above
+            else None
+        )
+        self._retrieved: dict[str, np.ndarray] = {}  # local id -> candidates in its places
         self._reset_search()
         self._steps: deque[Step] = deque(maxlen=config.window.steps)
         self._n_steps = 0
@@ -332,6 +342,8 @@ class Localizer:
     ) -> Result | None:
         """Grow the association sets of the window and decide (the paper's method).  A given
         `reason` overrides a `localized` decision (the answer that ended a tracked claim)."""
+        if self._places is not None:
+            self._retrieve()
         if self._search_stale:  # objects retired: the sets are grown again from the window
             self._reset_search()
             objects = self.window.objects
@@ -497,9 +509,31 @@ class Localizer:
             found, similarity = self._candidates.weighted(obj)
             self._found[obj.id] = (obj, found, similarity)
 
+    def _retrieve(self) -> None:
+        """Narrow each window object's candidates to the places that can hold the window
+        (`semloc.places`); when an object the search holds gets other candidates than it was
+        clustered with, the search regrows from the window."""
+        assert self._places is not None
+        objects = self.window.objects
+        found = [self._found[o.id][1] for o in objects]
+        positions = np.array([o.position for o in objects]).reshape(-1, 3)
+        cfg = self.config.clustering
+        support = self._places.support(positions, found, cfg.gamma, cfg.distance_tolerance)
+        kept = self._places.kept(support, found)
+        retrieved = {o.id: k for o, k in zip(objects, kept)}
+        held = {i: self._retrieved[i] for i in self._local if i in self._retrieved}
+        if any(not np.isin(retrieved[i], c, assume_unique=True).all() for i, c in held.items()):
+            self._search_stale = True  # wider than the search holds: it regrows
+        elif held:  # narrower: the held objects keep theirs (their other sets stay apart)
+            retrieved.update(held)
+        self._retrieved = retrieved
+
     def _gated(self, obj: SemanticObject, found: np.ndarray) -> np.ndarray:
-        """The candidates the clustering gets: those the prior lets `obj` be (all without one).
-        Evidence, verification and tracking see all candidates, as without a prior."""
+        """The candidates the clustering gets: those in the places retrieved for the window
+        (large maps) that the prior lets `obj` be (all without either).  Evidence,
+        verification and tracking see all candidates."""
+        if self._places is not None and obj.id in self._retrieved:
+            found = self._retrieved[obj.id]
         if self._prior is None:
             return found
         slack = self._gate_slack()[found]
@@ -536,6 +570,12 @@ class Localizer:
             return "the global map has no objects"
         if len(self._local) < 2:
             return f"too few local objects: {len(self._local)} seen, 2 needed"
+        waiting = [i for i, k in self._retrieved.items() if len(k) == 0 and len(self._found[i][1])]
+        if waiting and matched >= 2 and sum(len(k) > 0 for k in self._retrieved.values()) < 2:
+            return (
+                f"the view so far fits too many places of the map: {len(waiting)} local "
+                "object(s) wait for more objects to narrow their places (place retrieval)"
+            )
         if self._prior is not None and sum(n > 0 for n in self._gated_of.values()) < 2 <= matched:
             return "too few candidates within the prior: fewer than 2 local objects have one"
         if matched == 0:

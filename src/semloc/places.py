@@ -1,0 +1,174 @@
+"""Place retrieval: which parts of a large map can hold the local view, before the clustering.
+
+In a building the same labels repeat thousands of times: every chair of the map is a candidate
+of every local chair, and the clustering (`semloc.clustering`) would test the consistency of
+them all.  Place retrieval narrows each local object's candidates to the places whose object
+constellation can hold the view, as scene-graph systems retrieve a room or submap before they
+verify (Hydra, SceneGraphLoc); the clustering, verification and decision then run unchanged
+on the candidates kept.
+
+**Places.**  The map is cut into cells, cubes of `RetrievalConfig.cell` metres; the place of a
+map object is its cell.  Its **descriptor** is the set of its objects' *constellation words*:
+(label of an object in the cell, label of a map object within `reach` of it, their distance in
+bins of `bin` metres).  `PlaceIndex` holds every (word, cell) once, sorted by word: built once
+per map (`place_index`, cached while the map lives; a changed map is a new map and gets a new
+index), its memory bounded by the map's object pairs within `reach`, and at most one entry per
+word and cell.
+
+**Retrieval.**  For each local object a and each other local object b within `reach` of it,
+the words (label of a candidate of a, label of a candidate of b, every bin within the
+clustering's distance tolerance of |ab|, (ε + (1 − γ)·|ab|) / γ, within `reach`) are looked up; a
+cell *supports* a for b when it holds one of them.  The support of a cell for a (how many
+local objects b it supports a for) bounds from above the number of local objects a candidate
+of a in that cell is consistent with.  A candidate of a is kept when its cell's support is
+within `slack` of the best cell's support for a (`slack`: a share of it, at least one object,
+for detections the map lacks or mislabelled ones).  A local object with no neighbour within
+`reach` keeps every candidate.  Every place as good as the best is kept, so a view that has
+identical copies elsewhere keeps them all, and the decision still sees the rivals of a place.
+
+A local object whose retrieved places still hold more candidates than `wait_above` and a
+`wait_share` of the map's objects (one chair of a first view in a building of 40,000 chairs)
+*waits*: it joins the clustering once more objects narrow its places (the search then regrows
+from the window).  The clustering keeps a bounded pool of sets, so feeding it tens of
+thousands of equally plausible singletons only made it keep an arbitrary share of them; while
+every object waits the answer is `failed`, with the reason that the view fits too many places.
+
+Small maps are not retrieved at all (`RetrievalConfig.above`): their answers are exactly those
+of the clustering on every candidate.
+"""
+
+from __future__ import annotations
+
+import weakref
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field
+from scipy.spatial import cKDTree
+
+from semloc._places_fast import cell_support
+from semloc.maps import ObjectMap
+
+__all__ = ["PlaceIndex", "RetrievalConfig", "place_index"]
+
+
+class RetrievalConfig(BaseModel):
+    """Place retrieval in front of the clustering, for large maps."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    above: int | None = Field(
+        3000,
+        ge=0,
+        description="Maps with at least this many objects are retrieved (None: never); "
+        "smaller maps are clustered on every candidate.",
+    )
+    cell: float = Field(4.0, gt=0, description="Edge of a place's cell (m).")
+    reach: float = Field(
+        6.0, gt=0, description="Object pairs up to this distance (m) make constellation words."
+    )
+    bin: float = Field(0.5, gt=0, description="Distance bin of a constellation word (m).")
+    wait_above: int = Field(
+        1000,
+        ge=1,
+        description="A local object with more candidates than this (and than `wait_share` of "
+        "the map's objects) in its retrieved places waits out of the clustering until more "
+        "objects narrow its places.",
+    )
+    wait_share: float = Field(0.1, ge=0, le=1, description="See `wait_above`.")
+    slack: float = Field(
+        0.25,
+        ge=0,
+        le=1,
+        description="A candidate's place may support its local object this share fewer "
+        "times than the best place (at least one).",
+    )
+
+
+class PlaceIndex:
+    """The cells of a map and their constellation words, sorted by word."""
+
+    def __init__(self, global_map: ObjectMap, config: RetrievalConfig) -> None:
+        self.config = config
+        positions = np.asarray(global_map.positions, dtype=float).reshape(-1, 3)
+        label_names, self.label_codes = np.unique(global_map.labels, return_inverse=True)
+        self.label_codes = self.label_codes.astype(np.int64)
+        self._code_of = {str(name): code for code, name in enumerate(label_names)}
+        self.n_labels = max(len(label_names), 1)
+        self.n_bins = int(np.floor(config.reach / config.bin)) + 1
+        corners = np.floor(positions / config.cell).astype(np.int64)
+        _, self.cell_of = np.unique(corners, axis=0, return_inverse=True)
+        self.cell_of = self.cell_of.reshape(-1).astype(np.int64)
+        self.n_cells = int(self.cell_of.max()) + 1 if len(positions) else 0
+        self.words, self.cells = self._entries(positions)
+
+    def _entries(self, positions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Every (word, cell of the word's first object) once, sorted by word then cell."""
+        if len(positions) < 2:
+            return np.zeros(0, np.int64), np.zeros(0, np.int64)
+        pairs = cKDTree(positions).query_pairs(self.config.reach, output_type="ndarray")
+        first = np.concatenate([pairs[:, 0], pairs[:, 1]]).astype(np.int64)
+        second = np.concatenate([pairs[:, 1], pairs[:, 0]]).astype(np.int64)
+        del pairs
+        bins = np.linalg.norm(positions[first] - positions[second], axis=1) // self.config.bin
+        words = self.word(self.label_codes[first], self.label_codes[second], bins.astype(np.int64))
+        entries = np.unique(words * self.n_cells + self.cell_of[first])
+        return entries // self.n_cells, entries % self.n_cells
+
+    def word(self, first: np.ndarray, second: np.ndarray, bins: np.ndarray) -> np.ndarray:
+        """The constellation word of labels `first`, `second` (codes) `bins` apart."""
+        return (first * self.n_labels + second) * self.n_bins + bins
+
+    @property
+    def nbytes(self) -> int:
+        return int(self.words.nbytes + self.cells.nbytes + self.cell_of.nbytes)
+
+    def support(self, local_positions: np.ndarray, candidates: list[np.ndarray], gamma: float,
+                tolerance: float) -> np.ndarray:  # fmt: skip
+        """Per local object (rows) and cell (columns): for how many other local objects the
+        cell holds a word of the pair (the clustering's merge test: `gamma`, `tolerance` ε)."""
+        local_positions = np.asarray(local_positions, dtype=float).reshape(-1, 3)
+        n = len(local_positions)
+        codes = [np.unique(self.label_codes[c]) for c in candidates]
+        starts = np.zeros(n + 1, np.int64)
+        starts[1:] = np.cumsum([len(c) for c in codes])
+        flat = np.concatenate(codes).astype(np.int64) if n else np.zeros(0, np.int64)
+        gaps = np.linalg.norm(local_positions[:, None] - local_positions[None], axis=2)
+        slack = (tolerance + (1.0 - gamma) * gaps) / gamma  # |dA - dB| below it may merge
+        # only pairs whose every consistent map distance is indexed (within reach)
+        near = (gaps + slack <= self.config.reach) & ~np.eye(n, dtype=bool)
+        first, second = np.nonzero(near)
+        d, slack = gaps[first, second], slack[first, second]
+        low = np.maximum((d - slack) // self.config.bin, 0).astype(np.int64)
+        high = np.minimum((d + slack) // self.config.bin, self.n_bins - 1).astype(np.int64)
+        return cell_support(
+            self.words, self.cells, first.astype(np.int64), second.astype(np.int64), low, high,
+            starts, flat, self.n_labels, self.n_bins, n, self.n_cells,
+        )  # fmt: skip
+
+    def kept(self, support: np.ndarray, candidates: list[np.ndarray]) -> list[np.ndarray]:
+        """Each local object's candidates whose cell's support is within the slack of the
+        best cell's (all of them when no cell supports it); none while more are left than
+        `wait_above` and `wait_share` of the map (the object waits)."""
+        kept = []
+        for row, found in zip(support, candidates):
+            best = int(row.max()) if len(row) else 0
+            if best == 0 or len(found) == 0:
+                kept.append(found)
+                continue
+            floor = best - max(1, int(np.floor(self.config.slack * best)))
+            kept.append(found[row[self.cell_of[found]] >= max(floor, 1)])
+        most = max(self.config.wait_above, self.config.wait_share * len(self.cell_of))
+        return [k if len(k) <= most else k[:0] for k in kept]
+
+
+_INDEXES: weakref.WeakKeyDictionary[ObjectMap, dict[str, PlaceIndex]] = weakref.WeakKeyDictionary()
+
+
+def place_index(global_map: ObjectMap, config: RetrievalConfig) -> PlaceIndex:
+    """The place index of `global_map` for `config`, built on first use and kept while the
+    map lives (every Localizer of one map shares it)."""
+    cache = _INDEXES.setdefault(global_map, {})
+    key = config.model_dump_json(exclude={"above", "slack"})
+    if key not in cache:
+        cache[key] = PlaceIndex(global_map, config)
+    return cache[key]

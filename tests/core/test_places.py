@@ -1,0 +1,133 @@
+"""Place retrieval (`semloc.places`): the true place is always kept, identical copies are all
+kept, small maps are untouched, a view that fits too many places waits, the index is shared."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from helpers import room
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+import semloc
+from semloc import Localizer, ObjectMap
+from semloc.localizer import LocalizerConfig
+from semloc.maps import SemanticObject
+from semloc.places import PlaceIndex, RetrievalConfig, place_index
+from semloc.sim.longwalk import tiled
+from semloc.transforms import pose_error, yaw_pose
+
+RETRIEVE_ALL = LocalizerConfig(retrieval={"above": 0})  # retrieval on any map
+
+
+def _view(world: ObjectMap, indices, pose: np.ndarray, noise: float, seed: int) -> ObjectMap:
+    rng = np.random.default_rng(seed)
+    inverse = np.linalg.inv(pose)
+    objects = []
+    for k, i in enumerate(indices):
+        obj = world[int(i)].transformed(inverse)
+        objects.append(obj.replace(id=f"l{k}", position=obj.position + rng.normal(0, noise, 3),
+                                   seen=k))  # fmt: skip
+    return ObjectMap(objects, up=[0, 0, 1], name="view")
+
+
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    seed=st.integers(0, 10_000),
+    size=st.integers(2, 9),
+    noise=st.floats(0.0, 0.1),
+    yaw=st.floats(-np.pi, np.pi),
+)
+def test_the_true_candidates_are_always_retrieved(seed, size, noise, yaw):
+    """The support of a cell bounds from above how many local objects a candidate in it is
+    consistent with, so no cell beats the true place and the true candidates are kept."""
+    world = tiled(room(24, seed=seed % 7), 3, 2, keep=0.8, seed=seed)
+    rng = np.random.default_rng(seed)
+    centre = world.positions[rng.integers(len(world))]
+    near = np.argsort(np.linalg.norm(world.positions - centre, axis=1))[:size]
+    pose = yaw_pose(yaw, centre + rng.normal(0, 2, 3))
+    view = _view(world, near, pose, noise, seed)
+    index = PlaceIndex(world, RetrievalConfig(above=0))
+    localizer = Localizer(world, RETRIEVE_ALL)
+    found = [localizer._candidates.candidates(o) for o in view]
+    cfg = localizer.config.clustering
+    support = index.support(view.positions, found, cfg.gamma, cfg.distance_tolerance)
+    for true, kept in zip(near, index.kept(support, found)):
+        assert true in kept
+
+
+def test_small_maps_are_not_retrieved_and_answer_as_before():
+    world = tiled(room(20), 2, 2, seed=1)
+    view = _view(world, range(6), yaw_pose(0.4, [1.0, 2.0, 0.0]), 0.0, 0)
+    assert Localizer(world)._places is None  # below `above` (3000 objects)
+    plain = semloc.localize(world, view, config=LocalizerConfig(retrieval={"above": None}))
+    default = semloc.localize(world, view)
+    assert plain.status == default.status == "localized"
+    np.testing.assert_array_equal(plain.pose, default.pose)
+    assert [h.pairs for h in plain.hypotheses] == [h.pairs for h in default.hypotheses]
+    assert [s.top_scores for s in plain.steps] == [s.top_scores for s in default.steps]
+
+
+def test_identical_copies_are_all_kept_and_stay_ambiguous():
+    a = room(12)
+    shift = np.array([40.0, 0.0, 0.0])
+    b = [o.replace(id=o.id.replace("a", "b"), position=o.position + shift) for o in a]
+    world = ObjectMap([*a, *b], up=[0, 0, 1], name="two copies")
+    view = _view(world, range(6), yaw_pose(0.3, [0.5, 0.5, 0.0]), 0.0, 0)
+    result = semloc.localize(world, view, config=RETRIEVE_ALL)
+    assert result.status == "ambiguous"
+    wrong = yaw_pose(0.3, [0.5, 0.5, 0.0])
+    wrong[:3, 3] += shift
+    poses = [h.pose for h in result.hypotheses if h.pose is not None]
+    assert any(pose_error(p, yaw_pose(0.3, [0.5, 0.5, 0.0]))[1] < 0.05 for p in poses)
+    assert any(pose_error(p, wrong)[1] < 0.05 for p in poses)
+
+
+def test_retrieval_finds_the_one_room_that_holds_the_view():
+    world = tiled(room(30, seed=5), 6, 6, keep=0.7, seed=2)  # 36 alike, not identical, rooms
+    truth = yaw_pose(1.1, world.positions[500] + [0.3, -0.2, 0.0])
+    near = np.argsort(np.linalg.norm(world.positions - world.positions[500], axis=1))[:8]
+    view = _view(world, near, truth, 0.02, 3)
+    with_retrieval = semloc.localize(world, view, config=RETRIEVE_ALL)
+    best = with_retrieval.hypotheses[0]  # (copies that kept the same objects may rival it)
+    rotation, translation = pose_error(best.pose, truth)
+    assert rotation < 1.0 and translation < 0.1
+    localizer = Localizer(world, RETRIEVE_ALL, local_up=[0, 0, 1])
+    localizer.update(list(view))
+    kept = sum(len(k) for k in localizer._retrieved.values())
+    every = sum(len(localizer._found[o.id][1]) for o in view)
+    assert kept < 0.7 * every  # the clustering saw a part of the candidates
+
+
+def test_a_view_that_fits_too_many_places_waits_with_a_reason():
+    chairs = [
+        SemanticObject(f"c{i}", "chair", [x, y, 0.5])
+        for i, (x, y) in enumerate((x, y) for x in range(60) for y in range(60))
+    ]
+    world = ObjectMap(chairs, up=[0, 0, 1], name="a hall of chairs")
+    view = ObjectMap(
+        [SemanticObject("l0", "chair", [0, 0, 0.5], seen=0),
+         SemanticObject("l1", "chair", [1, 0, 0.5], seen=1)], up=[0, 0, 1], name="two chairs",
+    )  # fmt: skip
+    result = semloc.localize(world, view, config=LocalizerConfig(retrieval={"above": 0}))
+    assert result.status == "failed"
+    assert result.reason.startswith("the view so far fits too many places of the map")
+
+
+def test_the_index_is_built_once_per_map_and_anew_for_a_changed_map():
+    world = tiled(room(20), 2, 2, seed=1)
+    config = RetrievalConfig(above=0)
+    index = place_index(world, config)
+    assert place_index(world, config) is index
+    assert place_index(world, config.model_copy(update={"slack": 0.5})) is index  # query-time
+    changed = world.with_objects(list(world)[:-1])
+    assert place_index(changed, config) is not index
+    assert index.nbytes > 0 and len(index.words) == len(index.cells)
+    assert np.all(np.diff(index.words) >= 0)
+
+
+@pytest.mark.parametrize("n", [0, 1])
+def test_tiny_maps_build_an_empty_index(n):
+    world = ObjectMap([SemanticObject("a", "chair", [0, 0, 0])][:n], up=[0, 0, 1], name="tiny")
+    index = PlaceIndex(world, RetrievalConfig(above=0))
+    assert len(index.words) == 0
