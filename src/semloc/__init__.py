@@ -16,7 +16,7 @@ from semloc.localizer import Localizer, LocalizerConfig, localize
 from semloc.maps import MapError, ObjectMap, SemanticObject
 from semloc.pictures import colors  # label colours of pictures, exports, recordings (no plotting)
 from semloc.priors import Prior
-from semloc.results import Hypothesis, Result, Step
+from semloc.results import Hypothesis, Look, Result, Step
 
 __version__ = "0.1.0"
 __all__ = [
@@ -24,6 +24,7 @@ __all__ = [
     "Hypothesis",
     "Localizer",
     "LocalizerConfig",
+    "Look",
     "MapError",
     "ObjectMap",
     "Prior",

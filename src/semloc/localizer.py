@@ -52,6 +52,7 @@ from semloc.decision import (
     shipped_model,
 )
 from semloc.maps import MapError, ObjectMap, SemanticObject, unit_vector
+from semloc.next_look import NextLookConfig, next_look
 from semloc.places import PlaceIndex, RetrievalConfig, place_index
 from semloc.pose import PoseConfig, PoseEstimate, cached_cloud, estimate_pose
 from semloc.priors import GATE_SLACK, OUTSIDE_PRIOR, Prior, checked_prior
@@ -78,6 +79,7 @@ _COMPONENTS: dict[str, type[BaseModel]] = {
     "window": WindowConfig,
     "tracking": TrackingConfig,
     "retrieval": RetrievalConfig,
+    "next_look": NextLookConfig,
 }
 
 
@@ -96,6 +98,7 @@ class LocalizerConfig(BaseModel):
     window: WindowConfig = Field(default_factory=WindowConfig)
     tracking: TrackingConfig = Field(default_factory=TrackingConfig)
     retrieval: RetrievalConfig = Field(default_factory=RetrievalConfig)
+    next_look: NextLookConfig = Field(default_factory=NextLookConfig)
     top_k: int = Field(10, ge=1, description="How many distinct hypotheses are reported.")
     screened_sets: int = Field(
         60, ge=1, description="Association sets screened by closed-form pose for hypotheses."
@@ -467,7 +470,21 @@ class Localizer:
     def _result(self, status: Status, hypotheses: list[Hypothesis], reason: str, explain) -> Result:
         result = Result.of(status, hypotheses, self._steps, self._timing, reason, explain)
         result.support = self._support_of(hypotheses[0] if hypotheses else None)
+        if status == "ambiguous":  # where to look next, computed when first read
+            seen = self.window.objects
+            labels = [self._map_label(o) for o in seen]
+            positions = np.array([o.position for o in seen]).reshape(-1, 3)
+            result.suggest = lambda: next_look(
+                hypotheses, self.global_map, labels, positions, self.config.next_look
+            )
         return result
+
+    def _map_label(self, obj: SemanticObject) -> str:
+        """The map's label `obj` is read as (its most similar candidate's; its own without)."""
+        _, found, similarity = self._found[obj.id]
+        if len(found) == 0:
+            return obj.label
+        return str(self.global_map.labels[found[int(np.argmax(similarity))]])
 
     def _support_of(self, best: Hypothesis | None) -> Support | None:
         """How recent the evidence of the best hypothesis is (its local objects' detections)."""

@@ -89,6 +89,51 @@ class Step:
 
 
 @dataclass(frozen=True)
+class Look:
+    """A "look there next" suggestion of an ambiguous answer (`semloc.next_look`): a map
+    object, where it lies in the local frame under each top hypothesis (by rank), the ranks a
+    look at their spot tells from the others, and the expected reduction of the ambiguity
+    (bits)."""
+
+    label: str
+    global_id: str
+    where: dict[int, np.ndarray]
+    separates: list[int]
+    gain: float
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "label": self.label,
+            "global_id": self.global_id,
+            "where": {str(rank): np.round(p, 6).tolist() for rank, p in self.where.items()},
+            "separates": list(self.separates),
+            "gain": round(self.gain, 6),
+        }
+
+    @classmethod
+    def from_dict(cls, data: object, index: int = 0) -> Look:
+        """A suggestion of a result document; `ValueError` naming the field when malformed."""
+        try:
+            assert isinstance(data, dict) and isinstance(data["where"], dict)
+            where = {int(rank): as_point(p) for rank, p in data["where"].items()}
+            separates = [int(r) for r in data["separates"]]
+            assert isinstance(data["label"], str) and isinstance(data["global_id"], str)
+            gain = float(data["gain"])
+            assert np.isfinite(gain)
+        except (AssertionError, KeyError, TypeError, ValueError):
+            raise ValueError(f"'next_look[{index}]' is not a suggestion: {_brief(data)}") from None
+        return cls(data["label"], data["global_id"], where, separates, gain)
+
+
+def as_point(value: object) -> np.ndarray:
+    """A finite [x, y, z] (`ValueError` otherwise)."""
+    point = np.asarray(value, dtype=float)
+    if point.shape != (3,) or not np.all(np.isfinite(point)):
+        raise ValueError("not a finite [x, y, z]")
+    return point
+
+
+@dataclass(frozen=True)
 class Support:
     """How recent the evidence of an answer's pose is: its local objects' pairs, the span of
     their `seen` keyframes, how many updates and metres of odometry ago the oldest of them was
@@ -141,6 +186,8 @@ class Result:
     """Computes `changes` on first use (streaming updates whose changes nobody reads skip it)."""
     support: Support | None = None
     """How recent the evidence for the pose is (None without a pose)."""
+    suggest: Callable[[], list[Look]] | None = field(default=None, repr=False, compare=False)
+    """Computes `next_look` on first use (only an `ambiguous` answer has one)."""
 
     @classmethod
     def of(
@@ -161,6 +208,14 @@ class Result:
         """What the best hypothesis implies changed since the map was made (`semloc.changes`;
         empty without an explanation)."""
         return Changes() if self.explain is None else self.explain()
+
+    @cached_property
+    def next_look(self) -> list[Look]:
+        """Where to look next to tell the top hypotheses apart, best first (`semloc.next_look`;
+        empty unless `ambiguous`)."""
+        if self.status != "ambiguous" or self.suggest is None:
+            return []
+        return self.suggest()
 
     @property
     def best(self) -> Hypothesis | None:
@@ -191,10 +246,13 @@ class Result:
         except TypeError as exc:
             raise ValueError(f"'steps' are not steps ({exc})") from None
         changes = Changes.from_dict(data.get("changes") or {})
+        looks = [Look.from_dict(x, i) for i, x in enumerate(_list_field(data.get("next_look"),
+                                                                         "next_look"))]  # fmt: skip
         return cls(
             saved.status or "failed", saved.pose, hypotheses, steps,
             dict(data.get("timing_ms") or {}), str(data.get("reason") or ""),
             explain=lambda: changes, support=Support.from_dict(data.get("support")),
+            suggest=lambda: looks,
         )  # fmt: skip
 
     def to_json(self, **extra: Any) -> str:
@@ -215,6 +273,7 @@ class Result:
             "timing_ms": {k: round(v, 3) for k, v in self.timing_ms.items()},
             "changes": self.changes.to_dict(),
             "support": None if self.support is None else self.support.to_dict(),
+            "next_look": [look.to_dict() for look in self.next_look],
         }
 
 

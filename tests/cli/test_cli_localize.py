@@ -8,11 +8,13 @@ import sys
 
 import numpy as np
 import pytest
+from helpers import room
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from rich.console import Console
 
 import semloc
+from semloc import ObjectMap, save_map
 from semloc.cli import main
 from semloc.cli.app import CliError
 from semloc.cli.files import read_label_map
@@ -364,3 +366,23 @@ def test_bad_prior_options_exit_2_with_one_line(maps, capsys, extra, message):
     err = capsys.readouterr().err.strip()
     assert code == 2
     assert len(err.splitlines()) == 1 and err.startswith("semloc: error:") and message in err
+
+
+# ------------------------------------------------------------------- look there next
+def test_an_ambiguous_answer_says_where_to_look_next_in_the_table_and_the_json(tmp_path, capsys):
+    a = list(room(12))
+    shift = np.array([40.0, 0.0, 0.0])
+    b = [o.replace(id=o.id.replace("a", "b"), position=o.position + shift) for o in a[:-2]]
+    truth = yaw_pose(0.3, [0.5, 0.5, 0.0])
+    view = [o.transformed(np.linalg.inv(truth)).replace(id=f"l{k}", seen=k)
+            for k, o in enumerate(a[:5])]  # fmt: skip
+    save_map(ObjectMap([*a, *b], up=[0, 0, 1], name="two copies"), tmp_path / "global.json")
+    save_map(ObjectMap(view, up=[0, 0, 1], name="view"), tmp_path / "local.json")
+    args = ["localize", str(tmp_path / "global.json"), str(tmp_path / "local.json")]
+    assert main([*args, "--format", "json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["status"] == "ambiguous"
+    assert out["next_look"][0]["global_id"] in {"a10", "a11"}  # what the other copy lacks
+    assert main(args) == 0
+    table = capsys.readouterr().out
+    assert "look there next" in table and out["next_look"][0]["global_id"] in table

@@ -87,7 +87,9 @@ def test_localize_equals_the_in_process_answer(serve, building):
         same_answer(served, semloc.localize(building, local))
         assert served["map_version"] == 1
         assert set(served) >= {"status", "pose", "confidence", "reason", "hypotheses", "changes",
-                               "labels", "steps", "timing_ms"}  # fmt: skip
+                               "labels", "steps", "timing_ms", "next_look"}  # fmt: skip
+        expected = semloc.localize(building, local).to_dict()["next_look"]
+        assert served["next_look"] == expected  # where to look next, as in process
     assert served["status"] == "ambiguous" and served["reason"]
     local = view(building, TABLE, T_TRUE)
     answer = client.localize("office", local)

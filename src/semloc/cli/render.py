@@ -58,6 +58,8 @@ def print_result(
             out.print("  " + "  ".join(f"{v:9.4f}" for v in row))
     if result.hypotheses:
         out.print(_hypotheses_table(result, out.width, frames))
+    if result.next_look:
+        out.print(_next_look_table(result, frames))
     print_changes(result.changes, out)
     out.print(timing_line(result, warm))
 
@@ -92,6 +94,24 @@ def _hypotheses_table(result: Result, width: int, frames: tuple[str, str]) -> Ta
         shown = ", ".join(p.replace(" ", "\u00a0") for p in pairs)  # no break inside an id
         shown += " …" if len(h.pairs) > PAIRS_SHOWN else ""
         table.add_row(*row, escape(shown))
+    return table
+
+
+def _next_look_table(result: Result, frames: tuple[str, str]) -> Table:
+    """Where to look to tell the places apart: a map object, the spot (local frame) where
+    each hypothesis it separates expects it, and the expected gain."""
+    table = Table(title="look there next, best first",
+                  caption=f"spots in the {frames[1]} frame; seeing the object at a rank's spot "
+                          "confirms that rank, not seeing it rules it out",
+                  box=box.SIMPLE_HEAD, padding=(0, 1))  # fmt: skip
+    for name in ("label", f"{frames[0]} id", "rank: spot x y z (m)", "gain (bits)"):
+        table.add_column(name, overflow="fold")
+    for look in result.next_look:
+        spots = "; ".join(
+            f"{rank}: " + " ".join(f"{v:.2f}" for v in look.where[rank]) for rank in look.separates
+        )
+        table.add_row(for_rich(look.label), for_rich(look.global_id), spots,
+                      f"{look.gain:.2f}")  # fmt: skip
     return table
 
 

@@ -8,7 +8,7 @@
 - `/tf` (tf2_msgs/TFMessage): `map` -> odometry frame when localized, and the odometry frame
   -> the detections' frame at every answer;
 - `/semloc/status` (std_msgs/String): JSON `{"stamp", "status", "confidence", "reason",
-  "pose_is_answer", "n_local", "changes", "support", "hypotheses"}` at every answer (the best
+  "pose_is_answer", "n_local", "changes", "support", "next_look", "hypotheses"}` at every answer (the best
   three hypotheses: rank, confidence, pairs and the position of the local frame's origin);
 - `/semloc/map` (visualization_msgs/MarkerArray, once): the map's objects as label-coloured
   boxes with their labels;
@@ -167,6 +167,7 @@ def status(stamp: int, result: Result, n_local: int) -> dict[str, Any]:
         "n_local": n_local,
         "changes": result.changes.to_dict(),
         "support": None if result.support is None else result.support.to_dict(),
+        "next_look": [look.to_dict() for look in result.next_look],
         "hypotheses": [
             {
                 "rank": h.rank,

@@ -192,6 +192,19 @@ class Support(_Answer):
     tracked: bool = Field(description="The place was found earlier and is followed since.")
 
 
+class NextLook(_Answer):
+    """Where to look to tell the top hypotheses of an ambiguous answer apart."""
+
+    label: str
+    global_id: str
+    where: dict[str, list[float]] = Field(
+        description="Rank -> [x, y, z]: where the map object lies in the local frame if that "
+        "hypothesis is right."
+    )
+    separates: list[int] = Field(description="The ranks a look at their spot tells apart.")
+    gain: float = Field(description="Expected reduction of the ambiguity (bits).")
+
+
 class Answer(_Answer):
     """The JSON of `semloc localize --format json` with the map version it used."""
 
@@ -204,6 +217,9 @@ class Answer(_Answer):
     timing_ms: dict[str, float]
     changes: Changes
     support: Support | None = None
+    next_look: list[NextLook] = Field(
+        default_factory=list, description="Where to look next (only an ambiguous answer)."
+    )
     labels: dict[str, LabelMatch]
     map_version: int
 
