@@ -25,7 +25,7 @@ import numpy as np
 from numba.core import event
 
 from semloc.alignment import align
-from semloc.localizer import localize
+from semloc.localizer import LocalizerConfig, localize
 from semloc.maps import ObjectMap, SemanticObject
 from semloc.pointsets import sample_box_surface
 from semloc.transforms import yaw_pose
@@ -39,6 +39,7 @@ LIBRARY_NOTICE = (
     "(e.g. in a Dockerfile)"
 )
 _LABELS = ("chair", "table", "cabinet", "lamp")
+_RETRIEVING = LocalizerConfig(retrieval={"above": 0})
 log = logging.getLogger("semloc")
 
 
@@ -104,6 +105,7 @@ def warm_up(notice: Callable[[str], None] | None = None) -> WarmUp:
     with compile_notice(notice) as compiled:
         for up in ([0.0, 0.0, 1.0], None):
             localize(*warm_up_maps(up))
+        localize(*warm_up_maps([0.0, 0.0, 1.0]), config=_RETRIEVING)  # large maps' path
     return WarmUp(time.perf_counter() - begin, compiled.shown)
 
 
