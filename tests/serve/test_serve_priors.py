@@ -177,3 +177,24 @@ def test_localize_on_a_server_sends_near_and_radius(client, two_rooms, tmp_path,
     np.testing.assert_allclose(answer["pose"], TRUE_POSE, atol=1e-6)
     assert main([*args, "--near", "1", "2", "3", "--radius", "0"]) == 2
     assert "radius must be > 0" in capsys.readouterr().err
+
+
+def test_the_node_s_remote_localizer_sends_a_prior_change_once(client, two_rooms):
+    """`semloc ros2 node --server`: set_prior reaches the session with the next update."""
+    from semloc.ros2.remote import RemoteLocalizer
+
+    world, view = two_rooms
+    objects = list(view)
+    remote = RemoteLocalizer(client.session("rooms", up=[0, 0, 1]), world)
+    reference = Localizer(world, local_up=[0, 0, 1])
+    remote.set_prior(IN_A)
+    reference.set_prior(IN_A)
+    for batch in (objects[:4], objects[4:]):
+        got, expected = remote.update(batch), reference.update(batch)
+        assert got.status == expected.status == "localized"
+        np.testing.assert_allclose(got.pose, expected.pose, atol=1e-9)
+    remote.set_prior(None)
+    answer = remote.session.update([])  # not through the RemoteLocalizer: no change sent
+    assert answer["prior"] == IN_A.to_dict()
+    remote.update([])
+    assert remote.session.update([])["prior"] is None

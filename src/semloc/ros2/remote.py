@@ -29,11 +29,12 @@ class RemoteLocalizer:
     ) -> None:
         self.session, self.global_map, self.window, self.up = session, global_map, window, up
         self._local: OrderedDict[str, SemanticObject] = OrderedDict()
-        self._prior_change: tuple[Prior | None] | None = None  # sent with the next update
+        self._prior_set = False  # a prior change to send with the next update: _prior
+        self._prior: Prior | None = None
 
     def set_prior(self, prior: Prior | None) -> None:
         """The session's prior from the next update on (None: none)."""
-        self._prior_change = (prior,)
+        self._prior_set, self._prior = True, prior
 
     def update(self, objects: Iterable[SemanticObject], *, position: Any = None) -> Result:
         objects = list(objects)
@@ -46,12 +47,11 @@ class RemoteLocalizer:
         if position is not None:
             array = np.asarray(position, dtype=float)
             at = (array[:3, 3] if array.shape == (4, 4) else array.reshape(3)).tolist()
-        change, self._prior_change = self._prior_change, None
-        prior = None if change is None else change[0]
-        clear = change is not None and prior is None
+        prior, clear = self._prior, self._prior_set and self._prior is None
         answer = self.session.update(
             objects, stamp=time.time(), position=at, prior=prior, clear_prior=clear
         )
+        self._prior_set, self._prior = False, None
         return Result.from_dict(answer)
 
     @property
