@@ -283,10 +283,10 @@ class LiveNode:
                 try:
                     points = cloud_points(cloud, len(message.detections))
                 except ValueError as exc:
-                    self._skip(f"point clouds that cannot be read ({exc}); used without points")
+                    self._skip("point clouds that cannot be read (used without points)", str(exc))
         frame, dropped = detection_frame(message, points)
         if dropped:
-            self._skip(NO_CLASS, dropped)
+            self._skip(NO_CLASS, count=dropped)
         self._frames[id(message)] = frame
         return frame
 
@@ -313,7 +313,7 @@ class LiveNode:
                 msgs.matrix(message.pose.pose), message.pose.covariance, T_odom_robot
             )
         except ValueError as exc:
-            self._skip(f"pose estimates that cannot be used ({exc})")
+            self._skip("pose estimates that cannot be used", str(exc))
             return
         self.stream.localizer.set_prior(prior)
         log.info("prior from %s: %s", self.settings.initialpose, prior.to_dict())
@@ -347,7 +347,9 @@ class LiveNode:
     def _odom_frame(self, frame: DetectionFrame) -> str:
         return frame.frame if self._odom_frames is None else self._odom_frames[0]
 
-    def _skip(self, why: str, count: int = 1) -> None:
+    def _skip(self, why: str, detail: str = "", count: int = 1) -> None:
+        """Count a kind of problem (`why`); the first of each kind is logged as a warning
+        (with its `detail`)."""
         if why not in self.skipped:
-            log.warning("semloc node: skipped %s", why)
+            log.warning("semloc node: skipped %s%s", why, f": {detail}" if detail else "")
         self.skipped[why] = self.skipped.get(why, 0) + count
