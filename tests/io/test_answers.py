@@ -46,8 +46,8 @@ def test_the_service_answer_is_the_answer_document(tmp_path):
     service.put_map("office", map_to_dict(load_map(EXAMPLES / "global.json")))
     served = service.localize("office", map_to_dict(load_map(EXAMPLES / "local.json")))
     expected = _in_process()
-    assert list(served) == [*expected, "map_version", "localization_id"]
-    assert _untimed(served) == {**_untimed(expected), "map_version": 1,
+    assert list(served) == [*expected, "map_version", "prior", "localization_id"]
+    assert _untimed(served) == {**_untimed(expected), "map_version": 1, "prior": None,
                                 "localization_id": served["localization_id"]}  # fmt: skip
 
 

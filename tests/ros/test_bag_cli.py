@@ -255,3 +255,28 @@ def test_detections_in_a_moving_frame_without_odom_get_one_warning(walk, tmp_pat
     assert _localize(walk / "walk.mcap", walk, out, "--detections", "/detections",
                      "--odom", "/odom") == 0  # fmt: skip
     assert "warning" not in capsys.readouterr().err
+
+
+def test_near_and_radius_are_a_prior_on_the_odometry_origin(localized, tmp_path, capsys):
+    """Around the true odometry origin the run localizes as without a prior; 10 m away it
+    never claims a place; bad values end in one line (the options of `semloc localize`)."""
+    truth = np.asarray(json.loads((localized / "ground_truth.json").read_text())["T_global_local"])
+    run = ["--detections", "/detections", "--odom", "/odom", "--points", "/detections/points"]
+    x, y, z = truth[:3, 3] + [0.5, -0.5, 0.0]
+    near = ["--near", str(x), str(y), str(z), "--radius", "2"]
+    assert _localize(localized / "walk.mcap", localized, tmp_path / "a.mcap", *run, *near,
+                     "--jsonl", str(tmp_path / "a.jsonl")) == 0  # fmt: skip
+    within = [line["result"] for line in _lines(tmp_path / "a.jsonl")]
+    assert within[-1]["status"] == "localized"
+    assert all(h.get("outside_prior") is False for r in within for h in r["hypotheses"][:1])
+    rotation, translation = pose_error(np.asarray(within[-1]["pose"]), truth)
+    assert rotation < 2.0 and translation < 0.1
+    far = ["--near", str(x + 10), str(y), str(z), "--radius", "2"]
+    assert _localize(localized / "walk.mcap", localized, tmp_path / "b.mcap", *run, *far,
+                     "--jsonl", str(tmp_path / "b.jsonl")) == 0  # fmt: skip
+    assert all(line["result"]["status"] != "localized" for line in _lines(tmp_path / "b.jsonl"))
+    capsys.readouterr()
+    for bad, message in ((["--near", "1", "2", "3"], "--near X Y Z and --radius R go together"),
+                         (["--near", "1", "2", "3", "--radius", "0"], "radius must be > 0")):  # fmt: skip
+        assert _localize(localized / "walk.mcap", localized, tmp_path / "c.mcap", *run, *bad) == 2
+        _one_error_line(capsys, message)

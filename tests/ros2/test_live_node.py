@@ -32,6 +32,9 @@ def walk(tmp_path_factory):
             str(out / "global_reconstruction.json"), "--detections", "/detections",
             "--odom", "/odom", "-o", str(out / "out.mcap"), "--jsonl", str(out / "out.jsonl")]  # fmt: skip
     assert main(argv) == 0
+    with_points = [*argv[:-4], "--points", "/detections/points", "-o", str(out / "points.mcap"),
+                   "--jsonl", str(out / "points.jsonl")]  # fmt: skip
+    assert main(with_points) == 0
     return out
 
 
@@ -49,19 +52,23 @@ def test_ros2_names_and_byte_layouts():
         assert wire.serialize() == msgs.serialize(message, typename)  # classic CDR, as rosbag2
 
 
-def test_a_played_bag_gets_the_answers_of_bag_localize(walk):
+@pytest.mark.parametrize(("points", "jsonl"), [(None, "out.jsonl"),
+                                               ("/detections/points", "points.jsonl")])  # fmt: skip
+def test_a_played_bag_gets_the_answers_of_bag_localize(walk, points, jsonl):
+    """Boxes only, and with the detections' points (`--points`, as `bag localize --points`)."""
     domain = random.randrange(100, 200)  # apart from other runs on this machine
     global_map = load_map(walk / "global_reconstruction.json")
     node_wire, player_wire, listener = Wire(domain), Wire(domain), Wire(domain)
     poses = listener.reader("/semloc/pose", msgs.POSE, reliable=True)
     statuses = listener.reader("/semloc/status", msgs.STRING, reliable=True)
-    node = LiveNode(global_map, settings=NodeSettings(domain=domain, reliable=True), wire=node_wire)
+    settings = NodeSettings(domain=domain, reliable=True, points=points)
+    node = LiveNode(global_map, settings=settings, wire=node_wire)
     answers, done = [], threading.Event()
     thread = threading.Thread(target=node.spin, args=(done.is_set, answers.append), daemon=True)
     thread.start()
     try:
         counts = play(walk / "walk.mcap", player_wire, rate=4.0)
-        expected = [json.loads(line) for line in (walk / "out.jsonl").read_text().splitlines()]
+        expected = [json.loads(line) for line in (walk / jsonl).read_text().splitlines()]
         deadline = time.monotonic() + 30
         while len(answers) < len(expected) and time.monotonic() < deadline:
             time.sleep(0.05)
@@ -70,6 +77,8 @@ def test_a_played_bag_gets_the_answers_of_bag_localize(walk):
         thread.join(10)
     assert counts["/detections"] == 24 and counts["/odom"] == 24
     assert len(answers) == len(expected) and node.skipped == {}
+    assert node.stream.use_points == (points is not None)
+    assert all((o.points is not None) == (points is not None) for o in node.stream.local_map())
     for got, line in zip(answers, expected):
         assert got.stamp / 1e9 == pytest.approx(line["stamp"], abs=1e-9)
         assert got.result.status == line["result"]["status"]

@@ -52,3 +52,12 @@ def test_echo_needs_a_type_for_an_unknown_topic():
     run = semloc("ros2", "echo", "/somewhere")
     _, err = run.communicate(timeout=60)
     assert run.returncode == 2 and "give --type" in err
+
+
+def test_node_prior_options_are_checked_in_one_line(walk):  # noqa: F811
+    base = ["ros2", "node", "--map", str(walk / "global_reconstruction.json")]
+    for bad, message in ((["--radius", "2"], "--near X Y Z and --radius R go together"),
+                         (["--near", "1", "2", "3", "--radius", "-1"], "radius must be > 0")):  # fmt: skip
+        run = semloc(*base, *bad)
+        _, err = run.communicate(timeout=60)
+        assert run.returncode == 2 and message in err and "Traceback" not in err, err

@@ -4,7 +4,8 @@
 `/openapi.json` states every shape and bound a JSON Schema can; a few rules of a semloc map
 are beyond it: object ids unique within a map, a box rotation that is a proper rotation, `up`
 and an `embedding` that are not zero vectors and embeddings of one length per map, a change
-report's pose that is a rigid transform; and two of the service's own: an Idempotency-Key
+report's pose that is a rigid transform, a position prior's floor band in order and its
+heading tolerance with a heading; and two of the service's own: an Idempotency-Key
 names one request (a key reused with another body is refused), and If-Match names the
 current version (which the schema cannot know).  The hook makes generated requests obey
 those rules, so that a request that satisfies the schema is one the service must accept.
@@ -61,6 +62,18 @@ def _fix_map_like(document: dict[str, Any]) -> None:
     objects = document.get("objects")
     if isinstance(objects, list):
         _fix_objects(objects)
+    if isinstance(document.get("prior"), dict):
+        _fix_prior(document["prior"])
+
+
+def _fix_prior(prior: dict[str, Any]) -> None:
+    """A position prior: floor [z_min, z_max] in order; a heading tolerance with a heading."""
+    floor = prior.get("floor")
+    if _vector(floor, 2, math.inf):
+        prior["floor"] = sorted(floor)
+    tolerance = prior.get("heading_tolerance")
+    if _number(tolerance, math.inf) and prior.get("heading") is None:
+        prior["heading"] = 0.0
 
 
 def _fix_objects(objects: list[Any]) -> None:

@@ -57,7 +57,7 @@ def test_every_route_declares_its_body_answers_errors_and_security(server):
         "detail",
     }
     assert "HTTPValidationError" not in schemas
-    bodies = {("put", "/v1/maps/{map_id}"): "SemlocMap", ("post", "/v1/maps/{map_id}/localize"): "SemlocMap",
+    bodies = {("put", "/v1/maps/{map_id}"): "SemlocMap", ("post", "/v1/maps/{map_id}/localize"): "LocalizeRequest",
               ("post", "/v1/maps/{map_id}/sessions"): "SessionCreate",
               ("post", "/v1/sessions/{session_id}/objects"): "SessionUpdate",
               ("post", "/v1/maps/{map_id}/changes"): "ChangeReport"}  # fmt: skip

@@ -26,6 +26,7 @@ from semloc.cli.files import (
     read_config,
     read_label_map,
 )
+from semloc.cli.options import NearOption, RadiusOption, prior_option
 from semloc.io import load_map, write_files
 from semloc.localizer import LocalizerConfig
 from semloc.pictures.display import for_rich
@@ -103,6 +104,8 @@ def localize(
         typer.Option("--label-map", help="Labels mapped before comparing (JSON or .yaml)."),
     ] = None,
     map_frame: Annotated[str, typer.Option(help="Frame id of the map in the output.")] = "map",
+    near: NearOption = None,
+    radius: RadiusOption = None,
 ) -> None:
     """Localize a recorded run and write the answers as MCAP for Foxglove.
 
@@ -110,9 +113,11 @@ def localize(
 
     Output: /semloc/pose (when localized), /tf, /semloc/status (JSON), /semloc/map, /semloc/matches.
 
-    Both outputs are written at the end, both or neither.
+    Both outputs are written at the end, both or neither.  --near/--radius: a position prior
+    on the odometry frame's origin (the local frame).
     """
     check_finite(gamma=gamma)
+    prior = prior_option(near, radius)
     need("bag localize", "ros")
     check_output(output)
     if jsonl is not None:
@@ -137,6 +142,7 @@ def localize(
         if odom is None:
             _warn_moving_frame(run)
         stream = StreamLocalizer(global_map, cfg, use_points=points is not None)
+        stream.localizer.set_prior(prior)
         sink = McapSink()
         writer: AnswerTopics | None = None
         lines, last = [], None

@@ -44,6 +44,7 @@ from semloc.cli.files import (
     read_label_map,
     read_pose,
 )
+from semloc.cli.options import NearOption, RadiusOption, prior_option
 from semloc.cli.render import (
     print_centres_only,
     print_ground_truth,
@@ -58,7 +59,6 @@ from semloc.io import load_map, write_atomic
 from semloc.io.answers import answer_document, answer_text
 from semloc.localizer import LocalizerConfig
 from semloc.localizer import localize as run_localize
-from semloc.priors import Prior
 
 DescriptorKind = choices("DescriptorKind", DESCRIBERS)
 DEFAULTS = LocalizerConfig()
@@ -142,27 +142,14 @@ def localize(
     output: Annotated[
         Path | None, typer.Option("--output", "-o", help="Write the output to this file.")
     ] = None,
-    near: Annotated[
-        tuple[float, float, float] | None,
-        typer.Option(
-            "--near",
-            help="Position prior: the local frame's origin lies near X Y Z (global frame, m); "
-            "with --radius.",
-        ),
-    ] = None,
-    radius: Annotated[
-        float | None,
-        typer.Option(help="Position prior: within this many metres of --near (> 0)."),
-    ] = None,
+    near: NearOption = None,
+    radius: RadiusOption = None,
     server: remote.ServerOption = None,
     token: remote.TokenOption = None,
 ) -> None:
     """Localize LOCAL in GLOBAL: association sets, hypotheses and the pose T_global_local."""
-    prior = _prior(near, radius)
+    prior = prior_option(near, radius)
     if server is not None:
-        if prior is not None:
-            fail("--near/--radius: a position prior is not sent to a server yet; run without "
-                 "--server")  # fmt: skip
         remote.refuse_local_settings(
             gamma=gamma, delta=delta, top_k=top_k, tolerance=tolerance, descriptor=descriptor,
             descriptor_delta=descriptor_delta, label_map=label_map, config=config,
@@ -172,7 +159,7 @@ def localize(
             check_separate({"--output": output}, {local_map: "the local map", gt: "the --gt file"})
         truth = read_pose(gt, "--gt takes a file with T_global_local") if gt is not None else None
         as_json = output_format is OutputFormat.json
-        remote.localize(server, token, str(global_map), local_map, truth, as_json, output)
+        remote.localize(server, token, str(global_map), local_map, truth, as_json, output, prior)
         return
     check_finite(gamma=gamma, delta=delta, tolerance=tolerance, descriptor_delta=descriptor_delta)
     if output is not None:
@@ -217,17 +204,3 @@ def localize(
         print_ground_truth(report, target)
     if output is not None:
         write_atomic(output, target.export_text())
-
-
-def _prior(near: tuple[float, float, float] | None, radius: float | None) -> Prior | None:
-    """The position prior of `--near X Y Z --radius R` (both or neither; one line, exit 2)."""
-    if near is None and radius is None:
-        return None
-    if near is None or radius is None:
-        fail("--near X Y Z and --radius R go together (a position prior needs both)")
-    check_finite(near=near, radius=radius)
-    try:
-        return Prior(position=near, radius=radius)
-    except ValueError as exc:
-        fail(f"--near/--radius: {exc}")
-        raise  # unreachable: fail() raises

@@ -8,8 +8,10 @@ import typer
 
 from semloc.association import DESCRIBERS
 from semloc.cli.app import choices, fail
+from semloc.cli.files import check_finite
 from semloc.descriptors import described
 from semloc.maps import ObjectMap
+from semloc.priors import Prior
 from semloc.sim.mapkinds import MAP_KINDS
 from semloc.sim.sensor import check_resolution
 from semloc.sim.trajectory import PATHS
@@ -50,4 +52,33 @@ def parse_resolution(text: str) -> tuple[int, int]:
         return check_resolution(width, height)
     except ValueError as exc:
         fail(str(exc))
+        raise  # unreachable: fail() raises
+
+
+NearOption = Annotated[
+    tuple[float, float, float] | None,
+    typer.Option(
+        "--near",
+        help="Position prior: the local frame's origin lies near X Y Z (global frame, m); "
+        "with --radius.",
+    ),
+]
+RadiusOption = Annotated[
+    float | None,
+    typer.Option(help="Position prior: within this many metres of --near (> 0)."),
+]
+
+
+def prior_option(near: tuple[float, float, float] | None, radius: float | None) -> Prior | None:
+    """The position prior of `--near X Y Z --radius R` (both or neither; one line, exit 2):
+    the one reading of these options, for `localize`, `bag localize` and `ros2 node`."""
+    if near is None and radius is None:
+        return None
+    if near is None or radius is None:
+        fail("--near X Y Z and --radius R go together (a position prior needs both)")
+    check_finite(near=near, radius=radius)
+    try:
+        return Prior(position=near, radius=radius)
+    except ValueError as exc:
+        fail(f"--near/--radius: {exc}")
         raise  # unreachable: fail() raises

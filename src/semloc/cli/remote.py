@@ -26,6 +26,7 @@ from semloc.client import Client, ServerError
 from semloc.eval.success import ground_truth_report
 from semloc.io import load_map, write_atomic, write_files
 from semloc.io.native import map_files
+from semloc.priors import Prior
 from semloc.results import Result
 
 ServerOption = Annotated[
@@ -79,12 +80,13 @@ def _refused(server: str, what: str, exc: ServerError) -> None:
 
 def localize(
     server: str, token: str | None, map_id: str, local_map: Path, truth, as_json: bool,
-    output: Path | None,
+    output: Path | None, prior: Prior | None = None,
 ) -> None:  # fmt: skip
-    """Localize LOCAL in the server's map `map_id`; print or write the answer."""
+    """Localize LOCAL in the server's map `map_id` (within `prior`); print or write the
+    answer."""
     client = connect(server, token)
     local = load_map(local_map)
-    answer = call(server, "localize", client.localize, map_id, local)
+    answer = call(server, "localize", client.localize, map_id, local, prior)
     result = Result.from_dict(answer)
     report = None if truth is None else ground_truth_report(result.pose, result.hypotheses, truth)
     if as_json:

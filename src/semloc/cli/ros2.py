@@ -22,6 +22,7 @@ from semloc.cli import remote
 from semloc.cli.app import app, console, fail, first_error, foxglove_option
 from semloc.cli.extras import need
 from semloc.cli.files import read_config
+from semloc.cli.options import NearOption, RadiusOption, prior_option
 from semloc.client import Client, ServerError
 from semloc.io import load_map
 from semloc.localizer import LocalizerConfig
@@ -46,6 +47,8 @@ KNOWN_TOPICS = {
     "/tf": "tf2_msgs/msg/TFMessage",
     "/detections": "vision_msgs/msg/Detection3DArray",
     "/odom": "nav_msgs/msg/Odometry",
+    "/detections/points": "sensor_msgs/msg/PointCloud2",
+    "/initialpose": "geometry_msgs/msg/PoseWithCovarianceStamped",
 }
 """The topics `echo` knows the type of (others need `--type`)."""
 
@@ -54,6 +57,11 @@ DomainOption = Annotated[
     int | None,
     typer.Option("--domain", min=0, max=232, help="DDS domain id [default: ROS_DOMAIN_ID or 0]."),
 ]
+
+
+def _topic(name: str) -> str | None:
+    """A topic option's value: None for 'none'."""
+    return None if name.lower() == "none" else name
 
 
 def _domain(domain: int | None) -> int:
@@ -98,10 +106,28 @@ def node(
     ] = None,
     token: remote.TokenOption = None,
     foxglove: FoxgloveOption = None,
+    points: Annotated[
+        str | None,
+        typer.Option(
+            help="sensor_msgs/PointCloud2 topic with the detections' points (fields x, y, z, "
+            "detection = index in the array of the same stamp) [default: none, boxes only]."
+        ),
+    ] = None,
+    initialpose: Annotated[
+        str,
+        typer.Option(
+            help="geometry_msgs/PoseWithCovarianceStamped topic of robot pose estimates in the "
+            "map (RViz's 2D Pose Estimate): each sets the prior; 'none' reads none."
+        ),
+    ] = "/initialpose",
+    near: NearOption = None,
+    radius: RadiusOption = None,
 ) -> None:
     """Localize a robot's detections live: publish /semloc/pose, /tf, /semloc/status,
-    /semloc/markers and /semloc/map on the DDS wire (Ctrl-C ends it)."""
+    /semloc/markers and /semloc/map on the DDS wire (Ctrl-C ends it).  --near/--radius: a
+    position prior on the odometry frame's origin, until a pose estimate on --initialpose."""
     need("ros2 node", "ros2")
+    prior = prior_option(near, radius)
     try:
         cfg = LocalizerConfig(**read_config(config))
     except ValidationError as exc:
@@ -117,8 +143,10 @@ def node(
         except (ServerError, OSError) as exc:
             fail(f"--server {server}: {exc}")
         localizer = RemoteLocalizer(session, global_map)
-    settings = NodeSettings(detections, None if odom.lower() == "none" else odom,
-                            _domain(domain), map_frame, reliable)  # fmt: skip
+    settings = NodeSettings(
+        detections, _topic(odom), _domain(domain), map_frame, reliable, points,
+        _topic(initialpose), prior,
+    )  # fmt: skip
     view = None
     if foxglove is not None:
         need("ros2 node --foxglove", "viz", modules=("foxglove",))

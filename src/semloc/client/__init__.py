@@ -8,6 +8,11 @@
         answer = session.update([semloc.SemanticObject("l0", "chair", [1, 0, 0.4])], stamp=0.0)
     client.report_changes("office", answer, local=local_map)       # -> {"version": 2, ...}
 
+Position priors (`semloc.Prior`, or its JSON object): `client.localize(map_id, local,
+prior=P)`; `session.update(objects, prior=P)` sets a session's prior from that update on and
+`session.update(objects, clear_prior=True)` removes it.  Answers echo the prior in effect as
+`"prior"` (null: none).
+
 Answers are the JSON documents of `semloc localize --format json` (dicts) plus `map_version`.
 Every refusal of the server raises `ServerError` with its status, error and detail.  One
 keep-alive connection per thread; a Client may be shared between threads.  The URL may carry a
@@ -37,6 +42,7 @@ from typing import Any
 
 from semloc.io import load_map, map_from_dict, map_to_dict
 from semloc.maps import ObjectMap, SemanticObject
+from semloc.priors import Prior, checked_prior
 
 __all__ = ["Client", "ServerError", "Session"]
 
@@ -95,9 +101,16 @@ class Client:
         return self.request("GET", f"/v1/maps/{_quote(map_id)}/versions")
 
     # localization -----------------------------------------------------------------------------
-    def localize(self, map_id: str, local: MapLike) -> dict[str, Any]:
-        """Localize a local map (replayed by `seen`) in the latest version of `map_id`."""
-        return self.request("POST", f"/v1/maps/{_quote(map_id)}/localize", _map_document(local))
+    def localize(
+        self, map_id: str, local: MapLike, prior: Prior | dict[str, Any] | None = None
+    ) -> dict[str, Any]:
+        """Localize a local map (replayed by `seen`) in the latest version of `map_id`, within
+        the position `prior` when one is given (checked here: `ValueError`, `TypeError`)."""
+        body = _map_document(local)
+        checked = checked_prior(prior)
+        if checked is not None:
+            body["prior"] = checked.to_dict()
+        return self.request("POST", f"/v1/maps/{_quote(map_id)}/localize", body)
 
     def session(self, map_id: str, up: Iterable[float] | None = None) -> Session:
         """A live session on `map_id`: stream objects with `Session.update`."""
@@ -208,13 +221,22 @@ class Session:
         objects: Iterable[SemanticObject | dict[str, Any]],
         stamp: float = 0.0,
         position: Sequence[float] | None = None,
+        prior: Prior | dict[str, Any] | None = None,
+        clear_prior: bool = False,
     ) -> dict[str, Any]:
         """The answer after these objects, with `stamp` echoed (the device adds its own motion
         since `stamp` to the pose).  `position`: the device in its own frame, [x, y, z] (it
-        measures the travel that bounds the session's window)."""
+        measures the travel that bounds the session's window).  `prior`: the session's
+        position prior from this update on; `clear_prior`: none from this update on (without
+        either the prior stays as it was)."""
         body: dict[str, Any] = {"objects": _object_documents(objects), "stamp": float(stamp)}
         if position is not None:
             body["position"] = [float(v) for v in position]
+        checked = checked_prior(prior)
+        if checked is not None and clear_prior:
+            raise ValueError("prior and clear_prior=True contradict each other")
+        if checked is not None or clear_prior:
+            body["prior"] = None if checked is None else checked.to_dict()
         path = f"/v1/sessions/{_quote(self.session_id)}/objects"
         return self.client.request("POST", path, body, key=True)
 

@@ -203,31 +203,49 @@ class Run:
             yield self._frame(detections, first_log, clouds.pop(_key(detections), None))
 
     def _frame(self, message: Any, log_time: int, cloud: Any) -> DetectionFrame:
-        stamp = msgs.stamp_ns(message.header.stamp) or log_time
-        frame = message.header.frame_id or next(
-            (d.header.frame_id for d in message.detections if d.header.frame_id), ""
-        )
-        points = self._points(cloud, len(message.detections)) if cloud is not None else {}
-        detections = []
-        for i, det in enumerate(message.detections):
-            found = detection_from_msg(det, points.get(i))
-            if found is None:
-                why = "detections without a class or a finite box"
-                self.skipped[why] = self.skipped.get(why, 0) + 1
-            else:
-                detections.append(found)
-        return DetectionFrame(stamp, frame, detections)
-
-    def _points(self, cloud: Any, count: int) -> dict[int, np.ndarray]:
         try:
-            fields = msgs.cloud_fields(cloud, msgs.POINT_FIELDS)
+            points = {} if cloud is None else cloud_points(cloud, len(message.detections))
         except ValueError as exc:
             raise BagError(f"{self.path}: --points: {exc}") from None
-        xyz = np.column_stack([fields["x"], fields["y"], fields["z"]])
-        index = np.round(fields["detection"]).astype(np.int64)
-        keep = np.all(np.isfinite(xyz), axis=1) & (index >= 0) & (index < count)
-        xyz, index = xyz[keep], index[keep]
-        return {int(i): xyz[index == i] for i in np.unique(index)}
+        frame, dropped = detection_frame(message, points, log_time)
+        if dropped:
+            self.skipped[NO_CLASS] = self.skipped.get(NO_CLASS, 0) + dropped
+        return frame
+
+
+NO_CLASS = "detections without a class or a finite box"
+"""What a detection left out is counted as (`semloc bag localize`, the ROS 2 node)."""
+
+
+def detection_frame(
+    message: Any, points: dict[int, np.ndarray], fallback_stamp: int = 0
+) -> tuple[DetectionFrame, int]:
+    """The DetectionFrame of a Detection3DArray (its stamp, else `fallback_stamp`; its frame,
+    else its first detection's), with the points of detection i from `points[i]`; and how
+    many detections were left out (no class or no finite box)."""
+    stamp = msgs.stamp_ns(message.header.stamp) or fallback_stamp
+    frame = message.header.frame_id or next(
+        (d.header.frame_id for d in message.detections if d.header.frame_id), ""
+    )
+    detections = [
+        detection_from_msg(det, points.get(i)) for i, det in enumerate(message.detections)
+    ]
+    kept = [d for d in detections if d is not None]
+    return DetectionFrame(stamp, frame, kept), len(detections) - len(kept)
+
+
+def cloud_points(cloud: Any, count: int) -> dict[int, np.ndarray]:
+    """The points of each detection (by index, of `count`) in a sensor_msgs/PointCloud2 with
+    the fields x, y, z and `detection` (`msgs.POINT_FIELDS`); points that are not finite or
+    name no detection are left out.  ValueError naming what is wrong with the cloud."""
+    fields = msgs.cloud_fields(cloud, msgs.POINT_FIELDS)
+    xyz = np.column_stack([fields["x"], fields["y"], fields["z"]])
+    detection = fields["detection"]
+    finite = np.all(np.isfinite(xyz), axis=1) & np.isfinite(detection)
+    index = np.round(np.where(finite, detection, -1)).astype(np.int64)
+    keep = finite & (index >= 0) & (index < count)
+    xyz, index = xyz[keep], index[keep]
+    return {int(i): xyz[index == i] for i in np.unique(index)}
 
 
 def _key(message: Any) -> tuple[int, str]:

@@ -14,6 +14,23 @@ for the first odometry message after the detection's stamp, at most `MAX_GAP_S`)
 the odometry frame is used as it is; without odometry (`odom=None`) every message must be in
 one frame.
 
+Points: with a `points` topic (sensor_msgs/PointCloud2 with the fields x, y, z and
+`detection`, the index of the detection in the array of the same stamp and frame, as `semloc
+bag localize --points` reads and `semloc simulate --bag` writes), each detection message waits
+for its cloud (at most `CLOUD_WAIT_S`), the detections carry their points (transformed with
+them) and the Localizer uses them, as `bag localize --points` does.  vision_msgs 3 and later
+(ROS 2 Galactic, Humble, ...) dropped Detection3D's `source_cloud` field, so the points travel
+on a topic of their own.  A cloud that cannot be read is a warning (the message is used
+without points), never a crash.
+
+Priors: `NodeSettings.prior` (`--near X Y Z --radius R`) is a prior on the odometry frame's
+origin from the start; a message on `initialpose` (geometry_msgs/PoseWithCovarianceStamped in
+the map frame, RViz's "2D Pose Estimate") replaces it from the next update on, converted with
+the odometry at its stamp (`semloc.ros.initialpose`; it waits for the first odometry).
+
+Problems with the messages (no odometry, other frames, unreadable clouds or poses) are
+counted in `skipped` and logged once per kind as warnings (logger `semloc.ros2`).
+
 QoS: subscriptions are best-effort with a deep history by default, which matches both the
 best-effort publishers of sensor drivers and reliable ones; `reliable=True` asks for reliable
 delivery (it then matches reliable publishers only).  Answers are published reliable; the map
@@ -22,6 +39,7 @@ reliable and transient-local, so a viewer that starts later still gets it.
 
 from __future__ import annotations
 
+import logging
 import time
 from collections import deque
 from collections.abc import Callable
@@ -32,10 +50,12 @@ import numpy as np
 
 from semloc.localizer import LocalizerConfig
 from semloc.maps import ObjectMap
+from semloc.priors import Prior
 from semloc.ros import messages as msgs
 from semloc.ros.answers import MAP_TOPIC, MATCHES_TOPIC, AnswerTopics, Frames
-from semloc.ros.bag import MAX_GAP_S, detection_from_msg
+from semloc.ros.bag import CLOUD_WAIT_NS, MAX_GAP_S, NO_CLASS, cloud_points, detection_frame
 from semloc.ros.frames import Trajectory
+from semloc.ros.initialpose import odom_prior
 from semloc.ros.replay import Answer
 from semloc.ros.stream import DetectionFrame, StreamLocalizer
 from semloc.ros2.wire import idl_type, to_wire, topic_name
@@ -44,17 +64,25 @@ MARKERS_TOPIC = "/semloc/markers"
 TOPIC_RENAMES = {MATCHES_TOPIC: MARKERS_TOPIC}
 """The bag's topic names that the node publishes under another name."""
 HISTORY = 200
+CLOUD_WAIT_S = CLOUD_WAIT_NS / 1e9
+"""Seconds a detection message waits for its point cloud (with a `points` topic)."""
+log = logging.getLogger("semloc.ros2")
 
 
 @dataclass(frozen=True)
 class NodeSettings:
-    """Topics, frames, the DDS domain and the subscriptions' reliability."""
+    """Topics, frames, the DDS domain, the subscriptions' reliability and the prior: the
+    detections' points on `points` (None: none), pose estimates on `initialpose` (None: not
+    read), `prior` on the odometry frame's origin from the start."""
 
     detections: str = "/detections"
     odom: str | None = "/odom"
     domain: int = 0
     map_frame: str = "map"
     reliable: bool = False
+    points: str | None = None
+    initialpose: str | None = "/initialpose"
+    prior: Prior | None = None
 
 
 class Wire:
@@ -136,14 +164,26 @@ class LiveNode:
         `semloc.ros2.remote.RemoteLocalizer` for a `semloc serve` session)."""
         self.settings = settings or NodeSettings()
         self.wire = wire or Wire(self.settings.domain)
-        self.stream = StreamLocalizer(global_map, config, use_points=False, localizer=localizer)
+        s = self.settings
+        self.stream = StreamLocalizer(global_map, config, use_points=s.points is not None,
+                                      localizer=localizer)  # fmt: skip
+        if s.prior is not None:
+            self.stream.localizer.set_prior(s.prior)
         self.global_map = global_map
         self.sink = WireSink(self.wire)
         self._topics: AnswerTopics | None = None
-        s = self.settings
         self._detections = self.wire.reader(s.detections, msgs.DETECTIONS, s.reliable)
         self._odom = None if s.odom is None else self.wire.reader(s.odom, msgs.ODOMETRY, s.reliable)
-        self._waiting: deque[tuple[float, DetectionFrame]] = deque()  # (received, frame)
+        self._points = (
+            None if s.points is None else self.wire.reader(s.points, msgs.POINTS, s.reliable)
+        )
+        self._initialpose = (
+            None if s.initialpose is None else self.wire.reader(s.initialpose, msgs.POSE, s.reliable)
+        )  # fmt: skip
+        self._estimate: Any = None  # the latest pose estimate not yet applied
+        self._clouds: dict[tuple[int, str], Any] = {}  # (stamp, frame) -> cloud message
+        self._waiting: deque[tuple[float, Any]] = deque()  # (received, detection message)
+        self._frames: dict[int, DetectionFrame] = {}  # id(message) -> its frame, once built
         self._stamps: list[int] = []
         self._poses: list[np.ndarray] = []
         self._odom_frames: tuple[str, str] | None = None
@@ -162,15 +202,30 @@ class LiveNode:
         if self._odom is not None:
             for message in samples(self._odom):
                 self._add_odometry(message)
+        if self._initialpose is not None:
+            for message in samples(self._initialpose):
+                self._estimate = message  # the latest estimate wins
+        if self._estimate is not None:
+            self._apply_estimate()
+        if self._points is not None:
+            for message in samples(self._points):
+                self._clouds[(msgs.stamp_ns(message.header.stamp), message.header.frame_id)] = (
+                    message
+                )
         for message in samples(self._detections):
-            self._waiting.append((time.monotonic(), self._frame(message)))
+            self._waiting.append((time.monotonic(), message))
         answered = 0
         while self._waiting:
-            received, frame = self._waiting[0]
-            pose, ready = self._pose(frame, time.monotonic() - received)
+            received, message = self._waiting[0]
+            waited = time.monotonic() - received
+            frame = self._frame(message, waited)
+            if frame is None:
+                break  # its point cloud has not arrived yet
+            pose, ready = self._pose(frame, waited)
             if not ready:
                 break
             self._waiting.popleft()
+            del self._frames[id(message)]
             if pose is None:
                 continue
             result = self.stream.step(frame, pose)
@@ -207,16 +262,61 @@ class LiveNode:
         if len(self._stamps) > 4 * HISTORY:  # a bounded trajectory: the newest poses
             del self._stamps[:HISTORY], self._poses[:HISTORY]
 
-    def _frame(self, message: Any) -> DetectionFrame:
-        stamp = msgs.stamp_ns(message.header.stamp)
-        frame = message.header.frame_id or next(
-            (d.header.frame_id for d in message.detections if d.header.frame_id), ""
-        )
-        detections = [found for found in map(detection_from_msg, message.detections) if found]
-        dropped = len(message.detections) - len(detections)
+    def _frame(self, message: Any, waited_s: float) -> DetectionFrame | None:
+        """The message's detections with their points (None while its cloud may still come)."""
+        found = self._frames.get(id(message))
+        if found is not None:
+            return found
+        points: dict[int, np.ndarray] = {}
+        if self._points is not None:
+            key = (msgs.stamp_ns(message.header.stamp), message.header.frame_id)
+            cloud = self._clouds.pop(key, None)
+            if cloud is None and waited_s <= CLOUD_WAIT_S:
+                return None
+            for old in [k for k in self._clouds if k[0] < key[0] - CLOUD_WAIT_NS]:
+                del self._clouds[old]
+            if cloud is None:
+                self._skip(
+                    f"detection messages without their point cloud within {CLOUD_WAIT_S:g} s"
+                )
+            else:
+                try:
+                    points = cloud_points(cloud, len(message.detections))
+                except ValueError as exc:
+                    self._skip("point clouds that cannot be read (used without points)", str(exc))
+        frame, dropped = detection_frame(message, points)
         if dropped:
-            self._skip("detections without a class or a finite box", dropped)
-        return DetectionFrame(stamp, frame, detections)
+            self._skip(NO_CLASS, count=dropped)
+        self._frames[id(message)] = frame
+        return frame
+
+    def _apply_estimate(self) -> None:
+        """The pending pose estimate as the prior from the next update on, once the odometry
+        places the robot (see `semloc.ros.initialpose`)."""
+        message = self._estimate
+        frame = message.header.frame_id
+        if frame and frame != self.settings.map_frame:
+            self._estimate = None
+            self._skip(f"pose estimates not in the map frame '{self.settings.map_frame}'")
+            return
+        if self._odom is None:
+            T_odom_robot = np.eye(4)  # the detections' own frame is the local frame
+        elif not self._stamps:
+            return  # waits for the first odometry
+        else:
+            stamp = msgs.stamp_ns(message.header.stamp)
+            at = Trajectory(self._stamps, self._poses, int(MAX_GAP_S * 1e9)).at(stamp)
+            T_odom_robot = self._poses[-1] if at is None else at
+        self._estimate = None
+        try:
+            prior = odom_prior(
+                msgs.matrix(message.pose.pose), message.pose.covariance, T_odom_robot
+            )
+        except ValueError as exc:
+            self._skip("pose estimates that cannot be used", str(exc))
+            return
+        self.stream.localizer.set_prior(prior)
+        log.info("prior from %s: %s", self.settings.initialpose, prior.to_dict())
 
     def _pose(self, frame: DetectionFrame, waited_s: float) -> tuple[np.ndarray | None, bool]:
         """(pose of the frame in the odometry frame or None to skip it, whether decided)."""
@@ -247,5 +347,9 @@ class LiveNode:
     def _odom_frame(self, frame: DetectionFrame) -> str:
         return frame.frame if self._odom_frames is None else self._odom_frames[0]
 
-    def _skip(self, why: str, count: int = 1) -> None:
+    def _skip(self, why: str, detail: str = "", count: int = 1) -> None:
+        """Count a kind of problem (`why`); the first of each kind is logged as a warning
+        (with its `detail`)."""
+        if why not in self.skipped:
+            log.warning("semloc node: skipped %s%s", why, f": {detail}" if detail else "")
         self.skipped[why] = self.skipped.get(why, 0) + count

@@ -2,7 +2,8 @@
 
 `RemoteLocalizer(session)` takes the node's fused objects like `Localizer.update` and sends
 them as one update of a service session (`semloc.client.Session`, with the device's position),
-returning the service's answer as a `Result`; `local_map` holds the latest version of the
+returning the service's answer as a `Result`; `set_prior` sets the session's position prior
+from the next update on (sent with it); `local_map` holds the latest version of the
 objects it sent (at most `window` of them, newest kept), for the markers.
 """
 
@@ -16,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from semloc.maps import ObjectMap, SemanticObject
+from semloc.priors import Prior
 from semloc.results import Result
 
 
@@ -27,6 +29,12 @@ class RemoteLocalizer:
     ) -> None:
         self.session, self.global_map, self.window, self.up = session, global_map, window, up
         self._local: OrderedDict[str, SemanticObject] = OrderedDict()
+        self._prior_set = False  # a prior change to send with the next update: _prior
+        self._prior: Prior | None = None
+
+    def set_prior(self, prior: Prior | None) -> None:
+        """The session's prior from the next update on (None: none)."""
+        self._prior_set, self._prior = True, prior
 
     def update(self, objects: Iterable[SemanticObject], *, position: Any = None) -> Result:
         objects = list(objects)
@@ -39,7 +47,11 @@ class RemoteLocalizer:
         if position is not None:
             array = np.asarray(position, dtype=float)
             at = (array[:3, 3] if array.shape == (4, 4) else array.reshape(3)).tolist()
-        answer = self.session.update(objects, stamp=time.time(), position=at)
+        prior, clear = self._prior, self._prior_set and self._prior is None
+        answer = self.session.update(
+            objects, stamp=time.time(), position=at, prior=prior, clear_prior=clear
+        )
+        self._prior_set, self._prior = False, None
         return Result.from_dict(answer)
 
     @property

@@ -382,14 +382,15 @@ def create_app(
         response_model=models.LocalizeAnswer,
         tags=["localization"],
         responses=_errors(*AUTH, *BODY, 403),
-        openapi_extra=_body(models.SemlocMap),
+        openapi_extra=_body(models.LocalizeRequest),
     )
     async def localize(
         map_id: MapPath,
         who: Annotated[Caller, Depends(may("localize"))],
-        body: Annotated[Body, Depends(reader(models.SemlocMap))],
+        body: Annotated[Body, Depends(reader(models.LocalizeRequest))],
     ) -> JSONResponse:
-        """Localize a local map (replayed by `seen`) in the latest version."""
+        """Localize a local map (replayed by `seen`) in the latest version, within the body's
+        optional position `prior`."""
         answer = await run_in_threadpool(service.localize, map_id, body.document)
         observer.answers.labels("one-shot", answer["status"]).inc()
         return await _json(answer)

@@ -25,6 +25,7 @@ from semloc.maps import (
     MAX_OBJECTS,
     MAX_SEEN,
 )
+from semloc.priors import Prior
 
 SAFE_INTEGER = 2**53 - 1
 """Integers in requests stay within what every JSON reader holds exactly (I-JSON, RFC 7493)."""
@@ -131,6 +132,36 @@ class SemlocMap(_Request):
     )
 
 
+class PriorBody(_Request):
+    """A position prior (`semloc.Prior`, as `Prior.to_dict` writes it): the local frame's
+    origin lies within `radius` metres of `position` in the map's frame; optionally its height
+    within `floor` and its heading within `heading_tolerance` degrees of `heading`."""
+
+    model_config = ConfigDict(strict=True, extra="forbid")
+    position: Vector3 = Field(description="Where the local frame's origin lies (map frame, m).")
+    radius: float = Field(gt=0, description="Metres around `position`.")
+    floor: Annotated[list[Coordinate], Field(min_length=2, max_length=2)] | None = Field(
+        None, description="[z_min, z_max]: the origin's height band (map frame, z up)."
+    )
+    heading: float | None = Field(
+        None, description="Degrees: the local x axis about the map's z axis, from +x, CCW."
+    )
+    heading_tolerance: float | None = Field(
+        None, gt=0, le=180, description="Degrees around `heading` (default 30; needs a heading)."
+    )
+
+    @model_validator(mode="after")
+    def _a_prior(self) -> PriorBody:
+        Prior.from_dict(self.model_dump(exclude_none=True))  # its rules, in one place
+        return self
+
+
+class LocalizeRequest(SemlocMap):
+    """The local map (a semloc map, replayed by `seen`) and, optionally, a position prior."""
+
+    prior: PriorBody | None = Field(None, description="A position prior (none when absent).")
+
+
 class MapVersion(_Answer):
     map_id: str
     version: int = Field(ge=1)
@@ -155,6 +186,9 @@ class Hypothesis(_Answer):
     pose: Pose | None
     fitness: float | None = None
     confidence: float | None = None
+    outside_prior: bool | None = Field(
+        None, description="Its pose lies outside the prior (only with a prior)."
+    )
 
 
 class Step(_Answer):
@@ -222,6 +256,7 @@ class Answer(_Answer):
     )
     labels: dict[str, LabelMatch]
     map_version: int
+    prior: PriorBody | None = Field(description="The position prior applied (null: none).")
 
 
 class LocalizeAnswer(Answer):
@@ -257,6 +292,11 @@ class SessionUpdate(_Request):
         None,
         description="The device in its own frame (metres); it measures the travel that bounds "
         "the session's window of objects.",
+    )
+    prior: PriorBody | None = Field(
+        None,
+        description="Sets the session's position prior from this update on (absent: the prior "
+        "stays as it was; null: the session has no prior from now on).",
     )
 
 
@@ -348,7 +388,9 @@ class Error(BaseModel):
     detail: Any = None
 
 
-REQUESTS: tuple[type[BaseModel], ...] = (SemlocMap, SessionCreate, SessionUpdate, ChangeReport)
+REQUESTS: tuple[type[BaseModel], ...] = (
+    SemlocMap, LocalizeRequest, SessionCreate, SessionUpdate, ChangeReport
+)  # fmt: skip
 """The request bodies the routes read themselves (declared as OpenAPI components)."""
 
 

@@ -11,7 +11,9 @@ while the session tracks a place, where it rebuilds the Localizer exactly, and w
 searches only every `SEARCH_CHECKPOINT` updates: so a rebuilt session's answers equal an
 uninterrupted one's exactly, except after a search longer than that, whose rebuilt Localizer
 grows its association sets again from the same window objects at once (it may rank the
-candidate places differently until the search settles).  Each session is pinned to the map version it was created on.  Parsed maps are kept
+candidate places differently until the search settles).  A session's position prior is set by
+an update that carries `"prior"` (null clears it) and holds from then on: the batch keeps the
+change (a rebuild replays it in order) and the kept state the prior in effect.  Each session is pinned to the map version it was created on.  Parsed maps are kept
 per (map, version) in a small cache (a version never changes once written).
 
 A session belongs to its owner, the token that opened it: to any other caller it is as good as
@@ -50,8 +52,9 @@ from semloc.io import map_from_dict, map_to_dict
 from semloc.io.answers import answer_document
 from semloc.localizer import Localizer, LocalizerConfig, localize
 from semloc.maps import MapError, ObjectMap
+from semloc.priors import Prior
 from semloc.results import Result
-from semloc.serve.store import KeyTaken, Remembered, RequestKey, Store, session_scope
+from semloc.serve.store import Batch, KeyTaken, Remembered, RequestKey, Store, session_scope
 from semloc.transforms import as_pose
 
 MAX_ID_LENGTH = 200
@@ -167,6 +170,46 @@ def _position(value: Any) -> list[float] | None:
     return [float(v) for v in value]
 
 
+def _prior(value: Any) -> Prior | None:
+    """A body's `prior`: `Prior.to_dict`'s object (None: none); `Invalid` naming the problem."""
+    if value is None:
+        return None
+    try:
+        return Prior.from_dict(value)
+    except (TypeError, ValueError) as exc:
+        raise Invalid("invalid prior", str(exc)) from None
+
+
+def _prior_json(prior: Prior | None) -> dict[str, Any] | None:
+    return None if prior is None else prior.to_dict()
+
+
+@dataclass(frozen=True)
+class _Update:
+    """One batch of a session as its Localizer takes it: the objects, the device's position
+    and, when the batch set one (`sets_prior`), the prior from then on (None: no prior)."""
+
+    seq: int
+    objects: ObjectMap
+    position: list[float] | None = None
+    sets_prior: bool = False
+    prior: Prior | None = None
+
+    @classmethod
+    def of(cls, batch: Batch, up: list[float] | None) -> _Update:
+        objects = _objects_map(batch.objects, up, f"batch {batch.seq}")
+        prior = Prior.from_dict(batch.prior) if batch.prior is not None else None
+        return cls(batch.seq, objects, batch.position, batch.sets_prior, prior)
+
+    def apply(self, localizer: Localizer) -> Result:
+        """The Localizer's answer after this batch (its prior set first, when it sets one)."""
+        if self.sets_prior:
+            localizer.set_prior(self.prior)
+        result = localizer.update(list(self.objects), position=self.position)
+        assert result is not None
+        return result
+
+
 @dataclass(frozen=True)
 class SessionMeta:
     """What a session is: its map and version, its device frame's up, its owner."""
@@ -186,7 +229,7 @@ class _LiveSession:
     meta: SessionMeta
     applied: int = 0
     lock: threading.Lock = field(default_factory=threading.Lock)
-    answers: dict[int, Result] = field(default_factory=dict)
+    answers: dict[int, tuple[Result, Prior | None]] = field(default_factory=dict)  # + its prior
     seq_of: dict[str, int] = field(default_factory=dict)  # object id -> batch of its version
     saved: int = 0  # the batch after which the store has its state
 
@@ -273,14 +316,16 @@ class Service:
 
     # one-shot localization --------------------------------------------------------------------
     def localize(self, map_id: str, document: Any) -> dict[str, Any]:
-        """The answer for a local map, with the map version and a `localization_id` under which
-        the local map is kept (as long as an idle session) for a change report of the answer."""
+        """The answer for a local map (with its optional `prior`, echoed), with the map version
+        and a `localization_id` under which the local map is kept (as long as an idle session)
+        for a change report of the answer."""
         self._expire()
+        prior = _prior(document.get("prior")) if isinstance(document, dict) else None
         version, global_map = self.object_map(map_id)
         local = parse_map(document)
-        result = localize(global_map, local, self.config)
+        result = localize(global_map, local, self.config, prior=prior)
         labels = label_report(CandidateIndex(global_map, self.config.association), local)
-        document = answer_document(result, labels, map_version=version)
+        document = answer_document(result, labels, map_version=version, prior=_prior_json(prior))
         document["localization_id"] = secrets.token_urlsafe(18)
         kept = {"local": map_to_dict(local), "answer": _answer_record(document)}
         self.store.put_localization(document["localization_id"], map_id, kept)
@@ -346,11 +391,13 @@ class Service:
         ):
             raise Invalid("invalid update", "'stamp' must be a finite number")
         position = _position(body.get("position"))
+        sets_prior, prior = "prior" in body, _prior(body.get("prior"))
         objects = _objects_map(body["objects"], meta.up, "objects")  # refused before it is stored
         try:  # a key used before is found under the session's lock: nothing appended
             seq = self.store.append_batch(
-                session_id, float(stamp), body["objects"], self.session_idle_s, key, position
-            )
+                session_id, float(stamp), body["objects"], self.session_idle_s, key, position,
+                sets_prior, _prior_json(prior),
+            )  # fmt: skip
         except KeyTaken as taken:
             assert key is not None
             return self._answered(meta, _same_body(key, taken.remembered))
@@ -359,17 +406,19 @@ class Service:
                 self._live.pop(session_id, None)
             raise not_found(f"session {session_id!r}")
         live = self._live_session(meta)
-        result = self._advance(session_id, live, seq, objects, position)
-        document = self._session_answer(result, live.localizer, meta, stamp, seq)
+        update = _Update(seq, objects, position, sets_prior, prior)
+        result, in_effect = self._advance(session_id, live, update)
+        document = self._session_answer(result, in_effect, live.localizer, meta, stamp, seq)
         self.store.set_last(session_id, _summary(document), key, document)
         return document
 
     @staticmethod
     def _session_answer(
-        result: Result, localizer: Localizer, meta: SessionMeta, stamp: float, seq: int
-    ) -> dict[str, Any]:
-        document = answer_document(result, localizer.label_report(),
-                                   map_version=meta.map_version, stamp=stamp)  # fmt: skip
+        result: Result, prior: Prior | None, localizer: Localizer, meta: SessionMeta,
+        stamp: float, seq: int,
+    ) -> dict[str, Any]:  # fmt: skip
+        document = answer_document(result, localizer.label_report(), map_version=meta.map_version,
+                                   stamp=stamp, prior=_prior_json(prior))  # fmt: skip
         document["session_id"], document["update"] = meta.session_id, seq
         return document
 
@@ -385,12 +434,12 @@ class Service:
             raise Conflict("update superseded", f"update {remembered.ref} was answered already")
         result, stamp = None, 0.0
         for batch in self.store.batches(meta.session_id, live.applied, remembered.ref):
-            objects = _objects_map(batch.objects, meta.up, f"batch {batch.seq}")
-            result = live.localizer.update(list(objects), position=batch.position)
+            result = _Update.of(batch, meta.up).apply(live.localizer)
             stamp = batch.stamp
         if result is None:
             raise not_found(f"session {meta.session_id!r}")
-        return self._session_answer(result, live.localizer, meta, stamp, remembered.ref)
+        prior = live.localizer.prior
+        return self._session_answer(result, prior, live.localizer, meta, stamp, remembered.ref)
 
     def _live_session(self, meta: SessionMeta) -> _LiveSession:
         session_id = meta.session_id
@@ -422,44 +471,40 @@ class Service:
             order = [str(i) for i in state["window"]["order"]]
             if all(i in latest for i in order):
                 objects = _objects_map([latest[i][1] for i in order], up, "session state")
-                localizer = Localizer.restore(global_map, state, objects, self.config, up)
+                prior = None if state.get("prior") is None else Prior.from_dict(state["prior"])
+                localizer = Localizer.restore(global_map, state, objects, self.config, up, prior)
                 live = _LiveSession(localizer, meta, applied=seq, saved=seq)
                 live.seq_of = {i: latest[i][0] for i in order}
                 return live
         raise Conflict("session busy", "its kept state changed while it was read; retry")
 
     def _advance(
-        self,
-        session_id: str,
-        live: _LiveSession,
-        seq: int,
-        objects: ObjectMap,
-        position: list[float] | None,
-    ) -> Result:
-        """Apply the batches up to `seq` (whose objects are `objects`) not yet applied here, in
-        order (those of other workers read from the store); the answer after `seq`.  The state
-        after them is kept in the store, with the batches its window needs."""
+        self, session_id: str, live: _LiveSession, update: _Update
+    ) -> tuple[Result, Prior | None]:
+        """Apply the batches up to `update` not yet applied here, in order (those of other
+        workers read from the store); the answer after `update` and the prior it had.  The
+        state after them is kept in the store, with the batches its window needs."""
+        seq = update.seq
         with live.lock:
             if seq > live.applied:
                 if seq == live.applied + 1:
-                    pending = [(seq, objects, position)]
+                    pending = [update]
                 else:
                     pending = self._pending(session_id, live, seq)
-                for number, batch, at in pending:
-                    result = live.localizer.update(list(batch), position=at)
-                    assert result is not None
-                    live.applied = number
-                    live.answers[number] = result
-                    live.seq_of.update((o.id, number) for o in batch)
+                for batch in pending:
+                    result = batch.apply(live.localizer)
+                    live.applied = batch.seq
+                    live.answers[batch.seq] = (result, live.localizer.prior)
+                    live.seq_of.update((o.id, batch.seq) for o in batch.objects)
                 self._keep_state(session_id, live)
-            result = live.answers.pop(seq, None)
+            answer = live.answers.pop(seq, None)
             for old in [s for s in live.answers if s < seq - 64]:  # answers nobody came for
                 del live.answers[old]
-        if result is None:
+        if answer is None:
             raise Conflict("update superseded", f"update {seq} was answered already")
-        return result
+        return answer
 
-    def _pending(self, session_id: str, live: _LiveSession, seq: int) -> list[tuple]:
+    def _pending(self, session_id: str, live: _LiveSession, seq: int) -> list[_Update]:
         """The batches after `live.applied` up to `seq`, parsed.  When another worker let
         some of them go (its state is newer than this Localizer), the session is rebuilt
         here from that state first."""
@@ -470,8 +515,7 @@ class Service:
             live.localizer, live.applied, live.saved = fresh.localizer, fresh.applied, fresh.saved
             live.seq_of = fresh.seq_of
             batches = self.store.batches(session_id, live.applied, seq)
-        return [(b.seq, _objects_map(b.objects, live.meta.up, f"batch {b.seq}"), b.position)
-                for b in batches]  # fmt: skip
+        return [_Update.of(b, live.meta.up) for b in batches]
 
     def _keep_state(self, session_id: str, live: _LiveSession) -> None:
         """Store the Localizer's state and let go of the batches its window no longer needs:
@@ -482,7 +526,7 @@ class Service:
             return
         window = live.localizer.window
         live.seq_of = {i: n for i, n in live.seq_of.items() if i in window}
-        state = live.localizer.state()
+        state = {**live.localizer.state(), "prior": _prior_json(live.localizer.prior)}
         self.store.save_state(session_id, live.applied, state, set(live.seq_of.values()))
         live.saved = live.applied
 

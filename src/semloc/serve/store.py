@@ -168,6 +168,8 @@ class Batch:
     stamp: float
     objects: list[dict[str, Any]]
     position: list[float] | None = None  # the device in its frame, when it said
+    sets_prior: bool = False  # the batch set the session's position prior ...
+    prior: dict[str, Any] | None = None  # ... to this one (`Prior.to_dict`; None: no prior)
 
 
 def _pack(document: Any) -> bytes:
@@ -499,12 +501,19 @@ class Store:
         idle_seconds: float,
         key: RequestKey | None = None,
         position: list[float] | None = None,
+        sets_prior: bool = False,
+        prior: dict[str, Any] | None = None,
     ) -> int | None:
         """Store the next batch of a session and touch it; its sequence number (from 1), or
         None when the session is gone or was idle for longer than `idle_seconds`.  With a
-        request `key`, the key is stored with the batch (`KeyTaken` when it was used)."""
+        request `key`, the key is stored with the batch (`KeyTaken` when it was used).
+        `sets_prior`: the batch sets the session's position prior to `prior` (None: none)."""
         now = time.time()
-        document: Any = objects if position is None else {"objects": objects, "position": position}
+        document: Any = objects
+        if position is not None or sets_prior:
+            document = {"objects": objects, "position": position}
+            if sets_prior:
+                document["prior"] = prior
         with self._transaction(write=True, durable=False) as cur:
             # the row lock (PostgreSQL) serialises a session's appends
             cur.execute(
@@ -547,7 +556,14 @@ class Store:
             document = _unpack(blob)
             if isinstance(document, dict):
                 batches.append(
-                    Batch(int(seq), float(stamp), document["objects"], document["position"])
+                    Batch(
+                        int(seq),
+                        float(stamp),
+                        document["objects"],
+                        document["position"],
+                        "prior" in document,
+                        document.get("prior"),
+                    )  # fmt: skip
                 )
             else:
                 batches.append(Batch(int(seq), float(stamp), document))
