@@ -262,7 +262,10 @@ def building_table(results: list[dict]) -> str:
     ]
     for r in results:
         rows = r["rows"]
-        share = lambda key: np.mean([row[key] for row in rows])  # noqa: E731
+
+        def share(key: str, rows: list[dict] = rows) -> float:
+            return float(np.mean([row[key] for row in rows]))
+
         ms = [row["ms"] for row in rows]
         lines.append(
             f"| {r['base']} | {r['objects']:,} | {r['index_s']:.1f} | {r['index_mb']:.0f} "
