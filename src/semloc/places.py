@@ -8,7 +8,9 @@ verify (Hydra, SceneGraphLoc); the clustering, verification and decision then ru
 on the candidates kept.
 
 **Places.**  The map is cut into cells, cubes of `RetrievalConfig.cell` metres; the place of a
-map object is its cell.  Its **descriptor** is the set of its objects' *constellation words*:
+map object is its cell, or, when objects say which room they are in (`extra["room"]`: a scene
+graph's rooms layer, `semloc.io.dsg`), the part of its cell in its room (no place spans a
+wall between rooms).  Its **descriptor** is the set of its objects' *constellation words*:
 (label of an object in the cell, label of a map object within `reach` of it, their distance in
 bins of `bin` metres).  `PlaceIndex` holds every (word, cell) once, sorted by word: built once
 per map (`place_index`, cached while the map lives; a changed map is a new map and gets a new
@@ -96,7 +98,8 @@ class PlaceIndex:
         self.n_labels = max(len(label_names), 1)
         self.n_bins = int(np.floor(config.reach / config.bin)) + 1
         corners = np.floor(positions / config.cell).astype(np.int64)
-        _, self.cell_of = np.unique(corners, axis=0, return_inverse=True)
+        keys = np.column_stack([corners, _room_codes(global_map)])
+        _, self.cell_of = np.unique(keys, axis=0, return_inverse=True)
         self.cell_of = self.cell_of.reshape(-1).astype(np.int64)
         self.n_cells = int(self.cell_of.max()) + 1 if len(positions) else 0
         self.words, self.cells = self._entries(positions)
@@ -159,6 +162,17 @@ class PlaceIndex:
             kept.append(found[row[self.cell_of[found]] >= max(floor, 1)])
         most = max(self.config.wait_above, self.config.wait_share * len(self.cell_of))
         return [k if len(k) <= most else k[:0] for k in kept]
+
+
+def _room_codes(global_map: ObjectMap) -> np.ndarray:
+    """Per object, a number for its room (`extra["room"]`, e.g. a scene graph's rooms layer;
+    -1 without one): a cell never spans two rooms."""
+    codes: dict[str, int] = {}
+    rooms = [obj.extra.get("room") for obj in global_map]
+    return np.array(
+        [-1 if room is None else codes.setdefault(str(room), len(codes)) for room in rooms],
+        dtype=np.int64,
+    ).reshape(-1, 1)
 
 
 _INDEXES: weakref.WeakKeyDictionary[ObjectMap, dict[str, PlaceIndex]] = weakref.WeakKeyDictionary()

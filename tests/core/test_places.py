@@ -131,3 +131,13 @@ def test_tiny_maps_build_an_empty_index(n):
     world = ObjectMap([SemanticObject("a", "chair", [0, 0, 0])][:n], up=[0, 0, 1], name="tiny")
     index = PlaceIndex(world, RetrievalConfig(above=0))
     assert len(index.words) == 0
+
+
+def test_places_follow_the_rooms_objects_are_in():
+    a = SemanticObject("a", "chair", [0.5, 0.5, 0.5], extra={"room": "R(1)"})
+    b = SemanticObject("b", "table", [1.0, 0.5, 0.5], extra={"room": "R(2)"})  # through a wall
+    c = SemanticObject("c", "lamp", [1.5, 0.5, 0.5])  # no room
+    d = SemanticObject("d", "sofa", [1.2, 0.8, 0.5], extra={"room": "R(1)"})
+    index = PlaceIndex(ObjectMap([a, b, c, d], up=[0, 0, 1], name="rooms"), RetrievalConfig())
+    assert index.n_cells == 3  # one 4 m cell, cut by the rooms
+    assert index.cell_of[0] == index.cell_of[3] != index.cell_of[1] != index.cell_of[2]
