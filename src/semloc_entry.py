@@ -6,6 +6,7 @@ module's initialisation.  So this module, which imports nothing heavy and sits o
 `semloc` package (importing any of it runs `semloc/__init__`), keeps the signals that arrive
 while the command is imported, and `semloc.cli.main` raises the first of them as soon as its
 own handlers are installed (`semloc.io.interrupts`): status 130 / 143, `semloc: interrupted`.
+`python -m semloc` gets the same from the top of `semloc/__init__` (`hold_signals_for_module`).
 
 A process that `multiprocessing` spawns from the script (the Dask workers of `semloc bench`)
 runs the script again as its `__mp_main__` before anything else: imported there, this module
@@ -37,6 +38,29 @@ def hold_signals() -> None:
     """From now until the command's own handlers take over, keep SIGINT and SIGTERM."""
     for signum in (signal.SIGINT, signal.SIGTERM):
         signal.signal(signum, _keep)
+
+
+def hold_signals_for_module() -> None:
+    """`python -m semloc ...` (or `-m semloc.cli`) imports the package before its `__main__`
+    runs: called at the top of `semloc/__init__`, keep SIGINT and SIGTERM from then on, as the
+    script does (its `__main__` then runs `main`).  Nothing for any other module run with -m
+    that imports semloc, nor for a program that imports it."""
+    if sys.argv[:1] == ["-m"] and _module_run() in ("semloc", "semloc.cli"):
+        hold_signals()
+
+
+def _module_run() -> str | None:
+    """While `python [options] -m MODULE args` locates its module (`sys.argv` is then `-m` and
+    the args): MODULE, read from the interpreter's own command line."""
+    first = len(sys.orig_argv) - len(sys.argv)  # where MODULE is: the args follow it
+    if first < 2:
+        return None
+    before, name = sys.orig_argv[first - 1], sys.orig_argv[first]
+    if before.startswith("-") and not before.startswith("--") and before.endswith("m"):
+        return name  # -m semloc, -Im semloc
+    if name.startswith("-") and not name.startswith("--") and "m" in name:
+        return name.split("m", 1)[1]  # -msemloc
+    return None
 
 
 def main() -> int:

@@ -8,6 +8,13 @@ r = semloc.localize(g, l, prior=semloc.Prior(position=[x, y, z], radius=5.0))  #
 semloc.warmup()                  # compile the inner loops ahead (once after installing)
 """
 
+import sys as _sys
+
+if _sys.argv[:1] == ["-m"]:  # `python -m ...` locating its module: Ctrl-C from the first moment
+    import semloc_entry as _entry  # (for `python -m semloc` only, see its docstring)
+
+    _entry.hold_signals_for_module()
+
 from semloc import descriptors  # registers the descriptor kinds (numpy only)
 from semloc.alignment import AlignmentConfig, align
 from semloc.compiling import warmup  # compiles the inner loops ahead; says once when it does

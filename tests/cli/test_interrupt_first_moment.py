@@ -2,7 +2,7 @@
 SIGINT to the whole process group.  Exit status 130, the one line `semloc: interrupted` on
 stderr, no traceback, no half-written output, no process left behind; `bench` also while Dask
 starts its workers (a worker cut while it started failed the cluster: "Nanny failed to start"
-and ~150 lines of tracebacks).
+and ~150 lines of tracebacks; one cut while its interpreter started printed a traceback).
 
 Bounded: a few moments per command.  `benchmarks/interrupts.py` repeats them many times.
 """
@@ -49,14 +49,15 @@ BENCH = ["bench", "--quick", "--sequences", "1", "--starts", "1", "--workers", "
 NOTICE = "compiling semloc's inner loops"  # the first use of a fresh cache says so
 
 
-def run_and_interrupt(tmp_path: Path, argv: list[str], at: float, patch: str = "") -> tuple:
-    """Start the script in its own process group, SIGINT the group after `at` s; (status,
-    stderr lines without the compile notice)."""
+def run_and_interrupt(
+    tmp_path: Path, argv: list[str], at: float, patch: str = "", module: bool = False
+) -> tuple:
+    """Start the script (or `python -m semloc`) in its own process group, SIGINT the group
+    after `at` s; (status, stderr lines without the compile notice)."""
     script = tmp_path / "semloc"
     script.write_text(SCRIPT.format(patch=patch))
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join(sys.path), "OMP_NUM_THREADS": "1",
-           "MPLCONFIGDIR": str(tmp_path / ".mpl")}  # fmt: skip
-    proc = subprocess.Popen([sys.executable, str(script), *argv], cwd=tmp_path, env=env,
+    command = ["-m", "semloc"] if module else [str(script)]
+    proc = subprocess.Popen([sys.executable, *command, *argv], cwd=tmp_path, env=_env(tmp_path),
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             start_new_session=True)  # fmt: skip
     time.sleep(at)
@@ -66,6 +67,11 @@ def run_and_interrupt(tmp_path: Path, argv: list[str], at: float, patch: str = "
     assert_group_ends(proc.pid)
     lines = [line for line in err.splitlines() if line.strip() and NOTICE not in line]
     return proc.returncode, lines
+
+
+def _env(tmp_path: Path) -> dict[str, str]:
+    return {**os.environ, "PYTHONPATH": os.pathsep.join(sys.path), "OMP_NUM_THREADS": "1",
+            "MPLCONFIGDIR": str(tmp_path / ".mpl")}  # fmt: skip
 
 
 def assert_group_ends(group: int) -> None:
@@ -80,18 +86,33 @@ def assert_group_ends(group: int) -> None:
     raise AssertionError("processes of the interrupted command are still running")
 
 
-@pytest.mark.parametrize("at", [0.25, 0.5, 1.5])
-def test_ctrl_c_while_the_demo_starts(tmp_path, at):
+@pytest.mark.parametrize("at", [0.05, 0.3, 1.0])
+@pytest.mark.parametrize("module", [False, True], ids=["script", "python -m semloc"])
+def test_ctrl_c_while_the_demo_starts(tmp_path, at, module):
     """From the script's first line on (the interpreter's own start-up takes a few tens of
     milliseconds, Python's handler there), through the import of the command (most of the
-    first second) and its start: the command's answer."""
-    code, lines = run_and_interrupt(tmp_path, ["demo", "--keyframes", "6", "--out", "d"], at)
+    first second) and its start: the command's answer.  `python -m semloc` imports the package
+    first: it holds the signals from there on."""
+    argv = ["demo", "--keyframes", "6", "--out", "d"]
+    code, lines = run_and_interrupt(tmp_path, argv, at, module=module)
     assert (code, lines) == (130, [MESSAGE])
     assert not (tmp_path / "d").exists()
 
 
+def test_other_programs_keep_their_ctrl_c(tmp_path):
+    """Only `python -m semloc` holds the signals while it imports: a program that imports
+    semloc (run as a file or with -m) keeps Python's KeyboardInterrupt."""
+    (tmp_path / "other.py").write_text(
+        "import signal\nimport semloc\nprint(signal.getsignal(signal.SIGINT).__name__)\n"
+    )
+    for command in (["-m", "other"], ["other.py"], ["-c", "import other"]):
+        done = subprocess.run([sys.executable, *command], cwd=tmp_path, env=_env(tmp_path),
+                              capture_output=True, text=True, timeout=120)  # fmt: skip
+        assert (done.returncode, done.stdout.strip()) == (0, "default_int_handler"), done.stderr
+
+
 @pytest.mark.slow
-@pytest.mark.parametrize("at", [2.0, 3.0])  # ~1 s: a worker still importing (an open gap)
+@pytest.mark.parametrize("at", [0.05, 0.3, 1.0, 2.0, 3.0])  # ~1 s: the workers start
 def test_ctrl_c_while_dask_starts_its_workers(tmp_path, at):
     code, lines = run_and_interrupt(tmp_path, BENCH, at, TINY)
     assert not any("Traceback" in line or "Nanny" in line for line in lines), lines

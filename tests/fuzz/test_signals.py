@@ -371,6 +371,30 @@ def test_the_local_cluster_workers_ignore_sigint():
     assert list(ignores.values()) == [True]
 
 
+@pytest.mark.skipif(not Path("/proc/self/status").exists(), reason="reads /proc")
+def test_the_local_cluster_workers_start_with_sigint_blocked():
+    """Started inside `children_spared`, the workers have SIGINT blocked from their first
+    instruction (a terminal's Ctrl-C that reached one while its interpreter started printed a
+    traceback), though Dask starts them from its own threads and `multiprocessing` unblocks
+    the signals in the thread that starts its resource tracker; the caller's mask comes back."""
+    import dask.distributed
+
+    from semloc.io.interrupts import children_spared
+
+    def blocked() -> bool:  # the worker process's main thread, as the kernel sees it
+        status = Path("/proc/self/status").read_text()
+        mask = next(line for line in status.splitlines() if line.startswith("SigBlk:"))
+        return bool(int(mask.split()[1], 16) >> (signal.SIGINT - 1) & 1)
+
+    with children_spared():
+        cluster = dask.distributed.LocalCluster(
+            n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0"
+        )
+    with cluster, dask.distributed.Client(cluster) as client:
+        assert list(client.run(blocked).values()) == [True, True]
+    assert signal.SIGINT not in signal.pthread_sigmask(signal.SIG_BLOCK, set())
+
+
 def test_an_interrupt_swallowed_by_a_finaliser_is_delivered_again():
     """A signal that arrives while a finaliser or weakref callback runs raises there, where
     Python prints "Exception ignored" and goes on; it must still stop the command."""

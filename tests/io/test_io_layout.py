@@ -18,7 +18,8 @@ HOMES = {"reading": ["read_json", "read_regular", "parse_json", "npy_header", "r
          "output": ["write_files", "write_atomic", "staged_folder"],
          "answers": ["answer_document", "answer_text"],
          "interrupts": ["Interrupted", "interrupts_raise", "interrupts_deferred",
-                        "interrupts_wait", "signals_held", "ignore_sigint"]}  # fmt: skip
+                        "interrupts_wait", "signals_held", "children_spared",
+                        "ignore_sigint"]}  # fmt: skip
 
 
 def test_the_package_api_is_importable():

@@ -1,7 +1,7 @@
-"""`python -m semloc.cli`: the `semloc` command."""
+"""`python -m semloc.cli`: the `semloc` command, as `python -m semloc`."""
 
 import sys
 
-from semloc.cli import main
+from semloc_entry import main
 
 sys.exit(main())

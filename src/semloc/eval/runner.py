@@ -41,7 +41,7 @@ from semloc.eval.protocol import (
     with_night_rows,
 )  # fmt: skip
 from semloc.eval.report import write_outputs
-from semloc.io.interrupts import ignore_sigint, interrupts_deferred
+from semloc.io.interrupts import children_spared, ignore_sigint, interrupts_deferred
 from semloc.io.output import staged_folder
 
 _ONE_THREAD = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
@@ -172,10 +172,10 @@ def run_benchmark(
         else:
             # an interrupt waits until the cluster is up: cut half-way, its worker processes
             # and their watcher threads could not be closed (a crash at interpreter exit).
-            # A terminal's Ctrl-C also reaches the workers while they start: one cut in its
-            # start fails the cluster ("Nanny failed to start"), which the deferral reports
-            # as the interrupt it is (`semloc_entry` keeps it from the script's workers)
-            with interrupts_deferred():
+            # A terminal's Ctrl-C also reaches the workers: they start with SIGINT blocked (one
+            # cut in its start printed a traceback, or failed the cluster: "Nanny failed to
+            # start", which the deferral would report as the interrupt it is)
+            with children_spared():
                 cluster = LocalCluster(
                     n_workers=workers or os.cpu_count() or 1, threads_per_worker=1,
                     processes=True, dashboard_address=":0", silence_logs=logging.CRITICAL,

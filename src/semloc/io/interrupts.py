@@ -21,8 +21,9 @@ A signal that arrives while a block that waits raises an exception of its own (a
 whose workers took the terminal's Ctrl-C and failed to start) makes the block raise
 `Interrupted` instead: the interrupt, not its consequence, is what the user sees.
 
-Worker processes that the command closes itself (Dask's) ignore SIGINT (`ignore_sigint`), so
-that a terminal's Ctrl-C, which reaches the whole process group, prints nothing there.  The
+Worker processes that the command closes itself (Dask's) are started with SIGINT blocked
+(`children_spared`) and ignore it once they run (`ignore_sigint`), so that a terminal's Ctrl-C,
+which reaches the whole process group, prints nothing there.  The
 one handler outside this module is the `semloc` script's (`semloc_entry`): it keeps the
 signals that arrive while the command is still being imported (this package included) and
 hands them to `interrupts_raise(early=...)`, so that Ctrl-C is honoured from the first moment;
@@ -111,6 +112,31 @@ def signals_held() -> Iterator[None]:
             yield
     finally:
         signal.pthread_sigmask(signal.SIG_SETMASK, previous)
+
+
+@contextmanager
+def children_spared() -> Iterator[None]:
+    """Start worker threads and processes that the command closes itself (a Dask cluster)
+    inside this block: SIGINT is blocked for the calling thread meanwhile, so the threads it
+    starts and the processes they spawn inherit it blocked (a thread starts with its creator's
+    signal mask, a process with its parent thread's, kept across exec) and a terminal's Ctrl-C,
+    which reaches the whole process group, cannot cut a worker from its first instruction on
+    (one cut while Python itself started printed a KeyboardInterrupt traceback).  This process
+    still gets the signal: the block is deferred (`interrupts_deferred`), a SIGINT still
+    pending when the mask comes back included.
+
+    `multiprocessing`'s resource tracker is started first: the thread that starts it unblocks
+    SIGINT afterwards (`resource_tracker.ensure_running`), and Dask's event-loop thread did so,
+    so the worker processes it then started had SIGINT unblocked all the same."""
+    from multiprocessing import resource_tracker
+
+    with interrupts_deferred():
+        resource_tracker.ensure_running()  # ignores SIGINT itself, from its first moment
+        previous = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+        try:
+            yield
+        finally:
+            signal.pthread_sigmask(signal.SIG_SETMASK, previous)
 
 
 def ignore_sigint() -> None:
