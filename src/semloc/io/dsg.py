@@ -262,12 +262,14 @@ def _symbols(objmap: ObjectMap) -> dict[str, tuple[str, int]]:
     """A node symbol per object: the one it came with, its id if that is a symbol, else the
     next free `O(n)`."""
     chosen: dict[str, tuple[str, int]] = {}
+    taken: set[tuple[str, int]] = set()
     for obj in objmap:
         text = _kept_symbol(obj) or (obj.id if SYMBOL.match(obj.id) else None)
         if text is not None:
             letter, number = SYMBOL.match(text).groups()  # type: ignore[union-attr]
-            if (letter, int(number)) not in chosen.values():
+            if (letter, int(number)) not in taken:
                 chosen[obj.id] = (letter, int(number))
+                taken.add(chosen[obj.id])
     used = {n for letter, n in chosen.values() if letter == "O"}
     free = (n for n in range(10**9) if n not in used)
     for obj in objmap:
