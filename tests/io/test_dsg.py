@@ -1,6 +1,7 @@
 """Spark-DSG scene graphs: graphs built with spark-dsg's own API convert to maps (ids, label
 names, positions, boxes, mesh points), maps export to graphs and back without loss (property
-test), update-map's flags travel, and bad graphs end in one line with exit 2."""
+test), update-map's flags travel, objects keep their rooms both ways, and bad graphs end in one
+line with exit 2."""
 
 from __future__ import annotations
 
@@ -120,6 +121,9 @@ def maps(draw):
         size = draw(st.none() | st.lists(st.floats(0.0625, 4, width=32), min_size=3, max_size=3))
         points = draw(st.none() | st.lists(xyz, min_size=1, max_size=5))
         extra = {"missing": True} if draw(st.booleans()) else {}
+        room = draw(st.none() | st.sampled_from(["R(1)", "R(2)", "kitchen", "O(3)", "p(0)"]))
+        if room is not None:
+            extra["room"] = room
         objects.append(SemanticObject(object_id, draw(labels), draw(xyz), size,
                                       None if size is None else np.eye(3), points, extra=extra))  # fmt: skip
     return ObjectMap(objects, up=[0, 0, 1], name="m")
@@ -145,6 +149,7 @@ def test_a_map_goes_to_a_graph_and_back_unchanged(tmp_path, objmap):
         if obj.points is not None:
             assert np.allclose(got.points, obj.points, atol=1e-5)
         assert got.extra.get("missing") == obj.extra.get("missing")
+        assert got.extra.get("room") == obj.extra.get("room")
 
 
 def test_export_dsg_and_convert_round_trip_through_the_cli(tmp_path):
@@ -207,3 +212,77 @@ def test_update_map_flags_travel_to_the_graph(tmp_path):
     nodes = {str(n.id): n.attributes.metadata.get() for n in graph.get_layer(2).nodes}
     assert nodes["O(4)"] == {"semloc": {"missing": True}}
     assert nodes["O(0)"] == {"semloc": {"id": "new:l7"}}
+
+
+def rooms_graph(path):
+    """Two rooms as Hydra links them: objects under places under rooms, one object under a
+    room directly, one under both a place of R(1) and the room R(2) (the room wins), one under a place with
+    no room, one under nothing; a building above the rooms."""
+    graph = spark.DynamicSceneGraph()
+
+    def add(layer, letter, index, attrs, position):
+        attrs.position = np.asarray(position, float)
+        graph.add_node(layer, spark.NodeSymbol(letter, index), attrs)
+
+    for index, position in [(1, [0, 0, 1]), (2, [5, 0, 1])]:
+        add(spark.DsgLayers.ROOMS, "R", index, spark.RoomNodeAttributes(), position)
+    add(spark.DsgLayers.BUILDINGS, "B", 0, spark.RoomNodeAttributes(), [2.5, 0, 1])
+    for index, position in enumerate([[0, 0, 1], [1, 0, 1], [5, 0, 1], [9, 9, 1]]):
+        add(spark.DsgLayers.PLACES, "p", index, spark.PlaceNodeAttributes(), position)
+    add(spark.DsgLayers.PLACES, "P", 7, spark.PlaceNodeAttributes(), [0, 1, 1])  # sorts first
+    for index in range(7):
+        attrs = spark.ObjectNodeAttributes()
+        attrs.semantic_label = 3
+        add(spark.DsgLayers.OBJECTS, "O", index, attrs, [index, 0, 0.5])
+    edges = [("B0", "R1"), ("B0", "R2"), ("R1", "p0"), ("R1", "p1"), ("R2", "p2"),
+             ("p0", "O0"), ("p1", "O1"), ("p2", "O2"), ("R2", "O3"),
+             ("R1", "P7"), ("P7", "O4"), ("R2", "O4"), ("p3", "O5")]  # fmt: skip
+    for parent, child in edges:
+        assert graph.insert_edge(spark.NodeSymbol(parent[0], int(parent[1:])),
+                                 spark.NodeSymbol(child[0], int(child[1:])))  # fmt: skip
+    graph.set_labelspace(spark.Labelspace(LABELSPACE), 2, 0)
+    graph.save(str(path), True)
+
+
+ROOMS = {"O(0)": "R(1)", "O(1)": "R(1)", "O(2)": "R(2)", "O(3)": "R(2)", "O(4)": "R(2)"}
+
+
+def test_objects_keep_the_room_they_are_in(tmp_path):
+    rooms_graph(tmp_path / "scene.json")
+    objmap = load_dsg(tmp_path / "scene.json")
+    assert {o.id: o.extra.get("room") for o in objmap if "room" in o.extra} == ROOMS
+    assert objmap.get("O(0)").extra["dsg"] == {"symbol": "O(0)", "semantic_label": 3}
+    assert "room" not in objmap.get("O(5)").extra and "room" not in objmap.get("O(6)").extra
+    # the map file keeps the rooms (an object key semloc does not know is kept)
+    assert (
+        main(["convert", "dsg", str(tmp_path / "scene.json"), "-o", str(tmp_path / "m.json")]) == 0
+    )
+    saved = semloc.load_map(tmp_path / "m.json")
+    assert {o.id: o.extra["room"] for o in saved if "room" in o.extra} == ROOMS
+
+
+def test_rooms_go_to_a_graph_and_back(tmp_path):
+    rooms_graph(tmp_path / "scene.sparkdsg")
+    objmap = load_dsg(tmp_path / "scene.sparkdsg")
+    path = tmp_path / "again.sparkdsg"
+    path.write_bytes(dsg_bytes(objmap, path))
+    graph = spark.DynamicSceneGraph.load(str(path))
+    rooms = {str(n.id): n for n in graph.get_layer(spark.DsgLayers.ROOMS).nodes}
+    assert sorted(rooms) == ["R(1)", "R(2)"]
+    assert np.allclose(rooms["R(1)"].attributes.position, [0.5, 0, 0.5])  # mean of O(0), O(1)
+    assert np.allclose(rooms["R(2)"].attributes.position, [3, 0, 0.5])
+    children = {str(spark.NodeSymbol(c)) for c in rooms["R(2)"].children()}
+    assert children == {"O(2)", "O(3)", "O(4)"}
+    assert rooms["R(1)"].attributes.metadata.get() in ({}, None)
+    back = load_dsg(path)
+    assert {o.id: o.extra["room"] for o in back if "room" in o.extra} == ROOMS
+    # a room id that is no free symbol gets the next free R(n) and keeps its id
+    renamed = ObjectMap([SemanticObject("R(0)", "chair", [0, 0, 0], extra={"room": "kitchen"}),
+                         SemanticObject("b", "table", [2, 0, 0], extra={"room": "R(0)"})],
+                        up=[0, 0, 1])  # fmt: skip
+    path.write_bytes(dsg_bytes(renamed, path))
+    graph = spark.DynamicSceneGraph.load(str(path))
+    notes = {str(n.id): n.attributes.metadata.get() for n in graph.get_layer(4).nodes}
+    assert notes == {"R(1)": {"semloc": {"id": "kitchen"}}, "R(2)": {"semloc": {"id": "R(0)"}}}
+    back = load_dsg(path)
+    assert [back.get(i).extra["room"] for i in ("R(0)", "b")] == ["kitchen", "R(0)"]

@@ -9,11 +9,17 @@ label map the caller gives; `class_<n>` where neither has it), position the node
 position when the two differ), points the mesh vertices the node connects to (`mesh_connections`),
 `up` +z (Hydra's world frame).  Each object keeps `{"dsg": {"symbol", "semantic_label"}}` so a
 map written back keeps symbols and label numbers; objects flagged missing by `semloc update-map`
-carry `{"semloc": {"missing": true}}` in the node metadata.
+carry `{"semloc": {"missing": true}}` in the node metadata.  An object under a room keeps it as
+`extra["room"]` (the room node's symbol, `R(3)`, or the semloc room id kept in its metadata):
+the first node of the ROOMS layer (layer 4) up its parent chain, as Hydra links objects to
+places and places to rooms (or objects to rooms directly); one walk per node, remembered, so
+the rooms of a large graph cost one visit per node.
 
 Writing (`dsg_bytes`): one OBJECTS node per object (symbol kept, or the next free `O(n)`), the
 label space of the map's labels (numbers kept where the map came from a graph), OBB boxes, and
-a mesh holding every object's points as vertices (no faces), connected to their nodes.
+a mesh holding every object's points as vertices (no faces), connected to their nodes, and a
+ROOMS node per `extra["room"]` (its symbol where the room is one no object takes, else the next
+free `R(n)` with the id in its metadata) at the mean position of its objects, their parent.
 """
 
 from __future__ import annotations
@@ -32,6 +38,7 @@ from semloc.maps import MapError, ObjectMap, SemanticObject
 from semloc.pointsets import voxel_downsample
 
 OBJECTS_LAYER = 2
+ROOMS_LAYER = 4
 SYMBOL = re.compile(r"^([A-Za-z])\((\d+)\)$")
 UP = np.array([0.0, 0.0, 1.0])
 
@@ -57,7 +64,10 @@ def load_dsg(
         raise MapError(f"{path}: the scene graph has no objects (layer {OBJECTS_LAYER}, OBJECTS)")
     names = {**_label_names(graph), **(names or {})}
     vertices = _vertices(graph)
-    objects = [_object(path, node, names, vertices, voxel) for node in nodes]
+    rooms = _rooms(graph, nodes)
+    objects = [
+        _object(path, node, names, vertices, voxel, rooms.get(node.id.value)) for node in nodes
+    ]
     return ObjectMap(objects, up=UP, name=path.name.split(".")[0])
 
 
@@ -82,6 +92,44 @@ def _label_names(graph: Any) -> dict[int, str]:
         return {}
 
 
+def _rooms(graph: Any, nodes: list[Any]) -> dict[int, str]:
+    """The room id of each node of `nodes` under a room (by node id): the first ROOMS node up
+    its parents (a parent in ROOMS first, then the others' rooms, lowest id first)."""
+    try:
+        key = graph.get_layer_key("ROOMS")
+    except Exception:  # a graph without layer names
+        key = None
+    rooms_layer = ROOMS_LAYER if key is None else int(key.layer)
+    found: dict[int, str | None] = {}  # node id -> its room id, None for none (or being walked)
+
+    def room_of(node_id: int) -> str | None:
+        if node_id in found:
+            return found[node_id]
+        found[node_id] = None  # a cycle ends here
+        node = graph.get_node(node_id)
+        if node.layer.layer == rooms_layer:
+            meta = node.attributes.metadata.get() or {}
+            own = meta.get("semloc") if isinstance(meta.get("semloc"), dict) else {}
+            kept = own.get("id")
+            found[node_id] = kept if isinstance(kept, str) and kept else str(node.id)
+        elif node.layer.layer < rooms_layer:
+            parents = sorted(node.parents())
+            direct = [p for p in parents if graph.get_node(p).layer.layer == rooms_layer]
+            for parent in direct or parents:
+                room = room_of(parent)
+                if room is not None:
+                    found[node_id] = room
+                    break
+        return found[node_id]
+
+    rooms = {}
+    for node in nodes:
+        room = room_of(node.id.value)
+        if room is not None:
+            rooms[node.id.value] = room
+    return rooms
+
+
 def _vertices(graph: Any) -> np.ndarray | None:
     if not graph.has_mesh() or graph.mesh.num_vertices() == 0:
         return None
@@ -89,7 +137,7 @@ def _vertices(graph: Any) -> np.ndarray | None:
 
 
 def _object(path: Path, node: Any, names: dict[int, str], vertices: np.ndarray | None,
-            voxel: float) -> SemanticObject:  # fmt: skip
+            voxel: float, room: str | None = None) -> SemanticObject:  # fmt: skip
     attrs = node.attributes
     symbol = str(node.id)
     meta = attrs.metadata.get() or {}
@@ -111,6 +159,8 @@ def _object(path: Path, node: Any, names: dict[int, str], vertices: np.ndarray |
     extra: dict[str, Any] = {"dsg": {"symbol": symbol, "semantic_label": number}}
     if own.get("missing") is True:
         extra["missing"] = True
+    if room is not None:
+        extra["room"] = room
     object_id = own.get("id") if isinstance(own.get("id"), str) and own.get("id") else symbol
     try:
         return SemanticObject(object_id, label, position, size, rotation, points, extra=extra)
@@ -139,6 +189,7 @@ def dsg_bytes(objmap: ObjectMap, path: str | os.PathLike[str]) -> bytes:
         graph.add_node(OBJECTS_LAYER, spark.NodeSymbol(letter, index), attrs)
     graph.set_labelspace(spark.Labelspace({n: label for label, n in numbers.items()}),
                          OBJECTS_LAYER, 0)  # fmt: skip
+    _add_rooms(spark, graph, objmap, symbols)
     if offset:
         graph.mesh = mesh
     suffix = Path(path).suffix or ".json"
@@ -146,6 +197,38 @@ def dsg_bytes(objmap: ObjectMap, path: str | os.PathLike[str]) -> bytes:
         target = Path(folder) / f"graph{suffix}"
         graph.save(str(target), True)
         return target.read_bytes()
+
+
+def _add_rooms(spark: Any, graph: Any, objmap: ObjectMap,
+               symbols: dict[str, tuple[str, int]]) -> None:  # fmt: skip
+    """A ROOMS node per room id of the objects' `extra["room"]`, at their mean position, the
+    parent of each: the room's symbol where it is one the objects leave free, else the next
+    free `R(n)` keeping the id in its metadata."""
+    members: dict[str, list[SemanticObject]] = {}
+    for obj in objmap:
+        room = obj.extra.get("room")
+        if isinstance(room, str) and room:
+            members.setdefault(room, []).append(obj)
+    taken = set(symbols.values())
+    chosen: dict[str, tuple[str, int]] = {}
+    for room in members:
+        match = SYMBOL.match(room)
+        if match is not None and (match[1], int(match[2])) not in taken:
+            chosen[room] = (match[1], int(match[2]))
+            taken.add(chosen[room])
+    free = (n for n in range(10**9) if ("R", n) not in taken)
+    for room in members:
+        if room not in chosen:
+            chosen[room] = ("R", next(free))
+    for room, objects in members.items():
+        attrs = spark.RoomNodeAttributes()
+        attrs.position = np.mean([np.asarray(o.position, dtype=float) for o in objects], axis=0)
+        letter, index = chosen[room]
+        if room != f"{letter}({index})":  # the symbol is not the id: keep the id
+            attrs.metadata.set({"semloc": {"id": room}})
+        graph.add_node(ROOMS_LAYER, spark.NodeSymbol(letter, index), attrs)
+        for obj in objects:
+            graph.insert_edge(spark.NodeSymbol(letter, index), spark.NodeSymbol(*symbols[obj.id]))
 
 
 def _attributes(spark: Any, obj: SemanticObject, number: int, symbol: str) -> Any:
@@ -179,12 +262,14 @@ def _symbols(objmap: ObjectMap) -> dict[str, tuple[str, int]]:
     """A node symbol per object: the one it came with, its id if that is a symbol, else the
     next free `O(n)`."""
     chosen: dict[str, tuple[str, int]] = {}
+    taken: set[tuple[str, int]] = set()
     for obj in objmap:
         text = _kept_symbol(obj) or (obj.id if SYMBOL.match(obj.id) else None)
         if text is not None:
             letter, number = SYMBOL.match(text).groups()  # type: ignore[union-attr]
-            if (letter, int(number)) not in chosen.values():
+            if (letter, int(number)) not in taken:
                 chosen[obj.id] = (letter, int(number))
+                taken.add(chosen[obj.id])
     used = {n for letter, n in chosen.values() if letter == "O"}
     free = (n for n in range(10**9) if n not in used)
     for obj in objmap:
