@@ -3,7 +3,7 @@
 
     PYTHONPATH=src SEMLOC_DATA=../shared/data/real python benchmarks/building.py
         [--sizes 1000 10000 100000] [--bases rooms scannet replica] [--views 40]
-        [--starts 20] [--no-retrieval] [--quick]
+        [--starts 20] [--no-retrieval] [--set KEY=JSON ...] [--quick]
 
 Buildings: a base tiled side by side into about N objects, each copy keeping a random 70 % of
 the base's objects (`semloc.sim.longwalk.tiled`: copies are alike, not identical), 64 surface
@@ -148,12 +148,13 @@ def copies(world: ObjectMap, ids: list[str], truth: np.ndarray, trees: dict) -> 
 
 
 # ------------------------------------------------------------------------------- one building
-def measure(base_name: str, size: int, n_views: int, retrieval: bool, seed: int) -> dict:
+def measure(base_name: str, size: int, n_views: int, settings: dict, seed: int) -> dict:
     room = base(base_name)
     if room is None:
         return {}
     world = building(room, size)
-    config = LocalizerConfig() if retrieval else LocalizerConfig(retrieval={"above": None})
+    config = LocalizerConfig(**settings)
+    retrieval = config.retrieval.above is not None
     tick = time.process_time()
     index = place_index(world, config.retrieval)
     index_s = time.process_time() - tick
@@ -213,7 +214,7 @@ def observe(world: ObjectMap, truth: np.ndarray, spot: np.ndarray, rng) -> list[
     ]  # fmt: skip
 
 
-def active(world: ObjectMap, starts: int, follow: bool, seed: int) -> list[dict]:
+def active(world: ObjectMap, config, starts: int, follow: bool, seed: int) -> list[dict]:
     """Runs from ambiguous starts, following `next_look` or walking on (module docstring)."""
     rng = np.random.default_rng(seed)
     low, high = world.positions.min(axis=0), world.positions.max(axis=0)
@@ -221,7 +222,7 @@ def active(world: ObjectMap, starts: int, follow: bool, seed: int) -> list[dict]
     while len(runs) < starts:
         anchor = world.positions[rng.integers(len(world))]
         truth = yaw_pose(rng.uniform(-np.pi, np.pi), [anchor[0] + 0.5, anchor[1], 0.0])
-        localizer = Localizer(world, local_up=[0, 0, 1])
+        localizer = Localizer(world, config, local_up=[0, 0, 1])
         spot, heading = np.zeros(3), np.array([1.0, 0.0, 0.0])
         seen = observe(world, truth, spot, rng)
         if len(seen) < 2:
@@ -307,20 +308,27 @@ def main() -> int:
     parser.add_argument("--starts", type=int, default=20)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--no-retrieval", action="store_true", help="cluster every candidate")
+    parser.add_argument(
+        "--set", nargs="+", default=[], metavar="KEY=JSON",
+        help="Localizer settings, e.g. wait_above=2000 (flat LocalizerConfig fields)",
+    )  # fmt: skip
     parser.add_argument("--quick", action="store_true", help="1k and 10k, 10 views, 8 starts")
     parser.add_argument("--worker", nargs=2, metavar=("BASE", "SIZE"), help=argparse.SUPPRESS)
     parser.add_argument("--active-worker", type=int, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.quick:
         args.sizes, args.views, args.starts = [1000, 10000], 10, 8
-    retrieval = not args.no_retrieval
+    settings = {key: json.loads(value) for key, value in (a.split("=", 1) for a in args.set)}
+    if args.no_retrieval:
+        settings["above"] = None
     if args.worker:
-        found = measure(args.worker[0], int(args.worker[1]), args.views, retrieval, args.seed)
+        found = measure(args.worker[0], int(args.worker[1]), args.views, settings, args.seed)
         print(json.dumps(found))
         return 0
     if args.active_worker:
         world = building(base("rooms"), args.active_worker)
-        runs = {name: active(world, args.starts, follow, args.seed)
+        config = LocalizerConfig(**settings)
+        runs = {name: active(world, config, args.starts, follow, args.seed)
                 for name, follow in (("follows next_look", True), ("walks on", False))}  # fmt: skip
         print(json.dumps({"objects": len(world), "runs": runs}))
         return 0
@@ -331,6 +339,7 @@ def main() -> int:
             command = [sys.executable, __file__, "--worker", name, str(size), "--views",
                        str(args.views), "--seed", str(args.seed)]  # fmt: skip
             command += ["--no-retrieval"] if args.no_retrieval else []
+            command += ["--set", *args.set] if args.set else []
             out = subprocess.run(command, capture_output=True, text=True)
             if out.returncode != 0:
                 print(f"{name}-{size}: failed\n{out.stderr[-2000:]}", file=sys.stderr)
@@ -344,6 +353,8 @@ def main() -> int:
     print(building_table(results))
     command = [sys.executable, __file__, "--active-worker", str(min(args.sizes)), "--starts",
                str(args.starts), "--seed", str(args.seed)]  # fmt: skip
+    command += ["--set", *args.set] if args.set else []
+    command += ["--no-retrieval"] if args.no_retrieval else []
     out = subprocess.run(command, capture_output=True, text=True)
     if out.returncode == 0:
         found = json.loads(out.stdout.strip().splitlines()[-1])

@@ -532,7 +532,7 @@ class Localizer:
         clustered with, the search regrows from the window."""
         assert self._places is not None
         objects = self.window.objects
-        found = [self._found[o.id][1] for o in objects]
+        found = [self._prior_gated(o, self._found[o.id][1]) for o in objects]
         positions = np.array([o.position for o in objects]).reshape(-1, 3)
         cfg = self.config.clustering
         support = self._places.support(positions, found, cfg.gamma, cfg.distance_tolerance)
@@ -546,11 +546,15 @@ class Localizer:
         self._retrieved = retrieved
 
     def _gated(self, obj: SemanticObject, found: np.ndarray) -> np.ndarray:
-        """The candidates the clustering gets: those in the places retrieved for the window
-        (large maps) that the prior lets `obj` be (all without either).  Evidence,
-        verification and tracking see all candidates."""
+        """The candidates the clustering gets: those the prior lets `obj` be, in the places
+        retrieved for the window (large maps); all without either.  Evidence, verification
+        and tracking see all candidates."""
         if self._places is not None and obj.id in self._retrieved:
-            found = self._retrieved[obj.id]
+            return self._retrieved[obj.id]  # (retrieved among the prior's candidates)
+        return self._prior_gated(obj, found)
+
+    def _prior_gated(self, obj: SemanticObject, found: np.ndarray) -> np.ndarray:
+        """The candidates of `obj` the prior allows (all without a prior)."""
         if self._prior is None:
             return found
         slack = self._gate_slack()[found]
