@@ -28,12 +28,12 @@ for detections the map lacks or mislabelled ones).  A local object with no neigh
 `reach` keeps every candidate.  Every place as good as the best is kept, so a view that has
 identical copies elsewhere keeps them all, and the decision still sees the rivals of a place.
 
-A local object whose retrieved places still hold more candidates than `wait_above` and a
-`wait_share` of the map's objects (one chair of a first view in a building of 40,000 chairs)
-*waits*: it joins the clustering once more objects narrow its places (the search then regrows
-from the window).  The clustering keeps a bounded pool of sets, so feeding it tens of
-thousands of equally plausible singletons only made it keep an arbitrary share of them; while
-every object waits the answer is `failed`, with the reason that the view fits too many places.
+A local object whose retrieved places still hold more than `wait_above` candidates (one chair
+of a first view in a building of 40,000 chairs) *waits*: it joins the clustering once more
+objects narrow its places (the search then regrows from the window).  The clustering keeps a
+bounded pool of sets (`max_sets`, 2000), so feeding it tens of thousands of equally plausible
+singletons only made it keep an arbitrary share of them; while every object waits the answer
+is `failed`, with the reason that the view fits too many places.
 
 Small maps are not retrieved at all (`RetrievalConfig.above`): their answers are exactly those
 of the clustering on every candidate.
@@ -70,13 +70,12 @@ class RetrievalConfig(BaseModel):
     )
     bin: float = Field(0.5, gt=0, description="Distance bin of a constellation word (m).")
     wait_above: int = Field(
-        1000,
+        2000,
         ge=1,
-        description="A local object with more candidates than this (and than `wait_share` of "
-        "the map's objects) in its retrieved places waits out of the clustering until more "
-        "objects narrow its places.",
+        description="A local object with more candidates than this in its retrieved places "
+        "waits out of the clustering until more objects narrow its places (the clustering's "
+        "pool keeps max_sets = 2000 sets: more singletons would be cut arbitrarily).",
     )
-    wait_share: float = Field(0.1, ge=0, le=1, description="See `wait_above`.")
     slack: float = Field(
         0.25,
         ge=0,
@@ -150,8 +149,8 @@ class PlaceIndex:
 
     def kept(self, support: np.ndarray, candidates: list[np.ndarray]) -> list[np.ndarray]:
         """Each local object's candidates whose cell's support is within the slack of the
-        best cell's (all of them when no cell supports it); none while more are left than
-        `wait_above` and `wait_share` of the map (the object waits)."""
+        best cell's (all of them when no cell supports it); none while more than `wait_above`
+        are left (the object waits)."""
         kept = []
         for row, found in zip(support, candidates):
             best = int(row.max()) if len(row) else 0
@@ -160,8 +159,7 @@ class PlaceIndex:
                 continue
             floor = best - max(1, int(np.floor(self.config.slack * best)))
             kept.append(found[row[self.cell_of[found]] >= max(floor, 1)])
-        most = max(self.config.wait_above, self.config.wait_share * len(self.cell_of))
-        return [k if len(k) <= most else k[:0] for k in kept]
+        return [k if len(k) <= self.config.wait_above else k[:0] for k in kept]
 
 
 def _room_codes(global_map: ObjectMap) -> np.ndarray:
