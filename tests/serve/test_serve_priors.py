@@ -251,8 +251,14 @@ def test_the_node_s_remote_localizer_sends_a_prior_change_once(client, two_rooms
         got, expected = remote.update(batch), reference.update(batch)
         assert got.status == expected.status == "localized"
         np.testing.assert_allclose(got.pose, expected.pose, atol=1e-9)
+    assert remote.prior == IN_A  # the session's echo
     remote.set_prior(None)
+    assert remote.prior is None  # pending: the prior from the next update on
     answer = remote.session.update([])  # not through the RemoteLocalizer: no change sent
     assert answer["prior"] == IN_A.to_dict()
     remote.update([])
-    assert remote.session.update([])["prior"] is None
+    assert remote.session.update([])["prior"] is None and remote.prior is None
+    opened = RemoteLocalizer(client.session("rooms", up=[0, 0, 1], prior=IN_B), world)
+    assert opened.prior is None  # nothing answered yet: not known here
+    opened.update(objects[:2])
+    assert opened.prior == IN_B  # the session's opening prior, as its answer echoes it
