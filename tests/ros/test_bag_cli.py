@@ -17,6 +17,7 @@ pytest.importorskip("mcap")
 from rosbag_fixtures import T_MAP_ODOM, messages, write_bag  # noqa: E402
 
 import semloc  # noqa: E402
+from semloc import Prior  # noqa: E402
 from semloc.cli import main  # noqa: E402
 from semloc.ros import messages as msgs  # noqa: E402
 from semloc.ros.answers import OUTPUT_TOPICS  # noqa: E402
@@ -25,6 +26,7 @@ from semloc.sim.scenario import simulate_sequence  # noqa: E402
 from semloc.transforms import pose_error  # noqa: E402
 
 SIM = dict(seed=0, size="small", keyframes=24, resolution="120x90")
+RVIZ = np.diag([0.25, 0.25, 0.0, 0.0, 0.0, 0.06853891945200942]).ravel()  # 0.5 m, 15 deg
 
 
 @pytest.fixture(scope="module")
@@ -280,3 +282,85 @@ def test_near_and_radius_are_a_prior_on_the_odometry_origin(localized, tmp_path,
                          (["--near", "1", "2", "3", "--radius", "0"], "radius must be > 0")):  # fmt: skip
         assert _localize(localized / "walk.mcap", localized, tmp_path / "c.mcap", *run, *bad) == 2
         _one_error_line(capsys, message)
+
+
+def _estimate(stamp: int, T_map_robot: np.ndarray, frame: str = "map"):
+    """A geometry_msgs/PoseWithCovarianceStamped as RViz's 2D Pose Estimate sends it."""
+    message = msgs.new(msgs.POSE, header=msgs.header(stamp, frame))
+    message.pose.pose = msgs.pose(T_map_robot)
+    message.pose.covariance = RVIZ.copy()
+    return message
+
+
+def _status_priors(path):
+    from mcap.reader import make_reader
+
+    with open(path, "rb") as handle:
+        return [json.loads(msgs.deserialize(m.data, s.name).data)["prior"]
+                for s, c, m in make_reader(handle).iter_messages(topics=["/semloc/status"])]  # fmt: skip
+
+
+def test_initialpose_in_a_bag_sets_the_prior_from_the_next_detection_message(tmp_path, capsys):
+    """An estimate recorded after keyframe 3 is the prior (odom_prior with the odometry at its
+    stamp) of every answer from keyframe 4 on, in --jsonl and /semloc/status; an estimate
+    before any odometry and one in another frame are left out, one warning each on stderr;
+    --initialpose none reads none."""
+    from helpers import room
+    from rosbag_fixtures import robot_poses
+
+    from semloc.ros.initialpose import odom_prior
+
+    gmap = room(14)
+    semloc.save_map(gmap, tmp_path / "map.json")
+    drive = messages(gmap, n=16, radius=4.0)
+    stamp = 10**9 + 3 * 10**8  # keyframe 3's odometry
+    robot = robot_poses(16)[3]
+    records = [
+        ("/initialpose", msgs.POSE, 5 * 10**8, _estimate(5 * 10**8, T_MAP_ODOM)),  # before odom
+        *[r for r in drive if r[2] <= stamp],
+        ("/initialpose", msgs.POSE, stamp + 1, _estimate(stamp, T_MAP_ODOM @ robot)),
+        ("/initialpose", msgs.POSE, stamp + 2, _estimate(stamp, T_MAP_ODOM @ robot, "odom")),
+        *[r for r in drive if r[2] > stamp],
+    ]
+    bag = write_bag(tmp_path / "run", records)
+    run = ["--detections", "/detections", "--odom", "/odom"]
+    capsys.readouterr()
+    assert _localize(bag, tmp_path, tmp_path / "a.mcap", *run,
+                     "--jsonl", str(tmp_path / "a.jsonl"), "--map", str(tmp_path / "map.json")) == 0  # fmt: skip
+    warnings = [line for line in capsys.readouterr().err.splitlines() if "warning" in line]
+    assert warnings == ["warning: skipped 1 pose estimates before any odometry",
+                        "warning: skipped 1 pose estimates not in the map frame 'map'"]  # fmt: skip
+    lines = _lines(tmp_path / "a.jsonl")
+    expected = odom_prior(T_MAP_ODOM @ robot, RVIZ, robot).to_dict()
+    after = [line["stamp"] > stamp / 1e9 for line in lines]
+    assert any(after) and not all(after)
+    priors = [line["result"]["prior"] for line in lines]
+    assert [p is not None for p in priors] == after
+    for prior in filter(None, priors):  # the message's pose went through a quaternion
+        assert set(prior) == set(expected)
+        np.testing.assert_allclose(prior["position"], expected["position"], atol=1e-9)
+        for key in ("radius", "heading", "heading_tolerance"):
+            assert prior[key] == pytest.approx(expected[key], abs=1e-9)
+    assert _status_priors(tmp_path / "a.mcap") == priors
+    assert lines[-1]["result"]["status"] == "localized"
+    assert Prior.from_dict(expected).contains(T_MAP_ODOM)  # the truth lies within it
+    assert _localize(bag, tmp_path, tmp_path / "b.mcap", *run, "--initialpose", "none",
+                     "--jsonl", str(tmp_path / "b.jsonl"), "--map", str(tmp_path / "map.json")) == 0  # fmt: skip
+    assert "warning" not in capsys.readouterr().err
+    assert all(line["result"]["prior"] is None for line in _lines(tmp_path / "b.jsonl"))
+
+
+def test_an_initialpose_topic_that_is_not_one_ends_in_one_line(walk, tmp_path, capsys):
+    """The default topic may be absent (the walk has none: answers as before, prior null);
+    a topic given that is absent or of another type ends in one line, exit 2."""
+    run = ["--detections", "/detections", "--odom", "/odom"]
+    assert _localize(walk / "walk.mcap", walk, tmp_path / "a.mcap", *run,
+                     "--jsonl", str(tmp_path / "a.jsonl")) == 0  # fmt: skip
+    assert all(line["result"]["prior"] is None for line in _lines(tmp_path / "a.jsonl"))
+    for topic, fragment in (("/pose", "no topic /pose (--initialpose)"),
+                            ("/odom", "--initialpose needs geometry_msgs/msg/PoseWithCovarianceStamped")):  # fmt: skip
+        capsys.readouterr()
+        assert _localize(walk / "walk.mcap", walk, tmp_path / "b.mcap", *run,
+                         "--initialpose", topic) == 2  # fmt: skip
+        _one_error_line(capsys, fragment)
+        assert not (tmp_path / "b.mcap").exists()

@@ -1,5 +1,6 @@
 """A bag played onto the loopback DDS wire into the live node: the same answers as
-`semloc bag localize`, published as ROS 2 messages with ROS 2 names and byte layouts."""
+`semloc bag localize` (and, for a bag with an /initialpose message, the same prior in effect),
+published as ROS 2 messages with ROS 2 names and byte layouts."""
 
 from __future__ import annotations
 
@@ -7,6 +8,7 @@ import json
 import random
 import threading
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -14,12 +16,43 @@ import pytest
 from semloc.cli import main
 from semloc.io import load_map
 from semloc.ros import messages as msgs
+from semloc.ros.bag import opened
+from semloc.ros.mcap_out import McapSink
+from semloc.ros.simbag import PERIOD_NS, START_NS
 from semloc.ros2.node import LiveNode, NodeSettings, Wire
 from semloc.ros2.play import play
 from semloc.ros2.wire import dds_typename, idl_type, to_wire, topic_name
 
 pytest.importorskip("cyclonedds", reason="the ros2 extra (cyclonedds) is not installed")
 pytest.importorskip("rosbags", reason="the ros extra is not installed")
+
+
+ESTIMATE_AT = 2
+"""The keyframe after whose messages the estimate bag holds a pose estimate on /initialpose."""
+RVIZ = np.diag([0.25, 0.25, 0.0, 0.0, 0.0, 0.06853891945200942]).ravel()  # 0.5 m, 15 deg
+
+
+def with_estimate(walk: Path) -> Path:
+    """walk.mcap with one /initialpose message (map frame, RViz's covariance): the robot's true
+    pose at keyframe ESTIMATE_AT (the odometry there, placed by the ground truth), stamped as
+    that odometry, recorded half a period after it (written with semloc's own MCAP writer)."""
+    truth = np.asarray(json.loads((walk / "ground_truth.json").read_text())["T_global_local"])
+    sink, pending = McapSink(), None
+    with opened(walk / "walk.mcap") as reader:
+        for conn, log_time, raw in reader.messages():
+            if pending is not None and log_time > pending[0]:
+                sink.write("/initialpose", msgs.POSE, *pending)
+                pending = None
+            message = msgs.deserialize(raw, conn.msgtype)
+            sink.write(conn.topic, conn.msgtype, log_time, message)
+            if conn.topic == "/odom" and log_time == START_NS + ESTIMATE_AT * PERIOD_NS:
+                estimate = msgs.new(msgs.POSE, header=msgs.header(log_time, "map"))
+                estimate.pose.pose = msgs.pose(truth @ msgs.matrix(message.pose.pose))
+                estimate.pose.covariance = RVIZ.copy()
+                pending = (log_time + PERIOD_NS // 2, estimate)
+    path = walk / "estimate.mcap"
+    path.write_bytes(sink.getvalue())
+    return path
 
 
 @pytest.fixture(scope="module")
@@ -35,6 +68,10 @@ def walk(tmp_path_factory):
     with_points = [*argv[:-4], "--points", "/detections/points", "-o", str(out / "points.mcap"),
                    "--jsonl", str(out / "points.jsonl")]  # fmt: skip
     assert main(with_points) == 0
+    estimate = [*argv[:-4], "-o", str(out / "estimate.out.mcap"), "--jsonl",
+                str(out / "estimate.jsonl")]  # fmt: skip
+    estimate[2] = str(with_estimate(out))
+    assert main(estimate) == 0
     return out
 
 
@@ -52,10 +89,16 @@ def test_ros2_names_and_byte_layouts():
         assert wire.serialize() == msgs.serialize(message, typename)  # classic CDR, as rosbag2
 
 
-@pytest.mark.parametrize(("points", "jsonl"), [(None, "out.jsonl"),
-                                               ("/detections/points", "points.jsonl")])  # fmt: skip
-def test_a_played_bag_gets_the_answers_of_bag_localize(walk, points, jsonl):
-    """Boxes only, and with the detections' points (`--points`, as `bag localize --points`)."""
+@pytest.mark.parametrize(("bag", "points", "jsonl", "rate"), [
+    ("walk.mcap", None, "out.jsonl", 4.0),
+    ("walk.mcap", "/detections/points", "points.jsonl", 4.0),
+    ("estimate.mcap", None, "estimate.jsonl", 1.0),
+])  # fmt: skip
+def test_a_played_bag_gets_the_answers_of_bag_localize(walk, bag, points, jsonl, rate):
+    """Boxes only, with the detections' points (`--points`, as `bag localize --points`), and
+    with a pose estimate on /initialpose (the prior in effect, in the answers and the status,
+    is the bag's; played at the recorded pace, so the estimate arrives between the two
+    detection messages it lies between, as recorded)."""
     domain = random.randrange(100, 200)  # apart from other runs on this machine
     global_map = load_map(walk / "global_reconstruction.json")
     node_wire, player_wire, listener = Wire(domain), Wire(domain), Wire(domain)
@@ -67,7 +110,7 @@ def test_a_played_bag_gets_the_answers_of_bag_localize(walk, points, jsonl):
     thread = threading.Thread(target=node.spin, args=(done.is_set, answers.append), daemon=True)
     thread.start()
     try:
-        counts = play(walk / "walk.mcap", player_wire, rate=4.0)
+        counts = play(walk / bag, player_wire, rate=rate)
         expected = [json.loads(line) for line in (walk / jsonl).read_text().splitlines()]
         deadline = time.monotonic() + 30
         while len(answers) < len(expected) and time.monotonic() < deadline:
@@ -86,9 +129,16 @@ def test_a_played_bag_gets_the_answers_of_bag_localize(walk, points, jsonl):
             assert got.result.pose is None
         else:
             np.testing.assert_allclose(got.result.pose, line["result"]["pose"], atol=1e-6)
+        assert (None if got.prior is None else got.prior.to_dict()) == line["result"]["prior"]
     time.sleep(0.2)
     heard = [json.loads(s.data) for s in statuses.take(N=1000)]
     assert [h["status"] for h in heard] == [a.result.status for a in answers]
+    assert [h["prior"] for h in heard] == [line["result"]["prior"] for line in expected]
+    if bag == "estimate.mcap":  # no prior before the estimate, its prior after it
+        assert counts["/initialpose"] == 1
+        after = [a.stamp > START_NS + ESTIMATE_AT * PERIOD_NS for a in answers]
+        assert [a.prior is not None for a in answers] == after and any(after)
+        assert [h["prior"] for h in heard].count(None) == after.count(False)
     localized = sum(a.result.status == "localized" for a in answers)
     assert len(poses.take(N=1000)) == localized > 0
 

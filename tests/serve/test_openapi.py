@@ -61,6 +61,9 @@ def test_every_route_declares_its_body_answers_errors_and_security(server):
               ("post", "/v1/maps/{map_id}/sessions"): "SessionCreate",
               ("post", "/v1/sessions/{session_id}/objects"): "SessionUpdate",
               ("post", "/v1/maps/{map_id}/changes"): "ChangeReport"}  # fmt: skip
+    for model in ("LocalizeRequest", "SessionCreate", "SessionUpdate"):  # a position prior
+        declared = schemas[model]["properties"]["prior"]["anyOf"]
+        assert {"$ref": "#/components/schemas/PriorBody"} in declared, model
     operations = [(m, p, o) for p, ops in spec["paths"].items() for m, o in ops.items()]
     assert len(operations) == 13
     for method, path, operation in operations:

@@ -1,7 +1,7 @@
 """Position priors through `semloc serve`: the localize body's and session updates' `"prior"`
 (answers equal in-process `semloc.localize(..., prior=)` and a Localizer with `set_prior`),
-422 for an invalid prior, a session's prior across a rebuild on another worker, the client's
-`prior=` and `semloc localize --server --near --radius`."""
+422 for an invalid prior, a session's prior (from its opening or an update) across a rebuild on
+another worker, the client's `prior=` and `semloc localize --server --near --radius`."""
 
 from __future__ import annotations
 
@@ -91,15 +91,18 @@ def test_an_invalid_prior_is_refused_with_422_naming_the_problem(client, two_roo
     local = json.dumps({**map_to_dict(view), "prior": prior}).encode()
     session = client.session("rooms")
     update = json.dumps({"objects": [], "prior": prior}).encode()
+    opening = json.dumps({"up": [0, 0, 1], "prior": prior}).encode()
     for path, body in (
         ("/v1/maps/rooms/localize", local),
         (f"/v1/sessions/{session.session_id}/objects", update),
+        ("/v1/maps/rooms/sessions", opening),
     ):
         status, answer = raw(client.url, "POST", path, body)
         assert status == 422, answer
         assert set(answer) == {"error", "detail"} and answer["error"].startswith("invalid")
         assert named in json.dumps(answer["detail"]), answer
     assert session.update([])["update"] == 1  # nothing of the refused updates was applied
+    assert [s["mine"] for s in client.request("GET", "/v1/maps/rooms/sessions")] == [True]
 
 
 def test_the_client_checks_a_prior_before_sending_it(client, two_rooms):
@@ -109,6 +112,10 @@ def test_the_client_checks_a_prior_before_sending_it(client, two_rooms):
         client.localize("rooms", two_rooms[1], prior=[0, 0, 0])  # type: ignore[arg-type]
     with pytest.raises(ValueError, match="contradict"):
         client.session("rooms").update([], prior=IN_A, clear_prior=True)
+    with pytest.raises(ValueError, match="radius must be > 0"):
+        client.session("rooms", prior={"position": [0, 0, 0], "radius": -1})
+    with pytest.raises(TypeError, match="semloc.Prior"):
+        client.session("rooms", prior=(0, 0, 0))  # type: ignore[arg-type]
 
 
 def test_a_session_prior_holds_from_its_update_until_cleared(client, two_rooms):
@@ -130,6 +137,57 @@ def test_a_session_prior_holds_from_its_update_until_cleared(client, two_rooms):
     cleared = session.update(objects[6:], clear_prior=True)  # "prior": null
     same_answer(cleared, reference.update(objects[6:]))
     assert cleared["prior"] is None  # (the tracked place is kept: it is within "no prior")
+
+
+def test_a_session_opened_with_a_prior_has_it_from_its_first_update(client, two_rooms):
+    world, view = two_rooms
+    objects = list(view)
+    session = client.session("rooms", up=[0, 0, 1], prior=IN_A)
+    reference = Localizer(world, local_up=[0, 0, 1], prior=IN_A)
+    for batch in (objects[:4], objects[4:]):
+        served = session.update(batch)
+        same_answer(served, reference.update(batch))
+        assert served["prior"] == IN_A.to_dict()
+    assert served["status"] == "localized"
+    np.testing.assert_allclose(served["pose"], TRUE_POSE, atol=1e-6)
+    cleared = session.update([], clear_prior=True)  # an update changes it as before
+    reference.set_prior(None)
+    same_answer(cleared, reference.update([]))
+    assert cleared["prior"] is None
+    unset = client.session("rooms", up=[0, 0, 1], prior=None)  # null: no prior
+    assert unset.update(objects)["prior"] is None
+
+
+@pytest.mark.parametrize("changes", [False, True])
+def test_a_session_opened_with_a_prior_keeps_it_across_rebuilds(serve, two_rooms, tmp_path,
+                                                                 changes):  # fmt: skip
+    """Opened on one worker, every update on the other in turn: the opening prior holds on
+    either (on the second from its very first update, with no state saved by an update),
+    and an update's change replaces it there too."""
+    world, view = two_rooms
+    store = tmp_path / "shared"
+    first, second = serve(store=open_store(store)), serve(store=open_store(store))
+    Client(first.url).put_map("rooms", world)
+    session = Client(first.url).session("rooms", up=[0, 0, 1], prior=IN_B)
+    clients = [Client(second.url), Client(first.url)]  # the first update on the other one
+    reference = Localizer(world, local_up=[0, 0, 1], prior=IN_B)
+    objects = list(view)
+    steps = [(objects[:3], None), (objects[3:5], None), (objects[5:], None), ([], None)]
+    if changes:
+        steps[2] = (objects[5:], IN_A)
+    statuses = []
+    for k, (batch, change) in enumerate(steps):
+        session.client = clients[k % 2]
+        served = session.update(batch, stamp=k, prior=change)
+        if change is not None:
+            reference.set_prior(change)
+        same_answer(served, reference.update(batch))
+        assert served["prior"] == reference.prior.to_dict()
+        statuses.append(served["status"])
+    if changes:
+        assert statuses == ["ambiguous", "ambiguous", "localized", "localized"]
+    else:  # the view is of copy A, the prior says B: never localized
+        assert statuses == ["ambiguous"] * 4
 
 
 def test_a_session_prior_survives_a_rebuild_on_another_worker(serve, two_rooms, tmp_path):
@@ -193,8 +251,14 @@ def test_the_node_s_remote_localizer_sends_a_prior_change_once(client, two_rooms
         got, expected = remote.update(batch), reference.update(batch)
         assert got.status == expected.status == "localized"
         np.testing.assert_allclose(got.pose, expected.pose, atol=1e-9)
+    assert remote.prior == IN_A  # the session's echo
     remote.set_prior(None)
+    assert remote.prior is None  # pending: the prior from the next update on
     answer = remote.session.update([])  # not through the RemoteLocalizer: no change sent
     assert answer["prior"] == IN_A.to_dict()
     remote.update([])
-    assert remote.session.update([])["prior"] is None
+    assert remote.session.update([])["prior"] is None and remote.prior is None
+    opened = RemoteLocalizer(client.session("rooms", up=[0, 0, 1], prior=IN_B), world)
+    assert opened.prior is None  # nothing answered yet: not known here
+    opened.update(objects[:2])
+    assert opened.prior == IN_B  # the session's opening prior, as its answer echoes it

@@ -26,12 +26,13 @@ from semloc.cli.files import (
     read_config,
     read_label_map,
 )
-from semloc.cli.options import NearOption, RadiusOption, prior_option
+from semloc.cli.options import NearOption, RadiusOption, prior_option, topic_option
 from semloc.io import load_map, write_files
 from semloc.localizer import LocalizerConfig
 from semloc.pictures.display import for_rich
 from semloc.ros.answers import OUTPUT_TOPICS, AnswerTopics, Frames
 from semloc.ros.bag import Run, opened, topics
+from semloc.ros.initialpose import TOPIC as INITIALPOSE_TOPIC
 from semloc.ros.mcap_out import McapSink
 from semloc.ros.replay import Answer, answer_json, replay
 from semloc.ros.stream import StreamLocalizer
@@ -104,6 +105,14 @@ def localize(
         typer.Option("--label-map", help="Labels mapped before comparing (JSON or .yaml)."),
     ] = None,
     map_frame: Annotated[str, typer.Option(help="Frame id of the map in the output.")] = "map",
+    initialpose: Annotated[
+        str,
+        typer.Option(
+            help="geometry_msgs/PoseWithCovarianceStamped topic of robot pose estimates in the "
+            "map (RViz's 2D Pose Estimate), read when the bag has it: each sets the prior from "
+            "the next detection message on; 'none' reads none."
+        ),
+    ] = INITIALPOSE_TOPIC,
     near: NearOption = None,
     radius: RadiusOption = None,
 ) -> None:
@@ -114,7 +123,7 @@ def localize(
     Output: /semloc/pose (when localized), /tf, /semloc/status (JSON), /semloc/map, /semloc/matches.
 
     Both outputs are written at the end, both or neither.  --near/--radius: a position prior
-    on the odometry frame's origin (the local frame).
+    on the odometry frame's origin (the local frame), until a pose estimate on --initialpose.
     """
     check_finite(gamma=gamma)
     prior = prior_option(near, radius)
@@ -138,7 +147,7 @@ def localize(
     )
     start = time.perf_counter()
     with opened(bag) as reader:
-        run = Run(reader, bag, detections, odom, points)
+        run = Run(reader, bag, detections, odom, points, topic_option(initialpose))
         if odom is None:
             _warn_moving_frame(run)
         stream = StreamLocalizer(global_map, cfg, use_points=points is not None)
@@ -146,11 +155,12 @@ def localize(
         sink = McapSink()
         writer: AnswerTopics | None = None
         lines, last = [], None
-        for answer in replay(run, stream):
+        for answer in replay(run, stream, map_frame):
             if writer is None:
                 frames = Frames(map_frame, answer.odom_frame, answer.frame)
                 writer = AnswerTopics(sink, global_map, frames)
-            writer.write(answer.stamp, answer.result, answer.T_odom_sensor, stream.local_map())
+            writer.write(answer.stamp, answer.result, answer.T_odom_sensor, stream.local_map(),
+                         answer.prior)  # fmt: skip
             if jsonl is not None:
                 lines.append(json.dumps(answer_json(answer, stream), allow_nan=False) + "\n")
             last = answer
@@ -195,6 +205,8 @@ def _report(
     """What the run did: messages left out, the last answer, the files written."""
     for why, count in run.skipped.items():
         console.print(f"skipped {count} {why}")
+    for why, count in run.warnings.items():
+        err_console.print(f"[bold yellow]warning:[/] skipped {count} {why}", soft_wrap=True)
     if last is None:
         console.print("no local object was published: no answer")
     else:

@@ -82,3 +82,8 @@ def prior_option(near: tuple[float, float, float] | None, radius: float | None) 
     except ValueError as exc:
         fail(f"--near/--radius: {exc}")
         raise  # unreachable: fail() raises
+
+
+def topic_option(name: str) -> str | None:
+    """A topic option's value: None for 'none' (any case), for `bag localize` and `ros2 node`."""
+    return None if name.lower() == "none" else name

@@ -22,12 +22,13 @@ from semloc.cli import remote
 from semloc.cli.app import app, console, fail, first_error, foxglove_option
 from semloc.cli.extras import need
 from semloc.cli.files import read_config
-from semloc.cli.options import NearOption, RadiusOption, prior_option
+from semloc.cli.options import NearOption, RadiusOption, prior_option, topic_option
 from semloc.client import Client, ServerError
 from semloc.io import load_map
 from semloc.localizer import LocalizerConfig
 from semloc.pictures.live import FoxgloveView
 from semloc.ros import messages as msgs
+from semloc.ros.initialpose import TOPIC as INITIALPOSE_TOPIC
 from semloc.ros2.node import LiveNode, NodeSettings, Wire, samples
 from semloc.ros2.play import play
 from semloc.ros2.remote import RemoteLocalizer
@@ -57,11 +58,6 @@ DomainOption = Annotated[
     int | None,
     typer.Option("--domain", min=0, max=232, help="DDS domain id [default: ROS_DOMAIN_ID or 0]."),
 ]
-
-
-def _topic(name: str) -> str | None:
-    """A topic option's value: None for 'none'."""
-    return None if name.lower() == "none" else name
 
 
 def _domain(domain: int | None) -> int:
@@ -119,7 +115,7 @@ def node(
             help="geometry_msgs/PoseWithCovarianceStamped topic of robot pose estimates in the "
             "map (RViz's 2D Pose Estimate): each sets the prior; 'none' reads none."
         ),
-    ] = "/initialpose",
+    ] = INITIALPOSE_TOPIC,
     near: NearOption = None,
     radius: RadiusOption = None,
 ) -> None:
@@ -144,8 +140,8 @@ def node(
             fail(f"--server {server}: {exc}")
         localizer = RemoteLocalizer(session, global_map)
     settings = NodeSettings(
-        detections, _topic(odom), _domain(domain), map_frame, reliable, points,
-        _topic(initialpose), prior,
+        detections, topic_option(odom), _domain(domain), map_frame, reliable, points,
+        topic_option(initialpose), prior,
     )  # fmt: skip
     view = None
     if foxglove is not None:

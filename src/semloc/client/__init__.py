@@ -9,7 +9,8 @@
     client.report_changes("office", answer, local=local_map)       # -> {"version": 2, ...}
 
 Position priors (`semloc.Prior`, or its JSON object): `client.localize(map_id, local,
-prior=P)`; `session.update(objects, prior=P)` sets a session's prior from that update on and
+prior=P)`; `client.session(map_id, prior=P)` opens a session with a prior from its first update
+on; `session.update(objects, prior=P)` sets a session's prior from that update on and
 `session.update(objects, clear_prior=True)` removes it.  Answers echo the prior in effect as
 `"prior"` (null: none).
 
@@ -112,10 +113,21 @@ class Client:
             body["prior"] = checked.to_dict()
         return self.request("POST", f"/v1/maps/{_quote(map_id)}/localize", body)
 
-    def session(self, map_id: str, up: Iterable[float] | None = None) -> Session:
-        """A live session on `map_id`: stream objects with `Session.update`."""
-        body = None if up is None else {"up": [float(v) for v in up]}
-        created = self.request("POST", f"/v1/maps/{_quote(map_id)}/sessions", body)
+    def session(
+        self,
+        map_id: str,
+        up: Iterable[float] | None = None,
+        prior: Prior | dict[str, Any] | None = None,
+    ) -> Session:
+        """A live session on `map_id`: stream objects with `Session.update`.  `prior`: its
+        position prior from the first update on (checked here: `ValueError`, `TypeError`)."""
+        body: dict[str, Any] = {}
+        if up is not None:
+            body["up"] = [float(v) for v in up]
+        checked = checked_prior(prior)
+        if checked is not None:
+            body["prior"] = checked.to_dict()
+        created = self.request("POST", f"/v1/maps/{_quote(map_id)}/sessions", body or None)
         return Session(self, created["session_id"])
 
     def report_changes(

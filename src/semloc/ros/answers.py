@@ -8,8 +8,9 @@
 - `/tf` (tf2_msgs/TFMessage): `map` -> odometry frame when localized, and the odometry frame
   -> the detections' frame at every answer;
 - `/semloc/status` (std_msgs/String): JSON `{"stamp", "status", "confidence", "reason",
-  "pose_is_answer", "n_local", "changes", "support", "next_look", "hypotheses"}` at every answer (the best
-  three hypotheses: rank, confidence, pairs and the position of the local frame's origin);
+  "pose_is_answer", "n_local", "changes", "support", "next_look", "hypotheses", "prior"}` at every
+  answer (the best three hypotheses: rank, confidence, pairs and the position of the local
+  frame's origin; the prior in effect on the odometry frame's origin, null: none);
 - `/semloc/map` (visualization_msgs/MarkerArray, once): the map's objects as label-coloured
   boxes with their labels;
 - `/semloc/matches` (MarkerArray, every answer): the best hypothesis's local objects placed in
@@ -27,6 +28,7 @@ import numpy as np
 
 from semloc.maps import ObjectMap
 from semloc.pictures.colors import label_colors, rgb
+from semloc.priors import Prior
 from semloc.results import Result
 from semloc.ros import messages as msgs
 from semloc.ros.frames import covariance
@@ -65,9 +67,11 @@ class AnswerTopics:
         self._map_written = False
 
     def write(
-        self, stamp: int, result: Result, T_odom_sensor: np.ndarray, local: ObjectMap
-    ) -> None:
-        """The messages of one answer at `stamp` (ns); `local`: the local objects so far."""
+        self, stamp: int, result: Result, T_odom_sensor: np.ndarray, local: ObjectMap,
+        prior: Prior | None = None,
+    ) -> None:  # fmt: skip
+        """The messages of one answer at `stamp` (ns); `local`: the local objects so far;
+        `prior`: the prior in effect."""
         if not self._map_written:
             self.sink.write(MAP_TOPIC, msgs.MARKERS, stamp, self.map_markers(stamp))
             self._map_written = True
@@ -84,7 +88,7 @@ class AnswerTopics:
         if transforms:
             self.sink.write(TF_TOPIC, msgs.TF, stamp, msgs.new(msgs.TF, transforms=transforms))
         self.sink.write(STATUS_TOPIC, msgs.STRING, stamp, msgs.new(msgs.STRING,
-                        data=json.dumps(status(stamp, result, len(local)))))  # fmt: skip
+                        data=json.dumps(status(stamp, result, len(local), prior))))  # fmt: skip
         self.sink.write(
             MATCHES_TOPIC, msgs.MARKERS, stamp, self.match_markers(stamp, result, local)
         )
@@ -155,8 +159,9 @@ class AnswerTopics:
         return rgb255[0] / 255, rgb255[1] / 255, rgb255[2] / 255, alpha
 
 
-def status(stamp: int, result: Result, n_local: int) -> dict[str, Any]:
-    """The JSON of `/semloc/status` for one answer."""
+def status(stamp: int, result: Result, n_local: int, prior: Prior | None = None) -> dict[str, Any]:
+    """The JSON of `/semloc/status` for one answer under `prior` (the prior in effect on the
+    odometry frame's origin, `Prior.to_dict`; null: none)."""
     confidence = result.confidence
     return {
         "stamp": stamp / 1e9,
@@ -177,4 +182,5 @@ def status(stamp: int, result: Result, n_local: int) -> dict[str, Any]:
             }
             for h in result.hypotheses[:TOP_HYPOTHESES]
         ],
+        "prior": None if prior is None else prior.to_dict(),
     }

@@ -6,7 +6,7 @@ files, through `rosbags` (no ROS installation).
 frame), then the detection messages in order as `DetectionFrame`s, each with the pose of its
 frame in the odometry frame, and with the points of a `sensor_msgs/PointCloud2` topic where
 one is given (fields x, y, z and `detection`, the index of the detection in the array of the
-same stamp).  Every problem (no such file, not a bag, truncated, a missing topic, a topic of
+same stamp), and the robot pose estimates of an `--initialpose` topic (`estimates`).  Every problem (no such file, not a bag, truncated, a missing topic, a topic of
 another type, undecodable messages, frames that do not connect) is a `BagError` naming the
 file and what is wrong.
 """
@@ -25,9 +25,11 @@ import numpy as np
 from semloc.maps import MapError
 from semloc.ros import messages as msgs
 from semloc.ros.frames import Trajectory, matrix_of
+from semloc.ros.initialpose import TOPIC as INITIALPOSE_TOPIC
 from semloc.ros.stream import BoxDetection, DetectionFrame
 
-USES = {msgs.DETECTIONS: "--detections", msgs.ODOMETRY: "--odom", msgs.POINTS: "--points"}
+USES = {msgs.DETECTIONS: "--detections", msgs.ODOMETRY: "--odom", msgs.POINTS: "--points",
+        msgs.POSE: "--initialpose"}  # fmt: skip
 """The message types semloc reads, and the option of `semloc bag localize` that takes them."""
 
 MAX_GAP_S = 0.5
@@ -102,12 +104,22 @@ class Run:
     """A recorded run read for localization (see the module docstring)."""
 
     def __init__(self, reader: Any, path: Path, detections: str, odom: str | None,
-                 points: str | None) -> None:  # fmt: skip
+                 points: str | None, initialpose: str | None = None) -> None:  # fmt: skip
+        """`initialpose`: the topic of pose estimates (None: none read); the default topic
+        (`semloc.ros.initialpose.TOPIC`) may be absent from the bag, another must be there."""
         self.reader, self.path = reader, Path(path)
         self.detections = self._connections(detections, msgs.DETECTIONS, "--detections")
         self.odom = None if odom is None else self._connections(odom, msgs.ODOMETRY, "--odom")
         self.points = None if points is None else self._connections(points, msgs.POINTS, "--points")
+        self.initialpose: list[Any] = []
+        if initialpose is not None and (
+            initialpose != INITIALPOSE_TOPIC
+            or any(c.topic == initialpose and c.msgcount for c in reader.connections)
+        ):
+            self.initialpose = self._connections(initialpose, msgs.POSE, "--initialpose")
         self.skipped: dict[str, int] = {}
+        self.warnings: dict[str, int] = {}
+        """Pose estimates left out, by kind (`semloc.ros.initialpose`): said as warnings."""
 
     def _connections(self, topic: str, msgtype: str, option: str) -> list[Any]:
         conns = [c for c in self.reader.connections if c.topic == topic]
@@ -180,8 +192,19 @@ class Run:
                 break
         return None
 
+    def estimates(self) -> list[tuple[int, Any]]:
+        """(log time, message) of the pose estimates, in log-time order (none without a topic)."""
+        if not self.initialpose:
+            return []
+        return [(log_time, message) for _, log_time, message in self.messages(self.initialpose)]
+
     def frames(self) -> Iterator[DetectionFrame]:
         """The detection messages in log-time order (with their points when `--points`)."""
+        for _, frame in self.timed_frames():
+            yield frame
+
+    def timed_frames(self) -> Iterator[tuple[int, DetectionFrame]]:
+        """(log time, frame) of the detection messages (`frames`)."""
         conns = self.detections + (self.points or [])
         waiting: deque[tuple[int, Any]] = deque()  # (log time, detection message)
         clouds: dict[tuple[int, str], Any] = {}
@@ -197,10 +220,10 @@ class Run:
             ):
                 first_log, detections = waiting.popleft()
                 cloud = clouds.pop(_key(detections), None)
-                yield self._frame(detections, first_log, cloud)
+                yield first_log, self._frame(detections, first_log, cloud)
                 _drop_older(clouds, msgs.stamp_ns(detections.header.stamp) - CLOUD_WAIT_NS)
         for first_log, detections in waiting:
-            yield self._frame(detections, first_log, clouds.pop(_key(detections), None))
+            yield first_log, self._frame(detections, first_log, clouds.pop(_key(detections), None))
 
     def _frame(self, message: Any, log_time: int, cloud: Any) -> DetectionFrame:
         try:

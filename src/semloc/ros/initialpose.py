@@ -1,5 +1,6 @@
 """A position prior from a robot pose estimate in the map: what `/initialpose` says, as a
-`semloc.Prior` on the odometry frame's origin (numpy only; the ROS 2 node reads the message).
+`semloc.Prior` on the odometry frame's origin (numpy only; `estimate_prior` reads the message's
+fields for the ROS 2 node and `semloc bag localize` alike).
 
 `/initialpose` (geometry_msgs/PoseWithCovarianceStamped in the map frame, what RViz's "2D Pose
 Estimate" and amcl use) gives the ROBOT's pose in the map, T_map_robot, with a covariance.  A
@@ -26,6 +27,12 @@ offset from the odometry origin, in the map's axes.  The prior (`odom_prior`):
 
 The pose is taken as the pose of the odometry's moving (child) frame, height included: with
 RViz's 2D Pose Estimate (z = 0) the odometry should move the robot's base frame, as for amcl.
+
+`estimate_prior(message, map_frame, odometry)`: the prior of one message, with the odometry at
+its stamp (`robot_in_odom`: interpolated where the odometry covers the stamp, else its latest
+pose before it, what a live node holds then); an estimate in another frame than the map's, one
+before any odometry, or one whose pose or covariance cannot be used is `UnusableEstimate`
+naming the kind (the node and the bag count and warn by it).
 """
 
 from __future__ import annotations
@@ -36,7 +43,11 @@ from typing import Any
 import numpy as np
 
 from semloc.priors import Prior
+from semloc.ros.frames import Trajectory
+from semloc.ros.messages import matrix, stamp_ns
 
+TOPIC = "/initialpose"
+"""The default topic of pose estimates (`ros2 node --initialpose`, `bag localize --initialpose`)."""
 MIN_RADIUS_M = 1.0
 """The least radius of a prior from a pose estimate: a covariance of zeros (tools send them)
 still leaves room for the error of a right pose."""
@@ -73,3 +84,52 @@ def odom_prior(T_map_robot: np.ndarray, covariance: Any, T_odom_robot: np.ndarra
     heading = math.degrees(math.atan2(x_axis[1], x_axis[0]))
     return Prior(position=T_map_odom[:3, 3], radius=radius + chord, heading=heading,
                  heading_tolerance=tolerance)  # fmt: skip
+
+
+BEFORE_ODOMETRY = "pose estimates before any odometry"
+UNUSABLE = "pose estimates that cannot be used"
+
+
+def not_in_map(map_frame: str) -> str:
+    """The kind of an estimate in another frame than the map's."""
+    return f"pose estimates not in the map frame '{map_frame}'"
+
+
+class UnusableEstimate(ValueError):
+    """A pose estimate that gives no prior: `why` is its kind (one of this module's), `detail`
+    what was wrong with it (may be empty)."""
+
+    def __init__(self, why: str, detail: str = "") -> None:
+        super().__init__(why + (f": {detail}" if detail else ""))
+        self.why, self.detail = why, detail
+
+
+def robot_in_odom(odometry: Trajectory, stamp: int) -> np.ndarray | None:
+    """The odometry's pose at `stamp`: interpolated (`Trajectory.at`), else the latest pose
+    before `stamp`; None when every pose is later (or there is none)."""
+    pose = odometry.at(stamp)
+    if pose is not None:
+        return pose
+    before = int(np.searchsorted(odometry.stamps, stamp, side="right"))
+    return None if before == 0 else odometry.poses[before - 1]
+
+
+def estimate_prior(message: Any, map_frame: str, odometry: Trajectory | None) -> Prior:
+    """The prior on the odometry frame's origin of a geometry_msgs/PoseWithCovarianceStamped
+    (its frame the map's; an empty frame id counts as the map's), with `odometry` the robot's
+    poses in the odometry frame (None: there is no odometry, the detections' frame is the
+    local frame and the pose is the robot's there).  `UnusableEstimate` naming the kind."""
+    frame = message.header.frame_id
+    if frame and frame != map_frame:
+        raise UnusableEstimate(not_in_map(map_frame), f"frame '{frame}'")
+    T_odom_robot = np.eye(4)
+    if odometry is not None:
+        found = robot_in_odom(odometry, stamp_ns(message.header.stamp))
+        if found is None:
+            raise UnusableEstimate(BEFORE_ODOMETRY)
+        T_odom_robot = found
+    try:
+        T_map_robot = matrix(message.pose.pose)
+        return odom_prior(T_map_robot, message.pose.covariance, T_odom_robot)
+    except ValueError as exc:
+        raise UnusableEstimate(UNUSABLE, str(exc)) from None

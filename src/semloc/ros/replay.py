@@ -6,6 +6,12 @@ the odometry pose at its stamp (interpolated; none within `MAX_GAP_S`: the messa
 and counted), one already in the odometry frame is used as it is, any other frame is a
 `BagError`.  Without odometry every message must be in one frame, which is then the local
 (odometry) frame.
+
+Pose estimates (the run's `--initialpose` topic) replay as the live node takes them: each sets
+the prior on the odometry frame's origin (`semloc.ros.initialpose.estimate_prior`, with the
+odometry at its stamp) from the first detection message recorded at or after it; one it cannot
+use (another frame than `map_frame`, before any odometry, a bad covariance) is left out and
+counted in `run.warnings`.  Each answer carries the prior in effect.
 """
 
 from __future__ import annotations
@@ -17,8 +23,10 @@ from typing import Any
 import numpy as np
 
 from semloc.io.answers import answer_document
+from semloc.priors import Prior
 from semloc.results import Result
 from semloc.ros.bag import MAX_GAP_S, BagError, Odometry, Run
+from semloc.ros.initialpose import UnusableEstimate, estimate_prior
 from semloc.ros.stream import DetectionFrame, StreamLocalizer
 
 NO_ODOMETRY = f"detection messages without odometry within {MAX_GAP_S:g} s"
@@ -34,15 +42,27 @@ class Answer:
     odom_frame: str
     T_odom_sensor: np.ndarray
     result: Result
+    prior: Prior | None = None
+    """The prior in effect (on the odometry frame's origin), None: none."""
 
 
-def replay(run: Run, stream: StreamLocalizer) -> Iterator[Answer]:
+def replay(run: Run, stream: StreamLocalizer, map_frame: str = "map") -> Iterator[Answer]:
     """The answers of `run` (see the module docstring); `run.skipped` counts what was left out."""
     odometry = run.odometry()
+    trajectory = None if odometry is None else odometry.trajectory
+    estimates = run.estimates()
+    applied = 0  # estimates applied so far
     fixed: str | None = None
     stamps: list[int] = []  # of the messages left out for want of odometry
     placed = 0
-    for frame in run.frames():
+    for log_time, frame in run.timed_frames():
+        while applied < len(estimates) and estimates[applied][0] <= log_time:
+            try:
+                prior = estimate_prior(estimates[applied][1], map_frame, trajectory)
+                stream.localizer.set_prior(prior)
+            except UnusableEstimate as exc:
+                run.warnings[exc.why] = run.warnings.get(exc.why, 0) + 1
+            applied += 1
         if odometry is None:
             fixed = fixed if fixed is not None else frame.frame
             if frame.frame != fixed:
@@ -61,7 +81,8 @@ def replay(run: Run, stream: StreamLocalizer) -> Iterator[Answer]:
         result = stream.step(frame, pose)
         if result is not None:
             odom_frame = frame.frame if odometry is None else odometry.frame
-            yield Answer(frame.stamp, frame.frame, odom_frame, pose, result)
+            yield Answer(frame.stamp, frame.frame, odom_frame, pose, result,
+                         stream.localizer.prior)  # fmt: skip
     if odometry is not None and stamps and not placed:
         known = odometry.trajectory.stamps
         raise BagError(
@@ -86,6 +107,9 @@ def sensor_pose(run: Run, frame: DetectionFrame, odometry: Odometry) -> np.ndarr
 
 def answer_json(answer: Answer, stream: StreamLocalizer) -> dict[str, Any]:
     """One line of `--jsonl`: `{"stamp": seconds, "result": the localize JSON}`; its `steps`
-    hold this update's step only (the earlier ones are on the lines before)."""
+    hold this update's step only (the earlier ones are on the lines before), its `prior` is
+    the prior in effect (`Prior.to_dict`, null: none)."""
     labels = stream.localizer.label_report()
-    return {"stamp": answer.stamp / 1e9, "result": answer_document(answer.result, labels, 1)}
+    prior = None if answer.prior is None else answer.prior.to_dict()
+    document = answer_document(answer.result, labels, 1, prior=prior)
+    return {"stamp": answer.stamp / 1e9, "result": document}

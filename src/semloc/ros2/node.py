@@ -26,7 +26,8 @@ without points), never a crash.
 Priors: `NodeSettings.prior` (`--near X Y Z --radius R`) is a prior on the odometry frame's
 origin from the start; a message on `initialpose` (geometry_msgs/PoseWithCovarianceStamped in
 the map frame, RViz's "2D Pose Estimate") replaces it from the next update on, converted with
-the odometry at its stamp (`semloc.ros.initialpose`; it waits for the first odometry).
+the odometry at its stamp (`semloc.ros.initialpose`; it waits for the first odometry).  Each
+answer carries the prior in effect (`Answer.prior`, `"prior"` in `/semloc/status`).
 
 Problems with the messages (no odometry, other frames, unreadable clouds or poses) are
 counted in `skipped` and logged once per kind as warnings (logger `semloc.ros2`).
@@ -55,7 +56,8 @@ from semloc.ros import messages as msgs
 from semloc.ros.answers import MAP_TOPIC, MATCHES_TOPIC, AnswerTopics, Frames
 from semloc.ros.bag import CLOUD_WAIT_NS, MAX_GAP_S, NO_CLASS, cloud_points, detection_frame
 from semloc.ros.frames import Trajectory
-from semloc.ros.initialpose import odom_prior
+from semloc.ros.initialpose import TOPIC as INITIALPOSE_TOPIC
+from semloc.ros.initialpose import UnusableEstimate, estimate_prior
 from semloc.ros.replay import Answer
 from semloc.ros.stream import DetectionFrame, StreamLocalizer
 from semloc.ros2.wire import idl_type, to_wire, topic_name
@@ -81,7 +83,7 @@ class NodeSettings:
     map_frame: str = "map"
     reliable: bool = False
     points: str | None = None
-    initialpose: str | None = "/initialpose"
+    initialpose: str | None = INITIALPOSE_TOPIC
     prior: Prior | None = None
 
 
@@ -231,7 +233,8 @@ class LiveNode:
             result = self.stream.step(frame, pose)
             if result is None:
                 continue
-            answer = Answer(frame.stamp, frame.frame, self._odom_frame(frame), pose, result)
+            answer = Answer(frame.stamp, frame.frame, self._odom_frame(frame), pose, result,
+                            self.stream.localizer.prior)  # fmt: skip
             self._publish(answer)
             answered += 1
             if on_answer is not None:
@@ -243,7 +246,7 @@ class LiveNode:
             frames = Frames(self.settings.map_frame, answer.odom_frame, answer.frame)
             self._topics = AnswerTopics(self.sink, self.global_map, frames)
         self._topics.write(answer.stamp, answer.result, answer.T_odom_sensor,
-                           self.stream.local_map())  # fmt: skip
+                           self.stream.local_map(), answer.prior)  # fmt: skip
         self.answers += 1
 
     def _add_odometry(self, message: Any) -> None:
@@ -293,27 +296,16 @@ class LiveNode:
     def _apply_estimate(self) -> None:
         """The pending pose estimate as the prior from the next update on, once the odometry
         places the robot (see `semloc.ros.initialpose`)."""
-        message = self._estimate
-        frame = message.header.frame_id
-        if frame and frame != self.settings.map_frame:
-            self._estimate = None
-            self._skip(f"pose estimates not in the map frame '{self.settings.map_frame}'")
-            return
-        if self._odom is None:
-            T_odom_robot = np.eye(4)  # the detections' own frame is the local frame
-        elif not self._stamps:
+        if self._odom is not None and not self._stamps:
             return  # waits for the first odometry
-        else:
-            stamp = msgs.stamp_ns(message.header.stamp)
-            at = Trajectory(self._stamps, self._poses, int(MAX_GAP_S * 1e9)).at(stamp)
-            T_odom_robot = self._poses[-1] if at is None else at
-        self._estimate = None
+        message, self._estimate = self._estimate, None
+        odometry = None
+        if self._odom is not None:
+            odometry = Trajectory(self._stamps, self._poses, int(MAX_GAP_S * 1e9))
         try:
-            prior = odom_prior(
-                msgs.matrix(message.pose.pose), message.pose.covariance, T_odom_robot
-            )
-        except ValueError as exc:
-            self._skip("pose estimates that cannot be used", str(exc))
+            prior = estimate_prior(message, self.settings.map_frame, odometry)
+        except UnusableEstimate as exc:
+            self._skip(exc.why, exc.detail)
             return
         self.stream.localizer.set_prior(prior)
         log.info("prior from %s: %s", self.settings.initialpose, prior.to_dict())

@@ -3,7 +3,7 @@
 `RemoteLocalizer(session)` takes the node's fused objects like `Localizer.update` and sends
 them as one update of a service session (`semloc.client.Session`, with the device's position),
 returning the service's answer as a `Result`; `set_prior` sets the session's position prior
-from the next update on (sent with it); `local_map` holds the latest version of the
+from the next update on (sent with it) and `prior` is the one in effect; `local_map` holds the latest version of the
 objects it sent (at most `window` of them, newest kept), for the markers.
 """
 
@@ -31,6 +31,13 @@ class RemoteLocalizer:
         self._local: OrderedDict[str, SemanticObject] = OrderedDict()
         self._prior_set = False  # a prior change to send with the next update: _prior
         self._prior: Prior | None = None
+        self._in_effect: Prior | None = None  # as the latest answer echoed it
+
+    @property
+    def prior(self) -> Prior | None:
+        """The prior in effect: one set for the next update, else the one the session's
+        latest answer echoed (None: none)."""
+        return self._prior if self._prior_set else self._in_effect
 
     def set_prior(self, prior: Prior | None) -> None:
         """The session's prior from the next update on (None: none)."""
@@ -52,6 +59,8 @@ class RemoteLocalizer:
             objects, stamp=time.time(), position=at, prior=prior, clear_prior=clear
         )
         self._prior_set, self._prior = False, None
+        echoed = answer.get("prior")
+        self._in_effect = None if echoed is None else Prior.from_dict(echoed)
         return Result.from_dict(answer)
 
     @property

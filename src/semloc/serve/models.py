@@ -271,10 +271,15 @@ class SessionAnswer(Answer):
 
 # Sessions -----------------------------------------------------------------------------------
 class SessionCreate(_Request):
-    """Optional: the device frame's up (without it, no gravity prior)."""
+    """Optional: the device frame's up (without it, no gravity prior) and a position prior."""
 
     model_config = ConfigDict(strict=True, extra="forbid")
     up: Direction | None = None
+    prior: PriorBody | None = Field(
+        None,
+        description="The session's position prior from its first update on (until an update "
+        "changes it; absent or null: none).",
+    )
 
 
 class SessionCreated(_Answer):

@@ -13,7 +13,8 @@ uninterrupted one's exactly, except after a search longer than that, whose rebui
 grows its association sets again from the same window objects at once (it may rank the
 candidate places differently until the search settles).  A session's position prior is set by
 an update that carries `"prior"` (null clears it) and holds from then on: the batch keeps the
-change (a rebuild replays it in order) and the kept state the prior in effect.  Each session is pinned to the map version it was created on.  Parsed maps are kept
+change (a rebuild replays it in order) and the kept state the prior in effect; a prior given
+when the session opens is the kept state after batch 0 (a fresh Localizer with that prior).  Each session is pinned to the map version it was created on.  Parsed maps are kept
 per (map, version) in a small cache (a version never changes once written).
 
 A session belongs to its owner, the token that opened it: to any other caller it is as good as
@@ -333,18 +334,30 @@ class Service:
 
     # sessions ---------------------------------------------------------------------------------
     def create_session(self, map_id: str, body: Any, owner: str = "") -> str:
-        """A new session on the latest version of `map_id`, owned by `owner`; its id."""
+        """A new session on the latest version of `map_id`, owned by `owner`; its id.  A
+        body's `prior` holds from the first update on: the session starts from the kept state
+        of a fresh Localizer with that prior (batch 0), so a rebuild anywhere has it."""
         self._expire()
-        up = None
+        up, prior = None, None
         if body is not None:
-            if not isinstance(body, dict) or set(body) - {"up"}:
-                raise Invalid("invalid session", 'the body is optional: {"up": [x, y, z]}')
+            if not isinstance(body, dict) or set(body) - {"up", "prior"}:
+                raise Invalid(
+                    "invalid session", 'the body is optional: {"up": [x, y, z], "prior": {...}}'
+                )
             up = body.get("up")
             if up is not None:
                 _objects_map([], up, "body")  # validates `up` as a map's
-        version, _ = self.object_map(map_id)
+            prior = _prior(body.get("prior"))
+        version, global_map = self.object_map(map_id)
         session_id = secrets.token_urlsafe(18)
-        self.store.create_session(session_id, map_id, version, up, owner)
+        localizer, state = None, None
+        if prior is not None:
+            localizer = Localizer(global_map, self.config, local_up=up, prior=prior)
+            state = {**localizer.state(), "prior": _prior_json(prior)}
+        self.store.create_session(session_id, map_id, version, up, owner, state)
+        if localizer is not None:  # this worker holds it: the first update here builds nothing
+            meta = SessionMeta(session_id, map_id, version, up, owner)
+            self._hold(_LiveSession(localizer, meta))
         return session_id
 
     def session_of(self, session_id: str, owner: str, ends_any: bool = False) -> SessionMeta:
@@ -448,9 +461,13 @@ class Service:
             if live is not None:
                 self._live.move_to_end(session_id)
                 return live
-        fresh = self._rebuilt(meta)
+        return self._hold(self._rebuilt(meta))
+
+    def _hold(self, fresh: _LiveSession) -> _LiveSession:
+        """Keep a session's Localizer in this process (the one held already, if another
+        thread was first); the least recently used go beyond `LIVE_SESSIONS`."""
         with self._lock:
-            live = self._live.setdefault(session_id, fresh)
+            live = self._live.setdefault(fresh.meta.session_id, fresh)
             while len(self._live) > self.LIVE_SESSIONS:
                 self._live.popitem(last=False)  # rebuilt from the store if it comes back
         return live

@@ -449,8 +449,9 @@ class Store:
     # sessions ---------------------------------------------------------------------------------
     def create_session(
         self, session_id: str, map_id: str, map_version: int, up: list[float] | None,
-        owner: str = "",
+        owner: str = "", state: dict[str, Any] | None = None,
     ) -> None:  # fmt: skip
+        """A new session; with `state`, the Localizer state it starts from (after batch 0)."""
         now = time.time()
         with self._transaction(write=True, durable=False) as cur:
             cur.execute(
@@ -463,6 +464,13 @@ class Store:
                 self._sql("INSERT INTO session_owners (session_id, owner) VALUES (?, ?)"),
                 (session_id, owner),
             )
+            if state is not None:
+                cur.execute(
+                    self._sql(
+                        "INSERT INTO session_states (session_id, seq, state) VALUES (?, ?, ?)"
+                    ),
+                    (session_id, 0, _pack(state)),
+                )
 
     def session(self, session_id: str) -> SessionRow | None:
         with self._transaction() as cur:
