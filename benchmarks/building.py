@@ -156,7 +156,7 @@ def measure(base_name: str, size: int, n_views: int, settings: dict, seed: int) 
     config = LocalizerConfig(**settings)
     retrieval = config.retrieval.above is not None
     tick = time.process_time()
-    index = place_index(world, config.retrieval)
+    index = place_index(world, config.retrieval) if retrieval else None
     index_s = time.process_time() - tick
     Localizer(world, config).prepare()
     Localizer(room, config).prepare()
@@ -192,7 +192,7 @@ def measure(base_name: str, size: int, n_views: int, settings: dict, seed: int) 
         })  # fmt: skip
     return {
         "base": base_name, "size": size, "objects": len(world), "index_s": index_s,
-        "index_mb": index.nbytes / 1e6 if retrieval else 0.0, "rows": rows,
+        "index_mb": 0.0 if index is None else index.nbytes / 1e6, "rows": rows,
         "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
     }  # fmt: skip
 
