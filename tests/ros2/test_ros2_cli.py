@@ -17,8 +17,8 @@ pytest.importorskip("cyclonedds", reason="the ros2 extra (cyclonedds) is not ins
 pytest.importorskip("rosbags", reason="the ros extra is not installed")
 
 
-def semloc(*args: str, **options) -> subprocess.Popen:
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)}
+def semloc(*args: str, env: dict | None = None, **options) -> subprocess.Popen:
+    env = {**(os.environ if env is None else env), "PYTHONPATH": os.pathsep.join(sys.path)}
     return subprocess.Popen([sys.executable, "-m", "semloc", *args], env=env, text=True,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, **options)  # fmt: skip
 
@@ -61,3 +61,36 @@ def test_node_prior_options_are_checked_in_one_line(walk):  # noqa: F811
         run = semloc(*base, *bad)
         _, err = run.communicate(timeout=60)
         assert run.returncode == 2 and message in err and "Traceback" not in err, err
+
+
+def test_without_cyclonedds_uri_the_commands_stay_on_loopback(walk):  # noqa: F811
+    """Started without CYCLONEDDS_URI, `ros2 play` and `ros2 echo` fall back to loopback (and
+    say so): they find each other, and nothing is sent to the machine's network."""
+    bare = {k: v for k, v in os.environ.items() if k != "CYCLONEDDS_URI"}
+    domain = str(random.randrange(100, 200))
+    echo = semloc("ros2", "echo", "/odom", "--domain", domain, "--count", "2", env=bare)
+    try:
+        time.sleep(1.0)  # discovery
+        played = semloc("ros2", "play", str(walk / "walk.mcap"), "--domain", domain,
+                        "--rate", "4", env=bare)  # fmt: skip
+        out, err = played.communicate(timeout=120)
+        assert played.returncode == 0, err
+        assert "DDS stays on this machine (loopback): CYCLONEDDS_URI is not set" in err
+        lines, echo_err = echo.communicate(timeout=60)
+    finally:
+        echo.kill()
+    assert len(lines.splitlines()) == 2, echo_err  # heard over loopback
+    assert "DDS stays on this machine (loopback)" in echo_err
+
+
+def test_a_set_cyclonedds_uri_is_honoured_and_a_bad_network_refused(walk):  # noqa: F811
+    from semloc.ros2.wire import LOOPBACK, choose_network
+
+    assert os.environ["CYCLONEDDS_URI"]  # (set by the tests' conftest)
+    before = os.environ["CYCLONEDDS_URI"]
+    assert choose_network("loopback") is None and choose_network("default") is None
+    assert os.environ["CYCLONEDDS_URI"] == before  # never overridden
+    assert '<NetworkInterface name="lo"/>' in LOOPBACK and "AllowMulticast>false" in LOOPBACK
+    run = semloc("ros2", "echo", "/odom", "--network", "everywhere")
+    _, err = run.communicate(timeout=60)
+    assert run.returncode == 2 and "--network: network must be one of loopback, default" in err

@@ -19,7 +19,7 @@ import typer
 from pydantic import ValidationError
 
 from semloc.cli import remote
-from semloc.cli.app import app, console, fail, first_error, foxglove_option
+from semloc.cli.app import app, console, err_console, fail, first_error, foxglove_option
 from semloc.cli.extras import need
 from semloc.cli.files import read_config
 from semloc.cli.options import NearOption, RadiusOption, prior_option, topic_option
@@ -32,6 +32,7 @@ from semloc.ros.initialpose import TOPIC as INITIALPOSE_TOPIC
 from semloc.ros2.node import LiveNode, NodeSettings, Wire, samples
 from semloc.ros2.play import play
 from semloc.ros2.remote import RemoteLocalizer
+from semloc.ros2.wire import choose_network
 
 ros2_app = typer.Typer(
     help="Live on a ROS 2 robot without ROS (the ros2 extra): the semloc node, a bag player, "
@@ -54,10 +55,28 @@ KNOWN_TOPICS = {
 """The topics `echo` knows the type of (others need `--type`)."""
 
 FoxgloveOption = foxglove_option()
+NetworkOption = Annotated[
+    str,
+    typer.Option(
+        "--network",
+        help="Without CYCLONEDDS_URI: 'loopback' keeps DDS on this machine, 'default' uses "
+        "Cyclone DDS's defaults (the machine's network). A set CYCLONEDDS_URI always wins.",
+    ),
+]
 DomainOption = Annotated[
     int | None,
     typer.Option("--domain", min=0, max=232, help="DDS domain id [default: ROS_DOMAIN_ID or 0]."),
 ]
+
+
+def _network(network: str) -> None:
+    """Cyclone DDS's network for this process (`semloc.ros2.wire.choose_network`)."""
+    try:
+        notice = choose_network(network)
+    except ValueError as exc:
+        fail(f"--network: {exc}")
+    if notice is not None:
+        err_console.print(f"semloc ros2: {notice}", style="yellow", highlight=False)
 
 
 def _domain(domain: int | None) -> int:
@@ -84,6 +103,7 @@ def node(
         str, typer.Option(help="nav_msgs/Odometry topic; 'none' without odometry.")
     ] = "/odom",
     domain: DomainOption = None,
+    network: NetworkOption = "loopback",
     config: Annotated[
         Path | None, typer.Option("--config", help="Localizer settings (JSON or YAML).")
     ] = None,
@@ -123,6 +143,7 @@ def node(
     /semloc/markers and /semloc/map on the DDS wire (Ctrl-C ends it).  --near/--radius: a
     position prior on the odometry frame's origin, until a pose estimate on --initialpose."""
     need("ros2 node", "ros2")
+    _network(network)
     prior = prior_option(near, radius)
     try:
         cfg = LocalizerConfig(**read_config(config))
@@ -172,12 +193,14 @@ def node(
 def play_command(
     bag: Annotated[Path, typer.Argument(metavar="BAG", help="A rosbag2 folder or .mcap / .db3.")],
     domain: DomainOption = None,
+    network: NetworkOption = "loopback",
     rate: Annotated[
         float, typer.Option(min=0.0, help="Times the recorded pace; 0: as fast as possible.")
     ] = 1.0,
 ) -> None:
     """Publish BAG's messages on the DDS wire with ROS 2 names, at the recorded pace."""
     need("ros2 play", "ros2")
+    _network(network)
     start = time.perf_counter()
     counts = play(bag, Wire(_domain(domain)), rate)
     shown = ", ".join(f"{topic} {n}" for topic, n in counts.items())
@@ -188,6 +211,7 @@ def play_command(
 def echo(
     topic: Annotated[str, typer.Argument(help="The topic, e.g. /semloc/status.")],
     domain: DomainOption = None,
+    network: NetworkOption = "loopback",
     msgtype: Annotated[
         str | None, typer.Option("--type", help="Its message type, e.g. std_msgs/msg/String.")
     ] = None,
@@ -195,6 +219,7 @@ def echo(
 ) -> None:
     """Print a topic's messages, one JSON line each (Ctrl-C ends it)."""
     need("ros2 echo", "ros2")
+    _network(network)
     typename = msgtype or KNOWN_TOPICS.get(topic)
     if typename is None:
         fail(f"the type of {topic} is not known: give --type (known: {', '.join(KNOWN_TOPICS)})")

@@ -12,6 +12,7 @@ types' fields have the message's names, so code that reads messages reads both.
 
 from __future__ import annotations
 
+import os
 import types
 from dataclasses import dataclass
 from functools import cache
@@ -20,6 +21,33 @@ from typing import Any
 import numpy as np
 
 from semloc.ros import messages as msgs
+
+LOOPBACK = (
+    '<CycloneDDS><Domain><General><Interfaces><NetworkInterface name="lo"/></Interfaces>'
+    "<AllowMulticast>false</AllowMulticast></General><Discovery><Peers>"
+    '<Peer address="127.0.0.1"/></Peers><ParticipantIndex>auto</ParticipantIndex>'
+    "<MaxAutoParticipantIndex>40</MaxAutoParticipantIndex></Discovery></Domain></CycloneDDS>"
+)
+"""Cyclone DDS on this machine only: the loopback interface, no multicast, peer 127.0.0.1."""
+NETWORKS = ("loopback", "default")
+ON_LOOPBACK = (
+    "DDS stays on this machine (loopback): CYCLONEDDS_URI is not set; set it for the robot's "
+    "network, or pass --network default for Cyclone DDS's defaults (docs/ros2.md)"
+)
+
+
+def choose_network(network: str) -> str | None:
+    """Configure Cyclone DDS's network before this process's first participant.  A
+    `CYCLONEDDS_URI` that is set is honoured, never overridden; without one, `loopback` keeps
+    DDS on this machine (returns the notice to show) and `default` leaves Cyclone DDS's
+    defaults (multicast discovery on the machine's network)."""
+    if network not in NETWORKS:
+        raise ValueError(f"network must be one of {', '.join(NETWORKS)}, got {network!r}")
+    if os.environ.get("CYCLONEDDS_URI") or network == "default":
+        return None
+    os.environ["CYCLONEDDS_URI"] = LOOPBACK
+    return ON_LOOPBACK
+
 
 _BASE = {
     "bool": "bool", "byte": "uint8", "char": "uint8", "uint8": "uint8", "int8": "int8",
