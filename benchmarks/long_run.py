@@ -1,13 +1,14 @@
 """A robot's day: one Localizer fed for a long walk with drifting odometry and a kidnap.
 
-    PYTHONPATH=src python benchmarks/long_run.py [--keyframes 1000] [--worlds rooms real]
+    PYTHONPATH=src python benchmarks/long_run.py [--keyframes 1000] [--worlds rooms real large]
         [--kidnap-at 600] [--seed 0] [--unbounded-budget 120] [--plot long_run.png]
 
 Worlds: `rooms`, a generated building of 600 objects (`semloc.sim.layouts.layout`:
 classrooms, meeting rooms, offices, kitchens, living rooms; points on the box faces), and
 `real`, the ScanNet scene0000_00 objects (their mesh points) tiled 4 x 4 into a building, each
 copy keeping a random 70 % of its objects (`semloc.sim.longwalk.tiled`; skipped with a note
-when `../shared/data/real` is absent).  The walk (`semloc.sim.longwalk.LongWalk`): 0.5 m per
+when `../shared/data/real` is absent); `large`, a generated building of 5,000 objects (past
+the place-retrieval threshold, `semloc.places`).  The walk (`semloc.sim.longwalk.LongWalk`): 0.5 m per
 keyframe towards random objects in turn, up to 10 objects in a 120° view of 4 m, new ones plus
 two re-detections per keyframe, points on the faces the robot sees; odometry drift 1 %/m
 (random walk), 0.2°/√m of yaw random walk and a 0.05°/m yaw bias; a kidnap at `--kidnap-at`
@@ -147,6 +148,8 @@ def worlds(names: list[str], seed: int) -> dict[str, ObjectMap]:
     found: dict[str, ObjectMap] = {}
     if "rooms" in names:
         found["rooms (600 objects)"] = layout(600, seed=seed, points_per_object=320)
+    if "large" in names:  # past the place-retrieval threshold (3,000 objects)
+        found["rooms (5,000 objects)"] = layout(5000, seed=seed, points_per_object=320)
     if "real" in names:
         data = real_data_dir()
         if data is None:
@@ -209,7 +212,8 @@ def plot(path: Path, traces: dict[str, list[Trace]], kidnap: int | None) -> None
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--keyframes", type=int, default=1000)
-    parser.add_argument("--worlds", nargs="+", default=["rooms", "real"])
+    parser.add_argument("--worlds", nargs="+", default=["rooms", "real"],
+                        choices=["rooms", "real", "large"])  # fmt: skip
     parser.add_argument("--kidnap-at", type=int, default=None, help="default: 60 %% of the run")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--unbounded-budget", type=float, default=120.0)

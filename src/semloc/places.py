@@ -93,7 +93,6 @@ class PlaceIndex:
         positions = np.asarray(global_map.positions, dtype=float).reshape(-1, 3)
         label_names, self.label_codes = np.unique(global_map.labels, return_inverse=True)
         self.label_codes = self.label_codes.astype(np.int64)
-        self._code_of = {str(name): code for code, name in enumerate(label_names)}
         self.n_labels = max(len(label_names), 1)
         self.n_bins = int(np.floor(config.reach / config.bin)) + 1
         corners = np.floor(positions / config.cell).astype(np.int64)
