@@ -6,9 +6,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from helpers import room
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 import semloc
 from semloc import Localizer, Look, ObjectMap, Result
+from semloc.next_look import NextLookConfig
 from semloc.transforms import pose_error, yaw_pose
 
 SHIFT = np.array([40.0, 0.0, 0.0])
@@ -97,3 +100,38 @@ def test_suggestions_round_trip_through_json():
     with pytest.raises(ValueError, match=r"'next_look\[0\]' is not a suggestion"):
         Result.from_dict(document)
     assert isinstance(back.next_look[0], Look)
+
+
+@settings(max_examples=15, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    seed=st.integers(0, 50),
+    shift=st.tuples(st.floats(20, 60), st.floats(-30, 30)),
+    yaw=st.floats(-np.pi, np.pi),
+    dropped=st.integers(1, 3),
+)
+def test_every_suggestion_holds_what_it_says(seed, shift, yaw, dropped):
+    """Whatever the rooms and where the copy lies: `where[r]` is the object under hypothesis
+    r, a separated rank's spot is in reach and no other top hypothesis expects an object of
+    the label there, and the gain is the entropy of the outcome (bits)."""
+    a = list(room(12, seed=seed))
+    turn = yaw_pose(yaw, [shift[0], shift[1], 0.0])
+    b = [o.transformed(turn).replace(id=o.id.replace("a", "b")) for o in a[: len(a) - dropped]]
+    world = ObjectMap([*a, *b], up=[0, 0, 1], name="two copies")
+    result = semloc.localize(world, _view(a, range(5)))
+    config = NextLookConfig()
+    top = [h for h in result.hypotheses if h.pose is not None][: config.look_hypotheses]
+    seen = np.array([o.position for o in _view(a, range(5))])
+    for look in result.next_look:
+        position = world[world.index_of(look.global_id)].position
+        assert look.label == world[world.index_of(look.global_id)].label
+        for h in top:
+            expected = np.linalg.inv(h.pose) @ np.append(position, 1.0)
+            np.testing.assert_allclose(look.where[h.rank], expected[:3], atol=1e-9)
+        for rank in look.separates:
+            spot = look.where[rank]
+            assert np.linalg.norm(seen - spot, axis=1).min() <= config.look_reach
+            for other in (h for h in top if h.rank != rank):
+                at = other.pose[:3, :3] @ spot + other.pose[:3, 3]
+                near = np.linalg.norm(world.positions - at, axis=1) <= config.look_tolerance
+                assert look.label not in set(world.labels[near])
+        assert 0 < look.gain <= np.log2(len(look.separates) + 1) + 1e-9
