@@ -52,6 +52,8 @@ from semloc.maps import ObjectMap
 
 __all__ = ["PlaceIndex", "RetrievalConfig", "place_index"]
 
+_BLOCK = 4096  # map objects whose pairs are taken at once while the index is built
+
 
 class RetrievalConfig(BaseModel):
     """Place retrieval in front of the clustering, for large maps."""
@@ -103,16 +105,27 @@ class PlaceIndex:
         self.words, self.cells = self._entries(positions)
 
     def _entries(self, positions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Every (word, cell of the word's first object) once, sorted by word then cell."""
+        """Every (word, cell of the word's first object) once, sorted by word then cell.  The
+        map's pairs are taken a block of objects at a time and reduced to distinct entries
+        before the next block, so memory stays bounded by a block's pairs and the entries
+        (at most one per word and cell), however dense the map."""
         if len(positions) < 2:
             return np.zeros(0, np.int64), np.zeros(0, np.int64)
-        pairs = cKDTree(positions).query_pairs(self.config.reach, output_type="ndarray")
-        first = np.concatenate([pairs[:, 0], pairs[:, 1]]).astype(np.int64)
-        second = np.concatenate([pairs[:, 1], pairs[:, 0]]).astype(np.int64)
-        del pairs
-        bins = np.linalg.norm(positions[first] - positions[second], axis=1) // self.config.bin
-        words = self.word(self.label_codes[first], self.label_codes[second], bins.astype(np.int64))
-        entries = np.unique(words * self.n_cells + self.cell_of[first])
+        tree = cKDTree(positions)
+        found = []
+        for start in range(0, len(positions), _BLOCK):
+            block = np.arange(start, min(start + _BLOCK, len(positions)))
+            near = tree.query_ball_point(positions[block], self.config.reach, return_sorted=False)
+            counts = np.fromiter((len(n) for n in near), dtype=np.int64, count=len(near))
+            first = np.repeat(block, counts)
+            second = np.fromiter((j for n in near for j in n), dtype=np.int64, count=counts.sum())
+            other = first != second
+            first, second = first[other], second[other]
+            bins = np.linalg.norm(positions[first] - positions[second], axis=1) // self.config.bin
+            words = self.word(self.label_codes[first], self.label_codes[second],
+                              bins.astype(np.int64))  # fmt: skip
+            found.append(np.unique(words * self.n_cells + self.cell_of[first]))
+        entries = np.unique(np.concatenate(found))
         return entries // self.n_cells, entries % self.n_cells
 
     def word(self, first: np.ndarray, second: np.ndarray, bins: np.ndarray) -> np.ndarray:
