@@ -53,7 +53,7 @@ from semloc.localizer import LocalizerConfig
 from semloc.maps import ObjectMap
 from semloc.priors import Prior
 from semloc.ros import messages as msgs
-from semloc.ros.answers import MAP_TOPIC, MATCHES_TOPIC, AnswerTopics, Frames
+from semloc.ros.answers import MAP_TOPIC, MATCHES_TOPIC, OUTPUT_TOPICS, AnswerTopics, Frames
 from semloc.ros.bag import CLOUD_WAIT_NS, MAX_GAP_S, NO_CLASS, cloud_points, detection_frame
 from semloc.ros.frames import Trajectory
 from semloc.ros.initialpose import TOPIC as INITIALPOSE_TOPIC
@@ -142,8 +142,14 @@ class WireSink:
     """The `AnswerTopics` sink of the node: messages published instead of written to a file."""
 
     def __init__(self, wire: Wire) -> None:
+        """The writers of every answer topic are made here, before the first answer (as a ROS 2
+        node creates its publishers): `ros2 topic list` and `cyclonedds ls` show the topics,
+        with their types, from the start."""
         self.wire = wire
         self.counts: dict[str, int] = {}
+        for topic, typename in OUTPUT_TOPICS.items():
+            topic = TOPIC_RENAMES.get(topic, topic)
+            wire.writer(topic, typename, latched=topic == MAP_TOPIC)
 
     def write(self, topic: str, typename: str, stamp_ns: int, message: Any) -> None:
         topic = TOPIC_RENAMES.get(topic, topic)
