@@ -17,8 +17,10 @@ the local frame, `where[r]` = T_r⁻¹ p.  Looking at the spot `where[r]`:
 
 Suggestions are map objects within `look_reach` of the local objects under some top hypothesis;
 a rank is not separated by a spot already looked at (a local object of the same label lies
-within `look_tolerance` of it: what it shows is already in the evidence).  Best first by gain, then by how near the nearest separated spot is
-to the objects seen (a nearer look is cheaper), at most `suggestions` of them, one per spot.
+within `look_tolerance` of it: what it shows is already in the evidence).  Best first by gain,
+then by what one look there may see (how many spots that tell the same rank apart lie within
+`look_sight` of it: a look sees an area, not one object), then by how near the spot is to the
+objects seen (a nearer look is cheaper); at most `suggestions` of them, one per spot.
 Everything comes from the hypotheses' poses and the map: no new sensor is needed.  Pure
 computation on numpy arrays.
 """
@@ -48,6 +50,9 @@ class NextLookConfig(BaseModel):
     look_hypotheses: int = Field(5, ge=2, description="Top hypotheses (with a pose) weighed.")
     look_min_gain: float = Field(
         0.05, ge=0, description="Suggestions expected to tell less than this (bits) are left out."
+    )
+    look_sight: float = Field(
+        2.0, gt=0, description="Objects within this distance (m) of a spot are seen by one look."
     )
     look_reach: float = Field(
         8.0, gt=0, description="A spot to look at lies within this distance (m) of a seen object."
@@ -127,6 +132,7 @@ def next_look(
     others = _counts(expected, labels, trees, config.look_tolerance)
     others[:, np.arange(len(top)), np.arange(len(top))] = 0  # r itself
     separated = (distance <= config.look_reach) & ~already & (others.sum(axis=2) == 0)
+    telling = _telling_nearby(spots, separated, config.look_sight)
     looks = []
     for g in np.flatnonzero(separated.any(axis=1)):
         chosen = np.flatnonzero(separated[g])
@@ -141,15 +147,29 @@ def next_look(
             separates=sorted(top[r].rank for r in chosen),
             gain=float(gain),
         )
-        looks.append((gain, float(distance[g, chosen].min()), look))
-    looks.sort(key=lambda item: (-item[0], item[1], item[2].global_id))
+        evidence = int(telling[g, chosen].max())
+        looks.append((round(gain, 6), -evidence, float(distance[g, chosen].min()), look))
+    looks.sort(key=lambda item: (-item[0], item[1], item[2], item[3].global_id))
     return _one_per_spot(looks, config)
 
 
-def _one_per_spot(looks: list[tuple[float, float, Look]], config: NextLookConfig) -> list[Look]:
+def _telling_nearby(spots: np.ndarray, separated: np.ndarray, sight: float) -> np.ndarray:
+    """[g, r]: how many separated spots of rank r lie within `sight` of spot (g, r): what one
+    look there may see that tells r from the others."""
+    telling = np.zeros(separated.shape, dtype=np.int64)
+    for r in range(separated.shape[1]):
+        rows = np.flatnonzero(separated[:, r])
+        if len(rows):
+            points = spots[rows, r]
+            close = np.linalg.norm(points[:, None] - points[None], axis=2) <= sight
+            telling[rows, r] = close.sum(axis=1)
+    return telling
+
+
+def _one_per_spot(looks: list[tuple], config: NextLookConfig) -> list[Look]:
     """The best suggestions, one per label and spot (the same spot of a separated rank)."""
     chosen: list[Look] = []
-    for _, _, look in looks:
+    for *_, look in looks:
         rank = look.separates[0]
         if any(
             other.label == look.label

@@ -10,7 +10,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import semloc
-from semloc import Localizer, Look, ObjectMap, Result
+from semloc import Localizer, Look, ObjectMap, Result, SemanticObject
 from semloc.next_look import NextLookConfig
 from semloc.transforms import pose_error, yaw_pose
 
@@ -135,3 +135,21 @@ def test_every_suggestion_holds_what_it_says(seed, shift, yaw, dropped):
                 near = np.linalg.norm(world.positions - at, axis=1) <= config.look_tolerance
                 assert look.label not in set(world.labels[near])
         assert 0 < look.gain <= np.log2(len(look.separates) + 1) + 1e-9
+
+
+def test_a_look_that_sees_more_telling_objects_comes_first():
+    """Equal gains: the spot with two objects the other copy lacks beats a nearer spot with
+    one (a look sees an area, not one object)."""
+    seen = [("chair", [0, 0]), ("table", [1.5, 0.3]), ("cabinet", [0.2, 2.1]),
+            ("bookshelf", [2.4, 2.6]), ("sofa", [1.0, 3.8])]  # fmt: skip
+    extra = [("tv", [-2.5, 1.0]), ("lamp", [5.5, 1.0]), ("plant", [6.2, 1.8])]
+    a = [SemanticObject(f"a{i}", label, [x, y, 0.5]) for i, (label, (x, y)) in
+         enumerate(seen + extra)]  # fmt: skip
+    b = [o.replace(id=o.id.replace("a", "b"), position=o.position + SHIFT) for o in a[:5]]
+    world = ObjectMap([*a, *b], up=[0, 0, 1], name="copy without tv, lamp and plant")
+    result = semloc.localize(world, _view(a, range(5)))
+    assert result.status == "ambiguous"
+    labels = [look.label for look in result.next_look]
+    assert set(labels) == {"tv", "lamp", "plant"}
+    assert len({round(look.gain, 6) for look in result.next_look}) == 1  # equal gains
+    assert labels[0] in {"lamp", "plant"} and labels[-1] == "tv"
