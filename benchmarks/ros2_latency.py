@@ -27,18 +27,14 @@ from pathlib import Path
 
 import numpy as np
 
-LOOPBACK = (
-    '<CycloneDDS><Domain><General><Interfaces><NetworkInterface name="lo"/></Interfaces>'
-    "<AllowMulticast>false</AllowMulticast></General><Discovery><Peers>"
-    '<Peer address="127.0.0.1"/></Peers><ParticipantIndex>auto</ParticipantIndex>'
-    "<MaxAutoParticipantIndex>40</MaxAutoParticipantIndex></Discovery></Domain></CycloneDDS>"
-)
-os.environ.setdefault("CYCLONEDDS_URI", LOOPBACK)
+from semloc.cli import main as semloc_main
+from semloc.ros import messages as msgs
+from semloc.ros2.node import Wire, samples
+from semloc.ros2.play import play
+from semloc.ros2.wire import choose_network
 
-from semloc.cli import main as semloc_main  # noqa: E402
-from semloc.ros import messages as msgs  # noqa: E402
-from semloc.ros2.node import Wire, samples  # noqa: E402
-from semloc.ros2.play import play  # noqa: E402
+choose_network("loopback")  # DDS on this machine (before any participant), unless
+# CYCLONEDDS_URI says otherwise
 
 
 def main(argv: list[str] | None = None) -> int:
