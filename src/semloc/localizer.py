@@ -591,7 +591,11 @@ class Localizer:
             return "the global map has no objects"
         if len(self._local) < 2:
             return f"too few local objects: {len(self._local)} seen, 2 needed"
-        waiting = [i for i, k in self._retrieved.items() if len(k) == 0 and len(self._found[i][1])]
+        waiting = [  # retrieval left them nothing, though the prior (if any) left some
+            i
+            for i, k in self._retrieved.items()
+            if len(k) == 0 and len(self._prior_gated(*self._found[i][:2]))
+        ]
         if waiting and matched >= 2 and sum(len(k) > 0 for k in self._retrieved.values()) < 2:
             return (
                 f"the view so far fits too many places of the map: {len(waiting)} local "
