@@ -14,8 +14,19 @@ Odometry integrates the true motion with noise: per keyframe a translation error
 `drift.yaw_walk` degrees per √m, and a steady yaw bias of `drift.yaw_bias` degrees per metre.
 Objects are sent in the odometry frame, so the true `T_global_local` of keyframe k is the true
 robot pose times the inverse of the odometry pose, and changes slowly as drift accumulates.
-A kidnap at keyframe `kidnap_at` carries the robot at least `kidnap_distance` away; odometry
-does not notice (the true `T_global_local` jumps).
+A kidnap at keyframe `kidnap_at` (and at each of `more_kidnaps`) carries the robot at least
+`kidnap_distance` away; odometry does not notice (the true `T_global_local` jumps).  A kidnap
+at `lookalike_at` carries it into the look-alike of where it stands: the same spot, facing the
+same way, beside the map object of the nearest object's label whose surroundings repeat the
+most labels (another copy of the room in a building of alike rooms).
+
+An old map and a detector that errs (`World`): today's world differs from the map (a share of
+the objects stand 1-3 m from where the map has them, a share are gone), a share of detections
+carry another label of the map's vocabulary, objects the map does not hold appear (phantoms:
+a bag on the floor), and the detector splits one object into two or merges two near ones of a
+label into one.  Each keyframe also says what the sensor covered (`WalkKeyframe.coverage`: its
+pose in the odometry frame, the view's range up to the farthest object it could see, and its
+field of view), for negative evidence.
 """
 
 from __future__ import annotations
@@ -25,7 +36,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from semloc.coverage import Coverage
 from semloc.maps import ObjectMap, SemanticObject
+
+CAMERA_IN_ROBOT = np.array([[0.0, 0, 1, 0], [-1, 0, 0, 0], [0, -1, 0, 0], [0, 0, 0, 1]])
+"""The sensor looks ahead along the robot's x axis (z forward, x right, y down, as a camera)."""
 
 
 @dataclass(frozen=True)
@@ -36,6 +51,18 @@ class Drift:
     translation: float = 0.01
     yaw_walk: float = 0.2
     yaw_bias: float = 0.05
+
+
+@dataclass(frozen=True)
+class World:
+    """How today's world and the detector differ from the map (all off by default)."""
+
+    moved: float = 0.0  # share of map objects standing elsewhere today
+    move_m: tuple[float, float] = (1.0, 3.0)
+    gone: float = 0.0  # share of map objects gone today
+    phantoms: float = 0.0  # chance per keyframe of a detection the map does not hold
+    split: float = 0.0  # chance a detection is split in two
+    merged: float = 0.0  # chance two near detections of a label are merged in one
 
 
 @dataclass(frozen=True)
@@ -53,6 +80,9 @@ class WalkConfig:
     drift: Drift = field(default_factory=Drift)
     kidnap_at: int | None = None
     kidnap_distance: float = 12.0
+    more_kidnaps: tuple[int, ...] = ()
+    lookalike_at: int | None = None
+    world: World = field(default_factory=World)
 
 
 @dataclass(frozen=True)
@@ -66,6 +96,9 @@ class WalkKeyframe:
     robot_global: np.ndarray
     T_global_local: np.ndarray
     kidnapped: bool = False
+    coverage: Coverage | None = None
+    truth: dict[str, int | None] = field(default_factory=dict)
+    """The map object (index) each sent local object is, None for a phantom."""
 
 
 def _pose2d(x: float, y: float, yaw: float, z: float = 0.0) -> np.ndarray:
@@ -84,6 +117,27 @@ class LongWalk:
         self.config = config or WalkConfig()
         self.rng = np.random.default_rng(seed)
         self._points = [self._object_points(o) for o in global_map]
+        self.offsets, self.present = self._today()
+        self.labels = sorted(set(global_map.labels.tolist()))
+
+    def _today(self) -> tuple[np.ndarray, np.ndarray]:
+        """Where each map object stands today relative to the map, and which are still there."""
+        world, n = self.config.world, len(self.map)
+        offsets = np.zeros((n, 3))
+        if world.moved == 0 and world.gone == 0:  # (a clean walk draws nothing here)
+            return offsets, np.ones(n, dtype=bool)
+        moved = self.rng.random(n) < world.moved
+        angle = self.rng.uniform(-np.pi, np.pi, n)
+        reach = self.rng.uniform(*world.move_m, n)
+        offsets[moved, 0] = (reach * np.cos(angle))[moved]
+        offsets[moved, 1] = (reach * np.sin(angle))[moved]
+        present = self.rng.random(n) >= world.gone
+        return offsets, present
+
+    @property
+    def today(self) -> np.ndarray:
+        """Where the map objects stand today (N, 3)."""
+        return self.map.positions + self.offsets
 
     def _object_points(self, obj: SemanticObject) -> np.ndarray:
         if obj.points is not None and len(obj.points):
@@ -103,9 +157,10 @@ class LongWalk:
         odom = np.array([0.0, 0.0, 0.0])  # x, y, yaw of the odometry estimate
         target = robot
         sent: dict[int, tuple[str, int]] = {}  # global index -> (local id, last keyframe)
-        next_id = 0
+        counter = iter(range(10**9))
+        kidnaps = {*cfg.more_kidnaps, *((cfg.kidnap_at,) if cfg.kidnap_at is not None else ())}
         for k in range(cfg.keyframes):
-            kidnapped = cfg.kidnap_at is not None and k == cfg.kidnap_at
+            kidnapped = k in kidnaps or k == cfg.lookalike_at
             if k > 0:
                 while np.linalg.norm(target - robot) < cfg.step:
                     target = xy[rng.integers(len(xy))]
@@ -115,26 +170,75 @@ class LongWalk:
                 yaw += turn
                 robot = robot + move * np.array([np.cos(yaw), np.sin(yaw)])
                 odom = self._odometry(odom, turn, move)
-                if kidnapped:
+                if k == cfg.lookalike_at:
+                    robot = self._lookalike(robot)
+                    target = robot
+                elif kidnapped:
                     robot, yaw = self._elsewhere(robot), float(rng.uniform(-np.pi, np.pi))
                     target = robot
             T_world_robot = _pose2d(*robot, yaw, z=1.2)
             T_odom_robot = _pose2d(*odom[:2], odom[2], z=1.2)
             T_true = T_world_robot @ np.linalg.inv(T_odom_robot)
-            visible = self._visible(robot, yaw)
-            objects, fresh = [], []
-            for g in visible:
-                known = sent.get(g)
-                if known is None or k - known[1] > cfg.forget_after:
-                    fresh.append((g, f"o{next_id}"))
-                    next_id += 1
-            again = [g for g in visible if g in sent and k - sent[g][1] <= cfg.forget_after]
+            visible, reach = self._visible(robot, yaw)
+            fresh = [g for g in visible if g not in sent or k - sent[g][1] > cfg.forget_after]
+            for g in fresh:
+                sent[g] = (f"o{next(counter)}", k)
+            again = [g for g in visible if g not in fresh and k - sent[g][1] <= cfg.forget_after]
             again = [again[i] for i in rng.permutation(len(again))[: cfg.redetections]]
             T_local_world = np.linalg.inv(T_true)
-            for g, local_id in [*fresh, *((g, sent[g][0]) for g in again)]:
-                objects.append(self._measure(g, local_id, robot, T_local_world, k))
-                sent[g] = (local_id, k)
-            yield WalkKeyframe(k, objects, T_odom_robot, T_world_robot[:3, 3], T_true, kidnapped)
+            measured = [(g, sent[g][0], self._measure(g, sent[g][0], robot, T_local_world, k))
+                        for g in [*fresh, *again]]  # fmt: skip
+            for g in again:
+                sent[g] = (sent[g][0], k)
+            objects, truth = self._detector(measured, robot, yaw, T_local_world, k, counter)
+            coverage = Coverage(T_odom_robot @ CAMERA_IN_ROBOT, reach, (cfg.field_of_view, 150.0))
+            yield WalkKeyframe(k, objects, T_odom_robot, T_world_robot[:3, 3], T_true, kidnapped,
+                               coverage, truth)  # fmt: skip
+
+    def _detector(self, measured, robot, yaw, T_local_world, k, counter):
+        """The detector's errors over the measured objects: splits, merges, phantoms."""
+        world, rng = self.config.world, self.rng
+        objects: list[SemanticObject] = []
+        truth: dict[str, int | None] = {}
+        merged_away: set[str] = set()
+        for i, (g, local_id, obj) in enumerate(measured):
+            if local_id in merged_away:
+                continue
+            partner = next((m for m in measured[i + 1 :] if m[2].label == obj.label
+                            and np.linalg.norm(m[2].position - obj.position) < 1.5), None)  # fmt: skip
+            if partner is not None and world.merged and rng.random() < world.merged:
+                merged_away.add(partner[1])
+                obj = _merged(obj, partner[2])
+            if (
+                world.split
+                and rng.random() < world.split
+                and obj.points is not None
+                and len(obj.points) >= 8
+            ):
+                first, second = _split(obj, f"o{next(counter)}")
+                objects += [first, second]
+                truth[first.id], truth[second.id] = g, g
+                continue
+            objects.append(obj)
+            truth[obj.id] = g
+        if world.phantoms and rng.random() < world.phantoms:
+            phantom = self._phantom(robot, yaw, T_local_world, k, f"o{next(counter)}")
+            objects.append(phantom)
+            truth[phantom.id] = None
+        return objects, truth
+
+    def _phantom(self, robot, yaw, T_local_world, k, local_id) -> SemanticObject:
+        """An object the map does not hold, in view, with a label of the map's vocabulary."""
+        rng = self.rng
+        distance = rng.uniform(1.0, self.config.view_range * 0.8)
+        bearing = yaw + np.radians(rng.uniform(-0.4, 0.4) * self.config.field_of_view)
+        centre = np.array([*(robot + distance * np.array([np.cos(bearing), np.sin(bearing)])), 0.4])
+        size = rng.uniform(0.3, 0.8, 3)
+        u = rng.uniform(-0.5, 0.5, (max(self.config.points_per_object, 60), 3)) * size
+        points = u + centre
+        local = points @ T_local_world[:3, :3].T + T_local_world[:3, 3]
+        label = str(rng.choice(self.labels))
+        return SemanticObject(local_id, label, local.mean(axis=0), points=local, seen=k)
 
     def _odometry(self, odom: np.ndarray, turn: float, move: float) -> np.ndarray:
         d, rng = self.config.drift, self.rng
@@ -152,26 +256,56 @@ class LongWalk:
         pick = far if len(far) else np.arange(len(xy))
         return xy[self.rng.choice(pick)] + self.rng.normal(0, 0.5, 2)
 
-    def _visible(self, robot: np.ndarray, yaw: float) -> list[int]:
+    def _lookalike(self, robot: np.ndarray) -> np.ndarray:
+        """The same spot in the look-alike of the robot's surroundings, `kidnap_distance` away
+        at least: beside the object of the nearest object's label whose neighbours (4 m)
+        repeat the most labels at the same offsets (0.5 m)."""
+        positions, labels = self.map.positions, self.map.labels
+        xy = positions[:, :2]
+        nearest = int(np.argmin(np.linalg.norm(xy - robot, axis=1)))
+        around = np.flatnonzero(np.linalg.norm(xy - xy[nearest], axis=1) < 4.0)
+        best, best_count = None, -1
+        for j in np.flatnonzero(labels == labels[nearest]):
+            if np.linalg.norm(xy[j] - xy[nearest]) < self.config.kidnap_distance:
+                continue
+            shift = xy[j] - xy[nearest]
+            count = 0
+            for a in around:
+                gaps = np.linalg.norm(xy - (xy[a] + shift), axis=1)
+                count += bool(np.any((gaps < 0.5) & (labels == labels[a])))
+            if count > best_count:
+                best, best_count = j, count
+        if best is None:
+            return self._elsewhere(robot)
+        return robot + (xy[best] - xy[nearest])
+
+    def _visible(self, robot: np.ndarray, yaw: float) -> tuple[list[int], float]:
+        """The objects in view today (nearest first, at most `max_visible`) and how far the
+        view reached: its range, or the farthest object seen when more were in view."""
         cfg = self.config
-        offsets = self.map.positions[:, :2] - robot
+        offsets = self.today[:, :2] - robot
         distance = np.linalg.norm(offsets, axis=1)
         bearing = np.arctan2(offsets[:, 1], offsets[:, 0]) - yaw
         bearing = (bearing + np.pi) % (2 * np.pi) - np.pi
-        inside = (distance <= cfg.view_range) & (
-            np.abs(np.degrees(bearing)) <= cfg.field_of_view / 2
+        inside = (
+            (distance <= cfg.view_range)
+            & (np.abs(np.degrees(bearing)) <= cfg.field_of_view / 2)
+            & self.present
         )
         order = np.flatnonzero(inside)[np.argsort(distance[inside], kind="stable")]
-        return order[: cfg.max_visible].tolist()
+        if len(order) > cfg.max_visible:
+            return order[: cfg.max_visible].tolist(), float(distance[order[cfg.max_visible - 1]])
+        return order.tolist(), cfg.view_range
 
     def _measure(
         self, g: int, local_id: str, robot: np.ndarray, T_local_world: np.ndarray, k: int
     ) -> SemanticObject:
         cfg, rng, obj = self.config, self.rng, self.map[g]
-        points = self._points[g]
-        towards = np.append(robot, 1.2) - obj.position
+        points = self._points[g] + self.offsets[g]
+        centre = obj.position + self.offsets[g]
+        towards = np.append(robot, 1.2) - centre
         towards[2] = 0.0
-        facing = (points - obj.position) @ towards >= 0
+        facing = (points - centre) @ towards >= 0
         seen = points[facing] if facing.sum() >= 3 else points
         take = rng.permutation(len(seen))[: max(cfg.points_per_object, 60)]
         seen = seen[take] + rng.normal(0, cfg.point_noise, (len(take), 3))
@@ -181,6 +315,30 @@ class LongWalk:
             label = str(rng.choice(sorted(set(self.map.labels.tolist()) - {label}) or [label]))
         points = local if cfg.points_per_object else None
         return SemanticObject(local_id, label, local.mean(axis=0), points=points, seen=k)
+
+
+def _merged(a: SemanticObject, b: SemanticObject) -> SemanticObject:
+    """One detection of two objects: their points together."""
+    if a.points is None or b.points is None:
+        return a.replace(position=(a.position + b.position) / 2)
+    points = np.vstack([a.points, b.points])
+    return SemanticObject(a.id, a.label, points.mean(axis=0), points=points, seen=a.seen)
+
+
+def _split(obj: SemanticObject, second_id: str) -> tuple[SemanticObject, SemanticObject]:
+    """Two detections of one object: its points cut across their longest horizontal extent."""
+    points = obj.points
+    assert points is not None
+    axis = int(np.argmax(np.ptp(points[:, :2], axis=0)))
+    cut = points[:, axis] <= np.median(points[:, axis])
+    halves = points[cut], points[~cut]
+    if not len(halves[1]):
+        halves = points[: len(points) // 2], points[len(points) // 2 :]
+    return (
+        SemanticObject(obj.id, obj.label, halves[0].mean(axis=0), points=halves[0], seen=obj.seen),
+        SemanticObject(second_id, obj.label, halves[1].mean(axis=0), points=halves[1],
+                       seen=obj.seen),
+    )  # fmt: skip
 
 
 def tiled(
