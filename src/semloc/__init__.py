@@ -18,6 +18,7 @@ if _sys.argv[:1] == ["-m"]:  # `python -m ...` locating its module: Ctrl-C from 
 from semloc import descriptors  # registers the descriptor kinds (numpy only)
 from semloc.alignment import AlignmentConfig, align
 from semloc.compiling import warmup  # compiles the inner loops ahead; says once when it does
+from semloc.coverage import Coverage
 from semloc.io import load_map, save_map
 from semloc.localizer import Localizer, LocalizerConfig, localize
 from semloc.maps import MapError, ObjectMap, SemanticObject
@@ -28,6 +29,7 @@ from semloc.results import Hypothesis, Look, Result, Step
 __version__ = "0.1.0"
 __all__ = [
     "AlignmentConfig",
+    "Coverage",
     "Hypothesis",
     "Localizer",
     "LocalizerConfig",

@@ -4,12 +4,14 @@ A detection says an object is there; a look that shows nothing where a place pre
 object says the place may be wrong.  `Coverage(pose=T_odom_sensor, range_m, fov_deg)` is one
 such look: the sensor's pose in the odometry (local) frame, looking along its +z axis as a
 camera does, how far it sees and its horizontal / vertical field of view (None: all around
-within the range).  It is optional everywhere; without it semloc uses no negative evidence.
+within the range).  The update that carries a look holds every detection of that look,
+re-detections of known objects included: an object in view that is not sent reads as not
+seen.  It is optional everywhere; without it semloc uses no negative evidence.
 
 `expected_unseen(...)` is the negative evidence of one hypothesis: the map objects that its
-pose puts well inside a recent look (`inner_margin` from the look's edges, closer than
+pose puts well inside a recent look (`margin_deg` from the look's edges, closer than
 `range_share` of its range, where a detector sees an object reliably) and that no local
-object of the window accounts for.  A local object accounts for a map object when it is among
+object detected since that look accounts for.  A local object accounts for a map object when it is among
 its candidates and lands within the tracking allowance of it, or within a plausible move of it
 (`move_m`: an old map's moved objects are changes, not absences).
 
@@ -124,7 +126,7 @@ class Looks:
 
     range_share: float = 0.8
     margin_deg: float = 5.0
-    max_in_front: int = 0
+    max_in_front: int = 1
     move_m: float = 3.0
 
 
@@ -157,15 +159,37 @@ def expected_unseen(
     expected = indices[covered]
     if not len(expected):
         return expected, expected
+    accounted = _accounted(pose, global_positions, local, allowance, settings.move_m)
+    return expected, expected[~accounted[expected]]
+
+
+def _accounted(
+    pose: np.ndarray,
+    global_positions: np.ndarray,
+    local: Iterable[tuple[np.ndarray, np.ndarray]],
+    allowance: np.ndarray,
+    move_m: float,
+) -> np.ndarray:
+    """Which map objects a local object accounts for, one each: the nearest candidate within
+    its allowance; failing that, the nearest one within `move_m` not yet accounted for."""
     accounted = np.zeros(len(global_positions), dtype=bool)
     R, t = pose[:3, :3], pose[:3, 3]
+    farther: list[tuple[np.ndarray, np.ndarray]] = []
     for position, candidates in local:
         if not len(candidates):
             continue
         gaps = np.linalg.norm(global_positions[candidates] - (R @ position + t), axis=1)
-        reach = np.maximum(allowance[candidates], settings.move_m)
-        accounted[candidates[gaps <= reach]] = True
-    return expected, expected[~accounted[expected]]
+        nearest = int(np.argmin(gaps))
+        if gaps[nearest] <= allowance[candidates[nearest]]:
+            accounted[candidates[nearest]] = True
+        else:
+            farther.append((gaps, candidates))
+    for gaps, candidates in farther:
+        order = np.argsort(gaps)
+        free = [i for i in order if gaps[i] <= move_m and not accounted[candidates[i]]]
+        if free:
+            accounted[candidates[free[0]]] = True
+    return accounted
 
 
 def _unshadowed(

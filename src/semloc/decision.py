@@ -42,6 +42,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from semloc._decision_fast import first_same_place
 from semloc.confidence_model import SHIPPED
+from semloc.coverage import GONE_SHARE
 from semloc.priors import OUTSIDE_PRIOR
 from semloc.results import Hypothesis, Status
 from semloc.transforms import pose_error
@@ -280,6 +281,20 @@ RANKINGS: dict[str, Callable[[Hypothesis], tuple | float]] = {
 }
 
 
+MISSING_LOGIT = 1.0
+"""Evidence logit taken from a hypothesis per map object that its pose puts well inside the
+sensor's recent looks and nothing accounts for, beyond `coverage.GONE_SHARE` of those it
+expects there (negative evidence, `semloc.coverage`): a look-alike place that predicts
+absent objects loses against one that does not."""
+
+
+def missing_penalty(h: Hypothesis) -> float:
+    """The evidence logit a hypothesis loses to the objects it expected and nobody saw."""
+    if h.missing is None or h.expected is None:
+        return 0.0
+    return MISSING_LOGIT * max(0.0, h.missing - GONE_SHARE * h.expected)
+
+
 def rank(hypotheses: list[Hypothesis], rank_by: RankBy) -> list[Hypothesis]:
     """The hypotheses in the order of `rank_by`, renumbered 1, 2, ..."""
     ordered = sorted(hypotheses, key=RANKINGS[rank_by])
@@ -300,7 +315,7 @@ def rank_places(
     and confidences against the remaining rivals."""
     for h in hypotheses:  # ranked by the ranking logit; `score_confidence` sets the evidence
         if h.features is not None:
-            h.evidence = model.ranking(h.features)
+            h.evidence = model.ranking(h.features) - missing_penalty(h)
     ordered = rank(hypotheses, rank_by)
     places = ((h.pairs, h.pose) for h in ordered)
     kept = [ordered[i] for i in distinct(places, len(ordered), config, anchor)]
@@ -320,13 +335,14 @@ class Decision(NamedTuple):
 def score_confidence(
     hypotheses: Sequence[Hypothesis], model: ConfidenceModel, rival_overlap: float = 0.5
 ) -> None:
-    """Set `evidence` and `confidence` of hypotheses that carry `features` (distinct places);
+    """Set `evidence` (less the negative evidence, `missing_penalty`) and `confidence` of
+    hypotheses that carry `features` (distinct places);
     each one's rival is the best evidence among the others that are real rivals of it
     (`is_rival`: sharing less than `rival_overlap` of the pairs; a variant that keeps most of
     its pairs and swaps one is the same answer, wrong in one object, not another place)."""
     scored = [h for h in hypotheses if h.features is not None]
     for h in scored:
-        h.evidence = model.evidence(h.features)
+        h.evidence = model.evidence(h.features) - missing_penalty(h)
     for h in scored:
         others = [
             o.evidence for o in scored if o is not h and is_rival(h.pairs, o.pairs, rival_overlap)
@@ -394,7 +410,25 @@ def _by_confidence(best: Hypothesis, others: Sequence[Hypothesis], d: DecisionCo
 
 
 RIVAL_LOGIT_GAP = 2.0
-"""A rival whose evidence logit is within this of the best's is named as the reason."""
+"""A rival whose evidence logit is within this of the best's is named as the reason; the
+verdict's margin: a place outside the prior beats the best inside only beyond it."""
+
+
+def prior_first(ranked: list[Hypothesis]) -> list[Hypothesis]:
+    """With a prior, among places whose evidence cannot be told apart the prior decides: when
+    the best place lies outside the prior but the best inside has evidence within
+    `RIVAL_LOGIT_GAP` of it, the places inside come first (ranks renumbered).  An outside place
+    better beyond that margin stays first, and forbids a claim."""
+    inside = [h for h in ranked if not h.outside_prior]
+    if not ranked or not ranked[0].outside_prior or not inside:
+        return ranked
+    best, candidate = ranked[0].evidence, inside[0].evidence
+    if best is None or candidate is None or best - candidate > RIVAL_LOGIT_GAP:
+        return ranked
+    ordered = inside + [h for h in ranked if h.outside_prior]
+    for position, h in enumerate(ordered, 1):
+        h.rank = position
+    return ordered
 
 
 def _dominates(best: Hypothesis, rival: Hypothesis, rank_by: RankBy, d: DecisionConfig) -> bool:

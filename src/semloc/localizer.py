@@ -41,12 +41,14 @@ from semloc.association import (
 )
 from semloc.changes import Changes, ChangesConfig, answer_changes
 from semloc.clustering import ClusteringConfig, HierarchicalClustering, SetPairs
+from semloc.coverage import GONE_SHARE, Coverage, Looks, checked_coverage, expected_unseen
 from semloc.decision import (
     DecisionConfig,
     RankBy,
     decide,
     distinct,
     local_anchor,
+    prior_first,
     rank_places,
     score_confidence,
     shipped_model,
@@ -58,7 +60,15 @@ from semloc.pose import PoseConfig, PoseEstimate, cached_cloud, estimate_pose
 from semloc.priors import GATE_SLACK, OUTSIDE_PRIOR, Prior, checked_prior
 from semloc.results import Hypothesis, Result, Status, Step, Support
 from semloc.semantics import pair_weight
-from semloc.tracking import CONTRADICTED, Track, TrackingConfig, allowances, check
+from semloc.tracking import (
+    CONTRADICTED,
+    Track,
+    TrackingConfig,
+    Verdict,
+    allowances,
+    check,
+    recent_contradiction,
+)
 from semloc.transforms import centre_residual
 from semloc.verification import (
     Evidence,
@@ -192,6 +202,10 @@ class Localizer:
             else None
         )
         self._retrieved: dict[str, np.ndarray] = {}  # local id -> candidates in its places
+        self._look: Coverage | None = None  # what the sensor covered at this update
+        self._looks: deque[tuple[int, Coverage]] = deque(maxlen=LOOKS_KEPT)  # (update, look)
+        self._map_tree: Any = None  # a KD-tree of the map's positions, for looks
+        self._diagonals: np.ndarray | None = None
         self._reset_search()
         self._steps: deque[Step] = deque(maxlen=config.window.steps)
         self._n_steps = 0
@@ -235,6 +249,7 @@ class Localizer:
             "window": self.window.state(),
             "track": track,
             "steps": [s.to_dict() for s in self._steps],
+            "looks": [[update, look.to_dict()] for update, look in self._looks],
             "n_steps": self._n_steps,
             "timing": dict(self._timing),
         }
@@ -265,6 +280,9 @@ class Localizer:
                     state["track"], localizer.global_map.index_of, localizer.config.tracking
                 )
             localizer._steps.extend(Step(**s) for s in state["steps"])
+            localizer._looks.extend(
+                (int(update), Coverage.from_dict(look)) for update, look in state.get("looks", [])
+            )
             localizer._n_steps = int(state["n_steps"])
             localizer._timing.update({k: float(v) for k, v in state["timing"].items()})
         except (KeyError, TypeError, IndexError) as exc:
@@ -314,11 +332,14 @@ class Localizer:
         answer: bool = True,
         *,
         position: Any = None,
+        coverage: Coverage | None = None,
     ) -> Result | None:
         """Add new or re-detected local objects and return the current answer.
 
         `position`: where the robot is now in the local (odometry) frame, a point or a 4x4
         pose; it measures the travel that bounds the window (`config.window.distance`).
+        `coverage`: what the sensor covered at this update (`semloc.Coverage`, or its dict);
+        with it, map objects a place puts in view that were not detected count against it.
         With `answer=False` only the association sets grow (no hypotheses, no pose recovery,
         no decision) and None is returned; a later update with an answer sees the same sets.
         """
@@ -326,7 +347,10 @@ class Localizer:
         if isinstance(objects, ObjectMap) and objects.up is not None and self.local_up is None:
             self.local_up = objects.up
         objects = self._described(_checked_objects(objects))
+        self._look = checked_coverage(coverage)
         self.window.advance(_robot_position(position))
+        if self._look is not None:
+            self._looks.append((self.window.updates, self._look))
         self.window.add(objects)
         retired = self.window.retire()
         for object_id in retired:
@@ -368,6 +392,8 @@ class Localizer:
                 why = self._why_no_sets()
             elif why == OUTSIDE_PRIOR and self._prior is not None:  # (the best has a pose)
                 why = self._prior.why_outside(np.asarray(hypotheses[0].pose))
+            if status == "localized" and self._newest_contradict(hypotheses[0]):
+                status, why = "ambiguous", NEWEST_CONTRADICT
             if reason:
                 status, why = "ambiguous", reason
             reason = why
@@ -390,8 +416,15 @@ class Localizer:
         assert track is not None
         candidates = {o.id: self._found[o.id][1] for o in objects}
         verdict = check(
-            track.pose, objects, candidates, self.global_map.positions, self._allowances()
-        )
+            track.pose, objects, candidates, self.global_map.positions, self._allowances(),
+            self.config.tracking.move_m, track.pairs,
+        )  # fmt: skip
+        looked = None
+        if self._look is not None:
+            expected, unseen = self._unseen(track.pose, track.seen_map)
+            looked = (len(unseen), len(expected))
+            verdict = Verdict(verdict.supported, verdict.contradicting, verdict.changed,
+                              verdict.repeated, max(0.0, len(unseen) - GONE_SHARE * len(expected)))  # fmt: skip
         against = track.contradicted(verdict)
         if against:  # a fresh window of the contradicting updates' objects
             self._end_track()
@@ -408,10 +441,59 @@ class Localizer:
         end = time.perf_counter()
         self._add_timing(0.0, 0.0, end - start)
         hypothesis = followed
+        hypothesis.confidence = track.current_confidence()
+        if looked is not None:
+            hypothesis.missing, hypothesis.expected = looked
         self._add_step([hypothesis.score], end - start, "localized" if answer else None)
         if not answer:
             return None
         return self._result("localized", [hypothesis], "", self._changes([hypothesis]))
+
+    def _unseen(
+        self, pose: np.ndarray, detected: set[int], looks: list[tuple[int, Coverage]] | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """The map objects `looks` (default: this update's) expect under `pose`, and those of
+        them that no object detected since that look accounts for and that were not
+        `detected` (`semloc.coverage`: a look's update holds every detection in it)."""
+        if looks is None:
+            assert self._look is not None
+            looks = [(self.window.updates, self._look)]
+        if self._map_tree is None:
+            from scipy.spatial import cKDTree
+
+            self._map_tree = cKDTree(self.global_map.positions)
+            self._diagonals = np.linalg.norm(self.global_map.sizes, axis=1)
+        settings = Looks(move_m=self.config.tracking.move_m)
+        expected: set[int] = set()
+        unseen: set[int] = set()
+        for update, look in looks:
+            origin = pose[:3, :3] @ look.origin + pose[:3, 3]
+            near = np.array(self._map_tree.query_ball_point(origin, look.range_m + 0.5), dtype=int)
+            local = [(self._found[i][0].position, self._found[i][1])
+                     for i in self.window.since(update)]  # fmt: skip
+            seen, absent = expected_unseen(
+                pose, [look], self.global_map.positions, self._diagonals, local,
+                self._allowances(), settings, near,
+            )  # fmt: skip
+            expected.update(seen.tolist())
+            unseen.update(absent.tolist())
+        unseen -= detected
+        return np.array(sorted(expected), dtype=int), np.array(sorted(unseen), dtype=int)
+
+    def _newest_contradict(self, best: Hypothesis) -> bool:
+        """Whether the objects of the latest updates contradict the best place by tracking's
+        rule (`semloc.tracking`): a claim is about where the robot is now, and a window that
+        spans a kidnap holds a place the robot has left."""
+        assert best.pose is not None
+        tracking = self.config.tracking
+        verdicts = []
+        for update in range(self.window.updates - 2, self.window.updates + 1):
+            objects = [self._found[i][0] for i in self.window.since(update)
+                       if self.window.arrival(i).update == update]  # fmt: skip
+            candidates = {o.id: self._found[o.id][1] for o in objects}
+            verdicts.append(check(best.pose, objects, candidates, self.global_map.positions,
+                                  self._allowances(), tracking.move_m))  # fmt: skip
+        return recent_contradiction(verdicts, tracking.contradiction)
 
     def _allowances(self) -> np.ndarray:
         if self._allowance is None:
@@ -496,12 +578,17 @@ class Localizer:
         arrivals = [self.window.arrival(l) for l in ids]
         seen = [self._found[l][0].seen for l in ids]
         window = self.window
+        counts = {} if self._track is None else self._track.counts()
         return Support(
             pairs=len(ids),
             seen=(min(seen), max(seen)),
             updates_ago=window.updates - min(a.update for a in arrivals),
             metres=window.travel - min(a.travel for a in arrivals),
             tracked=self._track is not None,
+            changed=counts.get("changed", 0),
+            contradicting=counts.get("contradicting", 0),
+            missing=best.missing,
+            expected=best.expected,
         )
 
     def _add_step(self, scores: list[float], seconds: float, status: Status | None) -> None:
@@ -657,6 +744,7 @@ class Localizer:
         if self._prior is not None:  # conditioned on the prior: rivals outside it do not count
             for h in ranked:
                 h.outside_prior = h.pose is not None and not self._prior.admits(h.pose)
+            ranked = prior_first(ranked)
             inside = [h for h in ranked if not h.outside_prior]
             score_confidence(inside, shipped_model(), cfg.decision.rival_overlap)
         return ranked
@@ -697,6 +785,10 @@ class Localizer:
                 self._semantic_weight(verified.pairs),
             ).features()  # fmt: skip
         ids = self.global_map.ids
+        missing = expected = None
+        if pose is not None and self._looks:
+            seen, unseen = self._unseen(pose, set(), list(self._looks))
+            missing, expected = len(unseen), len(seen)
         return Hypothesis(
             rank=rank,
             score=verified.score,
@@ -708,6 +800,8 @@ class Localizer:
             method="" if estimate is None else estimate.method,
             features=features,
             rejected=[(str(ids[g]), local_objects[l].id) for g, l in verified.rejected],
+            missing=missing,
+            expected=expected,
         )
 
     def _semantic_weight(self, pairs: list[tuple[int, int]]) -> float:
@@ -791,6 +885,10 @@ def _warm_start(pairs: frozenset, previous: dict[_PoseKey, PoseEstimate | None])
 
 
 EMPTY_LOCAL_MAP = "the local map has no objects"
+LOOKS_KEPT = 6
+"""The search weighs the sensor's looks of this many latest updates (negative evidence)."""
+NEWEST_CONTRADICT = "contradicted by the newest objects"
+"""The reason of a search's answer whose best place the latest updates' objects contradict."""
 STATE_VERSION = 1
 """The layout of `Localizer.state()`."""
 

@@ -42,24 +42,31 @@ class Hypothesis:
     features: dict[str, float] | None = None  # its inputs (semloc.decision.FEATURES)
     rejected: list[tuple[str, str]] = field(default_factory=list)  # pairs that disagreed
     outside_prior: bool | None = None  # its pose is outside the position prior (None: no prior)
+    missing: int | None = None  # map objects its pose puts in the recent looks that no
+    # detection accounts for (None: no coverage given)
+    expected: int | None = None  # map objects its pose puts in the recent looks
 
     def to_dict(self) -> dict[str, Any]:
-        return {
-            "rank": self.rank,
-            "score": round(self.score, 6),
-            "pairs": [{"global": g, "local": l} for g, l in self.pairs],
-            "pose": None if self.pose is None else np.round(self.pose, 9).tolist(),
-            "fitness": None if self.fitness is None else round(self.fitness, 6),
-            "rmse": None if self.rmse is None else round(self.rmse, 6),
-            "residual": None if self.residual is None else round(self.residual, 6),
-            "method": self.method,
-            "confidence": None if self.confidence is None else round(self.confidence, 6),
-            "evidence": None if self.evidence is None else round(self.evidence, 6),
-            "features": None
-            if self.features is None
-            else {k: round(v, 6) for k, v in self.features.items()},
-            "rejected": [{"global": g, "local": l} for g, l in self.rejected],
-        } | ({} if self.outside_prior is None else {"outside_prior": self.outside_prior})
+        return (
+            {
+                "rank": self.rank,
+                "score": round(self.score, 6),
+                "pairs": [{"global": g, "local": l} for g, l in self.pairs],
+                "pose": None if self.pose is None else np.round(self.pose, 9).tolist(),
+                "fitness": None if self.fitness is None else round(self.fitness, 6),
+                "rmse": None if self.rmse is None else round(self.rmse, 6),
+                "residual": None if self.residual is None else round(self.residual, 6),
+                "method": self.method,
+                "confidence": None if self.confidence is None else round(self.confidence, 6),
+                "evidence": None if self.evidence is None else round(self.evidence, 6),
+                "features": None
+                if self.features is None
+                else {k: round(v, 6) for k, v in self.features.items()},
+                "rejected": [{"global": g, "local": l} for g, l in self.rejected],
+            }
+            | ({} if self.outside_prior is None else {"outside_prior": self.outside_prior})
+            | ({} if self.missing is None else {"missing": self.missing, "expected": self.expected})
+        )
 
 
 @dataclass
@@ -144,6 +151,16 @@ class Support:
     updates_ago: int
     metres: float
     tracked: bool = False
+    changed: int = 0
+    """Objects judged since a tracked claim began that a plausible move explains (0 unless
+    tracked)."""
+    contradicting: int = 0
+    """Objects judged since a tracked claim began that contradict it (0 unless tracked)."""
+    missing: int | None = None
+    """Map objects the pose puts in the recent looks that no detection accounts for (None: no
+    coverage given, so no negative evidence)."""
+    expected: int | None = None
+    """Map objects the pose puts in the recent looks (None: no coverage given)."""
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -152,6 +169,10 @@ class Support:
             "updates_ago": self.updates_ago,
             "metres": round(self.metres, 3),
             "tracked": self.tracked,
+            "changed": self.changed,
+            "contradicting": self.contradicting,
+            "missing": self.missing,
+            "expected": self.expected,
         }
 
     @classmethod
@@ -162,8 +183,12 @@ class Support:
         try:
             assert isinstance(data, dict)
             seen = data["seen"]
+            missing, expected = data.get("missing"), data.get("expected")
             return cls(int(data["pairs"]), (int(seen[0]), int(seen[1])),
-                       int(data["updates_ago"]), float(data["metres"]), bool(data["tracked"]))  # fmt: skip
+                       int(data["updates_ago"]), float(data["metres"]), bool(data["tracked"]),
+                       int(data.get("changed", 0)), int(data.get("contradicting", 0)),
+                       None if missing is None else int(missing),
+                       None if expected is None else int(expected))  # fmt: skip
         except (AssertionError, KeyError, IndexError, TypeError, ValueError):
             raise ValueError(f"'support' is not a support record: {_brief(data)}") from None
 
@@ -334,7 +359,12 @@ def _hypothesis_from(
         evidence=number("evidence"), rejected=rejected,
         features=dict(features) if isinstance(features, dict) else None,
         outside_prior=outside if isinstance(outside, bool) else None,
+        missing=_count(number("missing")), expected=_count(number("expected")),
     )  # fmt: skip
+
+
+def _count(value: float | None) -> int | None:
+    return None if value is None else int(value)
 
 
 def saved_pose(value: object, what: str = "pose") -> np.ndarray:

@@ -1,23 +1,39 @@
 """Staying at a place once it is found: check the tracked pose on every update's objects, follow
-odometry drift, and end the claim as soon as new objects contradict it.
+odometry drift, tell changes of an old map from contradictions, and end the claim as soon as
+the evidence turns against it.
 
 After a `localized` answer the Localizer tracks that place instead of searching again (the
 search's cost grows with the local objects; tracking costs a lookup per new object):
 
 * **Check.**  Each new or re-detected object with map candidates is put where the tracked pose
-  says it is; it *supports* the place when a candidate lies within `track_tolerance` plus a
-  quarter of that candidate's diagonal (a partial view moves a large object's centre) of
-  that point, and *contradicts* it otherwise.  Objects without candidates say nothing.
+  says it is.  It *supports* the place when a candidate lies within `track_tolerance` plus a
+  quarter of that candidate's diagonal (a partial view moves a large object's centre) of that
+  point; it is *changed* when the nearest candidate lies farther but within `move_m` (a moved
+  chair of an old map); otherwise it *contradicts* the place.  Objects without candidates say
+  nothing (a label the map does not hold: new).  A re-detection of an object already paired
+  with the same map object is the same evidence again: it refreshes the pair for the pose but
+  counts as half a supporting object in the decision, so that re-detections of paired objects
+  never outvote new objects that contradict the place.
+* **Missing.**  When the update says what the sensor covered (`semloc.coverage`), the map
+  objects the place puts well inside that look that no window object accounts for, beyond
+  `coverage.GONE_SHARE` of those it expects (an old map loses objects), count against it.
 * **Follow.**  The supporting pairs are kept, newest last (one per map object and per local
   object); the pose is refitted to the newest `pairs` of them, warm-started from the tracked
-  pose.  Odometry drift is slow, so the newest objects, seen near the robot, give the pose
-  that is right *now* where the robot is.
-* **Contradiction.**  An update whose contradicting objects number at least `contradiction`
-  and more than twice its supporting ones, or the last `CONTRADICTION_UPDATES` updates
-  together holding at least `contradiction` + 1 contradicting objects and more than twice as
-  many as supporting ones, end the claim at once (`ambiguous`, reason `"contradicted"`): the
-  robot was carried elsewhere, its odometry jumped, or the place was a wrong one.  One moved
-  chair among agreeing objects does not.
+  pose.  Changed objects never refit the pose.  Odometry drift is slow, so the newest objects,
+  seen near the robot, give the pose that is right *now* where the robot is.
+* **Contradiction.**  The evidence against an update is its contradicting objects, half its
+  changed ones and its missing ones beyond the tolerated share; for it, its supporting objects
+  (re-detections at half).  An update whose evidence against is at least `contradiction` and
+  more than twice the evidence for it, or the last `CONTRADICTION_UPDATES` updates together
+  holding at least `contradiction` + 1 against and more than twice as much as for, end the
+  claim at once (`ambiguous`, reason `"contradicted"`): the robot was carried elsewhere, its
+  odometry jumped, or the place was a wrong one.  One moved chair among agreeing objects does
+  not.  Over the whole claim, the objects judged since it began must stay at least half
+  supporting (`min_support_share`, once `min_judged` are judged): a wrong place that a few
+  lucky objects keep alive update by update loses it there.
+* **Confidence.**  The claim's confidence moves with its evidence: the search's confidence
+  (as a logit, at most `CONFIDENCE_CAP`) plus a log-likelihood ratio per judged object
+  (`EVIDENCE_LOGITS`: supporting, changed, contradicting, missing).
 * **Lapse.**  When fewer than `min_pairs` supporting pairs remain in the window (the robot saw
   nothing it could check for a while), the claim is not renewed and the search resumes on the
   window.
@@ -25,9 +41,10 @@ search's cost grows with the local objects; tracking costs a lookup per new obje
 
 from __future__ import annotations
 
+import math
 from collections import OrderedDict, deque
 from collections.abc import Callable, Iterable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -40,6 +57,14 @@ CONTRADICTION_UPDATES = 3
 
 CONTRADICTED = "contradicted"
 """The reason of the answer whose new objects ended a claim."""
+
+EVIDENCE_LOGITS = {"supported": 0.6, "changed": -0.4, "contradicting": -1.2, "missing": -0.8}
+"""Log-likelihood ratio (right place against a wrong one) of one judged object: a right place of
+an old map seen by an erring detector has about 65 % of its objects supporting, 15 % changed
+and 20 % contradicting; a wrong place about 25 / 25 / 50 %."""
+_VERDICTS = ("supported", "changed", "contradicting")
+CONFIDENCE_CAP = 4.0
+"""The search's confidence enters a claim's confidence as a logit of at most this."""
 
 
 class TrackingConfig(BaseModel):
@@ -69,6 +94,22 @@ class TrackingConfig(BaseModel):
         description="Contradicting objects in one update that end the claim when they "
         "are more than twice the supporting ones.",
     )
+    move_m: float = Field(
+        3.0,
+        ge=0,
+        description="An object whose nearest candidate lies beyond the tolerance but within "
+        "this distance (m) of where the pose puts it is a change of the map (moved), not a "
+        "contradiction; it never refits the pose.",
+    )
+    min_support_share: float = Field(
+        0.5,
+        ge=0,
+        le=1,
+        description="Share of the objects judged since the claim began that must support it.",
+    )
+    min_judged: int = Field(
+        8, ge=1, description="Objects judged since the claim began before that share is asked."
+    )
 
 
 @dataclass(frozen=True)
@@ -77,6 +118,18 @@ class Verdict:
 
     supported: list[tuple[int, str]]  # (global index, local id)
     contradicting: list[str]  # local ids
+    changed: list[tuple[int, str]] = field(default_factory=list)  # (nearest candidate, local)
+    repeated: int = 0  # supporting objects already paired with the same map object
+    missing: float = 0.0  # map objects the look expected but nothing accounts for, beyond
+    # the tolerated share
+
+    @property
+    def against(self) -> float:
+        return len(self.contradicting) + 0.5 * len(self.changed) + self.missing
+
+    @property
+    def towards(self) -> float:
+        return len(self.supported) - 0.5 * self.repeated
 
 
 def check(
@@ -85,22 +138,45 @@ def check(
     candidates: Mapping[str, np.ndarray],
     global_positions: np.ndarray,
     allowance: np.ndarray,
+    move_m: float = 0.0,
+    paired: Mapping[str, int] | None = None,
 ) -> Verdict:
     """Each object with candidates, put by `pose` (T_global_local) into the global frame:
-    supported by its nearest candidate g within `allowance[g]` (metres), else contradicting."""
-    supported, contradicting = [], []
+    supported by its nearest candidate g within `allowance[g]` (metres), changed when that
+    candidate lies within `move_m`, else contradicting.  `paired`: the local objects already
+    paired (local id -> map index), whose support again is a repeat."""
+    supported, contradicting, changed, repeated = [], [], [], 0
     R, t = pose[:3, :3], pose[:3, 3]
+    paired = paired or {}
     for obj in objects:
         found = candidates.get(obj.id)
         if found is None or not len(found):
             continue
         gaps = np.linalg.norm(global_positions[found] - (R @ obj.position + t), axis=1)
         nearest = int(np.argmin(gaps))
-        if gaps[nearest] <= allowance[found[nearest]]:
-            supported.append((int(found[nearest]), obj.id))
+        g = int(found[nearest])
+        if gaps[nearest] <= allowance[g]:
+            supported.append((g, obj.id))
+            repeated += paired.get(obj.id) == g
+        elif gaps[nearest] <= move_m:
+            changed.append((g, obj.id))
         else:
             contradicting.append(obj.id)
-    return Verdict(supported, contradicting)
+    return Verdict(supported, contradicting, changed, repeated)
+
+
+def recent_contradiction(verdicts: Sequence[Verdict], least: int) -> bool:
+    """Whether the latest updates' verdicts on a place (oldest first) contradict it: the
+    newest alone holds at least `least` against and more than twice as much for, or all of
+    them together hold at least `least` + 1 against and more than twice as much for."""
+    if not verdicts:
+        return False
+    newest = verdicts[-1]
+    if newest.against >= least and newest.against > 2 * newest.towards:
+        return True
+    against = sum(v.against for v in verdicts)
+    towards = sum(v.towards for v in verdicts)
+    return against >= least + 1 and against > 2 * towards
 
 
 def allowances(global_map: ObjectMap, tolerance: float) -> np.ndarray:
@@ -135,26 +211,58 @@ class Track:
         self.config = config
         self.pairs: OrderedDict[str, int] = OrderedDict()  # local id -> global index
         self._verdicts: deque[Verdict] = deque(maxlen=CONTRADICTION_UPDATES)
+        self.judged: dict[str, str] = {}  # local id -> its latest verdict since the claim began
+        self.missing = 0.0  # missing objects beyond the tolerated share, since the claim began
+        self.seen_map: set[int] = set()  # map objects detected during the claim
+        self.base = _logit(confidence, CONFIDENCE_CAP)
         self.accept(Verdict(list(pairs), []))
 
     def contradicted(self, verdict: Verdict) -> int:
         """How many of the latest updates (this one included) contradict the place: 0 when
-        they do not."""
+        they do not; 1 also when the claim's judged objects lost their supporting share."""
         self._verdicts.append(verdict)
+        self._judge(verdict)
         least = self.config.contradiction
-        against = len(verdict.contradicting)
-        if against >= least and against > 2 * len(verdict.supported):
+        if recent_contradiction([verdict], least):
             return 1
-        against = sum(len(v.contradicting) for v in self._verdicts)
-        supporting = sum(len(v.supported) for v in self._verdicts)
-        if against >= least + 1 and against > 2 * supporting:
+        if recent_contradiction(self._verdicts, least):
             return len(self._verdicts)
+        counts = self.counts()
+        judged = counts["supported"] + counts["changed"] + counts["contradicting"] + self.missing
+        if judged >= self.config.min_judged and counts["supported"] < (
+            self.config.min_support_share * judged
+        ):
+            return 1
         return 0
+
+    def _judge(self, verdict: Verdict) -> None:
+        for _, object_id in verdict.supported:
+            self.judged[object_id] = "supported"
+        for _, object_id in verdict.changed:
+            self.judged[object_id] = "changed"
+        for object_id in verdict.contradicting:
+            self.judged[object_id] = "contradicting"
+        self.missing += verdict.missing
+
+    def counts(self) -> dict[str, int]:
+        """The objects judged since the claim began, by their latest verdict."""
+        found = dict.fromkeys(_VERDICTS, 0)
+        for verdict in self.judged.values():
+            found[verdict] += 1
+        return found
+
+    def current_confidence(self) -> float:
+        """The claim's confidence from its accumulated evidence (see the module docstring)."""
+        counts = self.counts()
+        logit = self.base + self.missing * EVIDENCE_LOGITS["missing"]
+        logit += sum(EVIDENCE_LOGITS[k] * n for k, n in counts.items())
+        return 1.0 / (1.0 + math.exp(-max(min(logit, 50.0), -50.0)))
 
     def accept(self, verdict: Verdict) -> None:
         """Keep the verdict's supporting pairs (newest last, one per map and local object)."""
-        for object_id in verdict.contradicting:
+        for object_id in [*verdict.contradicting, *(l for _, l in verdict.changed)]:
             self.pairs.pop(object_id, None)  # re-detected elsewhere: no longer evidence
+        self.seen_map.update(g for g, _ in [*verdict.supported, *verdict.changed])
         for g, object_id in verdict.supported:
             for other in [l for l, h in self.pairs.items() if h == g]:
                 del self.pairs[other]
@@ -166,10 +274,13 @@ class Track:
         keep = set(object_ids)
         for object_id in [l for l in self.pairs if l not in keep]:
             del self.pairs[object_id]
+        for object_id in [l for l in self.judged if l not in keep]:
+            del self.judged[object_id]
 
     def state(self, global_ids: Sequence[str]) -> dict[str, Any]:
         """What rebuilds this track (JSON types; map objects by id)."""
-        verdicts = [[[[global_ids[g], l] for g, l in v.supported], v.contradicting]
+        verdicts = [[[[global_ids[g], l] for g, l in v.supported], v.contradicting,
+                     [[global_ids[g], l] for g, l in v.changed], v.repeated, v.missing]
                     for v in self._verdicts]  # fmt: skip
         return {
             "pose": self.pose.tolist(),
@@ -177,6 +288,9 @@ class Track:
             "confidence": self.confidence,
             "score": self.score,
             "verdicts": verdicts,
+            "judged": dict(self.judged),
+            "missing": self.missing,
+            "seen_map": [global_ids[g] for g in sorted(self.seen_map)],
         }
 
     @classmethod
@@ -188,12 +302,27 @@ class Track:
         track = cls(np.asarray(state["pose"], dtype=float), [], state["confidence"],
                     float(state["score"]), config)  # fmt: skip
         track.pairs = OrderedDict((l, g) for g, l in pairs)
-        for supported, contradicting in state["verdicts"]:
+        for supported, contradicting, *more in state["verdicts"]:  # (a state before changes:
+            changed, repeated, missing = more or [[], 0, 0.0]  # two items a verdict)
             verdict = Verdict([(index_of(g), str(l)) for g, l in supported],
-                              [str(l) for l in contradicting])  # fmt: skip
+                              [str(l) for l in contradicting],
+                              [(index_of(g), str(l)) for g, l in changed], int(repeated),
+                              float(missing))  # fmt: skip
             track._verdicts.append(verdict)
+        judged = state.get("judged", {})
+        track.judged = {str(l): str(v) for l, v in judged.items() if v in _VERDICTS}
+        track.missing = float(state.get("missing", 0.0))
+        track.seen_map = {index_of(g) for g in state.get("seen_map", [])}
         return track
 
     def newest(self, n: int) -> list[tuple[int, str]]:
         """The newest `n` supporting pairs (global index, local id), oldest first."""
         return [(g, l) for l, g in list(self.pairs.items())[-n:]]
+
+
+def _logit(probability: float | None, cap: float) -> float:
+    """The logit of `probability`, within +-`cap` (0 for None)."""
+    if probability is None:
+        return 0.0
+    p = min(max(probability, 1e-9), 1 - 1e-9)
+    return max(min(math.log(p / (1 - p)), cap), -cap)
