@@ -20,7 +20,8 @@ CORE = {"maps", "pointsets", "transforms", "association", "clustering", "pose", 
         "registration", "closed_form", "digests", "verification", "results", "decision", "localizer",
         "confidence_model", "_clustering_fast", "_verification_fast", "_decision_fast",
         "_alignment_fast", "alignment", "changes", "window", "tracking",
-        "semantics", "compiling", "priors", "places", "_places_fast", "next_look"}  # fmt: skip
+        "semantics", "compiling", "priors", "places", "_places_fast", "next_look",
+        "coverage"}  # fmt: skip
 APPLICATIONS = {"tools", "cli"}
 """The applications: nothing below them imports them."""
 BELOW_APPLICATIONS = ("io", "pictures", "sim", "eval", "baselines", "frontend", "descriptors")

@@ -80,6 +80,8 @@ class Moved:
     global_id: str
     local_id: str
     offset_m: float
+    evidence: int | None = None  # detections that saw it moved over a run (None: one view)
+    last_seen: int | None = None  # the `seen` keyframe of the latest of them
 
 
 @dataclass(frozen=True)
@@ -92,27 +94,124 @@ class Changes:
     matched: list[str] = field(default_factory=list, compare=False)
     """Map objects seen where the map has them (global ids): no change, so not in `to_dict`;
     `semloc update-map` clears their `missing` flag."""
+    evidence: dict[str, dict[str, int]] | None = None
+    """Over a run (`RunChanges`): how many detections (new) or looks (missing) said so, by id."""
 
     def to_dict(self) -> dict[str, Any]:
-        return {
-            "moved": [
-                {"global": m.global_id, "local": m.local_id, "offset_m": round(m.offset_m, 6)}
-                for m in self.moved
-            ],
+        document: dict[str, Any] = {
+            "moved": [_moved_entry(m) for m in self.moved],
             "new": list(self.new),
             "missing": list(self.missing),
         }
+        if self.evidence is not None:
+            document["evidence"] = {k: dict(v) for k, v in self.evidence.items()}
+        return document
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> Changes:
         """The changes of a `to_dict` document (`ValueError` for one that is not)."""
         try:
-            moved = [Moved(str(m["global"]), str(m["local"]), float(m["offset_m"]))
+            moved = [Moved(str(m["global"]), str(m["local"]), float(m["offset_m"]),
+                           _count(m.get("evidence")), _count(m.get("last_seen")))
                      for m in data.get("moved") or []]  # fmt: skip
+            evidence = data.get("evidence")
+            if evidence is not None:
+                evidence = {str(k): {str(i): int(n) for i, n in v.items()}
+                            for k, v in evidence.items()}  # fmt: skip
             return cls(moved, [str(i) for i in data.get("new") or []],
-                       [str(i) for i in data.get("missing") or []])  # fmt: skip
+                       [str(i) for i in data.get("missing") or []], evidence=evidence)  # fmt: skip
         except (KeyError, TypeError, ValueError, AttributeError) as exc:
             raise ValueError(f"'changes' is not a changes object ({exc})") from None
+
+
+def _moved_entry(m: Moved) -> dict[str, Any]:
+    entry: dict[str, Any] = {"global": m.global_id, "local": m.local_id,
+                             "offset_m": round(m.offset_m, 6)}  # fmt: skip
+    if m.evidence is not None:
+        entry["evidence"] = m.evidence
+    if m.last_seen is not None:
+        entry["last_seen"] = m.last_seen
+    return entry
+
+
+def _count(value: Any) -> int | None:
+    return None if value is None else int(value)
+
+
+class RunChanges:
+    """What changed since the map was made, accumulated over the tracked claims of a run.
+
+    Fed by tracking's verdicts (`semloc.tracking`): an object changed under the claim (its
+    nearest candidate beyond the tracking tolerance, within a plausible move) is evidence that
+    that map object moved; one without candidates, or contradicting, that it is new; a map
+    object the sensor's look should have shown that nobody accounts for, that it is missing.
+    A map object seen at its place cancels its moved and missing evidence.  A change is
+    reported once `min_evidence` detections (or looks) said so: a phantom or a mislabel is
+    seen once, a moved chair again at each look."""
+
+    def __init__(self, min_evidence: int = 2) -> None:
+        self.min_evidence = min_evidence
+        self.moved: dict[int, tuple[str, float, int, int]] = {}  # map index -> (local id,
+        # offset m, detections, last seen)
+        self.new: dict[str, tuple[int, int]] = {}  # local id -> (detections, last seen)
+        self.missing: dict[int, int] = {}  # map index -> looks that missed it
+        self.matched: set[int] = set()
+
+    def __bool__(self) -> bool:
+        return bool(self.moved or self.new or self.missing)
+
+    def observe_moved(self, g: int, local_id: str, offset: float, seen: int) -> None:
+        if g in self.matched:
+            return
+        _, _, count, _ = self.moved.get(g, (local_id, offset, 0, seen))
+        self.moved[g] = (local_id, offset, count + 1, seen)
+
+    def observe_new(self, local_id: str, seen: int, unknown_label: bool = False) -> None:
+        """A detection of a new object: one the map has no candidate for (`unknown_label`,
+        reported at once) or one its candidates contradict."""
+        count, _ = self.new.get(local_id, (0, seen))
+        self.new[local_id] = (max(count + 1, self.min_evidence if unknown_label else 0), seen)
+
+    def observe_missing(self, indices: Sequence[int]) -> None:
+        for g in indices:
+            if g not in self.matched:
+                self.missing[g] = self.missing.get(g, 0) + 1
+
+    def observe_matched(self, g: int, local_id: str) -> None:
+        self.matched.add(g)
+        self.moved.pop(g, None)
+        self.missing.pop(g, None)
+        self.new.pop(local_id, None)
+
+    def report(self, global_ids: Sequence[str]) -> Changes:
+        """The changes seen at least `min_evidence` times, with their evidence."""
+        least = self.min_evidence
+        moved = [Moved(str(global_ids[g]), l, offset, n, seen)
+                 for g, (l, offset, n, seen) in sorted(self.moved.items()) if n >= least]  # fmt: skip
+        new = {l: n for l, (n, _) in self.new.items() if n >= least}
+        missing = {str(global_ids[g]): n for g, n in sorted(self.missing.items()) if n >= least}
+        matched = [str(global_ids[g]) for g in sorted(self.matched)]
+        return Changes(moved, list(new), list(missing), matched,
+                       evidence={"new": new, "missing": missing})  # fmt: skip
+
+    def state(self, global_ids: Sequence[str]) -> dict[str, Any]:
+        ids = global_ids
+        return {
+            "moved": [[ids[g], l, o, n, s] for g, (l, o, n, s) in self.moved.items()],
+            "new": [[l, n, s] for l, (n, s) in self.new.items()],
+            "missing": [[ids[g], n] for g, n in self.missing.items()],
+            "matched": [ids[g] for g in sorted(self.matched)],
+        }
+
+    @classmethod
+    def restored(cls, state: Mapping[str, Any], index_of) -> RunChanges:
+        run = cls()
+        run.moved = {index_of(g): (str(l), float(o), int(n), int(s))
+                     for g, l, o, n, s in state.get("moved", [])}  # fmt: skip
+        run.new = {str(l): (int(n), int(s)) for l, n, s in state.get("new", [])}
+        run.missing = {index_of(g): int(n) for g, n in state.get("missing", [])}
+        run.matched = {index_of(g) for g in state.get("matched", [])}
+        return run
 
 
 def answer_changes(

@@ -39,7 +39,7 @@ from semloc.association import (
     LabelResolution,
     label_report,
 )
-from semloc.changes import Changes, ChangesConfig, answer_changes
+from semloc.changes import Changes, ChangesConfig, RunChanges, answer_changes
 from semloc.clustering import ClusteringConfig, HierarchicalClustering, SetPairs
 from semloc.coverage import GONE_SHARE, Coverage, Looks, checked_coverage, expected_unseen
 from semloc.decision import (
@@ -204,6 +204,7 @@ class Localizer:
         self._retrieved: dict[str, np.ndarray] = {}  # local id -> candidates in its places
         self._look: Coverage | None = None  # what the sensor covered at this update
         self._looks: deque[tuple[int, Coverage]] = deque(maxlen=LOOKS_KEPT)  # (update, look)
+        self._run_changes = RunChanges()  # what changed, over the run's tracked claims
         self._map_tree: Any = None  # a KD-tree of the map's positions, for looks
         self._diagonals: np.ndarray | None = None
         self._reset_search()
@@ -250,6 +251,7 @@ class Localizer:
             "track": track,
             "steps": [s.to_dict() for s in self._steps],
             "looks": [[update, look.to_dict()] for update, look in self._looks],
+            "changes": self._run_changes.state(list(self.global_map.ids)),
             "n_steps": self._n_steps,
             "timing": dict(self._timing),
         }
@@ -280,6 +282,9 @@ class Localizer:
                     state["track"], localizer.global_map.index_of, localizer.config.tracking
                 )
             localizer._steps.extend(Step(**s) for s in state["steps"])
+            localizer._run_changes = RunChanges.restored(
+                state.get("changes", {}), localizer.global_map.index_of
+            )
             localizer._looks.extend(
                 (int(update), Coverage.from_dict(look)) for update, look in state.get("looks", [])
             )
@@ -419,12 +424,13 @@ class Localizer:
             track.pose, objects, candidates, self.global_map.positions, self._allowances(),
             self.config.tracking.move_m, track.pairs,
         )  # fmt: skip
-        looked = None
+        looked, looked_unseen = None, np.zeros(0, dtype=int)
         if self._look is not None:
-            expected, unseen = self._unseen(track.pose, track.seen_map)
-            looked = (len(unseen), len(expected))
+            expected, looked_unseen = self._unseen(track.pose, track.seen_map)
+            looked = (len(looked_unseen), len(expected))
+            excess = max(0.0, len(looked_unseen) - GONE_SHARE * len(expected))
             verdict = Verdict(verdict.supported, verdict.contradicting, verdict.changed,
-                              verdict.repeated, max(0.0, len(unseen) - GONE_SHARE * len(expected)))  # fmt: skip
+                              verdict.repeated, excess)  # fmt: skip
         against = track.contradicted(verdict)
         if against:  # a fresh window of the contradicting updates' objects
             self._end_track()
@@ -432,6 +438,7 @@ class Localizer:
             self._found = {i: f for i, f in self._found.items() if i in self.window}
             return self._search_update(objects, answer, start, reason=CONTRADICTED)
         track.accept(verdict)
+        self._observe_changes(track, verdict, objects, candidates, looked_unseen)
         self._search_stale = True  # the search did not see these objects
         followed = self._follow(track) if len(track.pairs) >= self._min_track_pairs() else None
         if followed is None or not self._within_prior(track.pose):
@@ -479,6 +486,26 @@ class Localizer:
             unseen.update(absent.tolist())
         unseen -= detected
         return np.array(sorted(expected), dtype=int), np.array(sorted(unseen), dtype=int)
+
+    def _observe_changes(
+        self, track: Track, verdict: Verdict, objects: list[SemanticObject],
+        candidates: dict[str, np.ndarray], unseen: np.ndarray,
+    ) -> None:  # fmt: skip
+        """The run's change report learns what this update's objects said of the claim."""
+        run, by_id = self._run_changes, {o.id: o for o in objects}
+        R, t = track.pose[:3, :3], track.pose[:3, 3]
+        for g, object_id in verdict.supported:
+            run.observe_matched(g, object_id)
+        for g, object_id in verdict.changed:
+            obj = by_id[object_id]
+            offset = float(np.linalg.norm(self.global_map.positions[g] - (R @ obj.position + t)))
+            run.observe_moved(g, object_id, offset, obj.seen)
+        for obj in objects:
+            if not len(candidates[obj.id]):
+                run.observe_new(obj.id, obj.seen, unknown_label=True)
+            elif obj.id in verdict.contradicting:
+                run.observe_new(obj.id, obj.seen)
+        run.observe_missing(unseen.tolist())
 
     def _newest_contradict(self, best: Hypothesis) -> bool:
         """Whether the objects of the latest updates contradict the best place by tracking's
@@ -658,6 +685,9 @@ class Localizer:
         the window's objects and their candidates are taken now (later updates replace them).
         A tracked place is judged on the objects detected since its oldest pair used, as the
         older ones drifted with the odometry."""
+        if self._run_changes and self._track is not None:
+            report = self._run_changes.report(list(self.global_map.ids))
+            return lambda: report
         if not hypotheses or hypotheses[0].pose is None:
             return None
         local = self.window.objects

@@ -4,7 +4,7 @@
 `/openapi.json` states every shape and bound a JSON Schema can; a few rules of a semloc map
 are beyond it: object ids unique within a map, a box rotation that is a proper rotation, `up`
 and an `embedding` that are not zero vectors and embeddings of one length per map, a change
-report's pose that is a rigid transform, a position prior's floor band in order and its
+report's pose and a session update's coverage pose that are rigid transforms, a position prior's floor band in order and its
 heading tolerance with a heading; and two of the service's own: an Idempotency-Key
 names one request (a key reused with another body is refused), and If-Match names the
 current version (which the schema cannot know).  The hook makes generated requests obey
@@ -64,6 +64,9 @@ def _fix_map_like(document: dict[str, Any]) -> None:
         _fix_objects(objects)
     if isinstance(document.get("prior"), dict):
         _fix_prior(document["prior"])
+    coverage = document.get("coverage")
+    if isinstance(coverage, dict) and _matrix(coverage.get("pose"), 4, math.inf):
+        coverage["pose"] = [row[:] for row in IDENTITY4]
 
 
 def _fix_prior(prior: dict[str, Any]) -> None:

@@ -41,6 +41,7 @@ import uuid
 from collections.abc import Iterable, Sequence
 from typing import Any
 
+from semloc.coverage import Coverage, checked_coverage
 from semloc.io import load_map, map_from_dict, map_to_dict
 from semloc.maps import ObjectMap, SemanticObject
 from semloc.priors import Prior, checked_prior
@@ -235,12 +236,14 @@ class Session:
         position: Sequence[float] | None = None,
         prior: Prior | dict[str, Any] | None = None,
         clear_prior: bool = False,
+        coverage: Coverage | dict[str, Any] | None = None,
     ) -> dict[str, Any]:
         """The answer after these objects, with `stamp` echoed (the device adds its own motion
         since `stamp` to the pose).  `position`: the device in its own frame, [x, y, z] (it
         measures the travel that bounds the session's window).  `prior`: the session's
         position prior from this update on; `clear_prior`: none from this update on (without
-        either the prior stays as it was)."""
+        either the prior stays as it was).  `coverage`: what the sensor covered at this
+        update (`semloc.Coverage`; the objects are every detection of that look)."""
         body: dict[str, Any] = {"objects": _object_documents(objects), "stamp": float(stamp)}
         if position is not None:
             body["position"] = [float(v) for v in position]
@@ -249,6 +252,9 @@ class Session:
             raise ValueError("prior and clear_prior=True contradict each other")
         if checked is not None or clear_prior:
             body["prior"] = None if checked is None else checked.to_dict()
+        look = checked_coverage(coverage)
+        if look is not None:
+            body["coverage"] = look.to_dict()
         path = f"/v1/sessions/{_quote(self.session_id)}/objects"
         return self.client.request("POST", path, body, key=True)
 

@@ -16,6 +16,7 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, model_validator
 
+from semloc.coverage import Coverage
 from semloc.maps import (
     MAX_COORDINATE,
     MAX_DESCRIPTOR_LENGTH,
@@ -156,6 +157,25 @@ class PriorBody(_Request):
         return self
 
 
+class CoverageBody(_Request):
+    """What the sensor covered at this update (`semloc.Coverage`): its pose in the device's
+    frame (+z is the viewing axis, as a camera), its range and field of view; the update's
+    objects are every detection of that look."""
+
+    model_config = ConfigDict(strict=True, extra="forbid")
+    pose: Pose = Field(description="T_odom_sensor: a rigid transform, 4 rows of 4.")
+    range_m: float = Field(gt=0, le=MAX_COORDINATE, description="How far the sensor sees (m).")
+    fov_deg: (
+        Annotated[list[Annotated[float, Field(gt=0, le=360)]], Field(min_length=2, max_length=2)]
+        | None
+    ) = Field(None, description="[horizontal, vertical] degrees; null: all around within range_m.")
+
+    @model_validator(mode="after")
+    def _a_coverage(self) -> CoverageBody:
+        Coverage.from_dict(self.model_dump())  # its rules, in one place
+        return self
+
+
 class LocalizeRequest(SemlocMap):
     """The local map (a semloc map, replayed by `seen`) and, optionally, a position prior."""
 
@@ -189,6 +209,14 @@ class Hypothesis(_Answer):
     outside_prior: bool | None = Field(
         None, description="Its pose lies outside the prior (only with a prior)."
     )
+    missing: int | None = Field(
+        None,
+        description="Map objects its pose puts in the recent looks that no detection accounts "
+        "for (only with coverage).",
+    )
+    expected: int | None = Field(
+        None, description="Map objects its pose puts in the recent looks (only with coverage)."
+    )
 
 
 class Step(_Answer):
@@ -203,12 +231,18 @@ class Moved(_Answer):
     global_: str = Field(alias="global")
     local: str
     offset_m: float
+    evidence: int | None = Field(None, description="Detections that saw it moved (a run).")
+    last_seen: int | None = Field(None, description="The `seen` of the latest of them (a run).")
 
 
 class Changes(_Answer):
     moved: list[Moved]
     new: list[str] = Field(description="Local ids.")
     missing: list[str] = Field(description="Global ids.")
+    evidence: dict[str, dict[str, int]] | None = Field(
+        None,
+        description="Over a run: detections (new) and looks (missing) that said so, by id.",
+    )
 
 
 class LabelMatch(_Answer):
@@ -224,6 +258,16 @@ class Support(_Answer):
     updates_ago: int = Field(description="Updates since its oldest object was detected.")
     metres: float = Field(description="Metres of travel since then (0 without positions).")
     tracked: bool = Field(description="The place was found earlier and is followed since.")
+    changed: int = Field(0, description="Objects of the tracked claim a plausible move explains.")
+    contradicting: int = Field(0, description="Objects that contradict the tracked claim.")
+    missing: int | None = Field(
+        None,
+        description="Map objects the pose puts in the recent looks that no detection accounts "
+        "for (null: no coverage given, no negative evidence).",
+    )
+    expected: int | None = Field(
+        None, description="Map objects the pose puts in the recent looks (null: no coverage)."
+    )
 
 
 class NextLook(_Answer):
@@ -302,6 +346,11 @@ class SessionUpdate(_Request):
         None,
         description="Sets the session's position prior from this update on (absent: the prior "
         "stays as it was; null: the session has no prior from now on).",
+    )
+    coverage: CoverageBody | None = Field(
+        None,
+        description="What the sensor covered at this update (absent or null: no negative "
+        "evidence from it).",
     )
 
 

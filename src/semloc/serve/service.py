@@ -49,6 +49,7 @@ from semloc.changes import (
     check_still_applies,
     flags_to_clear,
 )
+from semloc.coverage import Coverage
 from semloc.io import map_from_dict, map_to_dict
 from semloc.io.answers import answer_document
 from semloc.localizer import Localizer, LocalizerConfig, localize
@@ -181,6 +182,17 @@ def _prior(value: Any) -> Prior | None:
         raise Invalid("invalid prior", str(exc)) from None
 
 
+def _coverage(value: Any) -> Coverage | None:
+    """An update's optional `coverage` (`Coverage.to_dict`'s object); `Invalid` naming the
+    problem."""
+    if value is None:
+        return None
+    try:
+        return Coverage.from_dict(value)
+    except (TypeError, ValueError) as exc:
+        raise Invalid("invalid coverage", str(exc)) from None
+
+
 def _prior_json(prior: Prior | None) -> dict[str, Any] | None:
     return None if prior is None else prior.to_dict()
 
@@ -195,18 +207,22 @@ class _Update:
     position: list[float] | None = None
     sets_prior: bool = False
     prior: Prior | None = None
+    coverage: Coverage | None = None
 
     @classmethod
     def of(cls, batch: Batch, up: list[float] | None) -> _Update:
         objects = _objects_map(batch.objects, up, f"batch {batch.seq}")
         prior = Prior.from_dict(batch.prior) if batch.prior is not None else None
-        return cls(batch.seq, objects, batch.position, batch.sets_prior, prior)
+        coverage = None if batch.coverage is None else Coverage.from_dict(batch.coverage)
+        return cls(batch.seq, objects, batch.position, batch.sets_prior, prior, coverage)
 
     def apply(self, localizer: Localizer) -> Result:
         """The Localizer's answer after this batch (its prior set first, when it sets one)."""
         if self.sets_prior:
             localizer.set_prior(self.prior)
-        result = localizer.update(list(self.objects), position=self.position)
+        result = localizer.update(
+            list(self.objects), position=self.position, coverage=self.coverage
+        )
         assert result is not None
         return result
 
@@ -405,11 +421,12 @@ class Service:
             raise Invalid("invalid update", "'stamp' must be a finite number")
         position = _position(body.get("position"))
         sets_prior, prior = "prior" in body, _prior(body.get("prior"))
+        coverage = _coverage(body.get("coverage"))
         objects = _objects_map(body["objects"], meta.up, "objects")  # refused before it is stored
         try:  # a key used before is found under the session's lock: nothing appended
             seq = self.store.append_batch(
                 session_id, float(stamp), body["objects"], self.session_idle_s, key, position,
-                sets_prior, _prior_json(prior),
+                sets_prior, _prior_json(prior), None if coverage is None else coverage.to_dict(),
             )  # fmt: skip
         except KeyTaken as taken:
             assert key is not None
@@ -419,7 +436,7 @@ class Service:
                 self._live.pop(session_id, None)
             raise not_found(f"session {session_id!r}")
         live = self._live_session(meta)
-        update = _Update(seq, objects, position, sets_prior, prior)
+        update = _Update(seq, objects, position, sets_prior, prior, coverage)
         result, in_effect = self._advance(session_id, live, update)
         document = self._session_answer(result, in_effect, live.localizer, meta, stamp, seq)
         self.store.set_last(session_id, _summary(document), key, document)

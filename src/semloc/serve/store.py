@@ -170,6 +170,7 @@ class Batch:
     position: list[float] | None = None  # the device in its frame, when it said
     sets_prior: bool = False  # the batch set the session's position prior ...
     prior: dict[str, Any] | None = None  # ... to this one (`Prior.to_dict`; None: no prior)
+    coverage: dict[str, Any] | None = None  # what the sensor covered (`Coverage.to_dict`)
 
 
 def _pack(document: Any) -> bytes:
@@ -511,17 +512,21 @@ class Store:
         position: list[float] | None = None,
         sets_prior: bool = False,
         prior: dict[str, Any] | None = None,
+        coverage: dict[str, Any] | None = None,
     ) -> int | None:
         """Store the next batch of a session and touch it; its sequence number (from 1), or
         None when the session is gone or was idle for longer than `idle_seconds`.  With a
         request `key`, the key is stored with the batch (`KeyTaken` when it was used).
-        `sets_prior`: the batch sets the session's position prior to `prior` (None: none)."""
+        `sets_prior`: the batch sets the session's position prior to `prior` (None: none);
+        `coverage`: what the sensor covered at the batch (`Coverage.to_dict`)."""
         now = time.time()
         document: Any = objects
-        if position is not None or sets_prior:
+        if position is not None or sets_prior or coverage is not None:
             document = {"objects": objects, "position": position}
             if sets_prior:
                 document["prior"] = prior
+            if coverage is not None:
+                document["coverage"] = coverage
         with self._transaction(write=True, durable=False) as cur:
             # the row lock (PostgreSQL) serialises a session's appends
             cur.execute(
@@ -571,6 +576,7 @@ class Store:
                         document["position"],
                         "prior" in document,
                         document.get("prior"),
+                        document.get("coverage"),
                     )  # fmt: skip
                 )
             else:
