@@ -4,14 +4,12 @@ accepted, every channel decoded with the schema it advertises, and a viewer that
 gets the latest message of every channel, contents included.
 
 A viewer joins after the answers were published (a late joiner) and prints what it decodes
-(`node/client.js`); the assertions compare it with what the answers say."""
+(`node/client.js`, `foxglove_viewer.py`); the assertions compare it with what the answers
+say.  `live_view.py` draws docs/img/live_view.png from the same decoded messages."""
 
 from __future__ import annotations
 
-import json
 import shutil
-import subprocess
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -20,17 +18,11 @@ from scipy.spatial.transform import Rotation
 pytest.importorskip("foxglove", reason="foxglove-sdk (the viz extra) is not installed")
 pytest.importorskip("websockets", reason="websockets (the viz extra) is not installed")
 
-import semloc  # noqa: E402
+from foxglove_viewer import LIBRARY, viewer, walk_answers  # noqa: E402
+
 from semloc.pictures.foxglove_ws import SUBPROTOCOLS  # noqa: E402
 from semloc.pictures.live import TOPICS, FoxgloveView  # noqa: E402
 from semloc.pictures.looks import look_arrows  # noqa: E402
-from semloc.sim.layouts import layout  # noqa: E402
-from semloc.sim.longwalk import LongWalk, WalkConfig  # noqa: E402
-
-NODE_DIR = Path(__file__).parent / "node"
-LIBRARY = NODE_DIR / "node_modules" / "@foxglove" / "ws-protocol"
-WAIT = 60.0
-"""Bound (s) of a client's run (the client gives up after 20 s without its messages)."""
 
 if shutil.which("node") is None:
     pytest.skip("Node.js is not installed (make system-deps)", allow_module_level=True)
@@ -43,28 +35,7 @@ if not LIBRARY.is_dir():
 @pytest.fixture(scope="module")
 def run():
     """A walk's answers: ambiguous ones with next-look suggestions, then localized ones."""
-    building = layout(60, seed=2)
-    localizer = semloc.Localizer(building, local_up=[0, 0, 1])
-    answers = []
-    walk = LongWalk(building, WalkConfig(keyframes=25, points_per_object=0), seed=2)
-    for k, frame in enumerate(walk):
-        result = localizer.update(frame.objects, position=frame.T_odom_robot)
-        answers.append((k, result, localizer.local_map, frame.T_odom_robot))
-    return building, answers
-
-
-def viewer(port: int, subprotocol: str, topics: list[str]) -> tuple[str, dict, dict]:
-    """Foxglove's client joins: the subprotocol it got, the channels, the decoded messages."""
-    out = subprocess.run(
-        ["node", str(NODE_DIR / "client.js"), f"ws://127.0.0.1:{port}", subprotocol, *topics],
-        capture_output=True, text=True, timeout=WAIT, check=False,
-    )  # fmt: skip
-    assert out.returncode == 0, out.stderr
-    lines = [json.loads(line) for line in out.stdout.splitlines()]
-    opened = next(line["open"] for line in lines if "open" in line)
-    channels = {c["topic"]: c for line in lines if "channels" in line for c in line["channels"]}
-    decoded = {line["topic"]: line for line in lines if "topic" in line}
-    return opened, channels, decoded
+    return walk_answers()
 
 
 def xyz(vector: dict) -> list[float]:
@@ -108,7 +79,7 @@ def test_a_late_foxglove_client_decodes_the_latest_of_every_channel(run, subprot
     assert msg["/semloc/status"]["message"].startswith("localized")
 
 
-def test_a_late_foxglove_client_sees_where_to_look_next(run):
+def test_a_late_foxglove_client_sees_where_to_look_next(run, tmp_path):
     building, answers = run
     ambiguous = [a for a in answers if a[1].next_look]
     view = FoxgloveView(building, port=0)
@@ -123,17 +94,26 @@ def test_a_late_foxglove_client_sees_where_to_look_next(run):
     arrows = look_arrows(result, T_odom_sensor)
     assert arrows
     drawn = {e["id"]: e for e in got["/semloc/hypotheses"]["message"]["entities"]}
-    for arrow in arrows:
-        entity = drawn[f"next_look/{arrow.order}/{arrow.rank}"]
-        assert entity["frame_id"] == "map" and entity["texts"][0]["text"] == arrow.text
-        (shaft,) = entity["arrows"]
-        assert np.allclose(xyz(shaft["pose"]["position"]), arrow.start)
-        q = shaft["pose"]["orientation"]  # Foxglove's arrows point along their pose's +x
-        along = Rotation.from_quat([q["x"], q["y"], q["z"], q["w"]]).apply([1.0, 0.0, 0.0])
-        length = shaft["shaft_length"] + shaft["head_length"]
-        assert np.allclose(arrow.start + length * along, arrow.end, atol=1e-5)
+    for order in range(1, len(result.next_look) + 1):
+        entity = drawn[f"next_look/{order}"]
+        mine = [a for a in arrows if a.order == order]
+        assert entity["frame_id"] == "map"
+        assert [t["text"] for t in entity["texts"]] == [a.text for a in mine]
+        assert len(entity["arrows"]) == len(mine)
+        for shaft, arrow in zip(entity["arrows"], mine, strict=True):
+            assert np.allclose(xyz(shaft["pose"]["position"]), arrow.start)
+            q = shaft["pose"]["orientation"]  # Foxglove's arrows point along their pose's +x
+            along = Rotation.from_quat([q["x"], q["y"], q["z"], q["w"]]).apply([1.0, 0.0, 0.0])
+            length = shaft["shaft_length"] + shaft["head_length"]
+            assert np.allclose(arrow.start + length * along, arrow.end, atol=1e-5)
     status = got["/semloc/status"]["message"]
     assert status["level"] == "WARNING" and status["message"].startswith("ambiguous")
     assert (
         f"look at {result.next_look[0].label} {result.next_look[0].global_id}" in status["message"]
     )
+    # the picture of docs/img/live_view.png draws the same decoded messages
+    pytest.importorskip("matplotlib", reason="matplotlib (the viz extra) is not installed")
+    from live_view import render
+
+    render([("ambiguous", got)], tmp_path / "view.png")
+    assert (tmp_path / "view.png").read_bytes().startswith(b"\x89PNG")

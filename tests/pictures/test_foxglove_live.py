@@ -167,19 +167,22 @@ def test_the_next_look_is_drawn_for_each_rank_it_separates(run):
     k, result, local, T_odom_sensor = next(a for a in answers if a[1].next_look)
     arrows = look_arrows(result, T_odom_sensor)
     assert len(arrows) == sum(len(look.separates) for look in result.next_look)
-    poses = {h.rank: h.pose for h in result.hypotheses}
+    best = result.best.pose
     where = {o.id: o.position for o in building}
     for arrow in arrows:
         look = result.next_look[arrow.order - 1]
-        # under rank r, the spot to look at is the map object itself, seen from where r puts us
-        assert np.allclose(arrow.end, where[look.global_id], atol=1e-6)
-        pose = poses[arrow.rank]
-        assert np.allclose(arrow.start, pose[:3, :3] @ T_odom_sensor[:3, 3] + pose[:3, 3])
-        assert f"#{arrow.rank}" in arrow.text and look.label in arrow.text
+        # from the sensor as the best hypothesis places it, to where rank r puts the object
+        assert np.allclose(arrow.start, best[:3, :3] @ T_odom_sensor[:3, 3] + best[:3, 3])
+        spot = best[:3, :3] @ look.where[arrow.rank] + best[:3, 3]
+        assert np.allclose(arrow.end, spot)
+        assert arrow.text == f"look {arrow.order}: {look.label} {look.global_id} if #{arrow.rank}"
+        if arrow.rank == result.best.rank:  # the best hypothesis's spot is the object itself
+            assert np.allclose(arrow.end, where[look.global_id], atol=1e-6)
     markers = AnswerTopics(None, building, Frames()).match_markers(k, result, local, T_odom_sensor)
     drawn = [mk for mk in markers.markers if mk.ns == "next look"]
-    assert [mk.type for mk in drawn] == [0, 9] * len(arrows)  # an arrow and its text
+    assert [mk.type for mk in drawn] == [0, 9] * len(arrows)  # an arrow and its label
     assert [mk.text for mk in drawn[1::2]] == [a.text for a in arrows]
+    assert len({mk.id for mk in drawn}) == len(drawn)
     assert np.allclose([[p.x, p.y, p.z] for p in drawn[0].points], [arrows[0].start, arrows[0].end])
     localized = AnswerTopics(None, building, Frames()).match_markers(*answers[-1])
     assert not [mk for mk in localized.markers if mk.ns == "next look"]

@@ -15,9 +15,9 @@ of every channel at once.
   when `localized`, orange when not) and a line from each matched one to its map partner;
 - `/semloc/hypotheses` (`SceneUpdate`): where each of the best hypotheses puts the local
   frame's origin, with its rank and confidence, and, when the answer is ambiguous, its "look
-  there next" suggestions (`semloc.pictures.looks`): for each rank a suggestion separates, a
-  cyan arrow from where that rank puts the sensor to the map object to look at, labelled
-  `look N: LABEL ID for #RANK (GAIN bit)`;
+  there next" suggestions (`semloc.pictures.looks`), one entity `next_look/N` each: for each
+  rank the suggestion separates, a cyan arrow from the sensor (placed by the best hypothesis)
+  to the spot to look at, labelled `look N: LABEL ID if #RANK`;
 - `/semloc/pose` (`foxglove.PoseInFrame`, frame `map`): the sensor's pose when `localized`;
 - `/tf` (`foxglove.FrameTransform`): `map` -> `odom` when `localized`;
 - `/semloc/status` (`foxglove.Log`): status, confidence and reason of each answer, and the
@@ -162,11 +162,13 @@ class FoxgloveView:
                 texts=[self._text(h.pose[:3, 3] + [0, 0, 0.4], f"#{h.rank}{conf}", 14.0)],
             ))  # fmt: skip
         colour = self._color(LOOK_RGB, 1.0)
-        for arrow in look_arrows(result, T_odom_sensor):
+        arrows = look_arrows(result, T_odom_sensor)
+        for order in sorted({a.order for a in arrows}):
+            mine = [a for a in arrows if a.order == order]
             entities.append(m.SceneEntity(
-                frame_id=self.map_frame, id=f"next_look/{arrow.order}/{arrow.rank}",
-                arrows=[self._arrow(arrow.start, arrow.end, colour)],
-                texts=[self._text(arrow.end + [0, 0, 0.5], arrow.text, 12.0, colour)],
+                frame_id=self.map_frame, id=f"next_look/{order}",
+                arrows=[self._arrow(a.start, a.end, colour) for a in mine],
+                texts=[self._text(a.end + [0, 0, 0.4], a.text, 12.0, colour) for a in mine],
             ))  # fmt: skip
         deletions = [m.SceneEntityDeletion(type=m.SceneEntityDeletionType.All)]
         return m.SceneUpdate(deletions=deletions, entities=entities)

@@ -2,11 +2,14 @@
 map frame: what the live views draw (`/semloc/markers` of `semloc.ros.answers`, the Foxglove
 view of `semloc.pictures.live`).
 
-A suggestion gives, for each top hypothesis (rank), where a map object lies in the local
-(odometry) frame if that hypothesis is right; it tells apart the ranks it `separates`.  For each
-separated rank r, `look_arrows` draws an arrow from where rank r puts the sensor now (its pose
-applied to the sensor's odometry pose; the local frame's origin without one) to that spot,
-placed in the map with rank r's pose: "if you are where #r says, look there".
+A suggestion gives, for each top hypothesis (rank r), the spot `where[r]` of the local
+(odometry) frame at which a map object lies if r is right; looking there tells apart the ranks
+it `separates`.  The views draw the robot as the best hypothesis places it, so the spots are
+placed with the best hypothesis's pose too: for each separated rank r, an arrow from the
+sensor (its odometry pose, placed by the best hypothesis; the local frame's origin without one)
+to spot r, labelled `look N: LABEL ID if #r`: "look there: a LABEL there means #r".  (Placed
+with rank r's own pose every spot of a suggestion would land on the same map object, which
+cannot show the ranks apart.)
 """
 
 from __future__ import annotations
@@ -33,17 +36,19 @@ class LookArrow:
 
 
 def look_arrows(result: Result, T_odom_sensor: np.ndarray | None = None) -> list[LookArrow]:
-    """The arrows of `result.next_look` (empty unless the answer is ambiguous), best first."""
-    poses = {h.rank: h.pose for h in result.hypotheses if h.pose is not None}
+    """The arrows of `result.next_look` (empty unless the answer is ambiguous and its best
+    hypothesis has a pose), best suggestion first."""
+    best = result.best
+    if best is None or best.pose is None:
+        return []
+    R, t = best.pose[:3, :3], best.pose[:3, 3]
     sensor = np.zeros(3) if T_odom_sensor is None else np.asarray(T_odom_sensor)[:3, 3]
+    start = R @ sensor + t
     arrows = []
     for order, look in enumerate(result.next_look, start=1):
         for rank in look.separates:
-            pose = poses.get(rank)
-            if pose is None or rank not in look.where:
-                continue
-            start = pose[:3, :3] @ sensor + pose[:3, 3]
-            end = pose[:3, :3] @ np.asarray(look.where[rank], dtype=float) + pose[:3, 3]
-            text = f"look {order}: {look.label} {look.global_id} for #{rank} ({look.gain:.2f} bit)"
-            arrows.append(LookArrow(order, rank, start, end, text))
+            if rank in look.where:
+                end = R @ np.asarray(look.where[rank], dtype=float) + t
+                text = f"look {order}: {look.label} {look.global_id} if #{rank}"
+                arrows.append(LookArrow(order, rank, start, end, text))
     return arrows

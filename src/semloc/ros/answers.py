@@ -17,8 +17,8 @@
   the map, a line from each to its map partner, an arrow from each moved object's map
   place to where it is now, and, when the answer is ambiguous, its "look there next"
   suggestions (namespace `next look`, `semloc.pictures.looks`): for each rank a suggestion
-  separates, a cyan arrow from where that rank puts the sensor to the map object to look at,
-  and a text `look N: LABEL ID for #RANK (GAIN bit)` above it.  (The ROS 2 node publishes
+  separates, a cyan arrow from the sensor (placed by the best hypothesis) to the spot to look
+  at, labelled `look N: LABEL ID if #RANK`.  (The ROS 2 node publishes
   this topic as `/semloc/markers`.)
 """
 
@@ -153,13 +153,13 @@ class AnswerTopics:
         return msgs.new(msgs.MARKERS, markers=markers)
 
     def look_markers(self, stamp: int, result: Result, T_odom_sensor: np.ndarray | None) -> list:
-        """The next-look arrows of an ambiguous answer, each with its text above its end."""
+        """The next-look arrows of an ambiguous answer, each with its label above its end."""
         markers, color = [], (*LOOK_RGB, 1.0)
         for i, arrow in enumerate(look_arrows(result, T_odom_sensor)):
             markers.append(self._marker(stamp, "next look", 2 * i, 0, np.eye(4), (0.06, 0.2, 0.4),
                                         color, points=[arrow.start, arrow.end]))  # fmt: skip
             T_text = np.eye(4)
-            T_text[:3, 3] = arrow.end + [0.0, 0.0, 0.5]
+            T_text[:3, 3] = arrow.end + [0.0, 0.0, 0.4]
             markers.append(self._marker(stamp, "next look", 2 * i + 1, 9, T_text, (0, 0, 0.25),
                                         color, text=arrow.text))  # fmt: skip
         return markers
