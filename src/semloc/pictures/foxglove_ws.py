@@ -4,7 +4,8 @@ on the `websockets` library, for the live view (`semloc.pictures.live`).
 It accepts both names of the protocol, `foxglove.websocket.v1` (Foxglove Studio 1.x,
 Lichtblick, `@foxglove/ws-protocol`) and `foxglove.sdk.v1` (the Foxglove app and SDK, which
 speak the same messages under the new name), and keeps the latest message of each channel: a
-client that subscribes at any time receives it at once, then every newer one.
+client that subscribes at any time receives it at once (stamped with the time it subscribed, so
+that its clock does not go back), then every newer one.
 
 `FoxgloveServer(host, port)` serves from a thread of its own; `add_channel(topic, schema_name,
 schema, encoding)` advertises a channel (before or after clients connect); `publish(channel,
@@ -106,7 +107,7 @@ class FoxgloveServer:
     def __init__(self, host: str = "127.0.0.1", port: int = 8765, name: str = "semloc") -> None:
         self.name, self.session = name, str(time.time_ns())
         self.channels: dict[int, Channel] = {}
-        self.latest: dict[int, tuple[int, bytes]] = {}
+        self.latest: dict[int, bytes] = {}
         self.clients: set[Client] = set()
         self._ids = itertools.count(1)
         self._loop = asyncio.new_event_loop()
@@ -180,7 +181,7 @@ class FoxgloveServer:
             client.say({"op": "advertise", "channels": [channel.advertised()]})
 
     def _publish(self, channel: int, log_time: int, payload: bytes) -> None:
-        self.latest[channel] = (log_time, payload)
+        self.latest[channel] = payload
         for client in self.clients:
             client.queue(channel, log_time, payload)
 
@@ -228,8 +229,8 @@ class FoxgloveServer:
             self._status(client, 1, f"no channel {channel}")
             return
         client.subscriptions[sid] = channel
-        if channel in self.latest:  # the latest message at once
-            client.queue_one(sid, *self.latest[channel])
+        if channel in self.latest:  # the latest message at once, stamped now: a viewer's clock
+            client.queue_one(sid, time.time_ns(), self.latest[channel])  # never goes back
 
     @staticmethod
     def _status(client: Client, level: int, text: str) -> None:
