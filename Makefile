@@ -22,11 +22,21 @@ system-deps:
 	@need=""; \
 	command -v chromium >/dev/null 2>&1 || need="$$need chromium"; \
 	ls /usr/lib/postgresql/*/bin/initdb >/dev/null 2>&1 || need="$$need postgresql"; \
+	command -v node >/dev/null 2>&1 || need="$$need nodejs"; \
+	command -v npm >/dev/null 2>&1 || need="$$need npm"; \
 	if [ -n "$$need" ]; then \
 	  sudo=""; [ "$$(id -u)" -eq 0 ] || sudo="sudo"; \
 	  $$sudo apt-get update -qq && \
 	  DEBIAN_FRONTEND=noninteractive $$sudo apt-get install -y -qq --no-install-recommends $$need; \
 	fi
+
+# Foxglove's own client library (@foxglove/ws-protocol, npm) for tests/interop, at the versions
+# of tests/interop/node/package-lock.json; needs Node.js and npm (Debian's `nodejs`, `npm`:
+# make system-deps installs them).
+.PHONY: interop-deps
+interop-deps:
+	@command -v npm >/dev/null 2>&1 || { echo "interop-deps: npm is not installed (make system-deps)"; exit 1; }
+	cd tests/interop/node && npm ci --ignore-scripts --no-audit --no-fund
 
 demo: install
 	$(BIN)/semloc demo

@@ -166,7 +166,7 @@ def node(
     )  # fmt: skip
     view = None
     if foxglove is not None:
-        need("ros2 node --foxglove", "viz", modules=("foxglove",))
+        need("ros2 node --foxglove", "viz", modules=("foxglove", "websockets"))
         view = FoxgloveView(global_map, port=foxglove, map_frame=map_frame)
     live = LiveNode(global_map, cfg, settings, localizer=localizer)
     console.print(

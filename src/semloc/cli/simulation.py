@@ -109,7 +109,7 @@ def demo(
     need("demo", "sim")
     need("demo", "viz", modules=("matplotlib",) if rrd is None else ("matplotlib", "rerun"))
     if foxglove is not None:
-        need("demo --foxglove", "viz", modules=("foxglove",))
+        need("demo --foxglove", "viz", modules=("foxglove", "websockets"))
     if scan is not None and (rrd is not None or foxglove is not None):
         fail("--rrd and --foxglove are not available with --scan")
     common = {"seed": seed, "resolution": parse_resolution(resolution), "gamma": gamma,

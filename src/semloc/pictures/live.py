@@ -1,30 +1,39 @@
-"""A live Foxglove view of a localization, over Foxglove's WebSocket protocol (`foxglove-sdk`,
-the `viz` extra), in Foxglove's own schemas, so the Foxglove app shows it without plugins.
+"""A live Foxglove view of a localization, in Foxglove's own schemas (protobuf, from
+`foxglove-sdk`), served over Foxglove's WebSocket protocol by `semloc.pictures.foxglove_ws`
+(both `foxglove.websocket.v1` and `foxglove.sdk.v1`; the `viz` extra), so Foxglove, Lichtblick
+and any client of the protocol show it without plugins.
 
-`FoxgloveView(global_map, port)` starts a server (Foxglove: *Open connection* ->
+`FoxgloveView(global_map, port)` starts a server (Foxglove or Lichtblick: *Open connection* ->
 `ws://localhost:PORT`; the layout `docs/foxglove_layout.json` arranges the panels) and
-`update(stamp_ns, result, local_map, T_odom_sensor)` publishes one answer:
+`update(stamp_ns, result, local_map, T_odom_sensor)` publishes one answer.  Each channel keeps
+its latest message: a viewer that subscribes at any time, also after the run, gets the latest
+of every channel at once.
 
 - `/semloc/map` (`foxglove.SceneUpdate`, frame `map`): the map's objects as label-coloured
-  boxes with their labels; sent again to each viewer that subscribes;
+  boxes with their labels;
 - `/semloc/local` (`SceneUpdate`): the local objects placed by the best hypothesis (green
   when `localized`, orange when not) and a line from each matched one to its map partner;
 - `/semloc/hypotheses` (`SceneUpdate`): where each of the best hypotheses puts the local
-  frame's origin, with its rank and confidence;
+  frame's origin, with its rank and confidence, and, when the answer is ambiguous, its "look
+  there next" suggestions (`semloc.pictures.looks`), one entity `next_look/N` each: for each
+  rank the suggestion separates, a cyan arrow from the sensor (placed by the best hypothesis)
+  to the spot to look at, labelled `look N: LABEL ID if #RANK`;
 - `/semloc/pose` (`foxglove.PoseInFrame`, frame `map`): the sensor's pose when `localized`;
 - `/tf` (`foxglove.FrameTransform`): `map` -> `odom` when `localized`;
-- `/semloc/status` (`foxglove.Log`): status, confidence and reason of each answer.
+- `/semloc/status` (`foxglove.Log`): status, confidence and reason of each answer, and the
+  best suggestion of an ambiguous one.
 """
 
 from __future__ import annotations
 
-import logging
 from typing import Any
 
 import numpy as np
 
 from semloc.maps import ObjectMap
 from semloc.pictures.colors import label_colors, rgb
+from semloc.pictures.foxglove_ws import FoxgloveServer
+from semloc.pictures.looks import LOOK_RGB, look_arrows
 from semloc.results import Result
 
 STATUS_RGB = {"localized": (0.1, 0.8, 0.2), "ambiguous": (1.0, 0.7, 0.0), "failed": (0.9, 0.1, 0.1)}
@@ -38,45 +47,36 @@ def _quaternion(R: np.ndarray) -> tuple[float, float, float, float]:
     return float(x), float(y), float(z), float(w)
 
 
+TOPICS = {"/semloc/map": "SceneUpdate", "/semloc/local": "SceneUpdate",
+          "/semloc/hypotheses": "SceneUpdate", "/semloc/pose": "PoseInFrame",
+          "/tf": "FrameTransform", "/semloc/status": "Log"}  # fmt: skip
+"""The view's channels and their `foxglove.` schemas."""
+
+
 class FoxgloveView:
     """The live view of one localization (see the module docstring)."""
 
     def __init__(self, global_map: ObjectMap, port: int = 8765, host: str = "127.0.0.1",
                  map_frame: str = "map", odom_frame: str = "odom") -> None:  # fmt: skip
-        import foxglove
-        from foxglove.channels import (
-            FrameTransformChannel,
-            LogChannel,
-            PoseInFrameChannel,
-            SceneUpdateChannel,
-        )
+        import foxglove.messages
 
-        # a viewer that goes away is not an error of the run (the SDK logs it as one)
-        logging.getLogger("foxglove.websocket").setLevel(logging.CRITICAL)
         self.m = foxglove.messages
         self.global_map, self.map_frame, self.odom_frame = global_map, map_frame, odom_frame
         self.colors = {k: rgb(v) for k, v in label_colors(global_map.labels).items()}
-        self.context = foxglove.Context()
-        view = self
-
-        class Listener(foxglove.ServerListener):
-            def on_subscribe(self, client: Any, channel: Any) -> None:
-                if channel.topic == "/semloc/map":
-                    view.publish_map()
-
-        channel = {"context": self.context}
-        self.map_channel = SceneUpdateChannel("/semloc/map", **channel)
-        self.local_channel = SceneUpdateChannel("/semloc/local", **channel)
-        self.hypotheses_channel = SceneUpdateChannel("/semloc/hypotheses", **channel)
-        self.pose_channel = PoseInFrameChannel("/semloc/pose", **channel)
-        self.tf_channel = FrameTransformChannel("/tf", **channel)
-        self.status_channel = LogChannel("/semloc/status", **channel)
-        self.server = foxglove.start_server(name="semloc", host=host, port=port,
-                                            context=self.context, server_listener=Listener())  # fmt: skip
+        self.server = FoxgloveServer(host, port)
         self.port = self.server.port
+        self.channels: dict[str, int] = {}
+        for topic, name in TOPICS.items():
+            schema = getattr(self.m, name).get_schema()
+            self.channels[topic] = self.server.add_channel(topic, schema.name, schema.data,
+                                                           encoding=schema.encoding)  # fmt: skip
+        self.publish_map()
 
     def close(self) -> None:
-        self.server.stop()
+        self.server.close()
+
+    def _log(self, topic: str, message: Any) -> None:
+        self.server.publish(self.channels[topic], message.encode())
 
     # messages -------------------------------------------------------------------------------
     def _pose(self, T: np.ndarray) -> Any:
@@ -94,7 +94,7 @@ class FoxgloveView:
         return self._pose(T)
 
     def publish_map(self) -> None:
-        """The map's objects (once per viewer that subscribes)."""
+        """The map's objects (kept for every viewer that subscribes later)."""
         m, entities = self.m, []
         for obj in self.global_map:
             T = np.eye(4)
@@ -103,64 +103,107 @@ class FoxgloveView:
                 T[:3, :3] = obj.rotation
             size = obj.size if obj.size is not None else np.full(3, 0.2)
             colour = tuple(c / 255 for c in self.colors.get(obj.label, (128, 128, 128)))
-            label = self._at(obj.position + [0.0, 0.0, float(size[2]) / 2 + 0.15])
+            label = obj.position + [0.0, 0.0, float(size[2]) / 2 + 0.15]
             entities.append(m.SceneEntity(
                 frame_id=self.map_frame, id=f"map/{obj.id}",
                 cubes=[m.CubePrimitive(pose=self._pose(T), size=m.Vector3(
                     x=float(size[0]), y=float(size[1]), z=float(size[2])),
                     color=self._color(colour, 0.45))],
-                texts=[m.TextPrimitive(pose=label, billboard=True, font_size=12.0,
-                                       scale_invariant=True, color=self._color((1, 1, 1), 0.9),
-                                       text=obj.label)],
+                texts=[self._text(label, obj.label, 12.0, self._color((1, 1, 1), 0.9))],
             ))  # fmt: skip
-        self.map_channel.log(m.SceneUpdate(entities=entities))
+        self._log("/semloc/map", m.SceneUpdate(entities=entities))
 
     def update(self, stamp_ns: int, result: Result, local_map: ObjectMap,
                T_odom_sensor: np.ndarray | None = None) -> None:  # fmt: skip
         """Publish one answer (see the module docstring)."""
-        m = self.m
-        best = result.best
+        self._log("/semloc/local", self._local_scene(result, local_map))
+        self._log("/semloc/hypotheses", self._hypotheses_scene(result, T_odom_sensor))
+        if result.pose_is_answer:
+            m, pose = self.m, result.pose
+            T_odom_sensor = np.eye(4) if T_odom_sensor is None else T_odom_sensor
+            self._log("/semloc/pose", m.PoseInFrame(frame_id=self.map_frame,
+                                                    pose=self._pose(pose @ T_odom_sensor)))  # fmt: skip
+            x, y, z, w = _quaternion(pose[:3, :3])
+            self._log("/tf", m.FrameTransform(
+                parent_frame_id=self.map_frame, child_frame_id=self.odom_frame,
+                translation=m.Vector3(x=float(pose[0, 3]), y=float(pose[1, 3]), z=float(pose[2, 3])),
+                rotation=m.Quaternion(x=x, y=y, z=z, w=w)))  # fmt: skip
+        self._log("/semloc/status", self._status(result))
+
+    def _local_scene(self, result: Result, local_map: ObjectMap) -> Any:
+        """The local objects placed by the best hypothesis, lines to their map partners."""
+        m, best = self.m, result.best
+        if best is None or best.pose is None:
+            return m.SceneUpdate(entities=[m.SceneEntity(frame_id=self.map_frame, id="local")])
         colour = self._color(STATUS_RGB[result.status], 1.0)
-        entities = [m.SceneEntity(frame_id=self.map_frame, id="local")]
-        if best is not None and best.pose is not None:
-            placed = {o.id: best.pose[:3, :3] @ o.position + best.pose[:3, 3] for o in local_map}
-            spheres = [m.SpherePrimitive(pose=self._at(p), size=m.Vector3(x=0.15, y=0.15, z=0.15),
-                                         color=colour) for p in placed.values()]  # fmt: skip
-            where = {o.id: o.position for o in self.global_map}
-            points = [m.Point3(x=float(v[0]), y=float(v[1]), z=float(v[2]))
-                      for g, l in best.pairs if g in where and l in placed
-                      for v in (where[g], placed[l])]  # fmt: skip
-            lines = [m.LinePrimitive(type=m.LinePrimitiveLineType.LineList, thickness=0.02,
-                                     points=points, color=colour)] if points else []  # fmt: skip
-            entities = [m.SceneEntity(frame_id=self.map_frame, id="local", spheres=spheres,
-                                      lines=lines)]  # fmt: skip
-        self.local_channel.log(m.SceneUpdate(entities=entities))
-        marks = []
+        placed = {o.id: best.pose[:3, :3] @ o.position + best.pose[:3, 3] for o in local_map}
+        spheres = [m.SpherePrimitive(pose=self._at(p), size=m.Vector3(x=0.15, y=0.15, z=0.15),
+                                     color=colour) for p in placed.values()]  # fmt: skip
+        where = {o.id: o.position for o in self.global_map}
+        points = [self._point(v) for g, lid in best.pairs if g in where and lid in placed
+                  for v in (where[g], placed[lid])]  # fmt: skip
+        lines = [m.LinePrimitive(type=m.LinePrimitiveLineType.LineList, thickness=0.02,
+                                 points=points, color=colour)] if points else []  # fmt: skip
+        return m.SceneUpdate(entities=[m.SceneEntity(frame_id=self.map_frame, id="local",
+                                                     spheres=spheres, lines=lines)])  # fmt: skip
+
+    def _hypotheses_scene(self, result: Result, T_odom_sensor: np.ndarray | None) -> Any:
+        """The best hypotheses' origins with rank and confidence, and the next-look arrows
+        (everything of the previous answer deleted first)."""
+        m, entities = self.m, []
         for h in result.hypotheses[:HYPOTHESES]:
             if h.pose is None:
                 continue
             conf = "" if h.confidence is None else f" {h.confidence:.2f}"
-            marks.append(m.SceneEntity(
+            entities.append(m.SceneEntity(
                 frame_id=self.map_frame, id=f"hypothesis/{h.rank}",
                 spheres=[m.SpherePrimitive(pose=self._at(h.pose[:3, 3]), size=m.Vector3(
                     x=0.3, y=0.3, z=0.3), color=self._color((0.3, 0.5, 1.0), 0.8))],
-                texts=[m.TextPrimitive(pose=self._at(h.pose[:3, 3] + [0, 0, 0.4]), billboard=True,
-                                       font_size=14.0, scale_invariant=True,
-                                       color=self._color((1, 1, 1), 1.0), text=f"#{h.rank}{conf}")],
+                texts=[self._text(h.pose[:3, 3] + [0, 0, 0.4], f"#{h.rank}{conf}", 14.0)],
+            ))  # fmt: skip
+        colour = self._color(LOOK_RGB, 1.0)
+        arrows = look_arrows(result, T_odom_sensor)
+        for order in sorted({a.order for a in arrows}):
+            mine = [a for a in arrows if a.order == order]
+            entities.append(m.SceneEntity(
+                frame_id=self.map_frame, id=f"next_look/{order}",
+                arrows=[self._arrow(a.start, a.end, colour) for a in mine],
+                texts=[self._text(a.end + [0, 0, 0.4], a.text, 12.0, colour) for a in mine],
             ))  # fmt: skip
         deletions = [m.SceneEntityDeletion(type=m.SceneEntityDeletionType.All)]
-        self.hypotheses_channel.log(m.SceneUpdate(deletions=deletions, entities=marks))
-        if result.pose_is_answer:
-            T_odom_sensor = np.eye(4) if T_odom_sensor is None else T_odom_sensor
-            self.pose_channel.log(m.PoseInFrame(frame_id=self.map_frame,
-                                                pose=self._pose(result.pose @ T_odom_sensor)))  # fmt: skip
-            x, y, z, w = _quaternion(result.pose[:3, :3])
-            t = result.pose[:3, 3]
-            self.tf_channel.log(m.FrameTransform(
-                parent_frame_id=self.map_frame, child_frame_id=self.odom_frame,
-                translation=m.Vector3(x=float(t[0]), y=float(t[1]), z=float(t[2])),
-                rotation=m.Quaternion(x=x, y=y, z=z, w=w)))  # fmt: skip
+        return m.SceneUpdate(deletions=deletions, entities=entities)
+
+    def _status(self, result: Result) -> Any:
+        """The answer's status line, with the best suggestion of an ambiguous one."""
+        m = self.m
         conf = "" if result.confidence is None else f" {result.confidence:.2f}"
+        text = f"{result.status}{conf} {result.reason}".rstrip()
+        if result.next_look:
+            look = result.next_look[0]
+            ranks = ", ".join(f"#{r}" for r in look.separates)
+            text += f"; look at {look.label} {look.global_id} (tells {ranks})"
         level = m.LogLevel.Info if result.status == "localized" else m.LogLevel.Warning
-        self.status_channel.log(m.Log(level=level, name="semloc",
-                                      message=f"{result.status}{conf} {result.reason}".rstrip()))  # fmt: skip
+        return m.Log(level=level, name="semloc", message=text)
+
+    def _point(self, v: np.ndarray) -> Any:
+        return self.m.Point3(x=float(v[0]), y=float(v[1]), z=float(v[2]))
+
+    def _text(self, xyz: np.ndarray, text: str, size: float, colour: Any = None) -> Any:
+        return self.m.TextPrimitive(pose=self._at(xyz), billboard=True, font_size=size,
+                                    scale_invariant=True, text=text,
+                                    color=colour or self._color((1, 1, 1), 1.0))  # fmt: skip
+
+    def _arrow(self, start: np.ndarray, end: np.ndarray, colour: Any) -> Any:
+        """An arrow from `start` to `end` (Foxglove's arrows point along their pose's +x)."""
+        from scipy.spatial.transform import Rotation
+
+        direction = np.asarray(end, dtype=float) - start
+        length = float(np.linalg.norm(direction))
+        T = np.eye(4)
+        T[:3, 3] = start
+        if length > 1e-9:
+            T[:3, :3] = Rotation.align_vectors([direction], [[1.0, 0.0, 0.0]])[0].as_matrix()
+        head = min(0.4, 0.3 * length)
+        return self.m.ArrowPrimitive(pose=self._pose(T), shaft_length=length - head,
+                                     shaft_diameter=0.06, head_length=head, head_diameter=0.2,
+                                     color=colour)  # fmt: skip

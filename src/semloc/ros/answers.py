@@ -14,8 +14,12 @@
 - `/semloc/map` (visualization_msgs/MarkerArray, once): the map's objects as label-coloured
   boxes with their labels;
 - `/semloc/matches` (MarkerArray, every answer): the best hypothesis's local objects placed in
-  the map, a line from each to its map partner, and an arrow from each moved object's map
-  place to where it is now.
+  the map, a line from each to its map partner, an arrow from each moved object's map
+  place to where it is now, and, when the answer is ambiguous, its "look there next"
+  suggestions (namespace `next look`, `semloc.pictures.looks`): for each rank a suggestion
+  separates, a cyan arrow from the sensor (placed by the best hypothesis) to the spot to look
+  at, labelled `look N: LABEL ID if #RANK`.  (The ROS 2 node publishes
+  this topic as `/semloc/markers`.)
 """
 
 from __future__ import annotations
@@ -28,6 +32,7 @@ import numpy as np
 
 from semloc.maps import ObjectMap
 from semloc.pictures.colors import label_colors, rgb
+from semloc.pictures.looks import LOOK_RGB, look_arrows
 from semloc.priors import Prior
 from semloc.results import Result
 from semloc.ros import messages as msgs
@@ -90,8 +95,9 @@ class AnswerTopics:
         self.sink.write(STATUS_TOPIC, msgs.STRING, stamp, msgs.new(msgs.STRING,
                         data=json.dumps(status(stamp, result, len(local), prior))))  # fmt: skip
         self.sink.write(
-            MATCHES_TOPIC, msgs.MARKERS, stamp, self.match_markers(stamp, result, local)
-        )
+            MATCHES_TOPIC, msgs.MARKERS, stamp,
+            self.match_markers(stamp, result, local, T_odom_sensor),
+        )  # fmt: skip
 
     def pose(self, stamp: int, result: Result, T_map_sensor: np.ndarray, local: ObjectMap) -> Any:
         best = result.best
@@ -120,9 +126,11 @@ class AnswerTopics:
                                         (1.0, 1.0, 1.0, 0.9), text=obj.label))  # fmt: skip
         return msgs.new(msgs.MARKERS, markers=markers)
 
-    def match_markers(self, stamp: int, result: Result, local: ObjectMap) -> Any:
+    def match_markers(self, stamp: int, result: Result, local: ObjectMap,
+                      T_odom_sensor: np.ndarray | None = None) -> Any:  # fmt: skip
         markers = [msgs.new("visualization_msgs/msg/Marker", header=msgs.header(stamp, self.frames.map),
                             action=3)]  # fmt: skip  # DELETEALL: the last answer's go
+        markers += self.look_markers(stamp, result, T_odom_sensor)
         best = result.best
         if best is None or best.pose is None:
             return msgs.new(msgs.MARKERS, markers=markers)
@@ -143,6 +151,18 @@ class AnswerTopics:
                 markers.append(self._marker(stamp, "moved", i, 0, np.eye(4), (0.04, 0.08, 0.1),
                                             (1.0, 0.2, 0.8, 1.0), points=ends))  # fmt: skip
         return msgs.new(msgs.MARKERS, markers=markers)
+
+    def look_markers(self, stamp: int, result: Result, T_odom_sensor: np.ndarray | None) -> list:
+        """The next-look arrows of an ambiguous answer, each with its label above its end."""
+        markers, color = [], (*LOOK_RGB, 1.0)
+        for i, arrow in enumerate(look_arrows(result, T_odom_sensor)):
+            markers.append(self._marker(stamp, "next look", 2 * i, 0, np.eye(4), (0.06, 0.2, 0.4),
+                                        color, points=[arrow.start, arrow.end]))  # fmt: skip
+            T_text = np.eye(4)
+            T_text[:3, 3] = arrow.end + [0.0, 0.0, 0.4]
+            markers.append(self._marker(stamp, "next look", 2 * i + 1, 9, T_text, (0, 0, 0.25),
+                                        color, text=arrow.text))  # fmt: skip
+        return markers
 
     def _marker(self, stamp: int, ns: str, i: int, kind: int, T: np.ndarray, scale: Any,
                 color: tuple, text: str = "", points: list | None = None) -> Any:  # fmt: skip
