@@ -426,7 +426,7 @@ class Localizer:
         )  # fmt: skip
         looked, looked_unseen = None, np.zeros(0, dtype=int)
         if self._look is not None:
-            expected, looked_unseen = self._unseen(track.pose, track.seen_map)
+            expected, looked_unseen = self._unseen(track.pose)
             looked = (len(looked_unseen), len(expected))
             excess = max(0.0, len(looked_unseen) - GONE_SHARE * len(expected))
             verdict = Verdict(verdict.supported, verdict.contradicting, verdict.changed,
@@ -457,11 +457,11 @@ class Localizer:
         return self._result("localized", [hypothesis], "", self._changes([hypothesis]))
 
     def _unseen(
-        self, pose: np.ndarray, detected: set[int], looks: list[tuple[int, Coverage]] | None = None
+        self, pose: np.ndarray, looks: list[tuple[int, Coverage]] | None = None
     ) -> tuple[np.ndarray, np.ndarray]:
         """The map objects `looks` (default: this update's) expect under `pose`, and those of
-        them that no object detected since that look accounts for and that were not
-        `detected` (`semloc.coverage`: a look's update holds every detection in it)."""
+        them that no object detected since that look accounts for (`semloc.coverage`: a
+        look's update holds every detection in it)."""
         if looks is None:
             assert self._look is not None
             looks = [(self.window.updates, self._look)]
@@ -484,7 +484,6 @@ class Localizer:
             )  # fmt: skip
             expected.update(seen.tolist())
             unseen.update(absent.tolist())
-        unseen -= detected
         return np.array(sorted(expected), dtype=int), np.array(sorted(unseen), dtype=int)
 
     def _observe_changes(
@@ -817,7 +816,7 @@ class Localizer:
         ids = self.global_map.ids
         missing = expected = None
         if pose is not None and self._looks:
-            seen, unseen = self._unseen(pose, set(), list(self._looks))
+            seen, unseen = self._unseen(pose, list(self._looks))
             missing, expected = len(unseen), len(seen)
         return Hypothesis(
             rank=rank,

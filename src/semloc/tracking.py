@@ -21,9 +21,10 @@ search's cost grows with the local objects; tracking costs a lookup per new obje
   object); the pose is refitted to the newest `pairs` of them, warm-started from the tracked
   pose.  Changed objects never refit the pose.  Odometry drift is slow, so the newest objects,
   seen near the robot, give the pose that is right *now* where the robot is.
-* **Contradiction.**  The evidence against an update is its contradicting objects, half its
-  changed ones and its missing ones beyond the tolerated share; for it, its supporting objects
-  (re-detections at half).  An update whose evidence against is at least `contradiction` and
+* **Contradiction.**  The evidence against an update is its contradicting and its changed
+  objects (a change is no support: a wrong place explains detections by "moves" as readily
+  as a right one) and its missing ones beyond the tolerated share; for it, its supporting
+  objects (re-detections at half).  An update whose evidence against is at least `contradiction` and
   more than twice the evidence for it, or the last `CONTRADICTION_UPDATES` updates together
   holding at least `contradiction` + 1 against and more than twice as much as for, end the
   claim at once (`ambiguous`, reason `"contradicted"`): the robot was carried elsewhere, its
@@ -125,7 +126,7 @@ class Verdict:
 
     @property
     def against(self) -> float:
-        return len(self.contradicting) + 0.5 * len(self.changed) + self.missing
+        return len(self.contradicting) + len(self.changed) + self.missing
 
     @property
     def towards(self) -> float:
@@ -213,7 +214,6 @@ class Track:
         self._verdicts: deque[Verdict] = deque(maxlen=CONTRADICTION_UPDATES)
         self.judged: dict[str, str] = {}  # local id -> its latest verdict since the claim began
         self.missing = 0.0  # missing objects beyond the tolerated share, since the claim began
-        self.seen_map: set[int] = set()  # map objects detected during the claim
         self.base = _logit(confidence, CONFIDENCE_CAP)
         self.accept(Verdict(list(pairs), []))
 
@@ -262,7 +262,6 @@ class Track:
         """Keep the verdict's supporting pairs (newest last, one per map and local object)."""
         for object_id in [*verdict.contradicting, *(l for _, l in verdict.changed)]:
             self.pairs.pop(object_id, None)  # re-detected elsewhere: no longer evidence
-        self.seen_map.update(g for g, _ in [*verdict.supported, *verdict.changed])
         for g, object_id in verdict.supported:
             for other in [l for l, h in self.pairs.items() if h == g]:
                 del self.pairs[other]
@@ -290,7 +289,6 @@ class Track:
             "verdicts": verdicts,
             "judged": dict(self.judged),
             "missing": self.missing,
-            "seen_map": [global_ids[g] for g in sorted(self.seen_map)],
         }
 
     @classmethod
@@ -312,7 +310,6 @@ class Track:
         judged = state.get("judged", {})
         track.judged = {str(l): str(v) for l, v in judged.items() if v in _VERDICTS}
         track.missing = float(state.get("missing", 0.0))
-        track.seen_map = {index_of(g) for g in state.get("seen_map", [])}
         return track
 
     def newest(self, n: int) -> list[tuple[int, str]]:

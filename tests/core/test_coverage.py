@@ -33,7 +33,7 @@ def test_a_look_without_field_of_view_shows_all_around():
 @given(
     yaw=st.floats(-np.pi, np.pi),
     xyz=st.tuples(*[st.floats(-50, 50)] * 3),
-    depth=st.floats(0.1, 4.9),
+    depth=st.floats(0.1, 3.5),  # (at 0.9 to the side: 4.7 m of the 5 m range)
     side=st.floats(-0.9, 0.9),
 )
 @settings(max_examples=60, deadline=None)

@@ -1,0 +1,330 @@
+"""Tracking outside the clean room (`semloc.tracking`, `semloc.changes.RunChanges`): every
+decision boundary pinned by a unit test built from its rule, then the Localizer's behaviour
+with moved objects, phantoms, gone objects, coverage and a look-alike kidnap."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from semloc import Coverage, Localizer, ObjectMap, Prior, SemanticObject
+from semloc.changes import RunChanges
+from semloc.decision import RIVAL_LOGIT_GAP, missing_penalty, prior_first
+from semloc.localizer import NEWEST_CONTRADICT
+from semloc.results import Hypothesis
+from semloc.tracking import (
+    CONFIDENCE_CAP,
+    CONTRADICTED,
+    EVIDENCE_LOGITS,
+    Track,
+    TrackingConfig,
+    Verdict,
+    check,
+    recent_contradiction,
+)
+
+GLOBALS = np.array([[0.0, 0, 0], [10.0, 0, 0], [20.0, 0, 0]])
+ALLOWANCE = np.array([0.5, 0.5, 0.5])
+
+
+def at(x: float, label: str = "chair", i: str = "l") -> SemanticObject:
+    return SemanticObject(i, label, [x, 0.0, 0.0])
+
+
+# check: supported / changed / contradicting ------------------------------------------------
+@pytest.mark.parametrize(
+    ("x", "kind"),
+    [(0.5, "supported"), (0.51, "changed"), (3.0, "changed"), (3.01, "contradicting")],
+)
+def test_check_sorts_an_object_by_its_nearest_candidates_gap(x, kind):
+    verdict = check(np.eye(4), [at(x)], {"l": np.array([0])}, GLOBALS, ALLOWANCE, move_m=3.0)
+    found = {
+        "supported": [g for g, _ in verdict.supported],
+        "changed": [g for g, _ in verdict.changed],
+        "contradicting": verdict.contradicting,
+    }
+    assert {k: bool(v) for k, v in found.items()} == {k: k == kind for k in found}
+
+
+def test_an_object_without_candidates_says_nothing():
+    verdict = check(np.eye(4), [at(0.0)], {"l": np.zeros(0, int)}, GLOBALS, ALLOWANCE, 3.0)
+    assert verdict == Verdict([], [], [], 0)
+
+
+def test_a_redetection_of_a_paired_object_is_a_repeat_but_not_of_another_pairing():
+    candidates = {"l": np.array([0])}
+    same = check(np.eye(4), [at(0.1)], candidates, GLOBALS, ALLOWANCE, 3.0, paired={"l": 0})
+    other = check(np.eye(4), [at(0.1)], candidates, GLOBALS, ALLOWANCE, 3.0, paired={"l": 1})
+    assert same.repeated == 1 and other.repeated == 0
+    assert same.towards == 0.5 and other.towards == 1.0
+
+
+def test_the_evidence_against_counts_contradictions_changes_and_missing_objects():
+    verdict = Verdict([(0, "a")], ["b", "c"], [(1, "d")], 0, 1.5)
+    assert verdict.against == 2 + 1 + 1.5 and verdict.towards == 1
+
+
+# the contradiction rules ---------------------------------------------------------------------
+def against(n: float, towards: int = 0) -> Verdict:
+    supported = [(i, f"s{i}") for i in range(towards)]
+    return Verdict(supported, [], [], 0, n)
+
+
+@pytest.mark.parametrize(
+    ("n", "towards", "ends"),
+    [(2, 0, True), (1.99, 0, False), (2, 1, False), (3, 1, True), (4, 2, False), (4.01, 2, True)],
+)
+def test_one_update_ends_a_claim_at_least_and_more_than_twice_for(n, towards, ends):
+    assert recent_contradiction([against(n, towards)], least=2) is ends
+
+
+@pytest.mark.parametrize(
+    ("amounts", "ends"),
+    [((1, 1, 1), True), ((1, 1, 0.99), False), ((1, 1, 0.5), False)],
+)
+def test_three_updates_together_end_a_claim_at_least_plus_one(amounts, ends):
+    assert recent_contradiction([against(a) for a in amounts], least=2) is ends
+
+
+def test_the_three_update_rule_weighs_the_support_of_all_three():
+    verdicts = [against(1.0), against(1.0, towards=1), against(1.5)]
+    assert recent_contradiction(verdicts, least=2) is True  # 3.5 against > 2 x 1 for
+    verdicts = [against(1.0), against(1.0, towards=2), against(1.5)]
+    assert recent_contradiction(verdicts, least=2) is False  # 3.5 against, not > 2 x 2
+
+
+def track(n_pairs: int = 3, confidence: float = 0.99, **config) -> Track:
+    pairs = [(i, f"p{i}") for i in range(n_pairs)]
+    return Track(np.eye(4), pairs, confidence, 3.0, TrackingConfig(**config))
+
+
+def test_a_claim_ends_when_its_judged_objects_lose_the_supporting_share():
+    """Each object counts once, by its latest verdict: half of the judged supporting keeps
+    the claim, one flipping to contradicting ends it; below `min_judged` nothing is asked."""
+    claim = track(min_judged=4)
+    assert claim.contradicted(Verdict([(10, "a"), (11, "b")], ["x", "y"])) == 0  # 2 of 4
+    assert claim.contradicted(Verdict([], ["a"])) == 1  # 1 of 4
+    young = track(min_judged=5)
+    assert young.contradicted(Verdict([(10, "a"), (11, "b")], ["x", "y"])) == 0
+    assert young.contradicted(Verdict([], ["a"])) == 0  # only 4 judged
+
+
+def test_a_changed_or_contradicting_redetection_drops_its_pair_and_never_refits():
+    claim = track()
+    claim.accept(Verdict([(5, "x")], []))
+    assert claim.pairs["x"] == 5
+    claim.accept(Verdict([], [], [(5, "x")]))
+    assert "x" not in claim.pairs
+    claim.accept(Verdict([(6, "y")], []))
+    claim.accept(Verdict([], ["y"]))
+    assert "y" not in claim.pairs and [l for _, l in claim.newest(5)] == ["p0", "p1", "p2"]
+
+
+def test_the_claims_confidence_moves_with_its_evidence():
+    claim = track(confidence=0.9)
+    start = claim.current_confidence()
+    assert math.isclose(start, 0.9)
+    claim.contradicted(Verdict([(5, "a"), (6, "b")], []))
+    up = claim.current_confidence()
+    claim.contradicted(Verdict([], ["c"]))
+    down = claim.current_confidence()
+    assert start < up and down < up
+    expected = math.log(9) + 2 * EVIDENCE_LOGITS["supported"] + EVIDENCE_LOGITS["contradicting"]
+    assert math.isclose(down, 1 / (1 + math.exp(-expected)))
+    sure = track(confidence=0.999999)
+    assert math.isclose(sure.current_confidence(), 1 / (1 + math.exp(-CONFIDENCE_CAP)))
+
+
+def test_a_track_round_trips_through_its_state_and_reads_an_old_one():
+    ids = [f"g{i}" for i in range(20)]
+    claim = track()
+    claim.contradicted(Verdict([(5, "a")], ["b"], [(7, "c")], 1, 0.5))
+    claim.accept(Verdict([(5, "a")], ["b"], [(7, "c")], 1, 0.5))
+    state = json.loads(json.dumps(claim.state(ids)))
+    again = Track.restored(state, ids.index, TrackingConfig())
+    assert again.state(ids) == state and again.counts() == claim.counts()
+    old = {**state, "verdicts": [v[:2] for v in state["verdicts"]]}
+    for key in ("judged", "missing"):
+        old.pop(key)
+    assert Track.restored(old, ids.index, TrackingConfig()).counts()["supported"] == 0
+
+
+# the run's change report ---------------------------------------------------------------------
+def test_a_change_is_reported_once_seen_twice_and_a_sighting_in_place_cancels_it():
+    run = RunChanges()
+    ids = ["g0", "g1", "g2"]
+    run.observe_moved(1, "l1", 2.0, seen=3)
+    assert run.report(ids).moved == []
+    run.observe_moved(1, "l1", 2.1, seen=4)
+    moved = run.report(ids).moved
+    assert [(m.global_id, m.local_id, m.evidence, m.last_seen) for m in moved] == [
+        ("g1", "l1", 2, 4)
+    ]
+    run.observe_new("l5", seen=4)
+    run.observe_new("l6", seen=4, unknown_label=True)  # a label the map does not hold
+    run.observe_missing([2])
+    report = run.report(ids)
+    assert report.new == ["l6"] and report.missing == []
+    run.observe_missing([2])
+    assert run.report(ids).missing == ["g2"]
+    run.observe_matched(1, "lx")
+    run.observe_matched(2, "ly")
+    report = run.report(ids)
+    assert report.moved == [] and report.missing == [] and report.evidence["new"] == {"l6": 2}
+    state = json.loads(json.dumps(run.state(ids)))
+    assert RunChanges.restored(state, ids.index).report(ids) == report
+
+
+# decisions -----------------------------------------------------------------------------------
+def hypothesis(rank: int, evidence: float, outside: bool | None) -> Hypothesis:
+    return Hypothesis(rank, 1.0, [(f"g{rank}", "l")], np.eye(4), evidence=evidence,
+                      outside_prior=outside)  # fmt: skip
+
+
+def test_the_prior_decides_among_places_whose_evidence_is_within_the_margin():
+    outside, inside = hypothesis(1, 3.0, True), hypothesis(2, 3.0 - RIVAL_LOGIT_GAP, False)
+    assert [h.rank for h in prior_first([outside, inside])] == [1, 2]
+    assert prior_first([outside, inside])[0] is inside and outside.rank == 2
+    outside, inside = hypothesis(1, 3.0, True), hypothesis(2, 2.99 - RIVAL_LOGIT_GAP, False)
+    assert prior_first([outside, inside])[0] is outside
+    alone = [hypothesis(1, 1.0, True)]
+    assert prior_first(alone) == alone
+
+
+def test_the_missing_penalty_forgives_the_gone_share():
+    h = hypothesis(1, 0.0, None)
+    assert missing_penalty(h) == 0.0
+    h.missing, h.expected = 2, 8
+    assert missing_penalty(h) == 0.0  # 2 of 8 is the share an old map may lose
+    h.missing = 4
+    assert missing_penalty(h) == pytest.approx(2.0)
+
+
+# the Localizer outside the clean room ----------------------------------------------------------
+LABELS = ["chair", "table", "lamp", "sofa", "shelf", "plant", "bin", "desk", "tv", "bed"]
+
+
+def room(offset: float = 0.0, drop: tuple[int, ...] = (), prefix: str = "a") -> list:
+    """Ten objects of ten labels on a 6 x 4 m floor, shifted by `offset` in x."""
+    rng = np.random.default_rng(4)
+    xy = rng.uniform([0, 0], [6, 4], (10, 2))
+    return [SemanticObject(f"{prefix}{i}", LABELS[i], [xy[i, 0] + offset, xy[i, 1], 0.5],
+                           size=[0.5, 0.5, 1.0])
+            for i in range(10) if i not in drop]  # fmt: skip
+
+
+def local(objects: list, ids: str = "l", shift: float = 0.0) -> list:
+    return [o.replace(id=f"{ids}{o.id}", position=o.position - [shift, 0, 0], size=None)
+            for o in objects]  # fmt: skip
+
+
+ALL_AROUND = Coverage(np.eye(4) @ np.diag([1, 1, 1, 1.0]), 12.0)
+
+
+def claimed(global_map: ObjectMap) -> Localizer:
+    localizer = Localizer(global_map, local_up=[0, 0, 1])
+    objects = local(list(global_map)[:10])
+    result = localizer.update(objects[:5])
+    result = localizer.update(objects[5:])
+    assert result.status == "localized" and np.allclose(result.pose, np.eye(4), atol=0.05)
+    return localizer
+
+
+def test_a_moved_object_is_reported_moved_and_does_not_move_the_pose():
+    building = ObjectMap(room(), up=[0, 0, 1])
+    localizer = claimed(building)
+    before = localizer.update([]).pose
+    lamp = building[building.index_of("a2")]
+    moved = lamp.replace(id="moved-lamp", position=lamp.position + [2.0, 0, 0], size=None)
+    for _ in range(2):  # seen twice: a change, not a one-off
+        result = localizer.update([moved])
+    assert result.status == "localized"
+    assert [(m.global_id, m.local_id) for m in result.changes.moved] == [("a2", "moved-lamp")]
+    assert result.changes.moved[0].offset_m == pytest.approx(2.0, abs=0.05)
+    assert np.allclose(result.pose, before, atol=1e-6)
+    assert ("a2", "moved-lamp") not in result.best.pairs
+
+
+def test_a_phantom_never_becomes_support():
+    building = ObjectMap(room(), up=[0, 0, 1])
+    localizer = claimed(building)
+    bin_ = building[building.index_of("a6")]
+    phantom = SemanticObject("bag", "bin", bin_.position + [5.0, 3.0, 0.0])
+    result = localizer.update([phantom])
+    assert all(l != "bag" for _, l in result.best.pairs)
+    assert "bag" not in localizer._track.pairs
+    assert localizer._track.judged["bag"] == "contradicting"
+
+
+def test_coverage_is_optional_and_round_trips_in_the_state():
+    building = ObjectMap(room(), up=[0, 0, 1])
+    localizer = claimed(building)
+    assert localizer.update([]).support.missing is None  # no coverage: no negative evidence
+    result = localizer.update(local(list(building)), coverage=ALL_AROUND)  # all it saw
+    assert result.support.missing == 0 and result.support.expected >= 6
+    state = json.loads(json.dumps(localizer.state()))
+    again = Localizer.restore(building, state, list(localizer.local_map), local_up=[0, 0, 1])
+    assert again.state() == state
+    with pytest.raises(ValueError, match="range_m"):
+        localizer.update([], coverage={"pose": np.eye(4).tolist(), "range_m": -1})
+
+
+def test_gone_objects_within_the_tolerated_share_do_not_end_a_right_claim():
+    building = ObjectMap(room(), up=[0, 0, 1])
+    localizer = claimed(building)
+    today = local(room(drop=(3, 8)))  # two of ten gone: within the share an old map loses
+    for _ in range(3):
+        result = localizer.update(today, coverage=ALL_AROUND)
+        assert result.status == "localized"
+    assert result.support.missing == 2 and result.support.expected >= 8
+
+
+def lookalikes() -> ObjectMap:
+    """The room and a copy 30 m away that lacks four of its objects and has two others."""
+    copy = room(offset=30.0, drop=(1, 3, 5, 7), prefix="b")
+    extra = [SemanticObject("b10", "tv", [31.0, 3.5, 0.5], size=[0.5, 0.5, 1.0]),
+             SemanticObject("b11", "bed", [35.0, 0.5, 0.5], size=[0.5, 0.5, 1.0])]  # fmt: skip
+    return ObjectMap([*room(), *copy, *extra], up=[0, 0, 1])
+
+
+def kidnapped(coverage: Coverage | None) -> list[str]:
+    """Claim the room, then be carried to the same spot of the copy (odometry unaware): the
+    statuses of the three updates after the kidnap."""
+    building = lookalikes()
+    localizer = Localizer(building, local_up=[0, 0, 1])
+    room_objects = local([o for o in building if o.id.startswith("a")])
+    localizer.update(room_objects[:5], coverage=coverage)
+    assert localizer.update(room_objects[5:], coverage=coverage).status == "localized"
+    there = local([o for o in building if o.id.startswith("b")], ids="k", shift=30.0)
+    return [localizer.update(there[i::3], coverage=coverage).status for i in range(3)]
+
+
+def test_a_kidnap_into_a_lookalike_copy_is_caught_only_with_the_coverage():
+    """The copy's objects all fit the room where the tracked pose puts them; only the room's
+    objects that the copy lacks, in plain view and not detected, tell the two apart."""
+    assert kidnapped(ALL_AROUND)[0] != "localized"
+    assert kidnapped(None) == ["localized"] * 3  # without coverage semloc cannot know
+
+
+def test_a_search_claim_that_the_newest_objects_contradict_is_not_made():
+    building = ObjectMap(room(), up=[0, 0, 1])
+    localizer = Localizer(building, local_up=[0, 0, 1], track=False)
+    objects = local(list(building))
+    localizer.update(objects[:8])
+    wrong = [o.replace(id=f"w{o.id}", position=o.position + [0, 7.0, 0]) for o in objects[:3]]
+    result = localizer.update(wrong)
+    assert result.status == "ambiguous" and result.reason == NEWEST_CONTRADICT
+    assert CONTRADICTED != NEWEST_CONTRADICT
+
+
+def test_a_prior_picks_the_copy_inside_it_among_identical_copies():
+    twins = ObjectMap([*room(), *room(offset=30.0, prefix="b")], up=[0, 0, 1])
+    objects = local(room())
+    for centre in ([0.0, 0, 0], [30.0, 0, 0]):
+        result = Localizer(twins, local_up=[0, 0, 1], prior=Prior(centre, 5.0)).update(objects)
+        assert result.status == "localized"
+        assert result.pose[0, 3] == pytest.approx(centre[0], abs=0.1)
+    assert Localizer(twins, local_up=[0, 0, 1]).update(objects).status == "ambiguous"
