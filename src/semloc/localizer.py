@@ -815,7 +815,7 @@ class Localizer:
             ).features()  # fmt: skip
         ids = self.global_map.ids
         missing = expected = None
-        if pose is not None and self._looks:
+        if pose is not None and self._looks and refine:  # (the places that decide)
             seen, unseen = self._unseen(pose, list(self._looks))
             missing, expected = len(unseen), len(seen)
         return Hypothesis(

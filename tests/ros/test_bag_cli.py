@@ -364,3 +364,35 @@ def test_an_initialpose_topic_that_is_not_one_ends_in_one_line(walk, tmp_path, c
                          "--initialpose", topic) == 2  # fmt: skip
         _one_error_line(capsys, fragment)
         assert not (tmp_path / "b.mcap").exists()
+
+
+def test_camera_info_makes_each_update_say_what_the_camera_covered(walk, tmp_path, capsys):
+    """With --camera-info every answer weighs what the camera should have seen: the support
+    and the hypotheses say how many map objects the looks expected and how many were missing;
+    without it they say nothing (null)."""
+    capsys.readouterr()
+    assert main(["bag", "info", str(walk / "walk.mcap")]) == 0
+    line = next(x for x in capsys.readouterr().out.splitlines() if "/camera_info" in x)
+    assert "--camera-info" in line
+    run = ["--detections", "/detections", "--odom", "/odom", "--points", "/detections/points"]
+    looks = tmp_path / "looks.jsonl"
+    assert _localize(walk / "walk.mcap", walk, tmp_path / "a.mcap", *run, "--camera-info",
+                     "/camera_info", "--range", "6", "--jsonl", str(looks)) == 0  # fmt: skip
+    results = [line["result"] for line in _lines(looks)]
+    supported = [r["support"] for r in results if r["support"] is not None]
+    assert supported and all(s["expected"] is not None for s in supported)
+    assert any(s["expected"] > 0 for s in supported)
+    assert all("missing" in h for r in results for h in r["hypotheses"] if h["pose"])
+    assert results[-1]["status"] == "localized"
+    plain = [line["result"] for line in _lines(walk / "out.jsonl")] if (
+        walk / "out.jsonl").exists() else []  # fmt: skip
+    assert all(r["support"] is None or r["support"]["missing"] is None for r in plain)
+
+
+def test_a_camera_info_topic_of_another_type_ends_in_one_line(walk, tmp_path, capsys):
+    capsys.readouterr()
+    out = tmp_path / "o.mcap"
+    assert _localize(walk / "walk.mcap", walk, out, "--detections", "/detections", "--odom",
+                     "/odom", "--camera-info", "/odom") == 2  # fmt: skip
+    _one_error_line(capsys, "walk.mcap", "--camera-info needs", "CameraInfo")
+    assert not out.exists()

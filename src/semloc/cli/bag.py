@@ -115,6 +115,25 @@ def localize(
     ] = INITIALPOSE_TOPIC,
     near: NearOption = None,
     radius: RadiusOption = None,
+    camera_info: Annotated[
+        str | None,
+        typer.Option(
+            "--camera-info",
+            help="sensor_msgs/msg/CameraInfo topic of the camera that made the detections: each "
+            "message then says what the camera covered (its field of view, placed by the "
+            "bag's /tf_static), and map objects in plain view that were not detected count "
+            "against a place.",
+        ),
+    ] = None,
+    camera_range: Annotated[
+        float,
+        typer.Option(
+            "--range",
+            min=0.1,
+            max=1000.0,
+            help="How far (m) the detector finds objects reliably (with --camera-info).",
+        ),
+    ] = 5.0,
 ) -> None:
     """Localize a recorded run and write the answers as MCAP for Foxglove.
 
@@ -147,7 +166,8 @@ def localize(
     )
     start = time.perf_counter()
     with opened(bag) as reader:
-        run = Run(reader, bag, detections, odom, points, topic_option(initialpose))
+        run = Run(reader, bag, detections, odom, points, topic_option(initialpose),
+                  camera_info, camera_range)  # fmt: skip
         if odom is None:
             _warn_moving_frame(run)
         stream = StreamLocalizer(global_map, cfg, use_points=points is not None)

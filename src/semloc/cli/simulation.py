@@ -44,6 +44,7 @@ from semloc.ros.simbag import walk_bag
 from semloc.sim.export import write_sequence
 from semloc.sim.noise import DetectionNoise
 from semloc.sim.scenario import simulate_sequence
+from semloc.sim.sensor import Intrinsics
 from semloc.sim.world import MAX_ROOMS
 from semloc.tools.demo import DemoConfig, run_demo
 from semloc.tools.scandemo import ScanDemoConfig, run_scan_demo
@@ -198,7 +199,8 @@ def simulate(
             descriptor=None if descriptor is None else descriptor.value,
         )
         if bag:
-            files.append(write_atomic(stage / "walk.mcap", walk_bag(seq)))
+            camera = Intrinsics.scannet(*parse_resolution(resolution))
+            files.append(write_atomic(stage / "walk.mcap", walk_bag(seq, camera)))
     table = Table(
         title=f"simulated world seed {seed} -> {for_rich(out, None)}", title_justify="left"
     )

@@ -24,12 +24,13 @@ import numpy as np
 
 from semloc.maps import MapError
 from semloc.ros import messages as msgs
+from semloc.ros.camera import Camera, CameraCoverage, CameraError, StaticFrames
 from semloc.ros.frames import Trajectory, matrix_of
 from semloc.ros.initialpose import TOPIC as INITIALPOSE_TOPIC
 from semloc.ros.stream import BoxDetection, DetectionFrame
 
 USES = {msgs.DETECTIONS: "--detections", msgs.ODOMETRY: "--odom", msgs.POINTS: "--points",
-        msgs.POSE: "--initialpose"}  # fmt: skip
+        msgs.POSE: "--initialpose", msgs.CAMERA_INFO: "--camera-info"}  # fmt: skip
 """The message types semloc reads, and the option of `semloc bag localize` that takes them."""
 
 MAX_GAP_S = 0.5
@@ -104,9 +105,13 @@ class Run:
     """A recorded run read for localization (see the module docstring)."""
 
     def __init__(self, reader: Any, path: Path, detections: str, odom: str | None,
-                 points: str | None, initialpose: str | None = None) -> None:  # fmt: skip
+                 points: str | None, initialpose: str | None = None,
+                 camera_info: str | None = None, range_m: float = 5.0) -> None:  # fmt: skip
         """`initialpose`: the topic of pose estimates (None: none read); the default topic
-        (`semloc.ros.initialpose.TOPIC`) may be absent from the bag, another must be there."""
+        (`semloc.ros.initialpose.TOPIC`) may be absent from the bag, another must be there.
+        `camera_info`: a CameraInfo topic whose camera made the detections: each update then
+        says what it covered (`semloc.ros.camera`, placed by `/tf_static` when the bag has
+        it), out to `range_m`."""
         self.reader, self.path = reader, Path(path)
         self.detections = self._connections(detections, msgs.DETECTIONS, "--detections")
         self.odom = None if odom is None else self._connections(odom, msgs.ODOMETRY, "--odom")
@@ -117,6 +122,12 @@ class Run:
             or any(c.topic == initialpose and c.msgcount for c in reader.connections)
         ):
             self.initialpose = self._connections(initialpose, msgs.POSE, "--initialpose")
+        self.camera_info = (
+            None
+            if camera_info is None
+            else self._connections(camera_info, msgs.CAMERA_INFO, "--camera-info")
+        )
+        self.range_m = range_m
         self.skipped: dict[str, int] = {}
         self.warnings: dict[str, int] = {}
         """Pose estimates left out, by kind (`semloc.ros.initialpose`): said as warnings."""
@@ -171,6 +182,21 @@ class Run:
             raise BagError(f"{self.path}: odometry changes frames ({shown}); one pair expected")
         frame, child = frames.pop()
         return Odometry(frame, child, Trajectory(stamps, poses, int(MAX_GAP_S * 1e9)))
+
+    def camera(self) -> CameraCoverage | None:
+        """What the camera of `--camera-info` covers (None without the topic): its first
+        CameraInfo, placed by the bag's static transforms (`/tf_static`, when present)."""
+        if self.camera_info is None:
+            return None
+        try:
+            _, _, info = next(self.messages(self.camera_info))
+            camera = Camera.of(info)
+        except CameraError as exc:
+            raise BagError(f"{self.path}: --camera-info: {exc}") from None
+        static = [c for c in self.reader.connections
+                  if c.topic == "/tf_static" and c.msgtype == msgs.TF and c.msgcount]  # fmt: skip
+        frames = StaticFrames(m for _, _, m in self.messages(static)) if static else StaticFrames()
+        return CameraCoverage(camera, frames, self.range_m)
 
     def first_frame(self) -> str | None:
         """The frame of the first detection message (None for a run without one)."""

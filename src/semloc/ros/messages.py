@@ -37,6 +37,7 @@ ODOMETRY = "nav_msgs/msg/Odometry"
 POINTS = "sensor_msgs/msg/PointCloud2"
 POSE = "geometry_msgs/msg/PoseWithCovarianceStamped"
 TF = "tf2_msgs/msg/TFMessage"
+CAMERA_INFO = "sensor_msgs/msg/CameraInfo"
 STRING = "std_msgs/msg/String"
 MARKERS = "visualization_msgs/msg/MarkerArray"
 

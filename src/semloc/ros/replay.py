@@ -7,6 +7,9 @@ and counted), one already in the odometry frame is used as it is, any other fram
 `BagError`.  Without odometry every message must be in one frame, which is then the local
 (odometry) frame.
 
+With a camera-info topic, each update says what the camera covered (`semloc.ros.camera`):
+negative evidence for the Localizer.
+
 Pose estimates (the run's `--initialpose` topic) replay as the live node takes them: each sets
 the prior on the odometry frame's origin (`semloc.ros.initialpose.estimate_prior`, with the
 odometry at its stamp) from the first detection message recorded at or after it; one it cannot
@@ -26,6 +29,7 @@ from semloc.io.answers import answer_document
 from semloc.priors import Prior
 from semloc.results import Result
 from semloc.ros.bag import MAX_GAP_S, BagError, Odometry, Run
+from semloc.ros.camera import CameraError
 from semloc.ros.initialpose import UnusableEstimate, estimate_prior
 from semloc.ros.stream import DetectionFrame, StreamLocalizer
 
@@ -50,6 +54,7 @@ def replay(run: Run, stream: StreamLocalizer, map_frame: str = "map") -> Iterato
     """The answers of `run` (see the module docstring); `run.skipped` counts what was left out."""
     odometry = run.odometry()
     trajectory = None if odometry is None else odometry.trajectory
+    camera = run.camera()
     estimates = run.estimates()
     applied = 0  # estimates applied so far
     fixed: str | None = None
@@ -78,7 +83,13 @@ def replay(run: Run, stream: StreamLocalizer, map_frame: str = "map") -> Iterato
             stamps.append(frame.stamp)
             continue
         placed += 1
-        result = stream.step(frame, pose)
+        coverage = None
+        if camera is not None:
+            try:
+                coverage = camera.at(pose, frame.frame)
+            except CameraError as exc:
+                raise BagError(f"{run.path}: --camera-info: {exc}") from None
+        result = stream.step(frame, pose, coverage)
         if result is not None:
             odom_frame = frame.frame if odometry is None else odometry.frame
             yield Answer(frame.stamp, frame.frame, odom_frame, pose, result,

@@ -8,7 +8,9 @@ One message per keyframe on each topic, 10 per second from stamp 1 s:
 - `/odom` (nav_msgs/Odometry, `odom` -> `camera`): the camera pose the simulated odometry
   estimated (with its drift), the frame the local map is fused in;
 - `/detections/points` (sensor_msgs/PointCloud2, frame `camera`): the detections' points with
-  the field `detection` (index in the array of the same stamp).
+  the field `detection` (index in the array of the same stamp);
+- `/camera_info` (sensor_msgs/CameraInfo, frame `camera`, the optical frame), when the
+  camera's intrinsics are given: its image size and focal lengths.
 """
 
 from __future__ import annotations
@@ -20,16 +22,18 @@ from semloc.ros import messages as msgs
 from semloc.ros.mcap_out import McapSink
 from semloc.sim.noise import Detection
 from semloc.sim.scenario import SimulatedSequence
+from semloc.sim.sensor import Intrinsics
 
 DETECTIONS_TOPIC = "/detections"
 ODOM_TOPIC = "/odom"
 POINTS_TOPIC = "/detections/points"
+CAMERA_INFO_TOPIC = "/camera_info"
 START_NS = 10**9
 PERIOD_NS = 10**8  # 10 Hz
 UP = np.array([0.0, 0.0, 1.0])
 
 
-def walk_bag(seq: SimulatedSequence) -> bytes:
+def walk_bag(seq: SimulatedSequence, intrinsics: Intrinsics | None = None) -> bytes:
     """The MCAP file of `seq`'s walk (see the module docstring)."""
     if seq.recording is None:
         raise ValueError("this sequence has no recording to write as a bag")
@@ -47,7 +51,15 @@ def walk_bag(seq: SimulatedSequence) -> bytes:
         index = np.concatenate([np.full(len(p), j) for j, p in enumerate(points)] or [[]])
         xyz = np.concatenate(points) if points else np.zeros((0, 3))
         sink.write(POINTS_TOPIC, msgs.POINTS, stamp, msgs.cloud(stamp, "camera", xyz, index))
+        if intrinsics is not None:
+            sink.write(CAMERA_INFO_TOPIC, msgs.CAMERA_INFO, stamp, _camera_info(stamp, intrinsics))
     return sink.getvalue()
+
+
+def _camera_info(stamp: int, K: Intrinsics) -> object:
+    k = [K.fx, 0.0, K.cx, 0.0, K.fy, K.cy, 0.0, 0.0, 1.0]
+    return msgs.new(msgs.CAMERA_INFO, header=msgs.header(stamp, "camera"), width=K.width,
+                    height=K.height, k=np.array(k), distortion_model="plumb_bob")  # fmt: skip
 
 
 def _detection(stamp: int, det: Detection, T_odom_camera: np.ndarray) -> object:

@@ -21,6 +21,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from semloc.coverage import Coverage
 from semloc.frontend.fusion import FusionConfig, ObjectFusion, Segment
 from semloc.localizer import Localizer, LocalizerConfig
 from semloc.maps import MapError, ObjectMap, SemanticObject
@@ -116,18 +117,24 @@ class StreamLocalizer:
     def global_map(self) -> ObjectMap:
         return self.localizer.global_map
 
-    def step(self, frame: DetectionFrame, T_odom_frame: np.ndarray) -> Result | None:
+    def step(
+        self, frame: DetectionFrame, T_odom_frame: np.ndarray, coverage: Coverage | None = None
+    ) -> Result | None:
         """Fuse one message's detections (in `frame.frame`, whose pose in the odometry frame is
-        `T_odom_frame`); the Localizer's answer if local objects changed, else None."""
+        `T_odom_frame`); the Localizer's answer if local objects changed, else None.
+        `coverage`: what the sensor covered at this message (the local objects its detections
+        fused into are that look's detections)."""
         segments = [Segment(d.label, d.samples(), d.score) for d in frame.detections]
         update = self.fusion.integrate(segments, T_odom_frame, frame="camera")
-        if not update.changed:
+        if not update.changed and coverage is None:  # (a look that found nothing still tells)
             return None
         objects = self.fusion.objects(update.changed)
         if not self.use_points:
             objects = [boxed(o) for o in objects]
         self.updates += 1
-        return self.localizer.update(objects, position=T_odom_frame)
+        if coverage is None:  # (a remote Localizer may take no coverage)
+            return self.localizer.update(objects, position=T_odom_frame)
+        return self.localizer.update(objects, position=T_odom_frame, coverage=coverage)
 
     def local_map(self) -> ObjectMap:
         """The local objects as the Localizer has them (odometry frame)."""
