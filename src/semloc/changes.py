@@ -183,6 +183,13 @@ class RunChanges:
         self.missing.pop(g, None)
         self.new.pop(local_id, None)
 
+    def copy(self) -> RunChanges:
+        """The report as it stands (later observations do not change the copy)."""
+        copied = RunChanges(self.min_evidence)
+        copied.moved, copied.new = dict(self.moved), dict(self.new)
+        copied.missing, copied.matched = dict(self.missing), set(self.matched)
+        return copied
+
     def report(self, global_ids: Sequence[str]) -> Changes:
         """The changes seen at least `min_evidence` times, with their evidence."""
         least = self.min_evidence

@@ -684,9 +684,9 @@ class Localizer:
         the window's objects and their candidates are taken now (later updates replace them).
         A tracked place is judged on the objects detected since its oldest pair used, as the
         older ones drifted with the odometry."""
-        if self._run_changes and self._track is not None:
-            report = self._run_changes.report(list(self.global_map.ids))
-            return lambda: report
+        if self._run_changes and self._track is not None:  # (made when first read)
+            run, ids = self._run_changes.copy(), self.global_map.ids
+            return lambda: run.report(list(ids))
         if not hypotheses or hypotheses[0].pose is None:
             return None
         local = self.window.objects
