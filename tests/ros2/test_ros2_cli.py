@@ -42,7 +42,7 @@ def test_node_play_and_echo_as_commands(walk):  # noqa: F811
     finally:
         echo.kill()
         node.send_signal(signal.SIGINT)
-        out, err = node.communicate(timeout=30)
+        out, err = node.communicate(timeout=120)
     assert node.returncode == 130, err
     assert err.strip().splitlines()[-1] == "semloc: interrupted" and "Traceback" not in err
     assert any(s in out for s in ("localized", "ambiguous"))
