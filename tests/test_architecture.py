@@ -13,6 +13,7 @@ no extra.
 from __future__ import annotations
 
 import ast
+import re
 import shutil
 import subprocess
 import sys
@@ -273,3 +274,12 @@ def test_import_semloc_loads_no_extra():
         [sys.executable, "-c", code % (EXTRAS,)], capture_output=True, text=True, check=True
     ).stdout.strip()
     assert out == "", f"import semloc loaded {out}"
+
+
+def test_the_contributors_map_names_every_module_and_package():
+    """CONTRIBUTING.md's map of the code matches the tree: every top-level module (`x.py`)
+    and every package (`x/`) of `src/semloc` is in it."""
+    guide = (PACKAGE.parents[1] / "CONTRIBUTING.md").read_text()
+    names = [f"{path.name}" for path in PACKAGE.glob("*.py")]
+    names += [f"{path.parent.name}/" for path in PACKAGE.glob("*/__init__.py")]
+    assert [name for name in names if not re.search(rf"(?<![\w/]){re.escape(name)}", guide)] == []
