@@ -24,6 +24,7 @@ def sessions(tmp_path):
     return tmp_path
 
 
+@pytest.mark.slow
 def test_align_writes_b_in_a_the_merged_map_the_edge_and_the_result(sessions, capsys):
     out = sessions
     code = main(["align", str(out / "a.json"), str(out / "b.json"), "-o", str(out / "b_in_a.json"),

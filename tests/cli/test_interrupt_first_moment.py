@@ -158,6 +158,7 @@ def test_ctrl_c_while_the_demo_starts(tmp_path, at, module):
     assert not (tmp_path / "d").exists()
 
 
+@pytest.mark.slow
 def test_other_programs_keep_their_ctrl_c(tmp_path):
     """Only `python -m semloc` holds the signals while it imports: a program that imports
     semloc (run as a file or with -m) keeps Python's KeyboardInterrupt."""

@@ -30,6 +30,8 @@ from semloc.eval.recall import read_rows
 from semloc.io import load_map, save_map
 from semloc.maps import ObjectMap, SemanticObject
 
+pytestmark = pytest.mark.slow  # real processes, random moments, Dask clusters: minutes
+
 CHILD = (
     "import sys, semloc_entry; semloc_entry.hold_signals(); import semloc.cli; "
     "print('ready', flush=True); "

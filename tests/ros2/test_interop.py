@@ -39,6 +39,8 @@ from cyclonedds.sub import DataReader, InvalidSample  # noqa: E402
 from cyclonedds.topic import Topic  # noqa: E402
 from cyclonedds.util import duration  # noqa: E402
 
+pytestmark = pytest.mark.slow  # a node process and the cyclonedds tool on the wire: 5-15 s each
+
 CLI = Path(sys.executable).parent / "cyclonedds"
 CLI_ENV = {"COLUMNS": "4000", "PYTHONUNBUFFERED": "1"}  # rich: no truncated names, no wrapping
 

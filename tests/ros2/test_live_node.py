@@ -23,6 +23,8 @@ from semloc.ros2.node import LiveNode, NodeSettings, Wire
 from semloc.ros2.play import play
 from semloc.ros2.wire import dds_typename, idl_type, to_wire, topic_name
 
+pytestmark = pytest.mark.slow  # a live node on the wire: 30-60 s waits
+
 pytest.importorskip("cyclonedds", reason="the ros2 extra (cyclonedds) is not installed")
 pytest.importorskip("rosbags", reason="the ros extra is not installed")
 

@@ -23,7 +23,10 @@ from semloc.maps import ObjectMap, SemanticObject
 SEMLOC = [sys.executable, "-m", "semloc"]
 HANG_SECONDS = 300
 """A server that has not answered its health check by then is hung (slow machines included)."""
-pytestmark = pytest.mark.usefixtures("compiled")  # the servers load compiled code, not compile
+pytestmark = [
+    pytest.mark.usefixtures("compiled"),  # the servers load compiled code, not compile
+    pytest.mark.slow,  # a server process per test, started, killed, restarted: 5-30 s each
+]
 
 
 def start(data: Path, *options: str) -> tuple[subprocess.Popen, str]:
