@@ -132,8 +132,11 @@ def test_a_played_bag_gets_the_answers_of_bag_localize(walk, bag, points, jsonl,
         else:
             np.testing.assert_allclose(got.result.pose, line["result"]["pose"], atol=1e-6)
         assert (None if got.prior is None else got.prior.to_dict()) == line["result"]["prior"]
-    time.sleep(0.2)
-    heard = [json.loads(s.data) for s in statuses.take(N=1000)]
+    heard: list[dict] = []
+    deadline = time.monotonic() + 60  # a hang guard: ends when every answer was heard
+    while len(heard) < len(answers) and time.monotonic() < deadline:
+        heard += [json.loads(s.data) for s in statuses.take(N=1000)]
+        time.sleep(0.05)
     assert [h["status"] for h in heard] == [a.result.status for a in answers]
     assert [h["prior"] for h in heard] == [line["result"]["prior"] for line in expected]
     if bag == "estimate.mcap":  # no prior before the estimate, its prior after it
