@@ -16,6 +16,8 @@ from proxy import DroppingProxy
 
 import semloc
 import semloc.client as client_module
+import semloc.serve.service as service_module
+import semloc.serve.store as store_module
 from semloc.client import Client, ServerError
 from semloc.io import map_from_dict, map_to_dict
 from semloc.maps import ObjectMap
@@ -146,12 +148,17 @@ def test_two_objects_per_update_and_redetections(serve, building):
             map_to_dict(ObjectMap(batch)))))  # fmt: skip
 
 
-def test_sessions_expire_when_idle(serve, building):
+def test_sessions_expire_when_idle(serve, building, monkeypatch):
+    """On the service's own clock (a stand-in here: no wall-clock window to fit in)."""
+    now = [time.time()]
+    clock = SimpleNamespace(time=lambda: now[0], monotonic=time.monotonic, sleep=time.sleep)
+    for module in (service_module, store_module):
+        monkeypatch.setattr(module, "time", clock)
     client = Client(serve(session_idle_s=0.3).url)
     client.put_map("office", building)
     session = client.session("office")
     session.update([])
-    time.sleep(0.5)
+    now[0] += 0.5
     with pytest.raises(ServerError) as error:
         session.update([])
     assert error.value.status == 404
