@@ -106,7 +106,7 @@ def pythons_own_answer(code: int, err: str) -> bool:
         return False
     if not err.strip():
         return code == -signal.SIGINT
-    if not err.rstrip().endswith("KeyboardInterrupt"):
+    if not err.rstrip().splitlines()[-1].startswith("KeyboardInterrupt"):
         return False
     return not any(_past_the_hold(Path(path), int(line), function)
                    for path, line, function in FRAME.findall(err))  # fmt: skip
@@ -114,7 +114,7 @@ def pythons_own_answer(code: int, err: str) -> bool:
 
 def _past_the_hold(path: Path, line: int, function: str) -> bool:
     """Whether a traceback's frame ran after semloc held the signals."""
-    if function == "main":
+    if path.name == "semloc_entry.py" and function == "main":
         return True
     return path.is_relative_to(PACKAGE) and (path != PACKAGE / "__init__.py" or line > HOLD_LINE)
 
@@ -133,9 +133,11 @@ def test_pythons_own_answer_is_only_a_signal_before_semloc_held_them():
     assert pythons_own_answer(-signal.SIGINT, traceback.format(top))
     assert not pythons_own_answer(-signal.SIGINT, traceback.format(in_main))
     assert not pythons_own_answer(-signal.SIGINT, traceback.format(below))
-    assert pythons_own_answer(
-        1, "Fatal Python error: init_import_site: ...\n" + traceback.format("")
-    )
+    site = '  File "<frozen site>", line 599, in main\n'  # site's `main`, not semloc_entry's
+    fatal = "Fatal Python error: init_import_site: Failed to import the site module\n"
+    assert pythons_own_answer(1, fatal + traceback.format(site))
+    loader = "python: failed to set __main__.__loader__\n" + traceback.format("") + ": "
+    assert pythons_own_answer(1, loader)  # "KeyboardInterrupt: ", the script's own import
     assert not pythons_own_answer(130, MESSAGE) and not pythons_own_answer(1, "")
 
 
