@@ -148,6 +148,7 @@ def _answers(result: Result) -> list[tuple]:
     return [(h.rank, h.score, tuple(h.pairs), h.pose.round(9).tobytes()) for h in result.hypotheses]
 
 
+@pytest.mark.slow
 def test_fpfh_index_shared_through_pickle_gives_the_same_answer(easy):
     import pickle
 
