@@ -41,8 +41,21 @@ interop-deps:
 demo: install
 	$(BIN)/semloc demo
 
+# The README's test command: every test but the slow ones (pytest's default, pyproject.toml;
+# under 6 minutes on 2 cores).  Skip reasons are reported (-rs).
 test: install
 	MPLCONFIGDIR=$${TMPDIR:-/tmp}/semloc-mpl $(BIN)/python -m pytest
+
+.PHONY: test-all test-slow
+
+# Every test, the slow ones too (long end-to-end runs, fuzzing, signals, live ROS 2, the
+# service's schemathesis run): what CI runs.
+test-all: install
+	MPLCONFIGDIR=$${TMPDIR:-/tmp}/semloc-mpl $(BIN)/python -m pytest -m 'not install'
+
+# Only what test-all adds to test: the slow tests (.ci/run runs test, then this).
+test-slow: install
+	MPLCONFIGDIR=$${TMPDIR:-/tmp}/semloc-mpl $(BIN)/python -m pytest -m 'slow and not install'
 
 # A plain `pip install .` in a fresh venv from PyPI (network): the core install stays light.
 test-install: install

@@ -7,6 +7,8 @@ import os
 import subprocess
 import sys
 
+import pytest
+
 import semloc
 from semloc.cli import main
 from semloc.compiling import COMPILING, LIBRARY_NOTICE
@@ -26,6 +28,7 @@ def run_python(code: str, cache: str) -> subprocess.CompletedProcess:
                           text=True, timeout=600)  # fmt: skip
 
 
+@pytest.mark.slow
 def test_library_use_says_once_on_stderr_that_it_compiles(tmp_path):
     """With nothing compiled yet (an empty cache) the first compiled call says so, once, on
     stderr and without any logging set up; with the cache filled, nothing is said."""

@@ -36,6 +36,7 @@ def test_the_pages_have_python_blocks():
     assert len(BLOCKS) >= 7  # the README's two, and the docs'
 
 
+@pytest.mark.slow  # a subprocess per block: minutes in all
 @pytest.mark.parametrize("code", [code for _, code in BLOCKS], ids=[w for w, _ in BLOCKS])
 def test_a_python_block_runs_as_written(code, tmp_path):
     if "semloc.sim" in code and importlib.util.find_spec("open3d") is None:

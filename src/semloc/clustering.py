@@ -37,7 +37,7 @@ Formulation (equivalent to the literal pairwise test, see tests/core/test_cluste
     cross pairs, from the object positions) only when its bound v_A + v_B + |A∖B|·|B∖A| can
     beat the best score of its union so far, which leaves every union's score unchanged.
 
-Where the paper is silent (see also DESIGN.md)
+Where the paper is silent (see also docs/contracts.md, "How semloc reads the paper")
     * "Marking merged sets": every pair of sets is tried once.  A clustering round works on a
       frontier: in each iteration only pairs with at least one set created in the previous
       iteration (or at this update) are tried; iterations run until no new set appears.

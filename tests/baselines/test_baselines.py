@@ -48,8 +48,10 @@ def easy():
 
 
 @pytest.mark.parametrize(
-    "cls", [ClipperBaseline, RandomWalkBaseline, SegMatchBaseline, FpfhRansacBaseline]
-)
+    "cls",
+    [pytest.param(ClipperBaseline, marks=pytest.mark.slow),  # 15-30 s
+     RandomWalkBaseline, SegMatchBaseline, FpfhRansacBaseline],
+)  # fmt: skip
 def test_baseline_localizes_easy_case(easy, cls):
     gmap, local, T = easy
     method = cls(gmap, local_up=local.up)
@@ -98,8 +100,10 @@ def _ring_method(cls, gmap):
 
 
 @pytest.mark.parametrize(
-    "cls", [ClipperBaseline, RandomWalkBaseline, SegMatchBaseline, FpfhRansacBaseline]
-)
+    "cls",
+    [pytest.param(ClipperBaseline, marks=pytest.mark.slow),  # 15-30 s
+     RandomWalkBaseline, SegMatchBaseline, FpfhRansacBaseline],
+)  # fmt: skip
 def test_baseline_is_ambiguous_where_the_map_repeats_itself(ring, cls):
     gmap, view, _ = ring
     result = _ring_method(cls, gmap).update(view)
@@ -112,8 +116,10 @@ def test_baseline_is_ambiguous_where_the_map_repeats_itself(ring, cls):
 
 
 @pytest.mark.parametrize(
-    "cls", [ClipperBaseline, RandomWalkBaseline, SegMatchBaseline, FpfhRansacBaseline]
-)
+    "cls",
+    [pytest.param(ClipperBaseline, marks=pytest.mark.slow),  # 15-30 s
+     RandomWalkBaseline, SegMatchBaseline, FpfhRansacBaseline],
+)  # fmt: skip
 def test_baseline_fails_on_a_view_with_nothing_in_common(ring, cls):
     gmap, _, alien = ring
     result = _ring_method(cls, gmap).update(alien)
@@ -142,6 +148,7 @@ def _answers(result: Result) -> list[tuple]:
     return [(h.rank, h.score, tuple(h.pairs), h.pose.round(9).tobytes()) for h in result.hypotheses]
 
 
+@pytest.mark.slow
 def test_fpfh_index_shared_through_pickle_gives_the_same_answer(easy):
     import pickle
 

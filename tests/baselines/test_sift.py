@@ -74,6 +74,7 @@ def tiny_sequence():
     return config, simulate(config, 0)
 
 
+@pytest.mark.slow
 def test_sift_localizes_a_clean_walk_by_day_and_fails_at_night(tiny_sequence):
     """Measured on this walk (seed 3, tiny world, 2 starts x 3 attempts): all 6 day attempts
     right at rank 1 and `localized`; at night no registration reaches 10 inliers."""

@@ -124,6 +124,7 @@ def test_every_numeric_option_has_a_range():
     assert not stale, stale
 
 
+@pytest.mark.slow
 @settings(max_examples=60, deadline=None, suppress_health_check=CAPTURE)
 @given(option=st.sampled_from(RANGED), data=st.data())
 def test_numeric_option_out_of_range_is_one_line(option, data, capsys):

@@ -24,6 +24,7 @@ def sessions(tmp_path):
     return tmp_path
 
 
+@pytest.mark.slow
 def test_align_writes_b_in_a_the_merged_map_the_edge_and_the_result(sessions, capsys):
     out = sessions
     code = main(["align", str(out / "a.json"), str(out / "b.json"), "-o", str(out / "b_in_a.json"),
@@ -114,6 +115,7 @@ def test_an_output_over_an_input_or_another_outputs_file_is_refused(
     assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before  # nothing written
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not os.path.exists("/dev/full"), reason="no /dev/full")
 def test_one_output_that_cannot_be_written_leaves_no_other(sessions, capsys):
     out = sessions

@@ -109,6 +109,7 @@ def test_valid_input_that_cannot_localize_exits_0(tmp_path, maps, capsys):
     assert json.loads(capsys.readouterr().out)["status"] == "failed"
 
 
+@pytest.mark.slow
 def test_console_script_has_no_traceback(tmp_path):
     bad = tmp_path / "x.json"
     bad.write_text("{")

@@ -46,7 +46,9 @@ def test_json_has_reason_confidence_and_marks_the_pose(maps, capsys):
     argv = ["localize", str(folder / "global.json"), str(folder / "local.json"), "--format", "json"]
     assert main(argv) == 0
     out = json.loads(capsys.readouterr().out)
-    assert {"status", "pose", "hypotheses", "steps", "timing_ms"} <= set(out)  # DESIGN.md's keys
+    assert {"status", "pose", "hypotheses", "steps", "timing_ms"} <= set(
+        out
+    )  # docs/contracts.md's keys
     assert out["pose_is_answer"] is (out["status"] == "localized")
     assert out["confidence"] == out["hypotheses"][0]["confidence"]
     assert isinstance(out["reason"], str) and out["warm_up_ms"] > 0
@@ -121,7 +123,7 @@ def test_a_compilation_of_semlocs_code_is_announced_once_and_a_load_not_at_all(m
     warm_up()  # whatever the cache held, everything is loaded now
     again = []
     warm = warm_up(again.append)
-    assert again == [] and not warm.compiled and warm.seconds < 30
+    assert again == [] and not warm.compiled  # loaded, not compiled: no notice
 
 
 def test_localize_text_separates_warm_up_from_updates(maps, capsys):

@@ -10,6 +10,7 @@ Bounded: a few moments per command.  `benchmarks/interrupts.py` repeats them man
 from __future__ import annotations
 
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -18,6 +19,7 @@ from pathlib import Path
 
 import pytest
 
+import semloc
 from semloc.io.interrupts import MESSAGE
 
 # What pip writes as the `semloc` script (console_scripts entry `semloc_entry:main`).
@@ -75,7 +77,7 @@ def _env(tmp_path: Path) -> dict[str, str]:
 
 
 def assert_group_ends(group: int) -> None:
-    deadline = time.monotonic() + 15
+    deadline = time.monotonic() + 60  # a hang guard: ends as soon as the group is gone
     while time.monotonic() < deadline:
         try:
             os.killpg(group, 0)
@@ -86,19 +88,79 @@ def assert_group_ends(group: int) -> None:
     raise AssertionError("processes of the interrupted command are still running")
 
 
+PACKAGE = Path(semloc.__file__).parent
+INIT_LINES = (PACKAGE / "__init__.py").read_text().splitlines()
+HOLD_LINE = 1 + next(i for i, line in enumerate(INIT_LINES) if "hold_signals_for_module()" in line)
+"""The line of `semloc/__init__` from which `python -m semloc` holds the signals."""
+FRAME = re.compile(r'File "([^"]+)", line (\d+), in (\S+)')
+
+
+def pythons_own_answer(code: int, err: str) -> bool:
+    """Whether the run ended as Python ends a SIGINT that came before semloc held the signals:
+    killed by SIGINT (before Python's handler, silently; after it, a KeyboardInterrupt
+    traceback) or status 1 (in the import of `site`: "Fatal Python error: init_import_site"
+    and the traceback), with no frame of the traceback past that point: not in
+    `semloc_entry.main` (whose first line holds them), not in the `semloc` package beyond the
+    top lines of its `__init__` (`python -m semloc`)."""
+    if code not in (-signal.SIGINT, 1):
+        return False
+    if not err.strip():
+        return code == -signal.SIGINT
+    if not err.rstrip().splitlines()[-1].startswith("KeyboardInterrupt"):
+        return False
+    return not any(_past_the_hold(Path(path), int(line), function)
+                   for path, line, function in FRAME.findall(err))  # fmt: skip
+
+
+def _past_the_hold(path: Path, line: int, function: str) -> bool:
+    """Whether a traceback's frame ran after semloc held the signals."""
+    if path.name == "semloc_entry.py" and function == "main":
+        return True
+    return path.is_relative_to(PACKAGE) and (path != PACKAGE / "__init__.py" or line > HOLD_LINE)
+
+
+def test_pythons_own_answer_is_only_a_signal_before_semloc_held_them():
+    entry = str(PACKAGE.parent / "semloc_entry.py")
+    before = (
+        f'  File "/tmp/x/semloc", line 3, in <module>\n  File "{entry}", line 20, in <module>\n'
+    )
+    in_main = f'  File "/tmp/x/semloc", line 6, in <module>\n  File "{entry}", line 70, in main\n'
+    top = f'  File "{PACKAGE / "__init__.py"}", line {HOLD_LINE}, in <module>\n'
+    below = f'  File "{PACKAGE / "__init__.py"}", line {HOLD_LINE + 1}, in <module>\n'
+    traceback = "Traceback (most recent call last):\n{}KeyboardInterrupt"
+    assert pythons_own_answer(-signal.SIGINT, "")  # before Python's own handler
+    assert pythons_own_answer(-signal.SIGINT, traceback.format(before))
+    assert pythons_own_answer(-signal.SIGINT, traceback.format(top))
+    assert not pythons_own_answer(-signal.SIGINT, traceback.format(in_main))
+    assert not pythons_own_answer(-signal.SIGINT, traceback.format(below))
+    site = '  File "<frozen site>", line 599, in main\n'  # site's `main`, not semloc_entry's
+    fatal = "Fatal Python error: init_import_site: Failed to import the site module\n"
+    assert pythons_own_answer(1, fatal + traceback.format(site))
+    loader = "python: failed to set __main__.__loader__\n" + traceback.format("") + ": "
+    assert pythons_own_answer(1, loader)  # "KeyboardInterrupt: ", the script's own import
+    assert not pythons_own_answer(130, MESSAGE) and not pythons_own_answer(1, "")
+
+
 @pytest.mark.parametrize("at", [0.05, 0.3, 1.0])
 @pytest.mark.parametrize("module", [False, True], ids=["script", "python -m semloc"])
 def test_ctrl_c_while_the_demo_starts(tmp_path, at, module):
     """From the script's first line on (the interpreter's own start-up takes a few tens of
     milliseconds, Python's handler there), through the import of the command (most of the
     first second) and its start: the command's answer.  `python -m semloc` imports the package
-    first: it holds the signals from there on."""
+    first: it holds the signals from there on.
+
+    The signal is sent at a fixed moment, so on a busy machine it can land in the interpreter's
+    start-up, before semloc's first line ran: that window is Python's, and Python's own answer
+    (`pythons_own_answer`: killed by SIGINT, a KeyboardInterrupt traceback that never reached
+    semloc's code) is accepted there; from semloc's first line on, only semloc's."""
     argv = ["demo", "--keyframes", "6", "--out", "d"]
     code, lines = run_and_interrupt(tmp_path, argv, at, module=module)
-    assert (code, lines) == (130, [MESSAGE])
+    if not pythons_own_answer(code, "\n".join(lines)):
+        assert (code, lines) == (130, [MESSAGE])
     assert not (tmp_path / "d").exists()
 
 
+@pytest.mark.slow
 def test_other_programs_keep_their_ctrl_c(tmp_path):
     """Only `python -m semloc` holds the signals while it imports: a program that imports
     semloc (run as a file or with -m) keeps Python's KeyboardInterrupt."""
@@ -115,6 +177,8 @@ def test_other_programs_keep_their_ctrl_c(tmp_path):
 @pytest.mark.parametrize("at", [0.05, 0.3, 1.0, 2.0, 3.0])  # ~1 s: the workers start
 def test_ctrl_c_while_dask_starts_its_workers(tmp_path, at):
     code, lines = run_and_interrupt(tmp_path, BENCH, at, TINY)
+    if pythons_own_answer(code, "\n".join(lines)):  # before the script's first line
+        return
     assert not any("Traceback" in line or "Nanny" in line for line in lines), lines
     if code == 0:  # finished first: the whole output
         assert (tmp_path / "out" / "report.md").exists()

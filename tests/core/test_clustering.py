@@ -319,6 +319,7 @@ def _replay_against_literal(g, labels, chosen, local, config):
     return fast, got
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("sweep", [False, True])
 def test_large_sparse_map_equals_literal_rules(monkeypatch, sweep):
     """A building-like map (many same-label objects far apart, compatibility sparse): the
@@ -402,6 +403,7 @@ def test_a_maps_sweep_order_serves_the_clustering(monkeypatch):
     assert max(len(p) for p in pair_sets(given_order)) >= 3
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("sweep", [False, True])
 def test_kernels_out_of_room_are_called_again_with_more(monkeypatch, sweep):
     """Every merge pass and compatibility search starts with room for one output: each runs
@@ -554,6 +556,7 @@ def test_sweep_windows_start_where_a_binary_search_would(
             assert window[i, lb] == lo + np.searchsorted(sorted_x[lo:hi], at)
 
 
+@pytest.mark.slow
 def test_top_pairs_are_the_top_sets_as_arrays():
     """`top_pairs` gives the sets of `top` (same order, pairs ascending by global index, same
     scores) as arrays, for both orders."""

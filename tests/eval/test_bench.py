@@ -86,6 +86,7 @@ def test_missing_column_is_reported(tmp_path):
         read_rows(tmp_path / "bad.csv")
 
 
+@pytest.mark.slow
 def test_tiny_run_is_reproducible(tmp_path):
     """The Dask run equals a serial recomputation (same seed) except for the times."""
     from semloc.eval.protocol import BenchConfig, run_attempts, simulate

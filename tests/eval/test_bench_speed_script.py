@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import pytest
 from helpers import benchmark_script
 
 
@@ -22,6 +23,7 @@ def test_profile_lists_the_kernels_per_localization():
     assert calls[update] == 4.0  # one update per observed object
 
 
+@pytest.mark.slow
 def test_against_another_checkout_times_both_in_turn():
     """`--against TREE` runs each map in this checkout and in TREE (here: this one again),
     in turn, and prints per-round medians and their ratio."""

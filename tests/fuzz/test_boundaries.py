@@ -238,6 +238,7 @@ def test_huge_gravity_is_refused_in_one_line(tmp_path, capsys):
     assert not (tmp_path / "m.json").exists()
 
 
+@pytest.mark.slow
 def test_object_count_limit():
     objects = [SemanticObject(str(i), "c", [0, 0, 0]) for i in range(semloc.maps.MAX_OBJECTS + 1)]
     with pytest.raises(MapError, match="more than the limit"):

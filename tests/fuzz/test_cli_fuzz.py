@@ -17,7 +17,10 @@ from cases import CONVERT_CASES, MAP_CASES, MUTATED_CASES, OPTION_CASES, Case
 
 from semloc.cli import main
 
-SECONDS_PER_CASE = 20.0
+CPU_SECONDS_PER_CASE = 20.0
+"""Processor time (not wall-clock: the machine may be busy) a case may take, in-process."""
+HANG_SECONDS = 600
+"""A subprocess still running after this is hung (its CPU time is limited to 60 s)."""
 MEMORY_LIMIT = 3 * 2**30  # address space of a subprocess run
 ALL_CASES = MAP_CASES + OPTION_CASES + CONVERT_CASES + MUTATED_CASES
 
@@ -69,14 +72,14 @@ def run_case(case: Case, folder: Path) -> tuple[list[str], list[str]]:
 def test_case_in_process(case, tmp_path, capsys):
     argv, blame = run_case(case, tmp_path)
     before = set(tmp_path.rglob("*"))
-    begin = time.perf_counter()
+    begin = time.process_time()
     code = main(argv)
-    seconds = time.perf_counter() - begin
+    seconds = time.process_time() - begin
     out, err = capsys.readouterr()
     check_outcome(code, err, blame, tmp_path, before)
     if must_be_refused(case):
         assert code == 2, (case.name, out)
-    assert seconds < SECONDS_PER_CASE, f"{case.name} took {seconds:.1f} s"
+    assert seconds < CPU_SECONDS_PER_CASE, f"{case.name} took {seconds:.1f} s of processor time"
 
 
 UNDER_LIMITS = {  # the cases that hung, ran out of memory or crashed the renderers
@@ -101,6 +104,6 @@ def test_case_in_subprocess_under_limits(case, tmp_path):
            "PYTHONPATH": os.pathsep.join(sys.path)}  # fmt: skip
     proc = subprocess.run(
         [sys.executable, "-m", "semloc.cli", *argv], capture_output=True, text=True,
-        timeout=SECONDS_PER_CASE + 10, preexec_fn=_limits, env=env,
+        timeout=HANG_SECONDS, preexec_fn=_limits, env=env,
     )  # fmt: skip
     check_outcome(proc.returncode, proc.stderr, blame, tmp_path)

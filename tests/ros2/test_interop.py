@@ -39,6 +39,8 @@ from cyclonedds.sub import DataReader, InvalidSample  # noqa: E402
 from cyclonedds.topic import Topic  # noqa: E402
 from cyclonedds.util import duration  # noqa: E402
 
+pytestmark = pytest.mark.slow  # a node process and the cyclonedds tool on the wire: 5-15 s each
+
 CLI = Path(sys.executable).parent / "cyclonedds"
 CLI_ENV = {"COLUMNS": "4000", "PYTHONUNBUFFERED": "1"}  # rich: no truncated names, no wrapping
 
@@ -180,13 +182,13 @@ def running_node(walk: Path):  # noqa: F811
                             stderr=subprocess.PIPE)  # fmt: skip
     out = lines(node.stdout)
     try:
-        first = out.get(timeout=60)
+        first = out.get(timeout=180)
         assert "semloc node on domain" in first, first
         yield domain
     finally:
         node.send_signal(signal.SIGINT)
         try:
-            _, err = node.communicate(timeout=30)
+            _, err = node.communicate(timeout=120)
         except subprocess.TimeoutExpired:
             node.kill()
             _, err = node.communicate()
@@ -262,7 +264,7 @@ def test_cyclonedds_ls_and_typeof_see_ros2_names(walk, cyclonedds_cli):  # noqa:
             return all(seen.get(topic, ("", set()))[0] == typename and kind in seen[topic][1]
                        for topic, (typename, kind) in NODE_TOPICS.items())  # fmt: skip
 
-        assert until(all_listed, 45, step=0.5), seen
+        assert until(all_listed, 120, step=0.5), seen
         idl: list[str] = []
 
         def rebuilt() -> bool:
@@ -270,7 +272,7 @@ def test_cyclonedds_ls_and_typeof_see_ros2_names(walk, cyclonedds_cli):  # noqa:
             idl.append(" ".join(out.split()))
             return all(part in idl[-1] for part in POSE_IDL)
 
-        assert until(rebuilt, 45, step=0.5), idl[-1]
+        assert until(rebuilt, 120, step=0.5), idl[-1]
         assert idl[-1].count("struct PoseWithCovarianceStamped_ ") == 1  # one type definition
 
 
@@ -317,8 +319,8 @@ def test_cyclonedds_subscribe_and_a_subscriber_from_the_msg_definitions_get_the_
                 return bool(others)
 
             assert until(lambda: poses.get_matched_publications()
-                         and tf.get_matched_publications(), 45), "no writer matched"  # fmt: skip
-            assert until(cli_subscribed, 45), "cyclonedds subscribe did not subscribe"
+                         and tf.get_matched_publications(), 120), "no writer matched"  # fmt: skip
+            assert until(cli_subscribed, 120), "cyclonedds subscribe did not subscribe"
             env = {**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)}
             played = subprocess.run([sys.executable, "-m", "semloc", "ros2", "play",
                                      str(walk / "walk.mcap"), "--domain", str(domain)],
@@ -338,18 +340,18 @@ def test_cyclonedds_subscribe_and_a_subscriber_from_the_msg_definitions_get_the_
                                 transforms[stamp_ns(f.header)] = f
                 return len(got) >= len(answered) and len(transforms) >= len(answered)
 
-            until(all_poses, 60)
+            until(all_poses, 180)
 
             def status_printed() -> bool:
                 while not printed.empty():
                     heard.append(printed.get())
                 return any('"status": "' in line for line in heard)
 
-            until(status_printed, 30)
+            until(status_printed, 120)
         finally:
             subscriber.send_signal(signal.SIGINT)
             try:
-                subscriber.communicate(timeout=20)
+                subscriber.communicate(timeout=60)
             except subprocess.TimeoutExpired:
                 subscriber.kill()
                 subscriber.communicate()

@@ -48,7 +48,7 @@ class Robot:
         if points is not None:
             self.topics[points] = msgs.POINTS
         writers = [self.wire.writer(t, k) for t, k in self.topics.items()]
-        deadline = time.monotonic() + 10
+        deadline = time.monotonic() + 120  # a hang guard
         while not all(w.get_matched_subscriptions() for w in writers):
             assert time.monotonic() < deadline, "the node was not discovered"
             time.sleep(0.01)
@@ -106,7 +106,7 @@ def running(node: LiveNode):
     return answers, stop
 
 
-def wait_for(condition, seconds: float = 30.0) -> None:
+def wait_for(condition, seconds: float = 120.0) -> None:
     deadline = time.monotonic() + seconds
     while not condition():
         assert time.monotonic() < deadline, "timed out"

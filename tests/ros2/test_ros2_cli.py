@@ -23,6 +23,7 @@ def semloc(*args: str, env: dict | None = None, **options) -> subprocess.Popen:
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, **options)  # fmt: skip
 
 
+@pytest.mark.slow
 def test_node_play_and_echo_as_commands(walk):  # noqa: F811
     domain = str(random.randrange(100, 200))
     node = semloc("ros2", "node", "--map", str(walk / "global_reconstruction.json"),
@@ -42,7 +43,7 @@ def test_node_play_and_echo_as_commands(walk):  # noqa: F811
     finally:
         echo.kill()
         node.send_signal(signal.SIGINT)
-        out, err = node.communicate(timeout=30)
+        out, err = node.communicate(timeout=120)
     assert node.returncode == 130, err
     assert err.strip().splitlines()[-1] == "semloc: interrupted" and "Traceback" not in err
     assert any(s in out for s in ("localized", "ambiguous"))
@@ -63,6 +64,7 @@ def test_node_prior_options_are_checked_in_one_line(walk):  # noqa: F811
         assert run.returncode == 2 and message in err and "Traceback" not in err, err
 
 
+@pytest.mark.slow
 def test_without_cyclonedds_uri_the_commands_stay_on_loopback(walk):  # noqa: F811
     """Started without CYCLONEDDS_URI, `ros2 play` and `ros2 echo` fall back to loopback (and
     say so): they find each other, and nothing is sent to the machine's network."""

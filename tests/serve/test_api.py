@@ -7,6 +7,7 @@ import json
 import threading
 import time
 import urllib.request
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -14,6 +15,9 @@ from conftest import T_TRUE, view
 from proxy import DroppingProxy
 
 import semloc
+import semloc.client as client_module
+import semloc.serve.service as service_module
+import semloc.serve.store as store_module
 from semloc.client import Client, ServerError
 from semloc.io import map_from_dict, map_to_dict
 from semloc.maps import ObjectMap
@@ -144,12 +148,17 @@ def test_two_objects_per_update_and_redetections(serve, building):
             map_to_dict(ObjectMap(batch)))))  # fmt: skip
 
 
-def test_sessions_expire_when_idle(serve, building):
+def test_sessions_expire_when_idle(serve, building, monkeypatch):
+    """On the service's own clock (a stand-in here: no wall-clock window to fit in)."""
+    now = [time.time()]
+    clock = SimpleNamespace(time=lambda: now[0], monotonic=time.monotonic, sleep=time.sleep)
+    for module in (service_module, store_module):
+        monkeypatch.setattr(module, "time", clock)
     client = Client(serve(session_idle_s=0.3).url)
     client.put_map("office", building)
     session = client.session("office")
     session.update([])
-    time.sleep(0.5)
+    now[0] += 0.5
     with pytest.raises(ServerError) as error:
         session.update([])
     assert error.value.status == 404
@@ -538,14 +547,16 @@ def test_if_match_and_etag(serve, building):
         assert response.headers["ETag"] == '"2"'
 
 
-def test_the_client_waits_as_429_says_and_keeps_a_base_path(serve, building):
+def test_the_client_waits_as_429_says_and_keeps_a_base_path(serve, building, monkeypatch):
     server = serve(rate=2)  # bursts of 4
     proxy = DroppingProxy(server.url, prefix="/semloc")
     client = Client(proxy.url)  # http://127.0.0.1:PORT/semloc
+    waits: list[float] = []  # the client's own waits (its module's `time`; the server's apart)
+    recording = SimpleNamespace(sleep=lambda s: waits.append(s) or time.sleep(s))
+    monkeypatch.setattr(client_module, "time", recording)
     assert client.put_map("office", building) == 1
-    started = time.monotonic()
     assert all(client.versions("office")[0]["version"] == 1 for _ in range(8))
-    assert time.monotonic() - started > 1.0  # it waited (Retry-After), then went on
+    assert waits and all(s >= 1 for s in waits)  # it waited as Retry-After said, then went on
     impatient = Client(proxy.url, retries=0)
     with pytest.raises(ServerError) as error:
         for _ in range(10):

@@ -89,6 +89,7 @@ def test_every_route_declares_its_body_answers_errors_and_security(server):
             assert needed <= set(operation["responses"]), (method, path)
 
 
+@pytest.mark.slow  # up to 300 s
 def test_schemathesis_finds_nothing(server, tmp_path):
     """Every check and every phase, bounded (examples per operation, seconds), seeded; the
     rules JSON Schema cannot state are schemathesis_hooks.py's.  Any finding fails the test

@@ -21,7 +21,12 @@ from semloc.io import map_to_dict
 from semloc.maps import ObjectMap, SemanticObject
 
 SEMLOC = [sys.executable, "-m", "semloc"]
-pytestmark = pytest.mark.usefixtures("compiled")  # the servers load compiled code, not compile
+HANG_SECONDS = 300
+"""A server that has not answered its health check by then is hung (slow machines included)."""
+pytestmark = [
+    pytest.mark.usefixtures("compiled"),  # the servers load compiled code, not compile
+    pytest.mark.slow,  # a server process per test, started, killed, restarted: 5-30 s each
+]
 
 
 def start(data: Path, *options: str) -> tuple[subprocess.Popen, str]:
@@ -36,13 +41,13 @@ def start(data: Path, *options: str) -> tuple[subprocess.Popen, str]:
     line = lines[-1]
     assert "listening on http://127.0.0.1:" in line, lines
     url = line.split("listening on ")[1].split()[0]
-    deadline = time.monotonic() + 20
+    deadline = time.monotonic() + HANG_SECONDS  # a guard against a hang, not a timing
     while True:
         try:
-            Client(url, timeout=2).health()
+            Client(url, timeout=30).health()
             return process, url
         except ServerError:
-            assert time.monotonic() < deadline, "the server did not answer in 20 s"
+            assert time.monotonic() < deadline, f"the server did not answer in {HANG_SECONDS} s"
             time.sleep(0.05)
 
 
@@ -76,7 +81,7 @@ def test_a_busy_port_is_one_line(tmp_path):
         assert "cannot serve on" in refused("--data", str(tmp_path / "b"), "--port", port)
     finally:
         process.terminate()
-        process.wait(20)
+        process.wait(120)
 
 
 def test_sigterm_stops_it_cleanly_and_the_store_survives(tmp_path):
@@ -84,7 +89,7 @@ def test_sigterm_stops_it_cleanly_and_the_store_survives(tmp_path):
     objmap = ObjectMap([SemanticObject("1", "chair", [1.0, 2.0, 0.5])])
     assert Client(url).put_map("m", objmap) == 1
     process.send_signal(signal.SIGTERM)
-    _, stderr = process.communicate(timeout=20)
+    _, stderr = process.communicate(timeout=120)
     assert "Traceback" not in stderr
     assert process.returncode == 143 and stderr.strip().splitlines() == ["semloc: interrupted"]
     process, url = start(tmp_path)
@@ -92,7 +97,7 @@ def test_sigterm_stops_it_cleanly_and_the_store_survives(tmp_path):
         assert Client(url).get_map("m").get("1").label == "chair"
     finally:
         process.terminate()
-        process.wait(20)
+        process.wait(120)
 
 
 @pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
@@ -100,7 +105,7 @@ def test_several_workers_stop_with_the_status_of_the_signal(tmp_path, signum):
     """With worker processes (uvicorn's supervisor) as with one: 128 + the signal number."""
     process, _ = start(tmp_path, "--workers", "2")
     process.send_signal(signum)
-    _, stderr = process.communicate(timeout=30)
+    _, stderr = process.communicate(timeout=120)
     assert process.returncode == 128 + signum, stderr
     assert stderr.strip().splitlines() == ["semloc: interrupted"]
 
@@ -150,9 +155,7 @@ def test_no_acknowledged_write_is_lost_when_killed(tmp_path):
         for thread in threads:
             thread.join(10)
         assert acknowledged, "nothing was acknowledged before the kill"
-    began = time.monotonic()
-    process, url = start(tmp_path)
-    restart_s = time.monotonic() - began
+    process, url = start(tmp_path)  # restarts (how fast: benchmarks/bench_serve.py)
     try:
         client = Client(url)
         names = {d["name"]: d for d in documents}
@@ -168,8 +171,7 @@ def test_no_acknowledged_write_is_lost_when_killed(tmp_path):
                 assert json.dumps(stored["objects"]) == json.dumps(names[stored["name"]]["objects"])
     finally:
         process.terminate()
-        process.wait(20)
-    assert restart_s < 30  # a start, imports included; bench_serve reports the figure
+        process.wait(120)
 
 
 def test_without_the_serve_extra_it_names_the_extra(tmp_path, monkeypatch, capsys):

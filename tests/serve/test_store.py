@@ -5,9 +5,11 @@ from __future__ import annotations
 
 import threading
 import time
+from types import SimpleNamespace
 
 import pytest
 
+import semloc.serve.store as store_module
 from semloc.serve.store import (
     Conflict,
     KeyTaken,
@@ -106,10 +108,14 @@ def test_sessions_keep_their_batches_in_order(store):
     assert store.session("s1") is None and store.batches("s1") == []
 
 
-def test_idle_sessions_expire(store):
+def test_idle_sessions_expire(store, monkeypatch):
+    """On the store's own clock (a stand-in here: no wall-clock window to fit in)."""
+    now = [1.0e9]
+    clock = SimpleNamespace(time=lambda: now[0], monotonic=time.monotonic, sleep=time.sleep)
+    monkeypatch.setattr(store_module, "time", clock)
     store.put_map("m", DOC, "upload")
     store.create_session("old", "m", 1, None)
-    time.sleep(0.3)
+    now[0] += 0.3
     store.create_session("new", "m", 1, None)
     assert store.append_batch("old", 0.0, [], 0.2) is None  # too long idle: not touched
     assert store.expire_sessions(0.2) == ["old"]

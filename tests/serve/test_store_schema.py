@@ -126,6 +126,7 @@ def test_a_store_of_a_newer_semloc_is_refused_unchanged(tmp_path):
 OPEN_ONE = "import sys; from semloc.serve.store import open_store; open_store(sys.argv[1])"
 
 
+@pytest.mark.slow
 def test_processes_opening_an_old_store_at_once_migrate_it_once(tmp_path):
     folder = tmp_path / "old"
     _build_old_sqlite(folder)
