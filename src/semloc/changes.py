@@ -161,23 +161,26 @@ class RunChanges:
         return bool(self.moved or self.new or self.missing)
 
     def observe_moved(self, g: int, local_id: str, offset: float, seen: int) -> None:
+        g, seen = int(g), int(seen)
         if g in self.matched:
             return
         _, _, count, _ = self.moved.get(g, (local_id, offset, 0, seen))
-        self.moved[g] = (local_id, offset, count + 1, seen)
+        self.moved[g] = (str(local_id), float(offset), count + 1, seen)
 
     def observe_new(self, local_id: str, seen: int, unknown_label: bool = False) -> None:
         """A detection of a new object: one the map has no candidate for (`unknown_label`,
         reported at once) or one its candidates contradict."""
         count, _ = self.new.get(local_id, (0, seen))
-        self.new[local_id] = (max(count + 1, self.min_evidence if unknown_label else 0), seen)
+        least = self.min_evidence if unknown_label else 0
+        self.new[str(local_id)] = (max(count + 1, least), int(seen))
 
     def observe_missing(self, indices: Sequence[int]) -> None:
-        for g in indices:
+        for g in map(int, indices):
             if g not in self.matched:
                 self.missing[g] = self.missing.get(g, 0) + 1
 
     def observe_matched(self, g: int, local_id: str) -> None:
+        g = int(g)
         self.matched.add(g)
         self.moved.pop(g, None)
         self.missing.pop(g, None)

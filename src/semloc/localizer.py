@@ -605,6 +605,9 @@ class Localizer:
         seen = [self._found[l][0].seen for l in ids]
         window = self.window
         counts = {} if self._track is None else self._track.counts()
+        if best.missing is None and self._looks:  # (weighed for the refined ones only)
+            seen, unseen = self._unseen(best.pose, list(self._looks))
+            best.missing, best.expected = len(unseen), len(seen)
         return Support(
             pairs=len(ids),
             seen=(min(seen), max(seen)),

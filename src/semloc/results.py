@@ -165,8 +165,8 @@ class Support:
     def to_dict(self) -> dict[str, Any]:
         return {
             "pairs": self.pairs,
-            "seen": list(self.seen),
-            "updates_ago": self.updates_ago,
+            "seen": [int(k) for k in self.seen],
+            "updates_ago": int(self.updates_ago),
             "metres": round(self.metres, 3),
             "tracked": self.tracked,
             "changed": self.changed,
