@@ -93,4 +93,5 @@ def test_a_set_cyclonedds_uri_is_honoured_and_a_bad_network_refused(walk):  # no
     assert '<NetworkInterface name="lo"/>' in LOOPBACK and "AllowMulticast>false" in LOOPBACK
     run = semloc("ros2", "echo", "/odom", "--network", "everywhere")
     _, err = run.communicate(timeout=60)
-    assert run.returncode == 2 and "--network: network must be one of loopback, default" in err
+    assert run.returncode == 2 and "Invalid value for '--network'" in err
+    assert "'everywhere' is not one of 'loopback', 'default'" in err

@@ -58,7 +58,12 @@ class DemoConfig(BaseModel):
     rooms: int = Field(2, ge=1, description="Rooms visited by the walk.")
     resolution: tuple[int, int] = Field((240, 180), description="Depth image width, height.")
     gamma: float = Field(0.8, gt=0, lt=1, description="Merge threshold of the clustering.")
-    drift: float = Field(0.0, ge=0, le=0.2, description="Odometry drift, metres per metre.")
+    drift: float = Field(
+        0.0, ge=0, le=1, description="Odometry drift, metres of position error per metre travelled."
+    )
+    drift_yaw: float = Field(
+        0.0, ge=0, le=90, description="Odometry heading drift, degrees per metre travelled."
+    )
     out: Path = Field(Path("demo_out"), description="Output folder.")
     rrd: Path | None = Field(None, description="Rerun recording of the updates to write.")
     foxglove: int | None = Field(
@@ -101,7 +106,7 @@ def simulate(config: DemoConfig, console: Console) -> SimulatedSequence:
         TextColumn("{task.completed}/{task.total}"),
         TimeElapsedColumn(),
     )
-    noise = DetectionNoise(drift_translation=config.drift, drift_yaw_deg=25.0 * config.drift)
+    noise = DetectionNoise(drift_translation=config.drift, drift_yaw_deg=config.drift_yaw)
     with Progress(*columns, console=console, transient=True) as progress:
         task = progress.add_task("simulating keyframes", total=config.keyframes)
         return simulate_sequence(

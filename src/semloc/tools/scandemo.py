@@ -48,7 +48,12 @@ class ScanDemoConfig(BaseModel):
     keyframes: int = Field(60, ge=2, le=2000, description="Number of keyframes.")
     resolution: tuple[int, int] = Field((240, 180), description="Depth image width, height.")
     gamma: float = Field(0.8, gt=0, lt=1, description="Merge threshold of the clustering.")
-    drift: float = Field(0.0, ge=0, le=0.2, description="Odometry drift, metres per metre.")
+    drift: float = Field(
+        0.0, ge=0, le=1, description="Odometry drift, metres of position error per metre travelled."
+    )
+    drift_yaw: float = Field(
+        0.0, ge=0, le=90, description="Odometry heading drift, degrees per metre travelled."
+    )
     out: Path = Field(Path("demo_out"), description="Output folder.")
 
 
@@ -83,7 +88,7 @@ def walk(config: ScanDemoConfig, scan: RealScan, console: Console) -> SimulatedS
     """The rendered, detected and fused walk, with a progress bar."""
     columns = (TextColumn("{task.description}"), BarColumn(),
                TextColumn("{task.completed}/{task.total}"), TimeElapsedColumn())  # fmt: skip
-    noise = DetectionNoise(drift_translation=config.drift, drift_yaw_deg=25.0 * config.drift)
+    noise = DetectionNoise(drift_translation=config.drift, drift_yaw_deg=config.drift_yaw)
     with Progress(*columns, console=console, transient=True) as progress:
         task = progress.add_task("rendering keyframes", total=config.keyframes)
         return simulate_walk(
