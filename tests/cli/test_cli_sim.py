@@ -226,9 +226,9 @@ def test_labels_appearing_later_keep_the_colours_handed_out():
 def test_the_demo_plots_every_keyframe_not_only_the_last_steps(tmp_path, monkeypatch):
     """scores.png draws the whole run (the demo keeps its history; `Result.steps` keeps the
     last 10), each keyframe at its own index; the summary keeps the warm-up apart."""
-    import semloc.pictures.viz as viz
     from rich.console import Console
 
+    import semloc.pictures.viz as viz
     from semloc.tools.demo import DemoConfig, run_demo
 
     drawn = {}
