@@ -36,6 +36,7 @@ from fastapi import Depends, FastAPI, Header, Path, Query, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import HTMLResponse, JSONResponse, PlainTextResponse, Response
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
+from fastapi_offline import FastAPIOffline
 from pydantic import BaseModel, ValidationError
 from starlette.concurrency import run_in_threadpool
 from starlette.exceptions import HTTPException as StarletteHTTPException
@@ -145,6 +146,10 @@ def _etag(version: int) -> dict[str, str]:
 ETAG = {"ETag": {"description": 'The version: "<version>".', "schema": {"type": "string"}}}
 
 
+DOCS_STATIC = "/docs/static"
+"""Where the interactive page's scripts, styles and icon are served (from `fastapi-offline`)."""
+
+
 def create_app(
     service: Service,
     access: Access | None = None,
@@ -163,13 +168,14 @@ def create_app(
         yield
         service.store.close()
 
-    app = FastAPI(
+    app = FastAPIOffline(  # /docs: Swagger UI served from the package, no CDN
         title="semloc",
         version=semloc.__version__,
         description="Object-level relocalization as a service: shared object maps, one-shot "
         "localization, live sessions and change reports.",
         docs_url="/docs",
         redoc_url=None,
+        static_url=DOCS_STATIC,
         lifespan=lifespan,
         separate_input_output_schemas=False,
     )
