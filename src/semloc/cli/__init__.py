@@ -27,7 +27,7 @@ from semloc.cli.app import CliError, app, with_optional_values
 # Importing a command module registers its commands; this order is the order of `--help`.
 from semloc.cli import simulation, localize, update, align, datasets  # noqa: F401, E402
 from semloc.cli import export, bag, bench, descriptors, config, warmup, serve, maps  # noqa: F401, E402
-from semloc.cli import ros2  # noqa: F401, E402
+from semloc.cli import ros2, tokens, sessions  # noqa: F401, E402
 
 # isort: on
 from semloc.cli.app import document_exit_statuses  # noqa: E402

@@ -149,6 +149,16 @@ class Client:
             body["session_id"] = session_id or answer["session_id"]
         return self.request("POST", f"/v1/maps/{_quote(map_id)}/changes", body, key=True)
 
+    # sessions, maps (administration) ----------------------------------------------------------
+    def sessions(self, map_id: str) -> list[dict[str, Any]]:
+        """The live sessions of `map_id`: `session_id` (of this token's own only, else None),
+        `mine`, `map_version`, `up`, `idle_s` and `last` (status, pose, stamp)."""
+        return self.request("GET", f"/v1/maps/{_quote(map_id)}/sessions")
+
+    def end_session(self, session_id: str) -> None:
+        """End a session: this token's own, or any session of a map it may write."""
+        self.request("DELETE", f"/v1/sessions/{_quote(session_id)}")
+
     # HTTP -------------------------------------------------------------------------------------
     def request(
         self,

@@ -25,6 +25,7 @@ import datetime
 import ipaddress
 import logging
 import math
+import re
 import sqlite3
 from collections.abc import AsyncIterator, Callable
 from contextlib import asynccontextmanager
@@ -146,6 +147,10 @@ def _etag(version: int) -> dict[str, str]:
 ETAG = {"ETag": {"description": 'The version: "<version>".', "schema": {"type": "string"}}}
 
 
+MAP_ONLY = re.compile(r"map '.*'", re.S)
+"""The detail of a 404 about a map as a whole (not one of its versions)."""
+MAP_HINT = " (or your token may not see it)"
+"""Added to such a 404: a map the token may not see is answered as one that does not exist."""
 DOCS_STATIC = "/docs/static"
 """Where the interactive page's scripts, styles and icon are served (from `fastapi-offline`)."""
 
@@ -243,7 +248,10 @@ def create_app(
     # errors ----------------------------------------------------------------------------------
     @app.exception_handler(ServiceError)
     async def _service_error(request: Request, exc: ServiceError) -> JSONResponse:
-        return _error(STATUS.get(type(exc), 422), exc.error, exc.detail)
+        detail = exc.detail
+        if isinstance(exc, NotFound) and isinstance(detail, str) and MAP_ONLY.fullmatch(detail):
+            detail += MAP_HINT  # the same words whether it is absent or hidden from this token
+        return _error(STATUS.get(type(exc), 422), exc.error, detail)
 
     @app.exception_handler(Refused)
     async def _refused(request: Request, exc: Refused) -> JSONResponse:
