@@ -9,7 +9,7 @@ import pytest
 from conftest import T_TRUE, view
 
 from semloc.cli import main
-from semloc.client import Client
+from semloc.client import Client, ServerError
 from semloc.serve.access import Access
 
 DEVICE, OTHER, LAB_ONLY = "device-token-1", "other-device-2", "lab-only-token"
@@ -65,3 +65,30 @@ def test_a_map_the_token_may_not_see_is_404_and_says_so(hub, building, capsys):
     assert "404 not found: map 'office' (or your token may not see it)" in err, err
     assert main(["maps", "versions", "nowhere", "--server", hub, "--token", DEVICE]) == 2
     assert "404 not found: map 'nowhere' (or your token may not see it)" in capsys.readouterr().err
+
+
+def test_maps_delete_needs_write_and_yes_and_numbers_go_on(hub, building, tmp_path, capsys):
+    writer = Client(hub, WRITER)
+    writer.put_map("office", building)
+    writer.put_map("office", building)
+    session = Client(hub, DEVICE).session("office")
+    args = ["maps", "delete", "office", "--server", hub]
+    assert main([*args, "--token", WRITER]) == 2  # no --yes: nothing deleted
+    assert "add --yes" in capsys.readouterr().err
+    assert main([*args, "--yes", "--token", DEVICE]) == 2  # read and localize, no write
+    assert "403" in capsys.readouterr().err
+    assert main([*args, "--yes", "--token", WRITER]) == 0
+    assert "deleted office" in capsys.readouterr().out
+    reader = Client(hub, DEVICE)
+    assert reader.maps() == []
+    with pytest.raises(ServerError) as gone:
+        reader.get_map("office")
+    assert gone.value.status == 404
+    with pytest.raises(ServerError) as ended:
+        session.update([], stamp=1.0)
+    assert ended.value.status == 404
+    assert main([*args, "--yes", "--token", WRITER]) == 2  # deleted already
+    assert "404 not found: map 'office'" in capsys.readouterr().err
+    assert writer.put_map("office", building) == 3  # a number never names two documents
+    assert [v["version"] for v in reader.versions("office")] == [3]
+    assert reader.get_map("office").ids.tolist() == building.ids.tolist()

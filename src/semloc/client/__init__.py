@@ -99,6 +99,10 @@ class Client:
         query = "" if version is None else f"?version={int(version)}"
         return map_from_dict(self.request("GET", f"/v1/maps/{_quote(map_id)}{query}"))
 
+    def delete_map(self, map_id: str) -> None:
+        """Delete a map with every version and its sessions (needs `write`)."""
+        self.request("DELETE", f"/v1/maps/{_quote(map_id)}")
+
     def versions(self, map_id: str) -> list[dict[str, Any]]:
         return self.request("GET", f"/v1/maps/{_quote(map_id)}/versions")
 

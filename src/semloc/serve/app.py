@@ -379,6 +379,16 @@ def create_app(
         headers = {"X-Semloc-Map-Version": str(number), **_etag(number)}
         return await _json(document, headers=headers)
 
+    @app.delete("/v1/maps/{map_id}", status_code=204, tags=["maps"],
+                responses=_errors(*AUTH, 403))  # fmt: skip
+    async def delete_map(
+        map_id: MapPath, who: Annotated[Caller, Depends(may("write"))]
+    ) -> Response:
+        """Delete a map: every version, its sessions and kept localizations.  Uploaded again,
+        the id goes on from the next version number (a number never names two documents)."""
+        await run_in_threadpool(service.delete_map, map_id)
+        return Response(status_code=204)
+
     @app.get("/v1/maps/{map_id}/versions", response_model=list[models.VersionInfo],
              tags=["maps"], responses=_errors(*AUTH, 403))  # fmt: skip
     async def versions(
