@@ -83,7 +83,7 @@ def warn_far_points(objmap: ObjectMap, source: object) -> None:
     first, metres = far[0]
     more = f" (and {len(far) - 1} more objects)" if len(far) > 1 else ""
     log.warning(
-        f"semloc: warning: {source}: object '{first[:60]}': its points lie {metres:.1f} m from "
+        f"warning: {source}: object '{first[:60]}': its points lie {metres:.1f} m from "
         f"its position{more}; move an object with SemanticObject.transformed (or replace "
         "position and points together)"
     )
