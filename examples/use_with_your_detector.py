@@ -6,91 +6,21 @@ segments, `ObjectFusion` fuses the segments of all frames into local objects wit
 and `Localizer.update` takes the objects that are new or changed after each frame.  The
 answer is `T_global_odom`: where your odometry frame lies in the prior map.
 
-Here the frames are made up (`your_frames`) by projecting points on the surfaces of the prior
-map's objects (`examples/global.json`) into a camera that turns around in the room, so the
+Here the frames are made up (`semloc.tools.standins.your_frames`) by projecting points on the
+surfaces of the example room's objects into a camera that turns around in the room, so the
 example runs anywhere with the core install:
 
     python examples/use_with_your_detector.py
 
-The README's block imports `K` and `your_frames` from here as stand-ins for yours.
+The README's block imports the same stand-ins (`K`, `MAP_FILE`, `your_frames`).
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterator
-from pathlib import Path
-
-import numpy as np
-
 import semloc
 from semloc.frontend import ObjectFusion, segments_from_masks
+from semloc.tools.standins import MAP_FILE, T_GLOBAL_ODOM, K, your_frames
 from semloc.transforms import pose_error
-
-MAP_FILE = Path(__file__).resolve().parent / "global.json"
-
-rng = np.random.default_rng(0)
-
-
-def box_points(centre, size, n=600):
-    """Points on the surface of a box (a stand-in for a scanned object)."""
-    points = rng.uniform(-0.5, 0.5, size=(n, 3))
-    face = rng.integers(0, 3, size=n)
-    points[np.arange(n), face] = np.sign(points[np.arange(n), face]) * 0.5
-    return points * size + centre
-
-
-# 1. The world the camera sees: dense points on the prior map's objects (their boxes).
-WORLD = [(obj.label, box_points(obj.position, obj.size)) for obj in semloc.load_map(MAP_FILE)]
-
-# 2. The camera: pinhole intrinsics, and poses turning around at (3, 2) (OpenCV axes).
-K = np.array([[120.0, 0, 80], [0, 120.0, 60], [0, 0, 1]])
-WIDTH, HEIGHT = 160, 120
-
-
-def camera_pose(yaw: float) -> np.ndarray:
-    """T_world_camera of a level camera at (3, 2, 1.3) looking along `yaw`."""
-    forward = np.array([np.cos(yaw), np.sin(yaw), 0.0])
-    right = np.cross(forward, [0, 0, 1])
-    T = np.eye(4)
-    T[:3, :3] = np.column_stack([right, np.cross(forward, right), forward])  # x right, y down
-    T[:3, 3] = [3.0, 2.0, 1.3]
-    return T
-
-
-def detect(T_world_camera: np.ndarray):
-    """What your detector gives for one frame: depth (m), instance masks and their labels.
-
-    Made up here by projecting the map's points with a z-buffer."""
-    depth = np.zeros((HEIGHT, WIDTH))
-    owner = np.full((HEIGHT, WIDTH), -1)
-    R, t = T_world_camera[:3, :3], T_world_camera[:3, 3]
-    for index, (_, points) in enumerate(WORLD):
-        p = (points - t) @ R  # camera frame
-        p = p[p[:, 2] > 0.3]
-        u = np.round(K[0, 0] * p[:, 0] / p[:, 2] + K[0, 2]).astype(int)
-        v = np.round(K[1, 1] * p[:, 1] / p[:, 2] + K[1, 2]).astype(int)
-        inside = (u >= 0) & (u < WIDTH) & (v >= 0) & (v < HEIGHT)
-        for uu, vv, z in zip(u[inside], v[inside], p[inside, 2]):
-            if depth[vv, uu] == 0 or z < depth[vv, uu]:
-                depth[vv, uu], owner[vv, uu] = z, index
-    depth[depth > 0] += rng.normal(0.0, 0.01, size=int((depth > 0).sum()))  # sensor noise
-    seen = [i for i in range(len(WORLD)) if (owner == i).sum() >= 30]
-    return depth, [owner == i for i in seen], [WORLD[i][0] for i in seen]
-
-
-# 3. Your odometry frame is not the map's: semloc finds T_global_odom.
-yaw = np.radians(35.0)
-T_GLOBAL_ODOM = np.eye(4)
-T_GLOBAL_ODOM[:3, :3] = [[np.cos(yaw), -np.sin(yaw), 0], [np.sin(yaw), np.cos(yaw), 0], [0, 0, 1]]
-T_GLOBAL_ODOM[:3, 3] = [1.5, -0.8, 0.0]
-
-
-def your_frames() -> Iterator[tuple[np.ndarray, list[np.ndarray], list[str], np.ndarray]]:
-    """Depth, masks, labels and `T_odom_camera` of each frame: what your pipeline gives."""
-    for heading in np.radians(np.arange(0, 360, 20)):
-        T_world_camera = camera_pose(heading)
-        depth, masks, labels = detect(T_world_camera)
-        yield depth, masks, labels, np.linalg.inv(T_GLOBAL_ODOM) @ T_world_camera
 
 
 def main() -> None:

@@ -2,8 +2,9 @@
 when they compile.
 
 The inner loops (numba, `cache=True`) are compiled on their first use after an install or
-upgrade (about half a minute or more on 2 cores) and loaded from the on-disk cache on the first
-use in every later process (a few hundred milliseconds).  The first compilation of one of
+upgrade (about 80 s of CPU: a minute and a half on 2 cores, longer on a busy machine) and
+loaded from the on-disk cache on the first use in every later process (a few hundred
+milliseconds).  The first compilation of one of
 semloc's loops in a process is announced once on stderr: through the `semloc` logger
 (a warning: Python prints it without any logging set up), or through the `notice` of a
 `compile_notice` block (the CLI prints it its way).
@@ -31,8 +32,8 @@ from semloc.pointsets import sample_box_surface
 from semloc.transforms import yaw_pose
 
 COMPILING = (
-    "compiling semloc's inner loops: once after installing or upgrading (a minute or more); "
-    "later runs load them in under a second"
+    "compiling semloc's inner loops: once after installing or upgrading (about a minute and a "
+    "half; longer on a busy machine); later runs load them in under a second"
 )
 LIBRARY_NOTICE = (
     f"semloc: {COMPILING}. semloc.warmup() or `semloc warmup` compiles them ahead "

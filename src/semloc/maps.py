@@ -233,7 +233,18 @@ class SemanticObject:
             set_(self, "score", score)
 
     def replace(self, **changes: Any) -> SemanticObject:
-        """A copy with some fields changed (validated again)."""
+        """A copy with some fields changed (validated again).
+
+        A new `position` without new `points` moves the points with the centre (by the same
+        offset), so that an object's points stay where its centre says it is; give `points`
+        too to set both as given.  To move or turn a whole object, `transformed` does it with
+        its box as well.
+        """
+        if "position" in changes and "points" not in changes and self.points is not None:
+            position = changes["position"]
+            if position is not None:
+                offset = _as_vector(position, 3, "position") - self.position
+                changes["points"] = self.points + offset
         return replace(self, **changes)
 
     def transformed(self, T: np.ndarray) -> SemanticObject:
@@ -244,6 +255,26 @@ class SemanticObject:
             rotation=None if self.rotation is None else R @ self.rotation,
             points=None if self.points is None else self.points @ R.T + t,
         )
+
+
+FAR_FROM_POINTS_M = 2.0
+"""An object whose centre lies farther than this from the box around its points is suspect
+(`far_from_points`): its points and its centre say different places."""
+
+
+def far_from_points(objects: Iterable[SemanticObject]) -> list[tuple[str, float]]:
+    """(id, metres) of each object whose `position` lies more than `FAR_FROM_POINTS_M` outside
+    the axis-aligned box around its points (e.g. a centre moved without its points)."""
+    found = []
+    for obj in objects:
+        if obj.points is None or not len(obj.points):
+            continue
+        low, high = obj.points.min(axis=0), obj.points.max(axis=0)
+        outside = np.maximum(0.0, np.maximum(low - obj.position, obj.position - high))
+        distance = float(np.linalg.norm(outside))
+        if distance > FAR_FROM_POINTS_M:
+            found.append((obj.id, distance))
+    return found
 
 
 class ObjectMap(Sequence[SemanticObject]):

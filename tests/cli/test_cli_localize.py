@@ -387,3 +387,20 @@ def test_an_ambiguous_answer_says_where_to_look_next_in_the_table_and_the_json(t
     assert main(args) == 0
     table = capsys.readouterr().out
     assert "look there next" in table and out["next_look"][0]["global_id"] in table
+
+
+def test_the_text_table_marks_hypotheses_outside_the_prior():
+    """`outside_prior` of the JSON is a `*` beside the rank in the text, explained below."""
+    inside = Hypothesis(1, 3.0, [("a", "1"), ("b", "2"), ("c", "3")], yaw_pose(0.2), fitness=1.0,
+                        confidence=0.4, outside_prior=False)  # fmt: skip
+    outside = Hypothesis(2, 3.0, [("a", "2"), ("b", "3"), ("c", "1")], yaw_pose(1.2),
+                         fitness=1.0, confidence=0.4, outside_prior=True)  # fmt: skip
+    out = Console(record=True, width=120)
+    print_result(Result.of("ambiguous", [inside, outside], [], {}, "two places"), out)
+    lines = out.export_text().splitlines()
+    ranks = [line.split()[0] for line in lines if line.strip()[:2] in ("1 ", "2*")]
+    assert ranks == ["1", "2*"], lines
+    assert any("* outside the position prior" in line for line in lines)
+    out = Console(record=True, width=120)
+    print_result(Result.of("ambiguous", [inside], [], {}, "one place"), out)
+    assert "outside the position prior" not in out.export_text()

@@ -221,3 +221,34 @@ def test_labels_appearing_later_keep_the_colours_handed_out():
     later = label_colors(["bench", "armchair"], first)
     assert {k: later[k] for k in first} == first
     assert len(set(later.values())) == len(later) == 4
+
+
+def test_the_demo_plots_every_keyframe_not_only_the_last_steps(tmp_path, monkeypatch):
+    """scores.png draws the whole run (the demo keeps its history; `Result.steps` keeps the
+    last 10), each keyframe at its own index; the summary keeps the warm-up apart."""
+    from rich.console import Console
+
+    import semloc.pictures.viz as viz
+    from semloc.tools.demo import DemoConfig, run_demo
+
+    drawn = {}
+    plot = viz.plot_scores
+
+    def spy(ax, steps, **options):
+        drawn["steps"], drawn["statuses"] = list(steps), options.get("statuses")
+        return plot(ax, steps, **options)
+
+    monkeypatch.setattr(viz, "plot_scores", spy)
+    console = Console(record=True, width=200)
+    config = DemoConfig(size="tiny", keyframes=16, resolution=(120, 90), out=tmp_path / "d")
+    demo = run_demo(config, console)
+    keyframes = [s.step for s in drawn["steps"]]
+    assert keyframes == [s.step for s in demo.history] == sorted(keyframes)
+    assert len(keyframes) > len(demo.result.steps) and keyframes[-1] >= 12
+    assert drawn["statuses"] == [s.status for s in demo.history]
+    assert drawn["statuses"][-1] == demo.result.status
+    last = demo.result.steps[-1].top_scores
+    assert list(drawn["steps"][-1].top_scores) == pytest.approx(list(last))
+    text = " ".join(console.export_text().split())
+    assert "s loading the compiled code" in text or "s compiling the inner loops" in text
+    assert f"({len(keyframes)} updates, " in text

@@ -84,7 +84,7 @@ CASES = [
     (["align", "g.json", "l.json", "-o", "l.json"],
      "l.json: --output would overwrite map B, an input"),
     (["train-descriptor", "--out", "w.npz", "--fixture", "w.npz"],
-     "w.npz: --out and --fixture would both write it"),
+     "w.npz: --output and --fixture would both write it"),
 ]  # fmt: skip
 
 

@@ -95,4 +95,16 @@ def test_a_set_cyclonedds_uri_is_honoured_and_a_bad_network_refused(walk):  # no
     assert '<NetworkInterface name="lo"/>' in LOOPBACK and "AllowMulticast>false" in LOOPBACK
     run = semloc("ros2", "echo", "/odom", "--network", "everywhere")
     _, err = run.communicate(timeout=60)
-    assert run.returncode == 2 and "--network: network must be one of loopback, default" in err
+    assert run.returncode == 2 and "Invalid value for '--network'" in err
+    assert "'everywhere' is not one of 'loopback', 'default'" in err
+
+
+def test_the_node_banner_lists_every_topic_it_reads(walk):  # noqa: F811
+    node = semloc("ros2", "node", "--map", str(walk / "global_reconstruction.json"),
+                  "--domain", str(random.randrange(100, 200)), "--points", "/detections/points")  # fmt: skip
+    try:
+        first = node.stdout.readline()
+    finally:
+        node.send_signal(signal.SIGINT)
+        node.communicate(timeout=30)
+    assert ": /detections + /odom + /detections/points -> " in first, first

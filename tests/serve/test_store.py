@@ -158,3 +158,21 @@ def test_request_keys_are_written_with_their_write_and_once(store):
     assert store.delete_session("s1")
     assert store.session("s1") is None and store.recall(batch) is None  # gone with it
     assert store.live_sessions(600.0) == 0
+
+
+def test_a_deleted_map_is_gone_with_its_sessions_and_its_numbers_go_on(store):
+    for n in (1, 2):
+        store.put_map("m", {**DOC, "name": f"v{n}"}, "upload")
+    store.put_map("other", DOC, "upload")
+    store.create_session("s1", "m", 2, None, owner="a")
+    store.put_localization("l1", "m", {"objects": []})
+    assert store.delete_map("m") and not store.delete_map("m") and not store.delete_map("none")
+    assert store.get_map("m") is None and store.latest_version("m") is None
+    assert store.versions("m") == [] and store.map_ids() == [("other", 1)]
+    assert store.session("s1") is None and store.localization("l1") is None
+    with pytest.raises(KeyError):
+        store.derive_map("m", lambda latest, old: DOC, "derived")  # no map to derive from
+    assert store.put_map("m", {**DOC, "name": "again"}, "upload") == 3
+    assert store.get_map("m") == (3, {**DOC, "name": "again"})
+    assert [v.version for v in store.versions("m")] == [3]
+    assert store.map_ids() == [("m", 3), ("other", 1)]

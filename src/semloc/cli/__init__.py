@@ -9,10 +9,14 @@ stderr and exit status 2, so that bad input never ends in a traceback.
 
 from __future__ import annotations
 
+import io
+import os
 import re
 import signal
 import sys
 import warnings
+from collections.abc import Iterator
+from contextlib import contextmanager, suppress
 
 import numpy as np
 import typer
@@ -23,7 +27,7 @@ from semloc.cli.app import CliError, app, with_optional_values
 # Importing a command module registers its commands; this order is the order of `--help`.
 from semloc.cli import simulation, localize, update, align, datasets  # noqa: F401, E402
 from semloc.cli import export, bag, bench, descriptors, config, warmup, serve, maps  # noqa: F401, E402
-from semloc.cli import ros2  # noqa: F401, E402
+from semloc.cli import ros2, tokens, sessions  # noqa: F401, E402
 
 # isort: on
 from semloc.cli.app import document_exit_statuses  # noqa: E402
@@ -49,6 +53,7 @@ def main(argv: list[str] | None = None, early: list[int] | None = None) -> int:
     try:
         with (
             interrupts_raise(script=argv is None, early=early),
+            quiet_when_stdout_closes(),
             warnings.catch_warnings(),
             np.errstate(all="ignore"),
         ):
@@ -64,6 +69,8 @@ def main(argv: list[str] | None = None, early: list[int] | None = None) -> int:
     except SystemExit as exc:  # --help and typer.Exit pass through unchanged
         return exc.code if isinstance(exc.code, int) else 0 if exc.code is None else 1
     except Exception as exc:
+        if type(exc).__name__ == "NoArgsIsHelpError":  # a group without its command: help shown
+            return _error(f"a command is needed: {_command_path(exc)} COMMAND (listed above)")
         # click (vendored by typer) usage errors: one line, status 2 like click's own
         if hasattr(exc, "format_message") and hasattr(exc, "exit_code"):
             return _error(_usage_message(exc))
@@ -74,6 +81,70 @@ def main(argv: list[str] | None = None, early: list[int] | None = None) -> int:
     if code == 130:  # typer turns a KeyboardInterrupt it sees into Exit(130)
         print(MESSAGE, file=sys.stderr)
     return code if isinstance(code, int) else 0
+
+
+class _QuietStdout(io.RawIOBase):
+    """File descriptor 1 that takes every write, also once its reader went away (`| head -1`):
+    from then on what is written is dropped, so the command finishes its work."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.closed_reader = False
+
+    def writable(self) -> bool:
+        return True
+
+    def fileno(self) -> int:
+        return 1
+
+    def isatty(self) -> bool:
+        return os.isatty(1)
+
+    def write(self, data) -> int:  # type: ignore[override]
+        if not self.closed_reader:
+            try:
+                return os.write(1, data)
+            except BrokenPipeError:
+                self.closed_reader = True
+        return len(data)
+
+
+@contextmanager
+def quiet_when_stdout_closes() -> Iterator[None]:
+    """While the command runs, a standard output whose reader closed it (`semloc ... | head -1`)
+    is not an error: the rest of the output is dropped, the command ends as it would have, with
+    its own exit status and no word about it.  Only for the process's own stdout (not one a
+    caller such as pytest put in its place)."""
+    real = sys.stdout
+    if real is None or real is not sys.__stdout__ or not _is_fd(real, 1):
+        yield
+        return
+    with suppress(BrokenPipeError):
+        real.flush()
+    quiet = io.TextIOWrapper(io.BufferedWriter(_QuietStdout()), encoding=real.encoding,
+                             errors=real.errors, line_buffering=real.line_buffering)  # fmt: skip
+    sys.stdout = quiet
+    try:
+        yield
+    finally:
+        quiet.flush()
+        sys.stdout = real
+
+
+def _command_path(exc: Exception) -> str:
+    """`semloc ros2` for an error in that group (whatever the program was called)."""
+    names, ctx = [], getattr(exc, "ctx", None)
+    while ctx is not None and ctx.parent is not None:
+        names.append(ctx.info_name)
+        ctx = ctx.parent
+    return " ".join(["semloc", *reversed(names)])
+
+
+def _is_fd(stream: object, fd: int) -> bool:
+    try:
+        return stream.fileno() == fd  # type: ignore[attr-defined]
+    except (AttributeError, OSError, ValueError):
+        return False
 
 
 def _interrupted(exc: BaseException) -> int:

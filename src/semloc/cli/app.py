@@ -14,7 +14,7 @@ from typing import Annotated, Any
 import typer
 from pydantic import ValidationError
 from rich.console import Console
-from typer.core import TyperOption
+from typer.core import TyperArgument, TyperOption
 
 import semloc
 
@@ -41,6 +41,19 @@ def _flags_without_metavar() -> None:
 
 
 _flags_without_metavar()
+
+
+def _arguments_in_capitals() -> None:
+    """One placeholder style: every argument is named in capitals in usage lines and messages
+    (`{GLOBAL_MAP}`, `Missing argument 'OUT'`), whether or not it sets a metavar."""
+
+    def display_name_raw(self: TyperArgument) -> str:
+        return self.metavar or (self.name or "").upper()
+
+    TyperArgument.display_name_raw = property(display_name_raw)  # type: ignore[method-assign,assignment]
+
+
+_arguments_in_capitals()
 
 
 MAX_SEED = 2**32 - 1
@@ -80,7 +93,7 @@ EXIT_STATUSES = {
     0: "done",
     1: "nothing written: the answer is not localized",
     2: "bad input or usage, also an output that would overwrite an input or another output "
-    "(nothing written)",
+    "(nothing written), or a command group without its command (its help is printed)",
     130: "interrupted by Ctrl-C (143: by SIGTERM), no half-written output",
 }
 """The exit statuses of the commands; 1 only where a command promises an output that needs
@@ -131,15 +144,22 @@ def foxglove_option(help_text: str = FOXGLOVE_HELP) -> Any:
 
 
 OPTIONAL_VALUES = {"--foxglove": "8765"}
+RENAMED = {"--out": "--output"}
+"""Old option names still accepted (not shown in `--help`): `--out` of demo, bench,
+train-descriptor and descriptors-eval is `-o/--output` now."""
 """Options whose value may be left out (`--foxglove` alone is `--foxglove 8765`): click needs
 a value after an option that takes one, so the command line gets the default inserted."""
 
 
 def with_optional_values(args: list[str]) -> list[str]:
     """`args` with the default value after each option of `OPTIONAL_VALUES` given alone (last,
-    or followed by another option; a negative number is a value, which click then checks)."""
+    or followed by another option; a negative number is a value, which click then checks),
+    and the old names of `RENAMED` under their new ones."""
     out: list[str] = []
     for i, arg in enumerate(args):
+        name, equals, value = arg.partition("=")
+        if name in RENAMED:
+            arg = RENAMED[name] + equals + value
         out.append(arg)
         following = args[i + 1] if i + 1 < len(args) else None
         alone = following is None or (

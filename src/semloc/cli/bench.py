@@ -24,7 +24,12 @@ def bench(
         ),
     ] = False,
     out: Annotated[
-        Path, typer.Option(help="Folder for results.csv, hypotheses.csv, the PNGs and report.md.")
+        Path,
+        typer.Option(
+            "--output",
+            "-o",
+            help="Folder for results.csv, hypotheses.csv, the PNGs and report.md.",
+        ),
     ] = Path("bench_out"),
     scheduler: Annotated[
         str | None,

@@ -38,7 +38,11 @@ def train_descriptor(
     ] = TrainedChoice["voxnet"],
     out: Annotated[
         Path | None,
-        typer.Option(help=with_default("Weights file to write (.npz).", "<kind>_weights.npz")),
+        typer.Option(
+            "--output",
+            "-o",
+            help=with_default("Weights file to write (.npz).", "<kind>_weights.npz"),
+        ),
     ] = None,
     seed: Annotated[
         int,
@@ -79,7 +83,7 @@ def train_descriptor(
     The defaults reproduce the shipped weights (src/semloc/descriptors/*_weights.npz).
     """
     out = out if out is not None else Path(DEFAULT_OUT[kind.value])
-    check_separate({"--out": out, "--fixture": fixture}, {})
+    check_separate({"--output": out, "--fixture": fixture}, {})
     need("train-descriptor", "train", "sim")
     trained = {"epochs": epochs, "batches_per_epoch": batches}
     trained = {k: v for k, v in trained.items() if v is not None}
@@ -114,7 +118,8 @@ def descriptors_eval(
         DescriptorChoice["both"]
     ),
     out: Annotated[
-        Path | None, typer.Option(help="Folder for descriptors_eval.json and figures.")
+        Path | None,
+        typer.Option("--output", "-o", help="Folder for descriptors_eval.json and figures."),
     ] = None,
     seed: Annotated[
         int, typer.Option(min=0, max=MAX_SEED, help="Seed of the evaluation views.")

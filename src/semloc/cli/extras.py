@@ -17,7 +17,7 @@ EXTRAS: dict[str, tuple[str, ...]] = {
     "sim": ("open3d",),
     "bench": ("dask", "distributed", "sklearn", "matplotlib", "cv2"),
     "train": ("torch",),
-    "serve": ("fastapi", "uvicorn", "prometheus_client"),
+    "serve": ("fastapi", "fastapi_offline", "uvicorn", "prometheus_client"),
     "ros": ("rosbags", "mcap"),
     "ros2": ("cyclonedds", "rosbags"),
     "dsg": ("spark_dsg",),

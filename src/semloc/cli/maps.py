@@ -1,7 +1,7 @@
-"""`semloc maps put | get | list | versions`: the maps of a `semloc serve` server, from the
+"""`semloc maps put | get | list | versions | delete`: the maps of a `semloc serve` server, from the
 command line (`semloc.client.Client`).
 
-Rights (the token file's): `put` needs `write` on the map; `get`, `list` and `versions` need
+Rights (the token file's): `put` and `delete` need `write` on the map; `get`, `list` and `versions` need
 `read` (`list` shows only the maps the token may read).  A server's refusal is one line naming
 the server and what it said, exit status 2, as for `localize --server`.  Output is plain text
 (`list` and `versions`: one tab-separated line per map or version, for scripts).
@@ -15,14 +15,14 @@ from typing import Annotated
 import typer
 
 from semloc.cli import remote
-from semloc.cli.app import app, exit_statuses
+from semloc.cli.app import app, exit_statuses, fail
 from semloc.cli.files import check_output, check_separate, map_outputs
 from semloc.io import load_map, write_files
 from semloc.io.native import map_files
 
 maps_app = typer.Typer(
     name="maps",
-    help="The maps of a `semloc serve` server: upload, download, list, versions.",
+    help="The maps of a `semloc serve` server: upload, download, list, versions, delete.",
     no_args_is_help=True,
 )
 app.add_typer(maps_app)
@@ -92,3 +92,21 @@ def versions(
     client = remote.connect(server, token)
     for entry in remote.call(server, "listing the versions", client.versions, map_id):
         typer.echo(f"{entry['version']}\t{entry['created']}\t{entry['source']}")
+
+
+@maps_app.command(epilog=exit_statuses())
+def delete(
+    map_id: MapIdArgument,
+    server: ServerArgument,
+    yes: Annotated[
+        bool, typer.Option("--yes", help="Yes, delete every version and end its sessions.")
+    ] = False,
+    token: remote.TokenOption = None,
+) -> None:
+    """Delete MAP_ID from the server: every version, and its live sessions end (needs
+    `write`; uploaded again, the id goes on from the next version number)."""
+    if not yes:
+        fail(f"maps delete removes every version of {map_id!r} and ends its sessions: add --yes")
+    client = remote.connect(server, token)
+    remote.call(server, "the deletion", client.delete_map, map_id)
+    typer.echo(f"deleted {map_id} from {server}")

@@ -69,6 +69,8 @@ PAIRS_SHOWN = 6
 COLUMNS = (("rank", 4), ("score", 5), ("pairs", 5), ("fit", 4), ("conf.", 5), ("yaw°", 6),
            ("t (m)", 14))  # fmt: skip
 """The numeric columns of the hypotheses table and their least widths."""
+OUTSIDE_MARK = "*"
+"""Beside the rank of a hypothesis whose pose lies outside the position prior (`--near`)."""
 TABLE_FRAME = 22
 """Characters of the hypotheses table that are not column content (padding, edges)."""
 
@@ -82,9 +84,11 @@ def _hypotheses_table(result: Result, width: int, frames: tuple[str, str]) -> Ta
     used = TABLE_FRAME + sum(max(size, len(name), *(len(row[i]) for row in rows))
                              for i, (name, size) in enumerate(COLUMNS))  # fmt: skip
     limit = max(4, min(24, (width - used - 2) // 2))
-    table = Table(title="hypotheses, best first",
-                  caption="ranked by evidence (pairs, fit, confidence), not by score",
-                  box=box.SIMPLE_HEAD, padding=(0, 1))  # fmt: skip
+    caption = "ranked by evidence (pairs, fit, confidence), not by score"
+    if any(h.outside_prior for h in result.hypotheses):
+        caption += f"; {OUTSIDE_MARK} outside the position prior"
+    table = Table(title="hypotheses, best first", caption=caption, box=box.SIMPLE_HEAD,
+                  padding=(0, 1))  # fmt: skip
     for name, size in COLUMNS:
         table.add_column(name, justify="right", no_wrap=True, min_width=size)
     table.add_column(f"associations {frames[1]}→{frames[0]}", min_width=2 * limit + 2,
@@ -116,14 +120,16 @@ def _next_look_table(result: Result, frames: tuple[str, str]) -> Table:
 
 
 def _numbers(h: Hypothesis) -> tuple[str, ...]:
-    """The numeric cells of a hypothesis' row: rank, score, pairs, fit, confidence, yaw, t."""
+    """The numeric cells of a hypothesis' row: rank (marked when outside the prior), score,
+    pairs, fit, confidence, yaw, t."""
     yaw = translation = "-"
     if h.pose is not None:
         yaw = f"{np.degrees(np.arctan2(h.pose[1, 0], h.pose[0, 0])):.1f}"
         translation = " ".join(f"{v:.2f}" for v in h.pose[:3, 3])
     fitness = "-" if h.fitness is None else f"{h.fitness:.2f}"
     confidence = "-" if h.confidence is None else f"{h.confidence:.2f}"
-    return (str(h.rank), f"{h.score:.2f}", str(len(h.pairs)), fitness, confidence, yaw,
+    rank = f"{h.rank}{OUTSIDE_MARK}" if h.outside_prior else str(h.rank)
+    return (rank, f"{h.score:.2f}", str(len(h.pairs)), fitness, confidence, yaw,
             translation)  # fmt: skip
 
 

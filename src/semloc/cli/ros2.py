@@ -19,7 +19,7 @@ import typer
 from pydantic import ValidationError
 
 from semloc.cli import remote
-from semloc.cli.app import app, console, err_console, fail, first_error, foxglove_option
+from semloc.cli.app import app, choices, console, err_console, fail, first_error, foxglove_option
 from semloc.cli.extras import need
 from semloc.cli.files import read_config
 from semloc.cli.options import NearOption, RadiusOption, prior_option, topic_option
@@ -32,7 +32,7 @@ from semloc.ros.initialpose import TOPIC as INITIALPOSE_TOPIC
 from semloc.ros2.node import LiveNode, NodeSettings, Wire, samples
 from semloc.ros2.play import play
 from semloc.ros2.remote import RemoteLocalizer
-from semloc.ros2.wire import choose_network
+from semloc.ros2.wire import NETWORKS, choose_network
 
 ros2_app = typer.Typer(
     help="Live on a ROS 2 robot without ROS (the ros2 extra): the semloc node, a bag player, "
@@ -55,24 +55,30 @@ KNOWN_TOPICS = {
 """The topics `echo` knows the type of (others need `--type`)."""
 
 FoxgloveOption = foxglove_option()
+Network = choices("Network", NETWORKS)
 NetworkOption = Annotated[
-    str,
+    Network,
     typer.Option(
         "--network",
-        help="Without CYCLONEDDS_URI: 'loopback' keeps DDS on this machine, 'default' uses "
-        "Cyclone DDS's defaults (the machine's network). A set CYCLONEDDS_URI always wins.",
+        help="Without $CYCLONEDDS_URI: 'loopback' keeps DDS on this machine, 'default' uses "
+        "Cyclone DDS's defaults (the machine's network). A set $CYCLONEDDS_URI always wins.",
     ),
 ]
 DomainOption = Annotated[
     int | None,
-    typer.Option("--domain", min=0, max=232, help="DDS domain id [default: ROS_DOMAIN_ID or 0]."),
+    typer.Option(
+        "--domain",
+        min=0,
+        max=232,
+        help="DDS domain id, 0 to 232 (or $ROS_DOMAIN_ID; without either: 0).",
+    ),
 ]
 
 
-def _network(network: str) -> None:
+def _network(network: Network) -> None:
     """Cyclone DDS's network for this process (`semloc.ros2.wire.choose_network`)."""
     try:
-        notice = choose_network(network)
+        notice = choose_network(network.value)
     except ValueError as exc:
         fail(f"--network: {exc}")
     if notice is not None:
@@ -103,7 +109,7 @@ def node(
         str, typer.Option(help="nav_msgs/Odometry topic; 'none' without odometry.")
     ] = "/odom",
     domain: DomainOption = None,
-    network: NetworkOption = "loopback",
+    network: NetworkOption = Network["loopback"],
     config: Annotated[
         Path | None, typer.Option("--config", help="Localizer settings (JSON or YAML).")
     ] = None,
@@ -169,8 +175,9 @@ def node(
         need("ros2 node --foxglove", "viz", modules=("foxglove", "websockets"))
         view = FoxgloveView(global_map, port=foxglove, map_frame=map_frame)
     live = LiveNode(global_map, cfg, settings, localizer=localizer)
+    inputs = [detections, settings.odom or "no odometry"] + ([points] if points else [])
     console.print(
-        f"semloc node on domain {settings.domain}: {detections} + {settings.odom or 'no odometry'}"
+        f"semloc node on domain {settings.domain}: {' + '.join(inputs)}"
         f" -> /semloc/pose, /tf, /semloc/status, /semloc/markers, /semloc/map ({len(global_map)} "
         "map objects); Ctrl-C ends it"
     )
@@ -193,7 +200,7 @@ def node(
 def play_command(
     bag: Annotated[Path, typer.Argument(metavar="BAG", help="A rosbag2 folder or .mcap / .db3.")],
     domain: DomainOption = None,
-    network: NetworkOption = "loopback",
+    network: NetworkOption = Network["loopback"],
     rate: Annotated[
         float, typer.Option(min=0.0, help="Times the recorded pace; 0: as fast as possible.")
     ] = 1.0,
@@ -211,7 +218,7 @@ def play_command(
 def echo(
     topic: Annotated[str, typer.Argument(help="The topic, e.g. /semloc/status.")],
     domain: DomainOption = None,
-    network: NetworkOption = "loopback",
+    network: NetworkOption = Network["loopback"],
     msgtype: Annotated[
         str | None, typer.Option("--type", help="Its message type, e.g. std_msgs/msg/String.")
     ] = None,

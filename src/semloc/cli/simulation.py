@@ -56,10 +56,27 @@ DemoFoxglove = foxglove_option(
 )
 
 
+DriftOption = Annotated[
+    float,
+    typer.Option(
+        min=0, max=1, help="Odometry drift: metres of position error per metre travelled."
+    ),
+]
+DriftYawOption = Annotated[
+    float,
+    typer.Option(
+        "--drift-yaw", min=0, max=90, help="Odometry heading drift: degrees per metre travelled."
+    ),
+]
+
+
 @app.command()
 def demo(
     out: Annotated[
-        Path, typer.Option(help="Folder for scores.png, map.png, world.png, result.json, maps.")
+        Path,
+        typer.Option(
+            "--output", "-o", help="Folder for scores.png, map.png, world.png, result.json, maps."
+        ),
     ] = Path("demo_out"),
     seed: Annotated[int, typer.Option(min=0, max=MAX_SEED, help="World and noise seed.")] = 0,
     size: Annotated[str, typer.Option(help=SIZE_HELP)] = "small",
@@ -79,10 +96,8 @@ def demo(
     rooms: Annotated[int, typer.Option(min=1, max=MAX_ROOMS, help="Rooms the walk visits.")] = 2,
     resolution: Annotated[str, typer.Option(help=RESOLUTION_HELP)] = "240x180",
     gamma: Annotated[float, typer.Option(help="Merge threshold of the clustering.")] = 0.8,
-    drift: Annotated[
-        float,
-        typer.Option(min=0, max=0.2, help="Odometry drift, m per m travelled (heading: 25x in °)."),
-    ] = 0.0,
+    drift: DriftOption = 0.0,
+    drift_yaw: DriftYawOption = 0.0,
     scan: Annotated[
         Path | None,
         typer.Option(
@@ -106,7 +121,7 @@ def demo(
 
     Prints a live table and the pose error against ground truth; writes scores.png and map.png.
     """
-    check_finite(gamma=gamma, drift=drift)
+    check_finite(gamma=gamma, drift=drift, drift_yaw=drift_yaw)
     need("demo", "sim")
     need("demo", "viz", modules=("matplotlib",) if rrd is None else ("matplotlib", "rerun"))
     if foxglove is not None:
@@ -114,7 +129,7 @@ def demo(
     if scan is not None and (rrd is not None or foxglove is not None):
         fail("--rrd and --foxglove are not available with --scan")
     common = {"seed": seed, "resolution": parse_resolution(resolution), "gamma": gamma,
-              "drift": drift, "out": out}  # fmt: skip
+              "drift": drift, "drift_yaw": drift_yaw, "out": out}  # fmt: skip
     if keyframes is not None:
         common["keyframes"] = keyframes
     kind = None if map_kind is None else map_kind.value
@@ -151,12 +166,8 @@ def simulate(
             "--perfect", help="Perfect detections (no misses, confusions or mask errors)."
         ),
     ] = False,
-    drift: Annotated[
-        float, typer.Option(min=0, max=1, help="Odometry drift in metres per metre travelled.")
-    ] = 0.0,
-    drift_yaw: Annotated[
-        float, typer.Option(min=0, max=90, help="Odometry heading drift in degrees per metre.")
-    ] = 0.0,
+    drift: DriftOption = 0.0,
+    drift_yaw: DriftYawOption = 0.0,
     descriptor: DescribeOption = None,
     bag: Annotated[
         bool,

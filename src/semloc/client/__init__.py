@@ -99,6 +99,10 @@ class Client:
         query = "" if version is None else f"?version={int(version)}"
         return map_from_dict(self.request("GET", f"/v1/maps/{_quote(map_id)}{query}"))
 
+    def delete_map(self, map_id: str) -> None:
+        """Delete a map with every version and its sessions (needs `write`)."""
+        self.request("DELETE", f"/v1/maps/{_quote(map_id)}")
+
     def versions(self, map_id: str) -> list[dict[str, Any]]:
         return self.request("GET", f"/v1/maps/{_quote(map_id)}/versions")
 
@@ -148,6 +152,16 @@ class Client:
         elif session_id is not None or "session_id" in answer:
             body["session_id"] = session_id or answer["session_id"]
         return self.request("POST", f"/v1/maps/{_quote(map_id)}/changes", body, key=True)
+
+    # sessions, maps (administration) ----------------------------------------------------------
+    def sessions(self, map_id: str) -> list[dict[str, Any]]:
+        """The live sessions of `map_id`: `session_id` (of this token's own only, else None),
+        `mine`, `map_version`, `up`, `idle_s` and `last` (status, pose, stamp)."""
+        return self.request("GET", f"/v1/maps/{_quote(map_id)}/sessions")
+
+    def end_session(self, session_id: str) -> None:
+        """End a session: this token's own, or any session of a map it may write."""
+        self.request("DELETE", f"/v1/sessions/{_quote(session_id)}")
 
     # HTTP -------------------------------------------------------------------------------------
     def request(

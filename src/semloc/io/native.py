@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import io
 import json
+import logging
 import os
 import zipfile
 from pathlib import Path
@@ -35,6 +36,7 @@ from semloc.maps import (
     MapError,
     ObjectMap,
     SemanticObject,
+    far_from_points,
 )
 
 __all__ = [
@@ -49,6 +51,7 @@ _OBJECT_KEYS = {
     "embedding",
 }  # fmt: skip
 _TOP_KEYS = {"format", "version", "name", "up", "objects", "points_file"}
+log = logging.getLogger("semloc")
 EMBEDDING_MEMBER = "embedding:"
 """An `.npz` member named `embedding:<object id>` holds that object's embedding (a vector)."""
 
@@ -62,11 +65,28 @@ def load_map(path: str | os.PathLike[str]) -> ObjectMap:
         hint = BINARY_HINTS.get(path.suffix.lower(), "") if path.is_file() else ""
         raise MapError(f"{exc}{hint}") from None
     try:
-        return map_from_dict(document, base_dir=path.parent)
+        objmap = map_from_dict(document, base_dir=path.parent)
     except MapError as exc:
         kind = document_kind(document)
         hint = "" if kind in (None, "a semloc map") else f" ({kind}: {KIND_HINTS[kind]})"
         raise MapError(f"{path}: {exc}{hint}") from None
+    warn_far_points(objmap, path)
+    return objmap
+
+
+def warn_far_points(objmap: ObjectMap, source: object) -> None:
+    """One warning line (the `semloc` logger) for a map with objects whose points lie far from
+    their centre (`semloc.maps.far_from_points`): it loads, but such an object fits nowhere."""
+    far = far_from_points(objmap)
+    if not far:
+        return
+    first, metres = far[0]
+    more = f" (and {len(far) - 1} more objects)" if len(far) > 1 else ""
+    log.warning(
+        f"warning: {source}: object '{first[:60]}': its points lie {metres:.1f} m from "
+        f"its position{more}; move an object with SemanticObject.transformed (or replace "
+        "position and points together)"
+    )
 
 
 BINARY_HINTS = {

@@ -25,6 +25,7 @@ import datetime
 import ipaddress
 import logging
 import math
+import re
 import sqlite3
 from collections.abc import AsyncIterator, Callable
 from contextlib import asynccontextmanager
@@ -36,6 +37,7 @@ from fastapi import Depends, FastAPI, Header, Path, Query, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import HTMLResponse, JSONResponse, PlainTextResponse, Response
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
+from fastapi_offline import FastAPIOffline
 from pydantic import BaseModel, ValidationError
 from starlette.concurrency import run_in_threadpool
 from starlette.exceptions import HTTPException as StarletteHTTPException
@@ -145,6 +147,14 @@ def _etag(version: int) -> dict[str, str]:
 ETAG = {"ETag": {"description": 'The version: "<version>".', "schema": {"type": "string"}}}
 
 
+MAP_ONLY = re.compile(r"map '.*'", re.S)
+"""The detail of a 404 about a map as a whole (not one of its versions)."""
+MAP_HINT = " (or your token may not see it)"
+"""Added to such a 404: a map the token may not see is answered as one that does not exist."""
+DOCS_STATIC = "/docs/static"
+"""Where the interactive page's scripts, styles and icon are served (from `fastapi-offline`)."""
+
+
 def create_app(
     service: Service,
     access: Access | None = None,
@@ -163,13 +173,14 @@ def create_app(
         yield
         service.store.close()
 
-    app = FastAPI(
+    app = FastAPIOffline(  # /docs: Swagger UI served from the package, no CDN
         title="semloc",
         version=semloc.__version__,
         description="Object-level relocalization as a service: shared object maps, one-shot "
         "localization, live sessions and change reports.",
         docs_url="/docs",
         redoc_url=None,
+        static_url=DOCS_STATIC,
         lifespan=lifespan,
         separate_input_output_schemas=False,
     )
@@ -237,7 +248,10 @@ def create_app(
     # errors ----------------------------------------------------------------------------------
     @app.exception_handler(ServiceError)
     async def _service_error(request: Request, exc: ServiceError) -> JSONResponse:
-        return _error(STATUS.get(type(exc), 422), exc.error, exc.detail)
+        detail = exc.detail
+        if isinstance(exc, NotFound) and isinstance(detail, str) and MAP_ONLY.fullmatch(detail):
+            detail += MAP_HINT  # the same words whether it is absent or hidden from this token
+        return _error(STATUS.get(type(exc), 422), exc.error, detail)
 
     @app.exception_handler(Refused)
     async def _refused(request: Request, exc: Refused) -> JSONResponse:
@@ -364,6 +378,16 @@ def create_app(
         number, document = await run_in_threadpool(service.map_document, map_id, version)
         headers = {"X-Semloc-Map-Version": str(number), **_etag(number)}
         return await _json(document, headers=headers)
+
+    @app.delete("/v1/maps/{map_id}", status_code=204, tags=["maps"],
+                responses=_errors(*AUTH, 403))  # fmt: skip
+    async def delete_map(
+        map_id: MapPath, who: Annotated[Caller, Depends(may("write"))]
+    ) -> Response:
+        """Delete a map: every version, its sessions and kept localizations.  Uploaded again,
+        the id goes on from the next version number (a number never names two documents)."""
+        await run_in_threadpool(service.delete_map, map_id)
+        return Response(status_code=204)
 
     @app.get("/v1/maps/{map_id}/versions", response_model=list[models.VersionInfo],
              tags=["maps"], responses=_errors(*AUTH, 403))  # fmt: skip

@@ -564,6 +564,16 @@ class Service:
         self.store.save_state(session_id, live.applied, state, set(live.seq_of.values()))
         live.saved = live.applied
 
+    def delete_map(self, map_id: str) -> None:
+        """Delete a map with every version and its sessions (`NotFound` if it is not there)."""
+        if not self.store.delete_map(map_id):
+            raise not_found(f"map {map_id!r}")
+        with self._lock:
+            for key in [k for k in self._maps if k[0] == map_id]:
+                del self._maps[key]
+            for session_id in [s for s, live in self._live.items() if live.meta.map_id == map_id]:
+                del self._live[session_id]
+
     def delete_session(self, session_id: str) -> None:
         with self._lock:
             self._live.pop(session_id, None)

@@ -279,8 +279,8 @@ class Store:
         return statement if self.placeholder == "?" else statement.replace("?", self.placeholder)
 
     def _lock_map(self, cur: Any, map_id: str) -> int | None:
-        """Inside a write transaction: the latest version of `map_id` (None if unknown), locked
-        until the transaction ends."""
+        """Inside a write transaction: the latest version of `map_id` as stored (None if
+        unknown; minus the last version of a deleted map), locked until the transaction ends."""
         cur.execute(self._sql("SELECT latest FROM maps WHERE map_id = ?"), (map_id,))
         row = cur.fetchone()
         return None if row is None else int(row[0])
@@ -335,15 +335,16 @@ class Store:
         `answer(version)` are stored with the version (`KeyTaken` when the key was used)."""
         blob_out: bytes
         with self._transaction(write=True) as cur:
-            latest = self._lock_map(cur, map_id)
+            stored = self._lock_map(cur, map_id)
+            latest = stored if stored is not None and stored > 0 else None  # < 0: deleted
             if key is not None:
                 self._check_key(cur, key)
             if latest is None and not create:
                 raise KeyError(map_id)
             old = None if latest is None else self._document(cur, map_id, latest)
             blob_out = _pack(build(latest, old))
-            version = 1 if latest is None else latest + 1
-            if latest is None:
+            version = 1 if stored is None else abs(stored) + 1  # never a number used before
+            if stored is None:
                 cur.execute(
                     self._sql("INSERT INTO maps (map_id, latest) VALUES (?, ?)"), (map_id, version)
                 )
@@ -414,7 +415,9 @@ class Store:
 
     def latest_version(self, map_id: str) -> int | None:
         with self._transaction() as cur:
-            cur.execute(self._sql("SELECT latest FROM maps WHERE map_id = ?"), (map_id,))
+            cur.execute(
+                self._sql("SELECT latest FROM maps WHERE map_id = ? AND latest > 0"), (map_id,)
+            )
             row = cur.fetchone()
         return None if row is None else int(row[0])
 
@@ -422,7 +425,9 @@ class Store:
         """(version, document) of `version` (the latest without one), or None if absent."""
         with self._transaction() as cur:
             if version is None:
-                cur.execute(self._sql("SELECT latest FROM maps WHERE map_id = ?"), (map_id,))
+                cur.execute(
+                    self._sql("SELECT latest FROM maps WHERE map_id = ? AND latest > 0"), (map_id,)
+                )
                 row = cur.fetchone()
                 if row is None:
                     return None
@@ -444,8 +449,25 @@ class Store:
     def map_ids(self) -> list[tuple[str, int]]:
         """Every map with its latest version, by id."""
         with self._transaction() as cur:
-            cur.execute("SELECT map_id, latest FROM maps ORDER BY map_id")
+            cur.execute("SELECT map_id, latest FROM maps WHERE latest > 0 ORDER BY map_id")
             return [(m, int(v)) for m, v in cur.fetchall()]
+
+    def delete_map(self, map_id: str) -> bool:
+        """Delete a map: every version, its sessions and its one-shot localizations; whether
+        it was there.  Its id stays known with minus its last version, so that a map uploaded
+        again under the id goes on from the next number: a version number never names two
+        documents (caches and If-Match rely on it)."""
+        with self._transaction(write=True) as cur:
+            latest = self._lock_map(cur, map_id)
+            if latest is None or latest < 0:
+                return False
+            cur.execute(self._sql("SELECT session_id FROM sessions WHERE map_id = ?"), (map_id,))
+            for (session_id,) in list(cur.fetchall()):
+                self._delete_session(cur, session_id)
+            for table in ("localizations", "map_versions"):
+                cur.execute(self._sql(f"DELETE FROM {table} WHERE map_id = ?"), (map_id,))
+            cur.execute(self._sql("UPDATE maps SET latest = ? WHERE map_id = ?"), (-latest, map_id))
+        return True
 
     # sessions ---------------------------------------------------------------------------------
     def create_session(

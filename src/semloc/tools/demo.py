@@ -7,6 +7,10 @@ status, time) and finally the pose error against ground truth.  It writes `score
 `map.png`, `world.png`, `result.json`, `ground_truth.json` and the global/local maps to `out`,
 and with `rrd` a 3D Rerun recording of the updates (`semloc.pictures.viz3d`, the `viz` extra);
 the files in `out` all or none (`semloc.io.output.staged_folder`).
+
+The pictures come from the run's whole history, one `KeyframeStep` per update kept here
+(`Result.steps` keeps only the last few).  Loading (or, once after an install, compiling) the
+inner loops happens before the first update and is reported apart from the localization time.
 """
 
 from __future__ import annotations
@@ -15,7 +19,6 @@ import json
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -25,7 +28,7 @@ from rich.live import Live
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
-from semloc.compiling import warmup
+from semloc.compiling import WarmUp, warmup
 from semloc.eval.success import is_success
 from semloc.io.native import save_map
 from semloc.io.output import staged_folder, write_atomic
@@ -58,12 +61,28 @@ class DemoConfig(BaseModel):
     rooms: int = Field(2, ge=1, description="Rooms visited by the walk.")
     resolution: tuple[int, int] = Field((240, 180), description="Depth image width, height.")
     gamma: float = Field(0.8, gt=0, lt=1, description="Merge threshold of the clustering.")
-    drift: float = Field(0.0, ge=0, le=0.2, description="Odometry drift, metres per metre.")
+    drift: float = Field(
+        0.0, ge=0, le=1, description="Odometry drift, metres of position error per metre travelled."
+    )
+    drift_yaw: float = Field(
+        0.0, ge=0, le=90, description="Odometry heading drift, degrees per metre travelled."
+    )
     out: Path = Field(Path("demo_out"), description="Output folder.")
     rrd: Path | None = Field(None, description="Rerun recording of the updates to write.")
     foxglove: int | None = Field(
         None, ge=0, le=65535, description="Port of a live Foxglove view (foxglove-sdk)."
     )
+
+
+@dataclass(frozen=True)
+class KeyframeStep:
+    """One update of the run as the pictures need it: the keyframe, the top association-set
+    scores after it, the status and the update's time."""
+
+    step: int
+    top_scores: list[float]
+    status: str
+    ms: float
 
 
 @dataclass
@@ -77,6 +96,8 @@ class DemoResult:
     correct_pairs: int
     seconds: dict[str, float]
     files: list[Path] = field(default_factory=list)
+    history: list[KeyframeStep] = field(default_factory=list)
+    warm_up: WarmUp | None = None
 
     @property
     def success(self) -> bool:
@@ -101,7 +122,7 @@ def simulate(config: DemoConfig, console: Console) -> SimulatedSequence:
         TextColumn("{task.completed}/{task.total}"),
         TimeElapsedColumn(),
     )
-    noise = DetectionNoise(drift_translation=config.drift, drift_yaw_deg=25.0 * config.drift)
+    noise = DetectionNoise(drift_translation=config.drift, drift_yaw_deg=config.drift_yaw)
     with Progress(*columns, console=console, transient=True) as progress:
         task = progress.add_task("simulating keyframes", total=config.keyframes)
         return simulate_sequence(
@@ -132,17 +153,18 @@ def localize_sequence(
     console: Console,
     recording: Any = None,
     view: Any = None,
-) -> tuple[Result, list[int], list[str]]:
-    """Run the Localizer over the keyframes (live table); the last Result, keyframes, statuses.
+) -> tuple[Result, list[KeyframeStep], WarmUp]:
+    """Run the Localizer over the keyframes (live table); the last Result, the whole history
+    (one `KeyframeStep` per update) and the warm-up before the first update.
 
     `recording` (a `semloc.pictures.viz3d.DemoRecording`) gets the state after every update,
     `view` (a `semloc.pictures.live.FoxgloveView`) every answer."""
     localizer = Localizer(seq.global_maps[kind], LocalizerConfig(gamma=gamma), local_up=(0, 0, 1))
     result = Result(status="failed", pose=None, hypotheses=[])
-    keyframes, statuses = [], []
+    history: list[KeyframeStep] = []
     # every compiled loop, not only localization's (the first command of a new install: then
     # `align`, `serve` and `bag` find nothing left to compile); not inside the timed updates
-    warmup(lambda text: console.print(f"[dim]{text}…[/]"))
+    warm = warmup(lambda text: console.print(f"[dim]{text}…[/]"))
     table = _table()
     with Live(table, console=console, refresh_per_second=8, vertical_overflow="visible"):
         for kf in seq.keyframes:
@@ -150,8 +172,9 @@ def localize_sequence(
                 continue
             result = localizer.update(kf.objects, position=kf.T_odom_camera)
             step = result.steps[-1]
-            keyframes.append(kf.index)
-            statuses.append(result.status)
+            history.append(
+                KeyframeStep(kf.index, list(step.top_scores), result.status, float(step.ms))
+            )
             if recording is not None:
                 recording.update(kf.index, localizer.local_map, result)
             if view is not None:
@@ -164,7 +187,7 @@ def localize_sequence(
                 f"[{STATUS_STYLE[result.status]}]{result.status}[/]", f"{step.ms:.0f}",
             )  # fmt: skip
     console.print()
-    return result, keyframes, statuses
+    return result, history, warm
 
 
 def run_demo(config: DemoConfig, console: Console | None = None) -> DemoResult:
@@ -191,7 +214,7 @@ def run_demo(config: DemoConfig, console: Console | None = None) -> DemoResult:
         view = FoxgloveView(gmap, port=config.foxglove)
         console.print(f"Foxglove: open a connection to ws://localhost:{view.port}")
     try:
-        result, keyframes, statuses = localize_sequence(
+        result, history, warm = localize_sequence(
             seq, config.map_kind, config.gamma, console, recording, view
         )
     except BaseException:
@@ -206,9 +229,10 @@ def run_demo(config: DemoConfig, console: Console | None = None) -> DemoResult:
         rot, trans = pose_error(result.pose, seq.T_global_local)
     truth = set(seq.correspondences(config.map_kind))
     correct = sum(1 for p in (result.best.pairs if result.best else []) if p in truth)
-    demo = DemoResult(result, seq, rot, trans, correct, {"simulate": t1 - t0, "localize": t2 - t1})
+    seconds = {"simulate": t1 - t0, "warm_up": warm.seconds, "localize": t2 - t1 - warm.seconds}
+    demo = DemoResult(result, seq, rot, trans, correct, seconds, history=history, warm_up=warm)
     with staged_folder(config.out, index="result.json") as stage:  # all files or none
-        files = write_outputs(config.model_copy(update={"out": stage}), demo, keyframes, statuses)
+        files = write_outputs(config.model_copy(update={"out": stage}), demo)
     demo.files = [config.out / f.relative_to(stage) for f in files]
     if recording is not None:
         demo.files.append(recording.close())
@@ -229,10 +253,9 @@ def _keep_serving(view: Any, console: Console) -> None:
         view.close()
 
 
-def write_outputs(
-    config: DemoConfig, demo: DemoResult, keyframes: list[int], statuses: list[str]
-) -> list[Path]:
-    """scores.png, map.png, world.png, result.json, ground_truth.json, global.json, local.json."""
+def write_outputs(config: DemoConfig, demo: DemoResult) -> list[Path]:
+    """scores.png (every update of `demo.history`), map.png, world.png, result.json,
+    ground_truth.json, global.json, local.json."""
     from semloc.pictures.viz import (
         map_figure,
         new_figure,
@@ -245,14 +268,10 @@ def write_outputs(
     out, seq, result = config.out, demo.sequence, demo.result
     out.mkdir(parents=True, exist_ok=True)
     gmap = seq.global_maps[config.map_kind]
-    steps = [  # plotted against keyframe indices
-        SimpleNamespace(step=kf, top_scores=s.top_scores)
-        for s, kf in zip(result.steps, keyframes, strict=False)
-    ]
-
     fig, ax = new_figure(8, 4.5)
     title = f"top-2 association-set scores ({config.map_kind} map)"
-    plot_scores(ax, steps, statuses=statuses, title=title, x_label="keyframe")
+    statuses = [s.status for s in demo.history]
+    plot_scores(ax, demo.history, statuses=statuses, title=title, x_label="keyframe")
     files = [save_figure(fig, out / "scores.png")]
     best = result.best
     fig, ax = map_figure(gmap.positions[:, :2])
@@ -301,9 +320,11 @@ def _report(demo: DemoResult, config: DemoConfig, console: Console) -> None:
             f"{demo.rotation_error_deg:.2f}° ({ok})"
         )
     s = demo.seconds
+    updates = sum(step.ms for step in demo.history) / 1000
+    warm = "" if demo.warm_up is None else f"{demo.warm_up.describe()}, "
     console.print(
-        f"time: simulation {s['simulate']:.1f} s, localization {s['localize']:.1f} s, "
-        f"total {s['total']:.1f} s"
+        f"time: simulation {s['simulate']:.1f} s, {warm}localization {s['localize']:.1f} s "
+        f"({len(demo.history)} updates, {updates:.1f} s in them), total {s['total']:.1f} s"
     )
     names = ", ".join(p.name for p in demo.files)
     console.print(f"wrote {names} to {for_rich(config.out, None)}/")

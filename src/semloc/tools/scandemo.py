@@ -15,7 +15,6 @@ from __future__ import annotations
 import json
 import time
 from pathlib import Path
-from types import SimpleNamespace
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
@@ -48,7 +47,12 @@ class ScanDemoConfig(BaseModel):
     keyframes: int = Field(60, ge=2, le=2000, description="Number of keyframes.")
     resolution: tuple[int, int] = Field((240, 180), description="Depth image width, height.")
     gamma: float = Field(0.8, gt=0, lt=1, description="Merge threshold of the clustering.")
-    drift: float = Field(0.0, ge=0, le=0.2, description="Odometry drift, metres per metre.")
+    drift: float = Field(
+        0.0, ge=0, le=1, description="Odometry drift, metres of position error per metre travelled."
+    )
+    drift_yaw: float = Field(
+        0.0, ge=0, le=90, description="Odometry heading drift, degrees per metre travelled."
+    )
     out: Path = Field(Path("demo_out"), description="Output folder.")
 
 
@@ -83,7 +87,7 @@ def walk(config: ScanDemoConfig, scan: RealScan, console: Console) -> SimulatedS
     """The rendered, detected and fused walk, with a progress bar."""
     columns = (TextColumn("{task.description}"), BarColumn(),
                TextColumn("{task.completed}/{task.total}"), TimeElapsedColumn())  # fmt: skip
-    noise = DetectionNoise(drift_translation=config.drift, drift_yaw_deg=25.0 * config.drift)
+    noise = DetectionNoise(drift_translation=config.drift, drift_yaw_deg=config.drift_yaw)
     with Progress(*columns, console=console, transient=True) as progress:
         task = progress.add_task("rendering keyframes", total=config.keyframes)
         return simulate_walk(
@@ -109,25 +113,24 @@ def run_scan_demo(config: ScanDemoConfig, console: Console | None = None) -> Dem
         f"'{kind}' with {len(seq.global_maps[kind])} objects; {len(seq.keyframes)} keyframes "
         f"walked, {len(seq.local_map)} local objects fused"
     )
-    result, keyframes, statuses = localize_sequence(seq, kind, config.gamma, console)
+    result, history, warm = localize_sequence(seq, kind, config.gamma, console)
     t2 = time.perf_counter()
     rot = trans = None
     if result.pose is not None:
         rot, trans = pose_error(result.pose, seq.T_global_local)
     truth = set(seq.correspondences(kind))
     correct = sum(1 for p in (result.best.pairs if result.best else []) if p in truth)
-    demo = DemoResult(result, seq, rot, trans, correct, {"simulate": t1 - t0, "localize": t2 - t1})
+    seconds = {"simulate": t1 - t0, "warm_up": warm.seconds, "localize": t2 - t1 - warm.seconds}
+    demo = DemoResult(result, seq, rot, trans, correct, seconds, history=history, warm_up=warm)
     with staged_folder(config.out, index="result.json") as stage:  # all files or none
-        files = write_outputs(stage, kind, scan, demo, keyframes, statuses)
+        files = write_outputs(stage, kind, scan, demo)
     demo.files = [config.out / f.relative_to(stage) for f in files]
     demo.seconds["total"] = time.perf_counter() - t0
     _report(demo, config, console)  # type: ignore[arg-type]  # reads config.out only
     return demo
 
 
-def write_outputs(
-    out: Path, kind: str, scan: RealScan, demo: DemoResult, keyframes: list[int], statuses: list
-) -> list[Path]:
+def write_outputs(out: Path, kind: str, scan: RealScan, demo: DemoResult) -> list[Path]:
     """scores.png, map.png, scan.png, result.json, ground_truth.json, global.json, local.json."""
     from semloc.pictures.viz import (  # matplotlib (the pictures)
         label_colors,
@@ -141,10 +144,9 @@ def write_outputs(
     seq, result = demo.sequence, demo.result
     out.mkdir(parents=True, exist_ok=True)
     gmap = seq.global_maps[kind]
-    steps = [SimpleNamespace(step=kf, top_scores=s.top_scores)
-             for s, kf in zip(result.steps, keyframes, strict=False)]  # fmt: skip
     fig, ax = new_figure(8, 4.5)
-    plot_scores(ax, steps, statuses=statuses, x_label="keyframe",
+    statuses = [s.status for s in demo.history]
+    plot_scores(ax, demo.history, statuses=statuses, x_label="keyframe",
                 title=f"top-2 association-set scores ({scan.name}, {kind} map)")  # fmt: skip
     files = [save_figure(fig, out / "scores.png")]
     error = (
