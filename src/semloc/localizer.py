@@ -602,15 +602,15 @@ class Localizer:
         if not ids:
             return None
         arrivals = [self.window.arrival(l) for l in ids]
-        seen = [self._found[l][0].seen for l in ids]
+        keyframes = [self._found[l][0].seen for l in ids]
         window = self.window
         counts = {} if self._track is None else self._track.counts()
         if best.missing is None and self._looks:  # (weighed for the refined ones only)
-            seen, unseen = self._unseen(best.pose, list(self._looks))
-            best.missing, best.expected = len(unseen), len(seen)
+            in_view, unseen = self._unseen(best.pose, list(self._looks))
+            best.missing, best.expected = len(unseen), len(in_view)
         return Support(
             pairs=len(ids),
-            seen=(min(seen), max(seen)),
+            seen=(min(keyframes), max(keyframes)),
             updates_ago=window.updates - min(a.update for a in arrivals),
             metres=window.travel - min(a.travel for a in arrivals),
             tracked=self._track is not None,

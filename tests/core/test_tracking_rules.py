@@ -4,6 +4,7 @@ with moved objects, phantoms, gone objects, coverage and a look-alike kidnap."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 
@@ -270,6 +271,20 @@ def test_coverage_is_optional_and_round_trips_in_the_state():
     assert again.state() == state
     with pytest.raises(ValueError, match="range_m"):
         localizer.update([], coverage={"pose": np.eye(4).tolist(), "range_m": -1})
+
+
+def test_the_support_of_an_unweighed_best_place_names_keyframes_not_map_objects():
+    """A best place not weighed against the looks yet (not refined) is weighed for the
+    support; its keyframes stay those of its detections."""
+    building = ObjectMap(room(), up=[0, 0, 1])
+    localizer = Localizer(building, local_up=[0, 0, 1], track=False)
+    objects = local(list(building))
+    localizer.update(objects[:5])
+    best = localizer.update(objects, coverage=ALL_AROUND).best  # the look's every detection
+    unweighed = dataclasses.replace(best, missing=None, expected=None)
+    support = localizer._support_of(unweighed)
+    assert support.seen == localizer._support_of(best).seen  # its detections' keyframes
+    assert support.missing == 0 and support.expected >= 6
 
 
 def test_gone_objects_within_the_tolerated_share_do_not_end_a_right_claim():
