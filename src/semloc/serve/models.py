@@ -365,7 +365,10 @@ class SessionInfo(_Answer):
     map_version: int
     up: list[float] | None
     idle_s: float
-    last: dict[str, Any] | None = Field(description="Status, pose and stamp of its latest answer.")
+    last: dict[str, Any] | None = Field(
+        description="Status, pose and stamp of its latest answer (and, while it tracks its "
+        "place, `run_changes`: the run's change report)."
+    )
 
 
 # Change reports -----------------------------------------------------------------------------
