@@ -605,9 +605,15 @@ class Localizer:
         keyframes = [self._found[l][0].seen for l in ids]
         window = self.window
         counts = {} if self._track is None else self._track.counts()
-        if best.missing is None and self._looks:  # (weighed for the refined ones only)
-            in_view, unseen = self._unseen(best.pose, list(self._looks))
-            best.missing, best.expected = len(unseen), len(in_view)
+        missing_ids = None
+        if self._looks:
+            # the looks the count was made on: while tracked, this update's (when it has one)
+            newest = self._track is not None and self._look is not None and best.missing is not None
+            shown, unseen = self._unseen(best.pose, None if newest else list(self._looks))
+            if best.missing is None:  # (weighed for the refined ones only)
+                best.missing, best.expected = len(unseen), len(shown)
+            map_ids = self.global_map.ids
+            missing_ids = tuple(str(map_ids[i]) for i in unseen[: Support.MISSING_IDS_KEPT])
         return Support(
             pairs=len(ids),
             seen=(min(keyframes), max(keyframes)),
@@ -618,6 +624,7 @@ class Localizer:
             contradicting=counts.get("contradicting", 0),
             missing=best.missing,
             expected=best.expected,
+            missing_ids=missing_ids,
         )
 
     def _add_step(self, scores: list[float], seconds: float, status: Status | None) -> None:

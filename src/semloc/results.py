@@ -13,7 +13,7 @@ import reprlib
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import cached_property
-from typing import Any, Literal
+from typing import Any, ClassVar, Literal
 
 import numpy as np
 
@@ -161,6 +161,12 @@ class Support:
     coverage given, so no negative evidence)."""
     expected: int | None = None
     """Map objects the pose puts in the recent looks (None: no coverage given)."""
+    missing_ids: tuple[str, ...] | None = None
+    """The ids of the map objects counted in `missing`, as the answer's pose places the looks
+    (at most `MISSING_IDS_KEPT`, in the map's order; None: no coverage given)."""
+
+    MISSING_IDS_KEPT: ClassVar[int] = 50
+    """The most ids an answer lists (a look that misses more says so by `missing` alone)."""
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -173,6 +179,7 @@ class Support:
             "contradicting": self.contradicting,
             "missing": self.missing,
             "expected": self.expected,
+            "missing_ids": None if self.missing_ids is None else list(self.missing_ids),
         }
 
     @classmethod
@@ -184,11 +191,14 @@ class Support:
             assert isinstance(data, dict)
             seen = data["seen"]
             missing, expected = data.get("missing"), data.get("expected")
+            ids = data.get("missing_ids")
+            assert ids is None or (isinstance(ids, list) and all(isinstance(i, str) for i in ids))
             return cls(int(data["pairs"]), (int(seen[0]), int(seen[1])),
                        int(data["updates_ago"]), float(data["metres"]), bool(data["tracked"]),
                        int(data.get("changed", 0)), int(data.get("contradicting", 0)),
                        None if missing is None else int(missing),
-                       None if expected is None else int(expected))  # fmt: skip
+                       None if expected is None else int(expected),
+                       None if ids is None else tuple(ids))  # fmt: skip
         except (AssertionError, KeyError, IndexError, TypeError, ValueError):
             raise ValueError(f"'support' is not a support record: {_brief(data)}") from None
 

@@ -385,6 +385,10 @@ def test_camera_info_makes_each_update_say_what_the_camera_covered(walk, tmp_pat
     best = [r["hypotheses"][0] for r in results if r["hypotheses"] and r["hypotheses"][0]["pose"]]
     assert best and all("missing" in h and "expected" in h for h in best)
     assert results[-1]["status"] == "localized"
+    last = results[-1]["support"]
+    assert len(last["missing_ids"]) == min(last["missing"], 50)
+    said = f"support: {last['pairs']} pairs; {last['missing']} of {last['expected']} map objects"
+    assert said in " ".join(capsys.readouterr().out.split())
     plain = [line["result"] for line in _lines(walk / "out.jsonl")] if (
         walk / "out.jsonl").exists() else []  # fmt: skip
     assert all(r["support"] is None or r["support"]["missing"] is None for r in plain)

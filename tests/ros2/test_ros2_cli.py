@@ -108,3 +108,19 @@ def test_the_node_banner_lists_every_topic_it_reads(walk):  # noqa: F811
         node.send_signal(signal.SIGINT)
         node.communicate(timeout=30)
     assert ": /detections + /odom + /detections/points -> " in first, first
+
+
+def test_the_node_banner_names_the_camera_info_and_a_bad_range_is_refused(walk):  # noqa: F811
+    base = ["ros2", "node", "--map", str(walk / "global_reconstruction.json"), "--domain",
+            str(random.randrange(100, 200)), "--camera-info", "/camera_info"]  # fmt: skip
+    node = semloc(*base, "--range", "6")
+    try:
+        first = node.stdout.readline()
+    finally:
+        node.send_signal(signal.SIGINT)
+        rest, _ = node.communicate(timeout=30)
+    banner = " ".join((first + rest).split())  # (the console wraps long lines)
+    assert ": /detections + /odom + /camera_info (coverage to 6 m) + /tf_static -> " in banner
+    run = semloc(*base, "--range", "0")
+    _, err = run.communicate(timeout=60)
+    assert run.returncode == 2 and "Invalid value for '--range'" in err and "Traceback" not in err

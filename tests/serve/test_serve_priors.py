@@ -262,3 +262,24 @@ def test_the_node_s_remote_localizer_sends_a_prior_change_once(client, two_rooms
     assert opened.prior is None  # nothing answered yet: not known here
     opened.update(objects[:2])
     assert opened.prior == IN_B  # the session's opening prior, as its answer echoes it
+
+
+def test_the_node_s_remote_localizer_sends_the_coverage(client, two_rooms):
+    """`semloc ros2 node --server --camera-info`: each look goes with its session update, so
+    the served answers weigh it as an in-process Localizer does (and without one, neither)."""
+    from semloc.ros2.remote import RemoteLocalizer
+
+    world, view = two_rooms
+    objects = list(view)
+    look = semloc.Coverage(pose=np.eye(4), range_m=6.0, fov_deg=None)
+    remote = RemoteLocalizer(client.session("rooms", up=[0, 0, 1]), world)
+    reference = Localizer(world, local_up=[0, 0, 1])
+    for batch, coverage in ((objects[:4], None), (objects[4:], look), ([], look)):
+        got = remote.update(batch, coverage=coverage)
+        expected = reference.update(batch, coverage=coverage)
+        assert got.status == expected.status
+        assert got.support == expected.support
+        assert [(h.missing, h.expected) for h in got.hypotheses] == [
+            (h.missing, h.expected) for h in expected.hypotheses
+        ]
+    assert expected.hypotheses[0].expected is not None

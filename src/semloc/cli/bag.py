@@ -27,6 +27,7 @@ from semloc.cli.files import (
     read_label_map,
 )
 from semloc.cli.options import NearOption, RadiusOption, prior_option, topic_option
+from semloc.cli.render import support_line
 from semloc.io import load_map, write_files
 from semloc.localizer import LocalizerConfig
 from semloc.pictures.display import for_rich
@@ -236,6 +237,9 @@ def _report(
             f"{stream.updates} answers, {len(stream.local_map())} local objects; last answer: "
             f"{result.status}{conf} {result.reason}".rstrip()
         )
+        looks = support_line(result)
+        if looks:
+            console.print(looks)
     shown = ", ".join(f"{t} {counts.get(t, 0)}" for t in OUTPUT_TOPICS)
     console.print(f"wrote {for_rich(output, None)} ({shown}) in {seconds:.1f} s")
     if jsonl is not None:

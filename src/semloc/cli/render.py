@@ -44,6 +44,9 @@ def print_result(
         out.print(f"confidence: {best.confidence:.3f}")
     if result.reason:
         out.print(f"reason: {escape(result.reason)}")
+    looks = support_line(result)
+    if looks:
+        out.print(looks)
     pose_name = f"T_{frames[0]}_{frames[1]}"
     if result.pose is not None and result.status != "localized":
         out.print(
@@ -131,6 +134,25 @@ def _numbers(h: Hypothesis) -> tuple[str, ...]:
     rank = f"{h.rank}{OUTSIDE_MARK}" if h.outside_prior else str(h.rank)
     return (rank, f"{h.score:.2f}", str(len(h.pairs)), fitness, confidence, yaw,
             translation)  # fmt: skip
+
+
+MISSING_SHOWN = 8
+"""Ids of missing map objects the support line names (then `…`)."""
+
+
+def support_line(result: Result) -> str:
+    """`support: N pairs; M of E map objects in view missing: ids` when the updates said what
+    the sensor covered (empty otherwise: without coverage there is no negative evidence)."""
+    support = result.support
+    if support is None or support.expected is None or support.missing is None:
+        return ""
+    line = (f"support: {support.pairs} pairs; {support.missing} of {support.expected} map "
+            "objects in view missing")  # fmt: skip
+    ids = list(support.missing_ids or ())
+    if ids:
+        line += ": " + ", ".join(for_rich(i, 24) for i in ids[:MISSING_SHOWN])
+        line += " …" if support.missing > MISSING_SHOWN else ""
+    return line
 
 
 def timing_line(result: Result, warm: WarmUp | None = None) -> str:

@@ -29,7 +29,7 @@ from semloc.localizer import LocalizerConfig
 from semloc.pictures.live import FoxgloveView
 from semloc.ros import messages as msgs
 from semloc.ros.initialpose import TOPIC as INITIALPOSE_TOPIC
-from semloc.ros2.node import LiveNode, NodeSettings, Wire, samples
+from semloc.ros2.node import DEFAULT_RANGE_M, TF_STATIC, LiveNode, NodeSettings, Wire, samples
 from semloc.ros2.play import play
 from semloc.ros2.remote import RemoteLocalizer
 from semloc.ros2.wire import NETWORKS, choose_network
@@ -51,6 +51,8 @@ KNOWN_TOPICS = {
     "/odom": "nav_msgs/msg/Odometry",
     "/detections/points": "sensor_msgs/msg/PointCloud2",
     "/initialpose": "geometry_msgs/msg/PoseWithCovarianceStamped",
+    "/camera_info": "sensor_msgs/msg/CameraInfo",
+    "/tf_static": "tf2_msgs/msg/TFMessage",
 }
 """The topics `echo` knows the type of (others need `--type`)."""
 
@@ -144,10 +146,31 @@ def node(
     ] = INITIALPOSE_TOPIC,
     near: NearOption = None,
     radius: RadiusOption = None,
+    camera_info: Annotated[
+        str | None,
+        typer.Option(
+            "--camera-info",
+            help="sensor_msgs/msg/CameraInfo topic of the camera that made the detections: each "
+            "update then says what the camera covered (its field of view, placed by /tf_static), "
+            "and map objects in plain view that were not detected count against a place "
+            "[default: none, no coverage].",
+        ),
+    ] = None,
+    camera_range: Annotated[
+        float,
+        typer.Option(
+            "--range",
+            min=0.1,
+            max=1000.0,
+            help="How far (m) the detector finds objects reliably (with --camera-info).",
+        ),
+    ] = DEFAULT_RANGE_M,
 ) -> None:
     """Localize a robot's detections live: publish /semloc/pose, /tf, /semloc/status,
     /semloc/markers and /semloc/map on the DDS wire (Ctrl-C ends it).  --near/--radius: a
-    position prior on the odometry frame's origin, until a pose estimate on --initialpose."""
+    position prior on the odometry frame's origin, until a pose estimate on --initialpose.
+    --camera-info: each update says what the camera covered (from its first CameraInfo on;
+    until then without)."""
     need("ros2 node", "ros2")
     _network(network)
     prior = prior_option(near, radius)
@@ -168,7 +191,7 @@ def node(
         localizer = RemoteLocalizer(session, global_map)
     settings = NodeSettings(
         detections, topic_option(odom), _domain(domain), map_frame, reliable, points,
-        topic_option(initialpose), prior,
+        topic_option(initialpose), prior, camera_info, camera_range,
     )  # fmt: skip
     view = None
     if foxglove is not None:
@@ -176,6 +199,8 @@ def node(
         view = FoxgloveView(global_map, port=foxglove, map_frame=map_frame)
     live = LiveNode(global_map, cfg, settings, localizer=localizer)
     inputs = [detections, settings.odom or "no odometry"] + ([points] if points else [])
+    if camera_info is not None:
+        inputs += [f"{camera_info} (coverage to {camera_range:g} m)", TF_STATIC]
     console.print(
         f"semloc node on domain {settings.domain}: {' + '.join(inputs)}"
         f" -> /semloc/pose, /tf, /semloc/status, /semloc/markers, /semloc/map ({len(global_map)} "

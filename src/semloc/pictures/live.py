@@ -13,6 +13,9 @@ of every channel at once.
   boxes with their labels;
 - `/semloc/local` (`SceneUpdate`): the local objects placed by the best hypothesis (green
   when `localized`, orange when not) and a line from each matched one to its map partner;
+  with coverage, entity `missing`: the map objects the answer counts missing (in view of the
+  recent looks, detected by nobody: `Support.missing_ids`) as magenta boxes labelled
+  `missing ID`;
 - `/semloc/hypotheses` (`SceneUpdate`): where each of the best hypotheses puts the local
   frame's origin, with its rank and confidence, and, when the answer is ambiguous, its "look
   there next" suggestions (`semloc.pictures.looks`), one entity `next_look/N` each: for each
@@ -20,12 +23,14 @@ of every channel at once.
   to the spot to look at, labelled `look N: LABEL ID if #RANK`;
 - `/semloc/pose` (`foxglove.PoseInFrame`, frame `map`): the sensor's pose when `localized`;
 - `/tf` (`foxglove.FrameTransform`): `map` -> `odom` when `localized`;
-- `/semloc/status` (`foxglove.Log`): status, confidence and reason of each answer, and the
-  best suggestion of an ambiguous one.
+- `/semloc/status` (`foxglove.Log`): status, confidence and reason of each answer, the best
+  suggestion of an ambiguous one, and with coverage how many map objects in view were
+  missing.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -38,6 +43,33 @@ from semloc.results import Result
 
 STATUS_RGB = {"localized": (0.1, 0.8, 0.2), "ambiguous": (1.0, 0.7, 0.0), "failed": (0.9, 0.1, 0.1)}
 HYPOTHESES = 5
+MISSING_RGB = (1.0, 0.0, 1.0)
+"""Magenta: the map objects an answer counts missing (no label colour is this loud)."""
+
+
+@dataclass(frozen=True)
+class Box:
+    """A box to draw: its pose in the map (4 x 4), size (m) and label."""
+
+    T: np.ndarray
+    size: np.ndarray
+    text: str
+
+
+def missing_boxes(result: Result, global_map: ObjectMap) -> list[Box]:
+    """The map objects the answer counts missing (`Support.missing_ids`), as boxes 10 cm
+    larger than the map's (so they show around them), labelled `missing ID`."""
+    ids = () if result.support is None else result.support.missing_ids or ()
+    boxes = []
+    for gid in ids:
+        obj = global_map.get(gid)
+        T = np.eye(4)
+        T[:3, 3] = obj.position
+        if obj.rotation is not None:
+            T[:3, :3] = obj.rotation
+        size = (obj.size if obj.size is not None else np.full(3, 0.2)) + 0.1
+        boxes.append(Box(T, size, f"missing {gid}"))
+    return boxes
 
 
 def _quaternion(R: np.ndarray) -> tuple[float, float, float, float]:
@@ -133,8 +165,11 @@ class FoxgloveView:
     def _local_scene(self, result: Result, local_map: ObjectMap) -> Any:
         """The local objects placed by the best hypothesis, lines to their map partners."""
         m, best = self.m, result.best
+        missing = self._missing_entity(result)
         if best is None or best.pose is None:
-            return m.SceneUpdate(entities=[m.SceneEntity(frame_id=self.map_frame, id="local")])
+            return m.SceneUpdate(
+                entities=[m.SceneEntity(frame_id=self.map_frame, id="local"), missing]
+            )
         colour = self._color(STATUS_RGB[result.status], 1.0)
         placed = {o.id: best.pose[:3, :3] @ o.position + best.pose[:3, 3] for o in local_map}
         spheres = [m.SpherePrimitive(pose=self._at(p), size=m.Vector3(x=0.15, y=0.15, z=0.15),
@@ -145,7 +180,20 @@ class FoxgloveView:
         lines = [m.LinePrimitive(type=m.LinePrimitiveLineType.LineList, thickness=0.02,
                                  points=points, color=colour)] if points else []  # fmt: skip
         return m.SceneUpdate(entities=[m.SceneEntity(frame_id=self.map_frame, id="local",
-                                                     spheres=spheres, lines=lines)])  # fmt: skip
+                                                     spheres=spheres, lines=lines), missing])  # fmt: skip
+
+    def _missing_entity(self, result: Result) -> Any:
+        """The map objects the answer counts missing, as boxes a little larger than the map's
+        (an empty entity replaces the previous answer's)."""
+        m = self.m
+        colour = self._color(MISSING_RGB, 0.8)
+        cubes, texts = [], []
+        for box in missing_boxes(result, self.global_map):
+            size = m.Vector3(x=float(box.size[0]), y=float(box.size[1]), z=float(box.size[2]))
+            cubes.append(m.CubePrimitive(pose=self._pose(box.T), color=colour, size=size))
+            above = box.T[:3, 3] + [0.0, 0.0, float(box.size[2]) / 2 + 0.3]
+            texts.append(self._text(above, box.text, 12.0, colour))
+        return m.SceneEntity(frame_id=self.map_frame, id="missing", cubes=cubes, texts=texts)
 
     def _hypotheses_scene(self, result: Result, T_odom_sensor: np.ndarray | None) -> Any:
         """The best hypotheses' origins with rank and confidence, and the next-look arrows
@@ -182,6 +230,9 @@ class FoxgloveView:
             look = result.next_look[0]
             ranks = ", ".join(f"#{r}" for r in look.separates)
             text += f"; look at {look.label} {look.global_id} (tells {ranks})"
+        support = result.support
+        if support is not None and support.expected is not None:
+            text += f"; {support.missing} of {support.expected} map objects in view missing"
         level = m.LogLevel.Info if result.status == "localized" else m.LogLevel.Warning
         return m.Log(level=level, name="semloc", message=text)
 

@@ -57,9 +57,14 @@ class StaticFrames:
     def __init__(self, messages: Iterable[Any] = ()) -> None:
         self.parent: dict[str, tuple[str, np.ndarray]] = {}  # child -> (parent, T_parent_child)
         for message in messages:
-            for t in message.transforms:
-                T = msgs.matrix(t.transform)
-                self.parent[str(t.child_frame_id)] = (str(t.header.frame_id), T)
+            self.add(message)
+
+    def add(self, message: Any) -> None:
+        """The transforms of one more message (a later transform of a child replaces the
+        earlier one, as tf2's buffer does)."""
+        for t in message.transforms:
+            T = msgs.matrix(t.transform)
+            self.parent[str(t.child_frame_id)] = (str(t.header.frame_id), T)
 
     def _to_root(self, frame: str) -> tuple[str, np.ndarray]:
         """The root of `frame`'s static tree and T_root_frame."""

@@ -29,6 +29,18 @@ the map frame, RViz's "2D Pose Estimate") replaces it from the next update on, c
 the odometry at its stamp (`semloc.ros.initialpose`; it waits for the first odometry).  Each
 answer carries the prior in effect (`Answer.prior`, `"prior"` in `/semloc/status`).
 
+Coverage: with a `camera_info` topic (sensor_msgs/CameraInfo of the camera that made the
+detections, `--camera-info`), each update says what the camera covered (`semloc.Coverage`:
+its field of view from the latest CameraInfo, out to `range_m`, placed in the detections'
+frame by the static transforms heard on `/tf_static` and in the odometry frame by the
+detections' pose), as `bag localize --camera-info` does, and map objects in plain view that
+were not detected count against a place.  Until the first CameraInfo arrives the updates carry
+no coverage (said once in the log): a node never waits for a camera that may not publish.
+`/tf_static` is read reliable and transient-local, as tf2 does, so transforms latched before
+the node started arrive too.  A camera frame no static transform joins to the detections'
+frame leaves that update without coverage (counted in `skipped`, as a warning).  Without
+`camera_info` no coverage is used.
+
 Problems with the messages (no odometry, other frames, unreadable clouds or poses) are
 counted in `skipped` and logged once per kind as warnings (logger `semloc.ros2`).
 
@@ -49,12 +61,14 @@ from typing import Any
 
 import numpy as np
 
+from semloc.coverage import Coverage
 from semloc.localizer import LocalizerConfig
 from semloc.maps import ObjectMap
 from semloc.priors import Prior
 from semloc.ros import messages as msgs
 from semloc.ros.answers import MAP_TOPIC, MATCHES_TOPIC, OUTPUT_TOPICS, AnswerTopics, Frames
 from semloc.ros.bag import CLOUD_WAIT_NS, MAX_GAP_S, NO_CLASS, cloud_points, detection_frame
+from semloc.ros.camera import Camera, CameraCoverage, CameraError, StaticFrames
 from semloc.ros.frames import Trajectory
 from semloc.ros.initialpose import TOPIC as INITIALPOSE_TOPIC
 from semloc.ros.initialpose import UnusableEstimate, estimate_prior
@@ -66,6 +80,9 @@ MARKERS_TOPIC = "/semloc/markers"
 TOPIC_RENAMES = {MATCHES_TOPIC: MARKERS_TOPIC}
 """The bag's topic names that the node publishes under another name."""
 HISTORY = 200
+TF_STATIC = "/tf_static"
+DEFAULT_RANGE_M = 5.0
+"""How far (m) the detector finds objects reliably, by default (as `bag localize --range`)."""
 CLOUD_WAIT_S = CLOUD_WAIT_NS / 1e9
 """Seconds a detection message waits for its point cloud (with a `points` topic)."""
 log = logging.getLogger("semloc.ros2")
@@ -75,7 +92,8 @@ log = logging.getLogger("semloc.ros2")
 class NodeSettings:
     """Topics, frames, the DDS domain, the subscriptions' reliability and the prior: the
     detections' points on `points` (None: none), pose estimates on `initialpose` (None: not
-    read), `prior` on the odometry frame's origin from the start."""
+    read), `prior` on the odometry frame's origin from the start, the CameraInfo of the
+    detections' camera on `camera_info` (None: no coverage) and how far it sees (`range_m`)."""
 
     detections: str = "/detections"
     odom: str | None = "/odom"
@@ -85,6 +103,8 @@ class NodeSettings:
     points: str | None = None
     initialpose: str | None = INITIALPOSE_TOPIC
     prior: Prior | None = None
+    camera_info: str | None = None
+    range_m: float = DEFAULT_RANGE_M
 
 
 class Wire:
@@ -110,12 +130,13 @@ class Wire:
         return Qos(reliability, durability, Policy.History.KeepLast(depth),
                    Policy.DataRepresentation(use_cdrv0_representation=True))  # fmt: skip
 
-    def reader(self, topic: str, typename: str, reliable: bool) -> Any:
+    def reader(self, topic: str, typename: str, reliable: bool, latched: bool = False) -> Any:
+        """`latched`: also the messages published before it joined (transient-local)."""
         from cyclonedds.sub import DataReader
         from cyclonedds.topic import Topic
 
         dds_topic = Topic(self.participant, topic_name(topic), idl_type(typename))
-        return DataReader(self.participant, dds_topic, qos=self.qos(reliable))
+        return DataReader(self.participant, dds_topic, qos=self.qos(reliable, latched))
 
     def writer(self, topic: str, typename: str, latched: bool = False) -> Any:
         from cyclonedds.pub import DataWriter
@@ -188,6 +209,17 @@ class LiveNode:
         self._initialpose = (
             None if s.initialpose is None else self.wire.reader(s.initialpose, msgs.POSE, s.reliable)
         )  # fmt: skip
+        self._camera_info = (
+            None if s.camera_info is None
+            else self.wire.reader(s.camera_info, msgs.CAMERA_INFO, s.reliable)
+        )  # fmt: skip
+        self._tf_static = (
+            None if s.camera_info is None
+            else self.wire.reader(TF_STATIC, msgs.TF, reliable=True, latched=True)
+        )  # fmt: skip
+        self.camera: Camera | None = None  # from the latest CameraInfo that gave one
+        self.statics = StaticFrames()
+        self._said_no_camera = False
         self._estimate: Any = None  # the latest pose estimate not yet applied
         self._clouds: dict[tuple[int, str], Any] = {}  # (stamp, frame) -> cloud message
         self._waiting: deque[tuple[float, Any]] = deque()  # (received, detection message)
@@ -215,6 +247,7 @@ class LiveNode:
                 self._estimate = message  # the latest estimate wins
         if self._estimate is not None:
             self._apply_estimate()
+        self._read_camera()
         if self._points is not None:
             for message in samples(self._points):
                 self._clouds[(msgs.stamp_ns(message.header.stamp), message.header.frame_id)] = (
@@ -236,7 +269,7 @@ class LiveNode:
             del self._frames[id(message)]
             if pose is None:
                 continue
-            result = self.stream.step(frame, pose)
+            result = self.stream.step(frame, pose, self._coverage(frame, pose))
             if result is None:
                 continue
             answer = Answer(frame.stamp, frame.frame, self._odom_frame(frame), pose, result,
@@ -298,6 +331,45 @@ class LiveNode:
             self._skip(NO_CLASS, count=dropped)
         self._frames[id(message)] = frame
         return frame
+
+    def _read_camera(self) -> None:
+        """The static transforms and the latest usable CameraInfo that arrived."""
+        if self._tf_static is not None:
+            for message in samples(self._tf_static):
+                self.statics.add(message)
+        if self._camera_info is None:
+            return
+        for message in samples(self._camera_info):
+            try:
+                camera = Camera.of(message)
+            except CameraError as exc:
+                self._skip("camera info messages without a field of view", str(exc))
+                continue
+            if camera != self.camera:
+                h, v = camera.fov_deg
+                log.info("coverage from %s: camera frame '%s', field of view %.0f x %.0f deg, "
+                         "range %g m", self.settings.camera_info, camera.frame, h, v,
+                         self.settings.range_m)  # fmt: skip
+            self.camera = camera
+
+    def _coverage(self, frame: DetectionFrame, pose: np.ndarray) -> Coverage | None:
+        """What the camera covered at this message (None: no camera info topic, none heard
+        yet, or a camera no static transform places)."""
+        if self._camera_info is None:
+            return None
+        if self.camera is None:
+            if not self._said_no_camera:
+                log.info("semloc node: no CameraInfo on %s yet; updates without coverage until "
+                         "one arrives", self.settings.camera_info)  # fmt: skip
+                self._said_no_camera = True
+            return None
+        look = CameraCoverage(self.camera, self.statics, self.settings.range_m)
+        try:
+            return look.at(pose, frame.frame)
+        except CameraError as exc:
+            self._skip("detection messages whose camera no static transform places (used "
+                       "without coverage)", str(exc))  # fmt: skip
+            return None
 
     def _apply_estimate(self) -> None:
         """The pending pose estimate as the prior from the next update on, once the odometry

@@ -1,7 +1,8 @@
 """Localizing through `semloc serve` instead of in-process: a `Localizer` stand-in for the node.
 
 `RemoteLocalizer(session)` takes the node's fused objects like `Localizer.update` and sends
-them as one update of a service session (`semloc.client.Session`, with the device's position),
+them as one update of a service session (`semloc.client.Session`, with the device's position
+and, when given, what the sensor covered),
 returning the service's answer as a `Result`; `set_prior` sets the session's position prior
 from the next update on (sent with it) and `prior` is the one in effect; `local_map` holds the latest version of the
 objects it sent (at most `window` of them, newest kept), for the markers.
@@ -16,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from semloc.coverage import Coverage
 from semloc.maps import ObjectMap, SemanticObject
 from semloc.priors import Prior
 from semloc.results import Result
@@ -43,7 +45,13 @@ class RemoteLocalizer:
         """The session's prior from the next update on (None: none)."""
         self._prior_set, self._prior = True, prior
 
-    def update(self, objects: Iterable[SemanticObject], *, position: Any = None) -> Result:
+    def update(
+        self,
+        objects: Iterable[SemanticObject],
+        *,
+        position: Any = None,
+        coverage: Coverage | None = None,
+    ) -> Result:
         objects = list(objects)
         for obj in objects:
             self._local.pop(obj.id, None)
@@ -56,7 +64,12 @@ class RemoteLocalizer:
             at = (array[:3, 3] if array.shape == (4, 4) else array.reshape(3)).tolist()
         prior, clear = self._prior, self._prior_set and self._prior is None
         answer = self.session.update(
-            objects, stamp=time.time(), position=at, prior=prior, clear_prior=clear
+            objects,
+            stamp=time.time(),
+            position=at,
+            prior=prior,
+            clear_prior=clear,
+            coverage=coverage,
         )
         self._prior_set, self._prior = False, None
         echoed = answer.get("prior")

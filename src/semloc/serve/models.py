@@ -268,6 +268,11 @@ class Support(_Answer):
     expected: int | None = Field(
         None, description="Map objects the pose puts in the recent looks (null: no coverage)."
     )
+    missing_ids: list[str] | None = Field(
+        None,
+        description="The ids of the map objects counted in `missing`, as the answer's pose "
+        "places the looks (at most 50, in the map's order; null: no coverage).",
+    )
 
 
 class NextLook(_Answer):
@@ -360,7 +365,10 @@ class SessionInfo(_Answer):
     map_version: int
     up: list[float] | None
     idle_s: float
-    last: dict[str, Any] | None = Field(description="Status, pose and stamp of its latest answer.")
+    last: dict[str, Any] | None = Field(
+        description="Status, pose and stamp of its latest answer (and, while it tracks its "
+        "place, `run_changes`: the run's change report)."
+    )
 
 
 # Change reports -----------------------------------------------------------------------------

@@ -43,6 +43,7 @@ import numpy as np
 
 from semloc.association import CandidateIndex, label_report
 from semloc.changes import (
+    Changes,
     ReportConflict,
     answer_changes,
     apply_changes,
@@ -623,7 +624,19 @@ class Service:
         """Apply a localization result's changes as a new version: `{"version", "changed"}`.
         Nothing is written when the report changes nothing; `Conflict` when the map moved on
         and the report no longer applies.  A report sent again by `owner` with its
-        `idempotency` key gets the first answer."""
+        `idempotency` key gets the first answer.
+
+        The changes are never the body's own: they are recomputed from the local objects, the
+        pose and the pairs (`answer_changes`), except for a session (`session_id`) whose latest
+        answer tracks its place: then they are the run's report that the server itself
+        accumulated over the walk (`Result.changes` while tracked: moved and new objects seen
+        at least twice, missing ones looked at twice and not seen), which is what a robot's
+        day found, with the evidence a single view lacks (a phantom is seen once), together
+        with the moves the latest view shows of objects the run does not name (a single
+        view's move needs its old place seen empty: evidence of its own); that view's new and
+        missing objects are not taken.  Moved objects go where the session's latest detection
+        of them puts them under the answer's pose; map objects the latest view sees in place
+        clear their `missing` flag."""
         if not isinstance(body, dict):
             raise Invalid("invalid change report", "the body must be a result object")
         key = request_key(f"changes {owner} {map_id}", idempotency)
@@ -658,6 +671,8 @@ class Service:
         changes = answer_changes(
             base, local, pose, pairs, self.config.association, self.config.changes
         )  # the report's own `changes` are not trusted: they are recomputed here
+        if isinstance(kept.get(RUN_CHANGES), dict):  # the server's own record of the run
+            changes = _run_report(changes, Changes.from_dict(kept[RUN_CHANGES]), local)
         if not (changes.moved or changes.new or changes.missing or flags_to_clear(base, changes)):
             latest = self.store.latest_version(map_id) or base_version
             unchanged = {"version": latest, "changed": False}
@@ -732,8 +747,29 @@ def _reported_answer(body: dict) -> tuple[np.ndarray, list[tuple[str, str]]]:
     return pose, pairs
 
 
-ANSWER_KEYS = ("status", "pose", "hypotheses", "map_version")
+RUN_CHANGES = "run_changes"
+"""The key of a session's summary that holds its tracked answer's run report."""
+ANSWER_KEYS = ("status", "pose", "hypotheses", "map_version", RUN_CHANGES)
 """What the server keeps of an answer to check a change report of it."""
+
+
+def _run_report(latest: Changes, run: Changes, local: ObjectMap) -> Changes:
+    """A session's run report as the changes to apply: its moved, new and missing objects
+    (those whose local objects the session holds); the moves the latest view shows of objects
+    the run does not name (a single view's move has evidence of its own: the old place seen
+    empty, with points); and the map objects the latest view matched in place (which clear a
+    `missing` flag).  The latest view's new and missing objects are left out: once is not
+    enough (a phantom, a miss)."""
+    held = set(local.ids.tolist())
+    moved = [m for m in run.moved if m.local_id in held]
+    named = {m.global_id for m in moved} | set(run.missing)
+    named_local = {m.local_id for m in moved} | set(run.new)
+    moved += [m for m in latest.moved
+              if m.global_id not in named and m.local_id not in named_local]  # fmt: skip
+    changed = {m.global_id for m in moved} | set(run.missing)
+    matched = [g for g in latest.matched if g not in changed]
+    return Changes(moved, [i for i in run.new if i in held], list(run.missing), matched,
+                   evidence=run.evidence)  # fmt: skip
 
 
 def _answer_record(document: dict[str, Any]) -> dict[str, Any]:
@@ -747,4 +783,7 @@ def _answer_record(document: dict[str, Any]) -> dict[str, Any]:
 def _summary(document: dict[str, Any]) -> dict[str, Any]:
     """What the page shows of a session's latest answer (and a change report checks)."""
     shown = {key: document.get(key) for key in ("confidence", "stamp", "update")}
-    return {**shown, **_answer_record(document)}
+    summary = {**shown, **_answer_record(document)}
+    if (document.get("support") or {}).get("tracked") and document.get("changes"):
+        summary[RUN_CHANGES] = document["changes"]  # the run's report (see report_changes)
+    return summary
