@@ -62,6 +62,7 @@ from semloc.results import Hypothesis, Result, Status, Step, Support
 from semloc.semantics import pair_weight
 from semloc.tracking import (
     CONTRADICTED,
+    CONTRADICTION_UPDATES,
     Track,
     TrackingConfig,
     Verdict,
@@ -399,6 +400,8 @@ class Localizer:
                 why = self._prior.why_outside(np.asarray(hypotheses[0].pose))
             if status == "localized" and self._newest_contradict(hypotheses[0]):
                 status, why = "ambiguous", NEWEST_CONTRADICT
+            elif status == "localized" and self._stale([l for _, l in hypotheses[0].pairs]):
+                status, why = "ambiguous", self._stale_reason()
             if reason:
                 status, why = "ambiguous", reason
             reason = why
@@ -433,17 +436,18 @@ class Localizer:
                               verdict.repeated, excess)  # fmt: skip
         against = track.contradicted(verdict)
         if against:  # a fresh window of the contradicting updates' objects
-            self._end_track()
-            self.window.keep_only(self.window.since(self.window.updates - against + 1))
-            self._found = {i: f for i, f in self._found.items() if i in self.window}
-            return self._search_update(objects, answer, start, reason=CONTRADICTED)
+            return self._contradicted(against, objects, answer, start)
         track.accept(verdict)
         self._observe_changes(track, verdict, objects, candidates, looked_unseen)
         self._search_stale = True  # the search did not see these objects
-        followed = self._follow(track) if len(track.pairs) >= self._min_track_pairs() else None
-        if followed is None or not self._within_prior(track.pose):
-            # too little evidence left in the window, or the place left the prior: search again
-            self._end_track()
+        if len(track.pairs) < self._min_track_pairs() or self._stale(list(track.pairs)):
+            self._end_track()  # too little, or too old, evidence left in the window: search again
+            return self._search_update(objects, answer, start)
+        followed = self._follow(track)
+        if followed is None:  # its newest pairs fit no one pose: the robot (or odometry) jumped
+            return self._contradicted(CONTRADICTION_UPDATES, objects, answer, start)
+        if not self._within_prior(track.pose):
+            self._end_track()  # the place left the prior: search again
             return self._search_update(objects, answer, start)
         end = time.perf_counter()
         self._add_timing(0.0, 0.0, end - start)
@@ -455,6 +459,16 @@ class Localizer:
         if not answer:
             return None
         return self._result("localized", [hypothesis], "", self._changes([hypothesis]))
+
+    def _contradicted(
+        self, updates: int, objects: list[SemanticObject], answer: bool, start: float
+    ):
+        """End the claim: search again on the objects of the latest `updates` updates only (the
+        older ones may show the place the robot has left), and answer `ambiguous`."""
+        self._end_track()
+        self.window.keep_only(self.window.since(self.window.updates - updates + 1))
+        self._found = {i: f for i, f in self._found.items() if i in self.window}
+        return self._search_update(objects, answer, start, reason=CONTRADICTED)
 
     def _unseen(
         self, pose: np.ndarray, looks: list[tuple[int, Coverage]] | None = None
@@ -525,6 +539,16 @@ class Localizer:
         if self._allowance is None:
             self._allowance = allowances(self.global_map, self.config.tracking.track_tolerance)
         return self._allowance
+
+    def _stale(self, local_ids: list[str]) -> bool:
+        """Whether none of these local objects was detected within `tracking.stale_m` metres of
+        travel (a claim is about where the robot is now)."""
+        stale_m, window = self.config.tracking.stale_m, self.window
+        found = [window.arrival(l).travel for l in local_ids if l in window]
+        return stale_m is not None and (not found or window.travel - max(found) > stale_m)
+
+    def _stale_reason(self) -> str:
+        return f"{STALE}: none of its objects was detected in the last {self.config.tracking.stale_m:g} m"
 
     def _min_track_pairs(self) -> int:
         return max(self.config.tracking.track_min_pairs, self.config.decision.min_pairs)
@@ -927,6 +951,9 @@ EMPTY_LOCAL_MAP = "the local map has no objects"
 LOOKS_KEPT = 6
 """The search weighs the sensor's looks of this many latest updates (negative evidence)."""
 NEWEST_CONTRADICT = "contradicted by the newest objects"
+STALE = "stale evidence"
+"""The reason (its start) of a search's answer whose best place was not seen of late
+(`tracking.stale_m`)."""
 """The reason of a search's answer whose best place the latest updates' objects contradict."""
 STATE_VERSION = 1
 """The layout of `Localizer.state()`."""

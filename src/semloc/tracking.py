@@ -20,7 +20,10 @@ search's cost grows with the local objects; tracking costs a lookup per new obje
 * **Follow.**  The supporting pairs are kept, newest last (one per map object and per local
   object); the pose is refitted to the newest `pairs` of them, warm-started from the tracked
   pose.  Changed objects never refit the pose.  Odometry drift is slow, so the newest objects,
-  seen near the robot, give the pose that is right *now* where the robot is.
+  seen near the robot, give the pose that is right *now* where the robot is.  When no one pose
+  fits them (their residual beyond `track_tolerance`), the robot or its odometry jumped: the
+  claim ends as contradicted, on a fresh window of the latest `CONTRADICTION_UPDATES` updates
+  (the older objects show the place the robot left, and would find it again).
 * **Contradiction.**  The evidence against an update is its contradicting and its changed
   objects (a change is no support: a wrong place explains detections by "moves" as readily
   as a right one) and its missing ones beyond the tolerated share; for it, its supporting
@@ -37,7 +40,10 @@ search's cost grows with the local objects; tracking costs a lookup per new obje
   (`EVIDENCE_LOGITS`: supporting, changed, contradicting, missing).
 * **Lapse.**  When fewer than `min_pairs` supporting pairs remain in the window (the robot saw
   nothing it could check for a while), the claim is not renewed and the search resumes on the
-  window.
+  window.  Nor is it when none of its supporting objects was detected within the last
+  `stale_m` metres of travel: a robot carried off while it saw nothing (an empty corridor)
+  would otherwise keep a place it cannot check; the search then answers `ambiguous` until
+  something is seen (a claim is about now).
 """
 
 from __future__ import annotations
@@ -110,6 +116,13 @@ class TrackingConfig(BaseModel):
     )
     min_judged: int = Field(
         8, ge=1, description="Objects judged since the claim began before that share is asked."
+    )
+    stale_m: float | None = Field(
+        6.0,
+        gt=0,
+        description="A claim needs a detection of its place within this many metres of "
+        "odometry travel: older evidence says where the robot was, not where it is (needs "
+        "robot positions; None: no bound).",
     )
 
 

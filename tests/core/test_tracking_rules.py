@@ -14,11 +14,12 @@ import pytest
 from semloc import Coverage, Localizer, ObjectMap, Prior, SemanticObject
 from semloc.changes import RunChanges
 from semloc.decision import RIVAL_LOGIT_GAP, missing_penalty, prior_first
-from semloc.localizer import NEWEST_CONTRADICT
+from semloc.localizer import NEWEST_CONTRADICT, STALE
 from semloc.results import Hypothesis
 from semloc.tracking import (
     CONFIDENCE_CAP,
     CONTRADICTED,
+    CONTRADICTION_UPDATES,
     EVIDENCE_LOGITS,
     Track,
     TrackingConfig,
@@ -247,6 +248,42 @@ def test_a_moved_object_is_reported_moved_and_does_not_move_the_pose():
     assert result.changes.moved[0].offset_m == pytest.approx(2.0, abs=0.05)
     assert np.allclose(result.pose, before, atol=1e-6)
     assert ("a2", "moved-lamp") not in result.best.pairs
+
+
+def test_newest_pairs_that_fit_no_one_pose_end_the_claim_on_a_fresh_window():
+    """Each of these objects lies within the tolerance of its map object, but in another
+    direction: no one pose fits them, so the robot or its odometry jumped.  The claim ends as
+    contradicted and the search restarts on the latest updates' objects only."""
+    building = ObjectMap(room(), up=[0, 0, 1])
+    localizer = claimed(building)
+    for _ in range(CONTRADICTION_UPDATES):
+        assert localizer.update([]).status == "localized"
+    jitter = [o.replace(id=f"j{o.id}", size=None,
+                        position=o.position + 0.75 * np.array([math.cos(2.4 * k), math.sin(2.4 * k), 0]))
+              for k, o in enumerate(room())]  # fmt: skip
+    result = localizer.update(jitter)
+    assert (result.status, result.reason) == ("ambiguous", CONTRADICTED)
+    assert {o.id for o in localizer.window.objects} == {o.id for o in jitter}
+
+
+def test_a_claim_needs_a_detection_of_its_place_within_the_stale_distance():
+    """Walking on with nothing seen, the claim holds for `stale_m` metres of travel; beyond, a
+    kidnap could not be told, so the answer is `ambiguous` (stale) until the place is seen
+    again."""
+    building = ObjectMap(room(), up=[0, 0, 1])
+    localizer = Localizer(building, local_up=[0, 0, 1])
+    objects = local(list(building))
+    localizer.update(objects[:5], position=[0.0, 0, 0])
+    assert localizer.update(objects[5:], position=[0.0, 0, 0]).status == "localized"
+    stale_m = localizer.config.tracking.stale_m
+    statuses = {}
+    for x in range(1, int(stale_m) + 3):
+        result = localizer.update([], position=[float(x), 0, 0])
+        statuses[x] = result.status
+    assert statuses[int(stale_m)] == "localized"
+    assert statuses[int(stale_m) + 1] == "ambiguous" and result.reason.startswith(STALE)
+    again = localizer.update(objects[:4], position=[stale_m + 2, 0, 0])  # seen again
+    assert again.status == "localized"
 
 
 def test_a_phantom_never_becomes_support():

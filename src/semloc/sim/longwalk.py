@@ -16,7 +16,7 @@ Objects are sent in the odometry frame, so the true `T_global_local` of keyframe
 robot pose times the inverse of the odometry pose, and changes slowly as drift accumulates.
 A kidnap at keyframe `kidnap_at` (and at each of `more_kidnaps`) carries the robot at least
 `kidnap_distance` away; odometry does not notice (the true `T_global_local` jumps).  A kidnap
-at `lookalike_at` carries it into the look-alike of where it stands: the same spot, facing the
+at `lookalike_at` (and at each of `more_lookalikes`) carries it into the look-alike of where it stands: the same spot, facing the
 same way, beside the map object of the nearest object's label whose surroundings repeat the
 most labels (another copy of the room in a building of alike rooms).
 
@@ -82,6 +82,7 @@ class WalkConfig:
     kidnap_distance: float = 12.0
     more_kidnaps: tuple[int, ...] = ()
     lookalike_at: int | None = None
+    more_lookalikes: tuple[int, ...] = ()
     world: World = field(default_factory=World)
 
 
@@ -159,8 +160,11 @@ class LongWalk:
         sent: dict[int, tuple[str, int]] = {}  # global index -> (local id, last keyframe)
         counter = iter(range(10**9))
         kidnaps = {*cfg.more_kidnaps, *((cfg.kidnap_at,) if cfg.kidnap_at is not None else ())}
+        lookalikes = {*cfg.more_lookalikes}
+        if cfg.lookalike_at is not None:
+            lookalikes.add(cfg.lookalike_at)
         for k in range(cfg.keyframes):
-            kidnapped = k in kidnaps or k == cfg.lookalike_at
+            kidnapped = k in kidnaps or k in lookalikes
             if k > 0:
                 while np.linalg.norm(target - robot) < cfg.step:
                     target = xy[rng.integers(len(xy))]
@@ -170,7 +174,7 @@ class LongWalk:
                 yaw += turn
                 robot = robot + move * np.array([np.cos(yaw), np.sin(yaw)])
                 odom = self._odometry(odom, turn, move)
-                if k == cfg.lookalike_at:
+                if k in lookalikes:
                     robot = self._lookalike(robot)
                     target = robot
                 elif kidnapped:
