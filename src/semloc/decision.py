@@ -417,14 +417,23 @@ different regions: perhaps copies of one place (the Localizer screens one set pe
 region beyond its best sets in a building)."""
 
 
-def new_regions(centroids: np.ndarray, first: int, apart: float = PLACE_APART) -> np.ndarray:
+def new_regions(
+    centroids: np.ndarray, first: int, apart: float = PLACE_APART, most: int | None = None
+) -> np.ndarray:
     """The rows after the `first` whose centroid lies farther than `apart` from those of the
-    first rows and of every earlier row taken (in order): one set per region not covered."""
-    taken = list(centroids[:first])
-    rows = []
+    first rows and of every earlier row taken (in order): one set per region not covered; at
+    most `most` of them (None: all)."""
+    centroids = np.asarray(centroids, dtype=float).reshape(-1, 3)
+    taken = np.empty_like(centroids)
+    count = min(first, len(centroids))
+    taken[:count] = centroids[:count]
+    rows: list[int] = []
     for row in range(first, len(centroids)):
-        if np.min(np.linalg.norm(np.asarray(taken) - centroids[row], axis=1)) > apart:
-            taken.append(centroids[row])
+        if most is not None and len(rows) >= most:
+            break
+        if np.min(np.linalg.norm(taken[:count] - centroids[row], axis=1)) > apart:
+            taken[count] = centroids[row]
+            count += 1
             rows.append(row)
     return np.array(rows, dtype=np.int64)
 

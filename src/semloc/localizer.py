@@ -808,7 +808,7 @@ class Localizer:
         ends = np.cumsum(sets.sizes[:largest])
         centroids = np.add.reduceat(self.global_map.positions[sets.pairs[: ends[-1], 0]],
                                     ends - sets.sizes[:largest]) / sets.sizes[:largest, None]  # fmt: skip
-        extra = new_regions(centroids, limit)
+        extra = new_regions(centroids, limit, most=limit + 1)
         rows = np.concatenate([np.arange(limit), extra[:limit]])
         return _rows_of(sets, rows), len(extra) > limit
 

@@ -107,3 +107,9 @@ def test_a_small_map_screens_only_its_best_sets():
     result = semloc.localize(world, _view(a), config=config)
     places = {h.pairs[0][0].split("/")[0] for h in result.hypotheses if len(h.pairs) == 6}
     assert len(places) == 1
+
+
+def test_new_regions_stop_at_the_most_asked_for():
+    centroids = np.array([[k * 2 * PLACE_APART, 0.0, 0.0] for k in range(6)])
+    assert new_regions(centroids, 1, most=2).tolist() == [1, 2]
+    assert new_regions(centroids, 1).tolist() == [1, 2, 3, 4, 5]
