@@ -442,6 +442,16 @@ SEARCH_CUT = "the search was cut"
 """The reason's start when places as well supported as the best were left out of the search."""
 
 
+def as_well_supported(
+    pairs: int, residual: float, best: tuple[int, float], d: DecisionConfig
+) -> bool:
+    """Whether a place of `pairs` pairs and centre `residual` is as well supported as the best
+    (`best`: its pairs and residual), in the terms of the verdict's residual rule: as many
+    pairs, and a residual the best does not beat by the margin (`_dominates`)."""
+    best_pairs, best_residual = best
+    return pairs >= best_pairs and residual <= (1.0 + d.margin) * best_residual + d.residual_floor
+
+
 def cut_search(decision: Decision, cut: bool, pairs: int) -> Decision:
     """A search that had to leave out places as well supported as its best (`cut`: more sets
     or distinct places of `pairs` pairs than it keeps) cannot claim: the right place may be

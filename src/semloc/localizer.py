@@ -46,6 +46,7 @@ from semloc.decision import (
     Decision,
     DecisionConfig,
     RankBy,
+    as_well_supported,
     cut_search,
     decide,
     distinct,
@@ -773,9 +774,11 @@ class Localizer:
         places = [(c.pairs, c.pose) for c in screened]
         anchor = local_anchor(local_xyz)
         picked = distinct(places, cfg.top_k + 1, cfg.decision, anchor)
-        most = len(screened[0].pairs) if screened else 0
-        cut |= by_size and len(picked) > cfg.top_k and len(screened[picked[-1]].pairs) == most
-        self._cut = (cut, most)
+        best = (len(screened[0].pairs), screened[0].residual) if screened else (0, 0.0)
+        if by_size and len(picked) > cfg.top_k:  # a place left out: as good as the best?
+            left = screened[picked[-1]]
+            cut |= as_well_supported(len(left.pairs), left.residual, best, cfg.decision)
+        self._cut = (cut, best[0])
         chosen = [screened[i] for i in picked[: cfg.top_k]]
         previous, self._poses = self._poses, {}
         hypotheses = [

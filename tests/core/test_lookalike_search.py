@@ -10,7 +10,15 @@ from helpers import room
 
 import semloc
 from semloc import LocalizerConfig, ObjectMap
-from semloc.decision import PLACE_APART, SEARCH_CUT, Decision, cut_search, new_regions
+from semloc.decision import (
+    PLACE_APART,
+    SEARCH_CUT,
+    Decision,
+    DecisionConfig,
+    as_well_supported,
+    cut_search,
+    new_regions,
+)
 from semloc.transforms import yaw_pose
 
 TRUTH = yaw_pose(0.4, [1.0, 0.5, 0.0])
@@ -39,6 +47,15 @@ def test_a_failed_answer_stays_failed_when_cut():
     assert cut_search(Decision("failed", "no set"), True, 2) == Decision("failed", "no set")
 
 
+def test_as_well_supported_is_the_residual_rule_of_the_verdict():
+    d = DecisionConfig()
+    edge = (1.0 + d.margin) * 0.1 + d.residual_floor
+    assert as_well_supported(6, edge, (6, 0.1), d)
+    assert not as_well_supported(6, edge + 1e-6, (6, 0.1), d)
+    assert not as_well_supported(5, 0.0, (6, 0.1), d)
+    assert as_well_supported(7, 0.1, (6, 0.1), d)
+
+
 def test_new_regions_take_one_set_per_region_beyond_the_first():
     x = [0.0, 0.5, PLACE_APART + 1.5, PLACE_APART + 2.0, -PLACE_APART, 3 * PLACE_APART]
     centroids = np.array([[v, 0.0, 0.0] for v in x])
@@ -50,12 +67,20 @@ def test_new_regions_take_one_set_per_region_beyond_the_first():
 
 
 # --- in the Localizer ------------------------------------------------------------------------
-def _copies(count: int, apart: float = 40.0) -> tuple[ObjectMap, list]:
-    """`count` identical copies of one room, `apart` metres from each other along x."""
+def _copies(count: int, apart: float = 40.0, jitter: float = 0.0) -> tuple[ObjectMap, list]:
+    """`count` copies of one room, `apart` metres from each other along x; the copies after
+    the first have their objects moved by `jitter` metres in random directions."""
     a = list(room(10))
-    objects = [o.replace(id=f"c{c}/{o.id}", position=o.position + [c * apart, 0.0, 0.0])
+    rng = np.random.default_rng(0)
+    objects = [o.replace(id=f"c{c}/{o.id}", position=o.position + [c * apart, 0.0, 0.0]
+                         + (jitter * _direction(rng) if c else 0.0))
                for c in range(count) for o in a]  # fmt: skip
     return ObjectMap(objects, up=[0, 0, 1], name=f"{count} copies"), a
+
+
+def _direction(rng: np.random.Generator) -> np.ndarray:
+    angle = rng.uniform(-np.pi, np.pi)
+    return np.array([np.cos(angle), np.sin(angle), 0.0])
 
 
 def _view(a: list) -> ObjectMap:
@@ -76,6 +101,14 @@ def test_as_many_identical_places_as_are_listed_do_not_cut_the_search():
     world, a = _copies(2)
     result = semloc.localize(world, _view(a), config=LocalizerConfig(top_k=2))
     assert result.status == "ambiguous" and not result.reason.startswith(SEARCH_CUT)
+
+
+def test_a_left_out_place_that_fits_clearly_worse_does_not_cut_the_search():
+    """The copy's objects lie 0.25 m off: as many pairs, but a residual the best beats by the
+    margin, so leaving it out loses nothing."""
+    world, a = _copies(2, jitter=0.25)
+    result = semloc.localize(world, _view(a), config=LocalizerConfig(top_k=1))
+    assert not result.reason.startswith(SEARCH_CUT), result.reason
 
 
 def test_a_unique_place_listed_alone_is_not_cut():
