@@ -386,7 +386,10 @@ class Localizer:
             objects = self.window.objects
         detections = self._associate(objects)
         tick = time.perf_counter()
-        if detections:
+        # an update whose objects all wait in place retrieval gives the sets nothing to merge
+        # with: it must not age them out (the view's copies would expire but ten)
+        waiting = self._places is not None and not any(len(c) for c in detections.values())
+        if detections and not waiting:
             self._clustering.update(
                 np.array([o.position for o in self._local.values()]).reshape(-1, 3),
                 list(self._local),

@@ -9,7 +9,7 @@ import pytest
 from helpers import room
 
 import semloc
-from semloc import LocalizerConfig, ObjectMap
+from semloc import Localizer, LocalizerConfig, ObjectMap, SemanticObject
 from semloc.decision import (
     PLACE_APART,
     SEARCH_CUT,
@@ -146,3 +146,29 @@ def test_new_regions_stop_at_the_most_asked_for():
     centroids = np.array([[k * 2 * PLACE_APART, 0.0, 0.0] for k in range(6)])
     assert new_regions(centroids, 1, most=2).tolist() == [1, 2]
     assert new_regions(centroids, 1).tolist() == [1, 2, 3, 4, 5]
+
+
+def _table_lamp_and_chairs(copies: int = 12, apart: float = 40.0) -> ObjectMap:
+    """`copies` identical rooms of a table, a lamp and 30 chairs in rows."""
+    base = [("table", 0.0, 0.0), ("lamp", 2.0, 0.5)]
+    base += [("chair", 0.6 * (i % 6), 2.0 + 0.6 * (i // 6)) for i in range(30)]
+    objects = [SemanticObject(f"c{c}/o{i}", label, [x + c * apart, y, 0.5])
+               for c in range(copies) for i, (label, x, y) in enumerate(base)]  # fmt: skip
+    return ObjectMap(objects, up=[0, 0, 1], name="copies")
+
+
+def test_updates_whose_objects_all_wait_do_not_age_the_sets():
+    """The table and the lamp make a set per copy; then chair after chair waits in place
+    retrieval (360 candidates in the retrieved places, 20 allowed).  Those updates give the
+    sets nothing to merge with, so the copies' sets stay (they would expire after
+    `expiry_updates` updates but the `protect_top` best)."""
+    config = LocalizerConfig(above=0, wait_above=20, protect_top=1)
+    localizer = Localizer(_table_lamp_and_chairs(), config, local_up=[0, 0, 1])
+    first = [SemanticObject("l0", "table", [0.0, 0.0, 0.5]),
+             SemanticObject("l1", "lamp", [2.0, 0.5, 0.5])]  # fmt: skip
+    localizer.update(first, answer=False)
+    sets = localizer.n_sets
+    assert sets >= 12  # (one per copy at least)
+    for k in range(config.clustering.expiry_updates + 2):
+        localizer.update([SemanticObject(f"c{k}", "chair", [0.6 * k, 2.0, 0.5])], answer=False)
+        assert localizer.n_sets == sets
