@@ -3,7 +3,7 @@
 
     PYTHONPATH=src SEMLOC_DATA=../shared/data/real python benchmarks/building.py
         [--sizes 1000 10000 100000] [--bases rooms scannet replica] [--views 40]
-        [--starts 20] [--no-retrieval] [--set KEY=JSON ...] [--quick]
+        [--starts 20] [--no-retrieval] [--set KEY=JSON ...] [--quick] [--lookalike]
 
 Buildings: a base tiled side by side into about N objects, each copy keeping a random 70 % of
 the base's objects (`semloc.sim.longwalk.tiled`: copies are alike, not identical), 64 surface
@@ -27,6 +27,15 @@ Views: the 8 objects nearest to a point beside a random object, their visible-si
   its ceiling: the share of views with no identical copy whose origin lies in the prior;
 * one room: top-1 of the same views against the base alone (the single-room success);
 * wrong: `localized` answers with a wrong pose (without / with the prior).
+
+A second table (issue 59, look-alike rooms) gives, per building without and with the prior,
+the right hypothesis's rank (1, 2-5, 6+, not listed: the right place dropped out of the
+search, and of those how many answers do not say the search was cut), the `ambiguous` answers with two or more hypotheses and how many of them carry a
+`next_look`, the searches that were cut (the reason says so: places as well supported as the
+best left out, `semloc.decision.SEARCH_CUT`, or every object waiting in place retrieval), and
+the wrong claims.
+`--lookalike` runs the sizes of the issue's look-alike buildings (2,300 and 6,800 objects; the
+issue tiled a 226-object apartment: `rooms` is the nearest in size), without active runs.
 
 Active runs (`--starts`, on the `rooms` building of the smallest size): starts where the
 first view (objects within 2.5 m of the robot, centres only) is `ambiguous`; then each
@@ -61,6 +70,7 @@ sys.path.insert(0, str(Path(__file__).parent))
 from bench_speed import _yaw_poses, views  # noqa: E402
 
 from semloc import Localizer, LocalizerConfig, ObjectMap, Prior, localize  # noqa: E402
+from semloc.decision import SEARCH_CUT  # noqa: E402
 from semloc.eval.datasets import real_data_dir  # noqa: E402
 from semloc.eval.success import is_success  # noqa: E402
 from semloc.io.importers.replica import load_replica  # noqa: E402
@@ -75,6 +85,7 @@ POINTS = 64
 VIEW = 8
 COPY_M = 0.3  # a copy's objects lie this close to the view's (less than a right pose's error)
 PRIOR_RADIUS, PRIOR_OFFSET = 10.0, 5.0
+WAITING = "fits too many places"  # a `failed` answer's reason while place retrieval waits
 SIGHT_M, STEP_M, KEYFRAMES = 2.5, 2.0, 10
 
 
@@ -185,6 +196,7 @@ def measure(base_name: str, size: int, n_views: int, settings: dict, seed: int) 
             "wrong": result.status == "localized" and not _right(result, T, 1),
             "prior": _right(with_prior, T, 1),
             "prior_wrong": with_prior.status == "localized" and not _right(with_prior, T, 1),
+            **_answer(result, T, ""), **_answer(with_prior, T, "prior_"),
             "room": _right(alone, shift @ T, 1),
             "copy": len(elsewhere) > 0,
             "copy_in_prior": bool(np.any(np.linalg.norm(elsewhere - prior.position, axis=1)
@@ -199,6 +211,19 @@ def measure(base_name: str, size: int, n_views: int, settings: dict, seed: int) 
 
 def _right(result, truth: np.ndarray, k: int) -> bool:
     return any(h.pose is not None and is_success(h.pose, truth) for h in result.hypotheses[:k])
+
+
+def _answer(result, truth: np.ndarray, prefix: str) -> dict:
+    """The right hypothesis's rank (0: not listed), whether the answer is `ambiguous` with two
+    or more hypotheses, whether it then carries a `next_look`, and whether the search was cut."""
+    ranks = [h.rank for h in result.hypotheses if h.pose is not None and is_success(h.pose, truth)]
+    rivals = result.status == "ambiguous" and len(result.hypotheses) >= 2
+    return {
+        f"{prefix}rank": min(ranks, default=0),
+        f"{prefix}ambiguous": rivals,
+        f"{prefix}look": rivals and len(result.next_look) > 0,
+        f"{prefix}cut": result.reason.startswith(SEARCH_CUT) or WAITING in result.reason,
+    }
 
 
 # -------------------------------------------------------------------------------- active runs
@@ -282,6 +307,37 @@ def building_table(results: list[dict]) -> str:
     return "\n".join(lines)
 
 
+RANKS = (("1", 1, 1), ("2-5", 2, 5), ("6+", 6, 10**9))
+
+
+def rank_table(results: list[dict]) -> str:
+    """Per building, without and with the prior: where the right hypothesis ranks, the
+    `ambiguous` answers with two or more hypotheses and how many carry a `next_look`, how many
+    searches were cut, and the wrong claims."""
+    lines = [
+        "| building | objects | prior | right at rank 1 | 2-5 | 6+ | not listed "
+        "| of which the search was not cut | ambiguous (>= 2 hypotheses) | with next_look "
+        "| search cut | wrong claims |",
+        "|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+    ]
+    for r in results:
+        for prefix, prior in (("", "none"), ("prior_", "10 m")):
+            rows = r["rows"]
+            ranks = [row.get(f"{prefix}rank", 0) for row in rows]
+            counts = [sum(low <= k <= high for k in ranks) for _, low, high in RANKS]
+            ambiguous = sum(row.get(f"{prefix}ambiguous", False) for row in rows)
+            looks = sum(row.get(f"{prefix}look", False) for row in rows)
+            cut = sum(row.get(f"{prefix}cut", False) for row in rows)
+            lost = sum(k == 0 and not row.get(f"{prefix}cut", False) for k, row in zip(ranks, rows))
+            wrong = sum(row["prior_wrong" if prefix else "wrong"] for row in rows)
+            lines.append(
+                f"| {r['base']} | {r['objects']:,} | {prior} | "
+                + " | ".join(str(c) for c in counts)
+                + f" | {ranks.count(0)} | {lost} | {ambiguous} | {looks} | {cut} | {wrong} |"
+            )
+    return "\n".join(lines)
+
+
 def active_table(objects: int, runs: dict[str, list[dict]]) -> str:
     lines = [
         f"Active runs on the rooms building ({objects:,} objects), from ambiguous starts",
@@ -305,7 +361,7 @@ def main() -> int:
     parser.add_argument("--sizes", type=int, nargs="+", default=[1000, 10000, 100000])
     parser.add_argument("--bases", nargs="+", default=["rooms", "scannet", "replica"])
     parser.add_argument("--views", type=int, default=40)
-    parser.add_argument("--starts", type=int, default=20)
+    parser.add_argument("--starts", type=int, default=20, help="active runs (0: none)")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--no-retrieval", action="store_true", help="cluster every candidate")
     parser.add_argument(
@@ -313,11 +369,17 @@ def main() -> int:
         help="Localizer settings, e.g. wait_above=2000 (flat LocalizerConfig fields)",
     )  # fmt: skip
     parser.add_argument("--quick", action="store_true", help="1k and 10k, 10 views, 8 starts")
+    parser.add_argument(
+        "--lookalike", action="store_true",
+        help="the issue's look-alike buildings: 2,300 and 6,800 objects, no active runs",
+    )  # fmt: skip
     parser.add_argument("--worker", nargs=2, metavar=("BASE", "SIZE"), help=argparse.SUPPRESS)
     parser.add_argument("--active-worker", type=int, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.quick:
         args.sizes, args.views, args.starts = [1000, 10000], 10, 8
+    if args.lookalike:
+        args.sizes, args.starts = [2300, 6800], 0
     settings = {key: json.loads(value) for key, value in (a.split("=", 1) for a in args.set)}
     if args.no_retrieval:
         settings["above"] = None
@@ -333,7 +395,7 @@ def main() -> int:
         print(json.dumps({"objects": len(world), "runs": runs}))
         return 0
     started = time.perf_counter()
-    results = []
+    results, skipped = [], []
     for name in args.bases:
         for size in args.sizes:
             command = [sys.executable, __file__, "--worker", name, str(size), "--views",
@@ -347,10 +409,19 @@ def main() -> int:
             found = json.loads(out.stdout.strip().splitlines()[-1])
             if found:
                 results.append(found)
+            else:
+                skipped.append(f"{name} {size}: skipped, real data absent (SEMLOC_DATA)")
             print(f"done {name} {size}", file=sys.stderr)
     print(f"`{' '.join(['python', 'benchmarks/building.py', *sys.argv[1:]])}` (CPU ms, one core)")
     print()
     print(building_table(results))
+    print("".join(f"\n{line}" for line in skipped))
+    print(f"Right hypothesis's rank ({args.views} views per building)")
+    print()
+    print(rank_table(results))
+    if args.starts == 0:
+        print(f"\nrun time {time.perf_counter() - started:.0f} s")
+        return 0
     command = [sys.executable, __file__, "--active-worker", str(min(args.sizes)), "--starts",
                str(args.starts), "--seed", str(args.seed)]  # fmt: skip
     command += ["--set", *args.set] if args.set else []

@@ -21,7 +21,9 @@ is another distinct place that shares less than `rival_overlap` of the hypothesi
                 factor 1 + margin); a rival there has a different pose and shares less
                 than `rival_overlap` of the smaller one's pairs with the best one;
     ambiguous   hypotheses exist (>= 2 pairs) but the best is not trusted (or its pose lies
-                outside the caller's position prior, `semloc.priors`); `reason` says why;
+                outside the caller's position prior, `semloc.priors`, or the search had to
+                leave out places as well supported as the best, `cut_search`); `reason` says
+                why;
     failed      no association set has 2 or more pairs; `reason` says why.
 
 Hypotheses are distinct places: walking down the ranked candidates, one whose pose is within
@@ -407,6 +409,61 @@ def _by_confidence(best: Hypothesis, others: Sequence[Hypothesis], d: DecisionCo
             f"(confidence {best.confidence:.2f} < {d.min_confidence:.2f})",
         )
     return Decision("ambiguous", f"low confidence: {best.confidence:.2f} < {d.min_confidence:.2f}")
+
+
+PLACE_APART = 4.0
+"""Sets whose map objects' centroids lie farther apart than this (m, a room's size) are in
+different regions: perhaps copies of one place (the Localizer screens one set per
+region beyond its best sets in a building)."""
+
+
+def new_regions(
+    centroids: np.ndarray, first: int, apart: float = PLACE_APART, most: int | None = None
+) -> np.ndarray:
+    """The rows after the `first` whose centroid lies farther than `apart` from those of the
+    first rows and of every earlier row taken (in order): one set per region not covered; at
+    most `most` of them (None: all)."""
+    centroids = np.asarray(centroids, dtype=float).reshape(-1, 3)
+    taken = np.empty_like(centroids)
+    count = min(first, len(centroids))
+    taken[:count] = centroids[:count]
+    rows: list[int] = []
+    for row in range(first, len(centroids)):
+        if most is not None and len(rows) >= most:
+            break
+        if np.min(np.linalg.norm(taken[:count] - centroids[row], axis=1)) > apart:
+            taken[count] = centroids[row]
+            count += 1
+            rows.append(row)
+    return np.array(rows, dtype=np.int64)
+
+
+SEARCH_CUT = "the search was cut"
+"""The reason's start when places as well supported as the best were left out of the search."""
+
+
+def as_well_supported(
+    pairs: int, residual: float, best: tuple[int, float], d: DecisionConfig
+) -> bool:
+    """Whether a place of `pairs` pairs and centre `residual` is as well supported as the best
+    (`best`: its pairs and residual), in the terms of the verdict's residual rule: as many
+    pairs, and a residual the best does not beat by the margin (`_dominates`)."""
+    best_pairs, best_residual = best
+    return pairs >= best_pairs and residual <= (1.0 + d.margin) * best_residual + d.residual_floor
+
+
+def cut_search(decision: Decision, cut: bool, pairs: int) -> Decision:
+    """A search that had to leave out places as well supported as its best (`cut`: more sets
+    or distinct places of `pairs` pairs than it keeps) cannot claim: the right place may be
+    among those left out, and a decision that weighs only what was found cannot know it.  The
+    answer is `ambiguous` and says so first (a `failed` answer stays as it is)."""
+    if not cut or decision.status == "failed":
+        return decision
+    why = (
+        f"{SEARCH_CUT}: places as well supported as the best ({pairs} pairs) were left out of "
+        "the hypotheses, and the right one may be among them"
+    )
+    return Decision("ambiguous", why if not decision.reason else f"{why}; {decision.reason}")
 
 
 RIVAL_LOGIT_GAP = 2.0

@@ -43,11 +43,15 @@ from semloc.changes import Changes, ChangesConfig, RunChanges, answer_changes
 from semloc.clustering import ClusteringConfig, HierarchicalClustering, SetPairs
 from semloc.coverage import GONE_SHARE, Coverage, Looks, checked_coverage, expected_unseen
 from semloc.decision import (
+    Decision,
     DecisionConfig,
     RankBy,
+    as_well_supported,
+    cut_search,
     decide,
     distinct,
     local_anchor,
+    new_regions,
     prior_first,
     rank_places,
     score_confidence,
@@ -233,6 +237,7 @@ class Localizer:
             [], global_map.positions, config.verification, axis=global_map.sweep_order.axis
         )
         self._search_stale = False  # the window changed without the search seeing it
+        self._cut = (False, 0)  # the last search left out places as good as its best; pairs
 
     @property
     def local_map(self) -> ObjectMap:
@@ -382,7 +387,10 @@ class Localizer:
             objects = self.window.objects
         detections = self._associate(objects)
         tick = time.perf_counter()
-        if detections:
+        # an update whose objects all wait in place retrieval gives the sets nothing to merge
+        # with: it must not age them out (the view's copies would expire but ten)
+        waiting = self._places is not None and not any(len(c) for c in detections.values())
+        if detections and not waiting:
             self._clustering.update(
                 np.array([o.position for o in self._local.values()]).reshape(-1, 3),
                 list(self._local),
@@ -394,6 +402,7 @@ class Localizer:
         if answer:
             hypotheses = self._hypotheses()
             status, why = decide(hypotheses, self.config.decision, self.config.rank_by)
+            status, why = cut_search(Decision(status, why), *self._cut)
             if not hypotheses:
                 why = self._why_no_sets()
             elif why == OUTSIDE_PRIOR and self._prior is not None:  # (the best has a pose)
@@ -791,14 +800,20 @@ class Localizer:
         poses of the top-k, measure their evidence, rank, merge duplicates, attach confidence."""
         cfg = self.config
         by_size = cfg.rank_by in ("residual", "evidence")
-        sets = self._clustering.top_pairs(cfg.screened_sets, min_size=2, largest_first=by_size)
+        sets, cut = self._screened_sets(by_size)
         local_xyz = np.array([o.position for o in self._local.values()]).reshape(-1, 3)
         screened = [c for c in self._verified_all(sets, local_xyz) if len(c.pairs) >= 2]
         if by_size:  # pairs include the guided matches
             screened.sort(key=lambda c: (-len(c.pairs), round(c.residual, 9), -c.score))
         places = [(c.pairs, c.pose) for c in screened]
         anchor = local_anchor(local_xyz)
-        chosen = [screened[i] for i in distinct(places, cfg.top_k, cfg.decision, anchor)]
+        picked = distinct(places, cfg.top_k + 1, cfg.decision, anchor)
+        best = (len(screened[0].pairs), screened[0].residual) if screened else (0, 0.0)
+        if by_size and len(picked) > cfg.top_k:  # a place left out: as good as the best?
+            left = screened[picked[-1]]
+            cut |= as_well_supported(len(left.pairs), left.residual, best, cfg.decision)
+        self._cut = (cut, best[0])
+        chosen = [screened[i] for i in picked[: cfg.top_k]]
         previous, self._poses = self._poses, {}
         hypotheses = [
             self._hypothesis(rank, c, local_xyz, previous) for rank, c in enumerate(chosen, 1)
@@ -811,6 +826,28 @@ class Localizer:
             inside = [h for h in ranked if not h.outside_prior]
             score_confidence(inside, shipped_model(), cfg.decision.rival_overlap)
         return ranked
+
+    def _screened_sets(self, by_size: bool) -> tuple[SetPairs, bool]:
+        """The sets screened for hypotheses, and whether the screening was cut.  Ranked by
+        size: the `screened_sets` best; in a building (a map place retrieval narrows), then
+        each further set as large as the largest whose map objects lie in a region no
+        screened set covers (`new_regions`), up to `screened_sets` more: variants of one place
+        (chairs swapped) must not crowd its copies elsewhere out.  More new regions than that:
+        cut.  Smaller maps screen as they always did (their confidence is calibrated so)."""
+        cfg = self.config
+        limit = cfg.screened_sets
+        if not by_size or self._places is None:
+            return self._clustering.top_pairs(limit, min_size=2, largest_first=by_size), False
+        sets = self._clustering.top_pairs(self._clustering.n_sets, 2, largest_first=True)
+        if len(sets.sizes) <= limit:
+            return sets, False
+        largest = int(np.searchsorted(-sets.sizes, -sets.sizes[0], side="right"))
+        ends = np.cumsum(sets.sizes[:largest])
+        centroids = np.add.reduceat(self.global_map.positions[sets.pairs[: ends[-1], 0]],
+                                    ends - sets.sizes[:largest]) / sets.sizes[:largest, None]  # fmt: skip
+        extra = new_regions(centroids, limit, most=limit + 1)
+        rows = np.concatenate([np.arange(limit), extra[:limit]])
+        return _rows_of(sets, rows), len(extra) > limit
 
     def _verified_all(self, sets: SetPairs, local_xyz: np.ndarray) -> list[Verified]:
         """Each set verified against the map (`semloc.verification.verify_sets`)."""
@@ -957,6 +994,13 @@ STALE = "stale evidence"
 """The reason of a search's answer whose best place the latest updates' objects contradict."""
 STATE_VERSION = 1
 """The layout of `Localizer.state()`."""
+
+
+def _rows_of(sets: SetPairs, rows: np.ndarray) -> SetPairs:
+    """The sets at `rows` (ascending) of `sets`."""
+    starts = np.concatenate([[0], np.cumsum(sets.sizes)[:-1]])
+    pairs = [sets.pairs[starts[r] : starts[r] + sets.sizes[r]] for r in rows]
+    return SetPairs(np.concatenate(pairs), sets.sizes[rows], sets.scores[rows])
 
 
 def localize(

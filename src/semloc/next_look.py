@@ -23,6 +23,20 @@ then by what one look there may see (how many spots that tell the same rank apar
 objects seen (a nearer look is cheaper); at most `suggestions` of them, one per spot.
 Everything comes from the hypotheses' poses and the map: no new sensor is needed.  Pure
 computation on numpy arrays.
+
+**Which hypotheses are weighed.**  The top `look_hypotheses` with a pose inside the caller's
+position prior; when fewer than two lie inside it, those outside count too: a place outside
+the prior that forbids a claim is the rival a look must tell apart.
+
+**When nothing nearby tells them apart.**  In a building of look-alike rooms every other copy
+may hold an object of the label near each spot (a row of chairs in every classroom), so no spot
+is one place's alone among five.  An ambiguous answer with two or more places still gets a
+suggestion, widened step by step as a robot would go: first tell fewer places apart (the best
+four, three, then the best two: one look that settles the top two is worth more than none),
+then look farther (twice `look_reach`, then `WIDER_REACH` times it, where any gain counts):
+nearer first, as a robot pays for every metre.  A suggestion's `where` holds the ranks it
+weighed.  Only when even the widest look tells nothing (identical copies in an otherwise empty
+map) is the list empty.
 """
 
 from __future__ import annotations
@@ -93,6 +107,10 @@ def _counts(points: np.ndarray, labels: np.ndarray, trees: dict, radius: float) 
     return counts
 
 
+WIDER_REACH = 4.0
+"""The widest search for a telling spot, as a multiple of `look_reach` (the last resort)."""
+
+
 def next_look(
     hypotheses: Sequence[Hypothesis],
     global_map: ObjectMap,
@@ -101,13 +119,38 @@ def next_look(
     config: NextLookConfig | None = None,
 ) -> list[Look]:
     """The suggestions for an ambiguous answer's `hypotheses` (best first), given the local
-    objects seen so far (labels and positions, local frame) and the global map."""
+    objects seen so far (labels and positions, local frame) and the global map.  Widened step
+    by step until one is found (module docstring, "When nothing nearby tells them apart")."""
     config = config or NextLookConfig()
-    top = [h for h in hypotheses if h.pose is not None and not h.outside_prior]
-    top = top[: config.look_hypotheses]
+    posed = [h for h in hypotheses if h.pose is not None]
+    inside = [h for h in posed if not h.outside_prior]
+    weighed = (inside if len(inside) >= 2 else posed)[: config.look_hypotheses]
     seen = np.asarray(local_positions, dtype=float).reshape(-1, 3)
-    if config.suggestions == 0 or len(top) < 2 or len(seen) == 0 or len(global_map) == 0:
+    if config.suggestions == 0 or len(weighed) < 2 or len(seen) == 0 or len(global_map) == 0:
         return []
+    for count, reach, min_gain in _widening(config, len(weighed)):
+        step = config.model_copy(update={"look_reach": reach, "look_min_gain": min_gain})
+        looks = _looks(weighed[:count], global_map, local_labels, seen, step)
+        if looks:
+            return looks
+    return []
+
+
+def _widening(config: NextLookConfig, weighed: int) -> list[tuple[int, float, float]]:
+    """The searches tried in turn: (hypotheses weighed, reach, least gain)."""
+    reach, gain = config.look_reach, config.look_min_gain
+    fewer = [(count, reach, gain) for count in range(weighed, 1, -1)]
+    return [*fewer, (2, 2 * reach, gain), (2, WIDER_REACH * reach, 0.0)]
+
+
+def _looks(
+    top: list[Hypothesis],
+    global_map: ObjectMap,
+    local_labels: Sequence[str],
+    seen: np.ndarray,
+    config: NextLookConfig,
+) -> list[Look]:
+    """The suggestions that tell the hypotheses `top` apart, within `config`'s reach."""
     poses = np.array([h.pose for h in top])
     inverses = np.linalg.inv(poses)
     weights = np.array([h.confidence or 0.0 for h in top])

@@ -33,7 +33,9 @@ of a first view in a building of 40,000 chairs) *waits*: it joins the clustering
 objects narrow its places (the search then regrows from the window).  The clustering keeps a
 bounded pool of sets (`max_sets`, 2000), so feeding it tens of thousands of equally plausible
 singletons only made it keep an arbitrary share of them; while every object waits the answer
-is `failed`, with the reason that the view fits too many places.
+is `failed`, with the reason that the view fits too many places.  An update whose objects all
+wait gives the clustering's sets nothing to merge with, so it does not age them (the Localizer
+skips the clustering then): the places found so far are not expired while the view waits.
 
 Small maps are not retrieved at all (`RetrievalConfig.above`): their answers are exactly those
 of the clustering on every candidate.

@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 
 import semloc
 from semloc import Localizer, Look, ObjectMap, Result, SemanticObject
-from semloc.next_look import NextLookConfig
+from semloc.next_look import WIDER_REACH, NextLookConfig, next_look
 from semloc.transforms import pose_error, yaw_pose
 
 SHIFT = np.array([40.0, 0.0, 0.0])
@@ -110,27 +110,30 @@ def test_suggestions_round_trip_through_json():
     dropped=st.integers(1, 3),
 )
 def test_every_suggestion_holds_what_it_says(seed, shift, yaw, dropped):
-    """Whatever the rooms and where the copy lies: `where[r]` is the object under hypothesis
-    r, a separated rank's spot is in reach and no other top hypothesis expects an object of
-    the label there, and the gain is the entropy of the outcome (bits)."""
+    """Whatever the rooms and where the copy lies: a suggestion weighs two or more of the top
+    hypotheses (its `where`), `where[r]` is the object under hypothesis r, a separated rank's
+    spot is within the widest reach and no other weighed hypothesis expects an object of the
+    label there, and the gain is the entropy of the outcome (bits)."""
     a = list(room(12, seed=seed))
     turn = yaw_pose(yaw, [shift[0], shift[1], 0.0])
     b = [o.transformed(turn).replace(id=o.id.replace("a", "b")) for o in a[: len(a) - dropped]]
     world = ObjectMap([*a, *b], up=[0, 0, 1], name="two copies")
     result = semloc.localize(world, _view(a, range(5)))
     config = NextLookConfig()
-    top = [h for h in result.hypotheses if h.pose is not None][: config.look_hypotheses]
+    top = {h.rank: h for h in result.hypotheses if h.pose is not None}
     seen = np.array([o.position for o in _view(a, range(5))])
     for look in result.next_look:
         position = world[world.index_of(look.global_id)].position
         assert look.label == world[world.index_of(look.global_id)].label
-        for h in top:
+        weighed = [top[rank] for rank in look.where]
+        assert 2 <= len(weighed) <= config.look_hypotheses and set(look.separates) <= set(top)
+        for h in weighed:
             expected = np.linalg.inv(h.pose) @ np.append(position, 1.0)
             np.testing.assert_allclose(look.where[h.rank], expected[:3], atol=1e-9)
         for rank in look.separates:
             spot = look.where[rank]
-            assert np.linalg.norm(seen - spot, axis=1).min() <= config.look_reach
-            for other in (h for h in top if h.rank != rank):
+            assert np.linalg.norm(seen - spot, axis=1).min() <= WIDER_REACH * config.look_reach
+            for other in (h for h in weighed if h.rank != rank):
                 at = other.pose[:3, :3] @ spot + other.pose[:3, 3]
                 near = np.linalg.norm(world.positions - at, axis=1) <= config.look_tolerance
                 assert look.label not in set(world.labels[near])
@@ -153,3 +156,75 @@ def test_a_look_that_sees_more_telling_objects_comes_first():
     assert set(labels) == {"tv", "lamp", "plant"}
     assert len({round(look.gain, 6) for look in result.next_look}) == 1  # equal gains
     assert labels[0] in {"lamp", "plant"} and labels[-1] == "tv"
+
+
+# --- the widening rules (issue 59): built from the rules, on hand-made places -----------------
+def _places(
+    offsets: list[float], lamps: dict[int, float], plants: tuple[float, ...] = ()
+) -> tuple[ObjectMap, list]:
+    """A table at each offset along x (a place, and a hypothesis putting the local table
+    there), a lamp `lamps[i]` metres beside the table of place i, and plants at `plants`."""
+    objects = [SemanticObject(f"t{i}", "table", [x, 0.0, 0.5]) for i, x in enumerate(offsets)]
+    objects += [SemanticObject(f"lamp{i}", "lamp", [offsets[i] + d, 0.0, 0.5])
+                for i, d in lamps.items()]  # fmt: skip
+    objects += [SemanticObject(f"plant{i}", "plant", [x, 0.0, 0.5]) for i, x in enumerate(plants)]
+    hypotheses = [
+        semloc.Hypothesis(rank=i + 1, score=1.0, pairs=[(f"t{i}", "l0")],
+                          pose=yaw_pose(0.0, [x, 0.0, 0.0]), confidence=0.2)
+        for i, x in enumerate(offsets)
+    ]  # fmt: skip
+    return ObjectMap(objects, up=[0, 0, 1], name="places"), hypotheses
+
+
+def _suggest(world: ObjectMap, hypotheses: list) -> list[Look]:
+    return next_look(hypotheses, world, ["table"], np.array([[0.0, 0.0, 0.5]]))
+
+
+@pytest.mark.parametrize("lamps, weighed", [((0, 2, 3, 4), [1, 2]), ((0, 3, 4), [1, 2, 3])])
+def test_when_no_spot_tells_all_places_apart_the_best_few_are_told_apart(lamps, weighed):
+    """A lamp beside places 1, 3, 4 and 5: every lamp spot is expected by another of the best
+    five, four and three, none by place 2: the suggestion tells rank 1 from rank 2, weighing
+    those two.  Without the lamp of place 3 it tells the best three apart."""
+    world, hypotheses = _places([0.0, 20.0, 40.0, 60.0, 80.0], dict.fromkeys(lamps, 3.0))
+    looks = _suggest(world, hypotheses)
+    assert looks, "an ambiguous answer with two places that a look tells apart gets a suggestion"
+    assert looks[0].label == "lamp" and looks[0].separates == [1]
+    assert sorted(looks[0].where) == weighed
+
+
+def test_a_rival_outside_the_prior_is_weighed_when_one_place_lies_inside():
+    world, hypotheses = _places([0.0, 20.0], {0: 3.0})
+    hypotheses[0].outside_prior, hypotheses[1].outside_prior = False, True
+    looks = _suggest(world, hypotheses)
+    assert looks and looks[0].separates == [1] and sorted(looks[0].where) == [1, 2]
+
+
+@pytest.mark.parametrize("distance", [12.0, 30.0])
+def test_a_telling_spot_beyond_reach_is_suggested(distance):
+    """Nothing within `look_reach` (8 m) tells the places apart; a lamp 12 or 30 m off does
+    (within `WIDER_REACH` x reach)."""
+    world, hypotheses = _places([0.0, 100.0], {0: distance})
+    looks = _suggest(world, hypotheses)
+    assert [look.global_id for look in looks] == ["lamp0"]
+    np.testing.assert_allclose(looks[0].where[1], [distance, 0.0, 0.5])
+
+
+def test_the_nearer_widening_comes_first():
+    """A lamp 12 m off and two plants 25 m off each tell the places apart; the two plants
+    would be seen by one look, but a robot looks nearer first: within twice the reach the
+    lamp alone is suggested."""
+    world, hypotheses = _places([0.0, 100.0], {0: 12.0}, plants=(25.0, 25.5))
+    assert [look.global_id for look in _suggest(world, hypotheses)] == ["lamp0"]
+
+
+def test_no_suggestion_beyond_the_widest_reach():
+    world, hypotheses = _places([0.0, 100.0], {0: WIDER_REACH * NextLookConfig().look_reach + 1})
+    assert _suggest(world, hypotheses) == []
+
+
+def test_a_suggestion_within_reach_weighs_every_top_place():
+    """What the widening must not change: a spot that tells rank 1 from all the others is
+    suggested over all of them."""
+    world, hypotheses = _places([0.0, 20.0, 40.0], {0: 3.0})
+    looks = _suggest(world, hypotheses)
+    assert looks[0].separates == [1] and sorted(looks[0].where) == [1, 2, 3]
