@@ -66,7 +66,6 @@ from semloc.results import Hypothesis, Result, Status, Step, Support
 from semloc.semantics import pair_weight
 from semloc.tracking import (
     CONTRADICTED,
-    CONTRADICTION_UPDATES,
     Track,
     TrackingConfig,
     Verdict,
@@ -449,14 +448,12 @@ class Localizer:
         track.accept(verdict)
         self._observe_changes(track, verdict, objects, candidates, looked_unseen)
         self._search_stale = True  # the search did not see these objects
-        if len(track.pairs) < self._min_track_pairs() or self._stale(list(track.pairs)):
-            self._end_track()  # too little, or too old, evidence left in the window: search again
-            return self._search_update(objects, answer, start)
-        followed = self._follow(track)
-        if followed is None:  # its newest pairs fit no one pose: the robot (or odometry) jumped
-            return self._contradicted(CONTRADICTION_UPDATES, objects, answer, start)
-        if not self._within_prior(track.pose):
-            self._end_track()  # the place left the prior: search again
+        lapsed = len(track.pairs) < self._min_track_pairs() or self._stale(list(track.pairs))
+        followed = None if lapsed else self._follow(track)
+        if followed is None or not self._within_prior(track.pose):
+            # too little or too old evidence left in the window, the pose no longer fits its
+            # newest pairs, or the place left the prior: search again
+            self._end_track()
             return self._search_update(objects, answer, start)
         end = time.perf_counter()
         self._add_timing(0.0, 0.0, end - start)

@@ -20,10 +20,7 @@ search's cost grows with the local objects; tracking costs a lookup per new obje
 * **Follow.**  The supporting pairs are kept, newest last (one per map object and per local
   object); the pose is refitted to the newest `pairs` of them, warm-started from the tracked
   pose.  Changed objects never refit the pose.  Odometry drift is slow, so the newest objects,
-  seen near the robot, give the pose that is right *now* where the robot is.  When no one pose
-  fits them (their residual beyond `track_tolerance`), the robot or its odometry jumped: the
-  claim ends as contradicted, on a fresh window of the latest `CONTRADICTION_UPDATES` updates
-  (the older objects show the place the robot left, and would find it again).
+  seen near the robot, give the pose that is right *now* where the robot is.
 * **Contradiction.**  The evidence against an update is its contradicting and its changed
   objects (a change is no support: a wrong place explains detections by "moves" as readily
   as a right one) and its missing ones beyond the tolerated share; for it, its supporting
