@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 
 from semloc import Localizer, LocalizerConfig, ObjectMap, SemanticObject
 from semloc.sim.layouts import layout
-from semloc.sim.longwalk import Drift, LongWalk, WalkConfig
+from semloc.sim.longwalk import Drift, LongWalk, WalkConfig, World
 from semloc.tracking import CONTRADICTED, Track, TrackingConfig, Verdict, allowances, check
 from semloc.window import LocalWindow, WindowConfig
 
@@ -106,11 +106,12 @@ def walk_frames(building: ObjectMap, seed: int, **config):
     return list(walk)
 
 
-def run_walk(building: ObjectMap, frames, **settings):
+def run_walk(building: ObjectMap, frames, coverage: bool = False, **settings):
     localizer = Localizer(building, local_up=[0, 0, 1], **settings)
     answers = []
     for frame in frames:
-        result = localizer.update(frame.objects, position=frame.T_odom_robot)
+        looked = {"coverage": frame.coverage} if coverage else {}
+        result = localizer.update(frame.objects, position=frame.T_odom_robot, **looked)
         at = None
         if result.pose is not None:
             p = frame.T_odom_robot[:3, 3]
@@ -144,6 +145,29 @@ def test_drift_below_a_bound_keeps_the_pose_right(building, translation, yaw_wal
     right = [error < 0.5 for _, error, _ in after]
     assert np.mean(right) >= 0.9
     assert all(error < 0.5 for status, error, _ in after if status == "localized")
+
+
+@settings(
+    max_examples=4, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+)
+@given(
+    yaw_walk=st.floats(0.0, 0.3),
+    moved=st.floats(0.0, 0.1),
+    gone=st.floats(0.0, 0.1),
+    wrong_labels=st.floats(0.0, 0.05),
+    seed=st.integers(0, 50),
+)
+def test_an_old_map_and_an_erring_detector_below_a_bound_give_no_wrong_claim(
+    building, yaw_walk, moved, gone, wrong_labels, seed
+):
+    """Drift, moved and gone objects and mislabels below a bound: no `localized` answer is
+    wrong (with the sensor's coverage passed, as a robot that has it would)."""
+    frames = walk_frames(building, seed, keyframes=90, drift=Drift(0.01, yaw_walk, 0.05),
+                         world=World(moved=moved, gone=gone), wrong_label_rate=wrong_labels,
+                         redetections=10)  # fmt: skip
+    answers = run_walk(building, frames, coverage=True)
+    assert any(status == "localized" for status, _, _ in answers), "never localized"
+    assert all(error < 0.5 for status, error, _ in answers if status == "localized")
 
 
 def test_a_kidnap_never_yields_a_wrong_localized_claim(building):
