@@ -300,3 +300,21 @@ def test_the_widest_search_takes_any_gain():
     looks = _suggest(world, hypotheses)
     assert [look.global_id for look in looks] == ["lamp0"]
     assert 0 < looks[0].gain < NextLookConfig().look_min_gain
+
+
+def test_equal_gains_are_ordered_by_what_one_look_sees_then_by_distance():
+    """Three spots tell place 1 apart, 2 m apart each (`look_sight`): the middle one sees all
+    three; of the two that see two, the nearer comes first.  At most `suggestions`."""
+    world, hypotheses = _places([0.0, 100.0], {0: 3.0}, plants=(5.0, 7.0))
+    looks = _suggest(world, hypotheses)
+    assert [look.global_id for look in looks] == ["plant0", "lamp0", "plant1"]
+    config = NextLookConfig(suggestions=2)
+    looks = next_look(hypotheses, world, ["table"], np.array([[0.0, 0.0, 0.5]]), config)
+    assert [look.global_id for look in looks] == ["plant0", "lamp0"]
+
+
+def test_two_objects_of_a_label_look_tolerance_apart_are_two_spots():
+    world, hypotheses = _places(
+        [0.0, 100.0], {}, plants=(5.0, 5.0 + NextLookConfig().look_tolerance)
+    )
+    assert [look.global_id for look in _suggest(world, hypotheses)] == ["plant0", "plant1"]
