@@ -24,6 +24,7 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from semloc.decision import (
+    FEATURES,
     RIVAL_LOGIT_GAP,
     DecisionConfig,
     _different,
@@ -33,6 +34,8 @@ from semloc.decision import (
     is_rival,
     same_place,
     same_place_index,
+    score_confidence,
+    shipped_model,
 )
 from semloc.results import Hypothesis
 from semloc.transforms import yaw_pose
@@ -623,3 +626,59 @@ def test_distinct_takes_any_top_k():
     places = [((), yaw_pose(0.0, [float(i), 0.0, 0.0])) for i in range(40)]
     places.append(((), yaw_pose(0.0, [3.1, 0.0, 0.0])))  # the same place as the fourth
     assert distinct(places, 10**15, config) == list(range(40))
+
+
+# exactly at each boundary (values whose products are exact in binary) ------------------------
+def test_dominance_exactly_at_the_margin_is_dominance_by_score_and_fitness():
+    """score / fitness: the best dominates a rival of exactly 1 / (1 + margin) of it."""
+    config = DecisionConfig(margin=0.5)
+    best = bare(config, score=3.0, fitness=0.75)
+    assert _dominates(best, rival(best, score=2.0), "score", config)
+    assert _dominates(best, rival(best, fitness=0.5), "fitness", config)
+    assert decide([best, rival(best, score=2.0)], config, "score") == ("localized", "")
+
+
+def test_a_rival_exactly_at_the_residual_threshold_is_not_dominated():
+    config = DecisionConfig()
+    best = bare(config, residual=0.1)
+    at = rival(best, residual=threshold(best.residual, config))
+    assert not _dominates(best, at, "residual", config)
+    assert decide([best, at], config, "residual")[0] == "ambiguous"
+
+
+def test_a_rival_exactly_at_the_logit_gap_is_named():
+    config = DecisionConfig()
+    best = sure(config, confidence=config.min_confidence - 0.1, evidence=1.0)
+    at = rival(best, evidence=best.evidence - RIVAL_LOGIT_GAP)
+    assert "rank 2 has nearly the same evidence" in decide([best, at], config, "evidence")[1]
+
+
+def test_a_rival_outside_the_prior_does_not_count_against_a_best_inside_it():
+    """With a prior, a place outside it is wrong if the prior holds: it is no rival."""
+    config = DecisionConfig()
+    for make in (sure, bare):
+        best = make(config, outside_prior=False)
+        twin = rival(best, outside_prior=True)
+        assert decide([best, twin], config, "residual") == ("localized", "")
+        twin.outside_prior = False
+        assert decide([best, twin], config, "residual")[0] == "ambiguous"
+
+
+def test_a_variant_does_not_lower_the_confidence_a_rival_does():
+    """`score_confidence`: the rival of a hypothesis is the best evidence among the others
+    that share less than `rival_overlap` of its pairs; a variant (sharing more) is the same
+    answer and leaves its confidence as without a rival."""
+    model = shipped_model()
+    features = {"pairs": 6.0, "rejected_share": 0.0, "residual": 0.05, "fitness": 0.9,
+                "support": 6.0, "conflict_share": 0.0}  # fmt: skip
+    assert set(features) == set(FEATURES)
+    best = Hypothesis(1, 1.0, pairs(4), HERE, features=features)
+    variant = Hypothesis(2, 1.0, shared(best.pairs, 4, 2), ELSEWHERE,
+                         features=features | {"pairs": 9.0})  # fmt: skip
+    score_confidence([best, variant], model, 0.5)
+    assert best.confidence == model.confidence(best.evidence, None)
+    other = Hypothesis(2, 1.0, shared(best.pairs, 4, 1), ELSEWHERE,
+                       features=features | {"pairs": 9.0})  # fmt: skip
+    score_confidence([best, other], model, 0.5)
+    assert best.confidence == model.confidence(best.evidence, other.evidence)
+    assert best.confidence < model.confidence(best.evidence, None)

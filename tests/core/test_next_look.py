@@ -3,6 +3,8 @@ its places apart, where they lie under each hypothesis, and following it decides
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 from helpers import room
@@ -228,3 +230,91 @@ def test_a_suggestion_within_reach_weighs_every_top_place():
     world, hypotheses = _places([0.0, 20.0, 40.0], {0: 3.0})
     looks = _suggest(world, hypotheses)
     assert looks[0].separates == [1] and sorted(looks[0].where) == [1, 2, 3]
+
+
+def test_a_spot_already_looked_at_is_not_suggested():
+    """A lamp beside place 1 tells it from place 2, unless a lamp was seen within
+    `look_tolerance` of where place 1 puts it: what that spot shows is already evidence."""
+    world, hypotheses = _places([0.0, 100.0], {0: 3.0})
+    tolerance = NextLookConfig().look_tolerance
+
+    def suggest(offset: float) -> list[Look]:
+        seen = np.array([[0.0, 0.0, 0.5], [3.0, offset, 0.5]])
+        return next_look(hypotheses, world, ["table", "lamp"], seen)
+
+    assert suggest(tolerance) == []
+    assert [(look.global_id, look.separates) for look in suggest(tolerance + 0.01)] == [
+        ("lamp0", [1])
+    ]
+
+
+def test_a_spot_exactly_at_the_reach_is_within_it():
+    """A lamp exactly `look_reach` from the table seen tells place 1 from both others in the
+    first search (all three weighed), not in a widened one."""
+    world, hypotheses = _places([0.0, 20.0, 40.0], {0: NextLookConfig().look_reach})
+    looks = _suggest(world, hypotheses)
+    assert [look.global_id for look in looks] == ["lamp0"] and sorted(looks[0].where) == [1, 2, 3]
+
+
+def test_a_suggestion_exactly_at_the_least_gain_is_kept():
+    """Four equally likely places (no confidences): telling one from the rest gains
+    H(1/4, 3/4) bits; with that as the least gain the first search keeps it."""
+    world, hypotheses = _places([0.0, 20.0, 40.0, 60.0], {0: 3.0})
+    for h in hypotheses:
+        h.confidence = None
+    gain = -sum(p * math.log2(p) for p in [0.25, 0.75])
+    config = NextLookConfig(look_min_gain=gain)
+    looks = next_look(hypotheses, world, ["table"], np.array([[0.0, 0.0, 0.5]]), config)
+    assert sorted(looks[0].where) == [1, 2, 3, 4] and looks[0].gain == gain
+
+
+def test_the_places_inside_the_prior_are_weighed_when_two_lie_inside():
+    world, hypotheses = _places([0.0, 20.0, 40.0], {0: 3.0})
+    for h, outside in zip(hypotheses, [False, False, True]):
+        h.outside_prior = outside
+    looks = _suggest(world, hypotheses)
+    assert looks[0].separates == [1] and sorted(looks[0].where) == [1, 2]
+
+
+def test_the_best_two_are_told_apart_within_reach_before_the_search_widens():
+    """Places 1 and 3 both have a lamp 3 m off (no spot tells the best three apart); a plant
+    12 m behind place 1 would tell it too, but only a wider look reaches it: within
+    `look_reach` the lamp alone tells the best two apart."""
+    world, hypotheses = _places([0.0, 20.0, 40.0], {0: 3.0, 2: 3.0}, plants=(-12.0,))
+    looks = _suggest(world, hypotheses)
+    assert [look.global_id for look in looks] == ["lamp0"] and sorted(looks[0].where) == [1, 2]
+
+
+def test_the_second_widening_reaches_twice_the_reach():
+    """A lamp 12 m off (within twice the reach) is suggested alone; two plants 17 m off
+    would be seen by one look, but lie beyond twice the reach."""
+    world, hypotheses = _places([0.0, 100.0], {0: 12.0}, plants=(17.0, 17.5))
+    assert [look.global_id for look in _suggest(world, hypotheses)] == ["lamp0"]
+
+
+def test_the_widest_search_takes_any_gain():
+    """One place is all but sure: telling it from the other gains far less than
+    `look_min_gain`, yet an ambiguous answer still gets the one look that tells them apart."""
+    world, hypotheses = _places([0.0, 100.0], {0: 3.0})
+    hypotheses[0].confidence, hypotheses[1].confidence = 0.999, 0.001
+    looks = _suggest(world, hypotheses)
+    assert [look.global_id for look in looks] == ["lamp0"]
+    assert 0 < looks[0].gain < NextLookConfig().look_min_gain
+
+
+def test_equal_gains_are_ordered_by_what_one_look_sees_then_by_distance():
+    """Three spots tell place 1 apart, 2 m apart each (`look_sight`): the middle one sees all
+    three; of the two that see two, the nearer comes first.  At most `suggestions`."""
+    world, hypotheses = _places([0.0, 100.0], {0: 3.0}, plants=(5.0, 7.0))
+    looks = _suggest(world, hypotheses)
+    assert [look.global_id for look in looks] == ["plant0", "lamp0", "plant1"]
+    config = NextLookConfig(suggestions=2)
+    looks = next_look(hypotheses, world, ["table"], np.array([[0.0, 0.0, 0.5]]), config)
+    assert [look.global_id for look in looks] == ["plant0", "lamp0"]
+
+
+def test_two_objects_of_a_label_look_tolerance_apart_are_two_spots():
+    world, hypotheses = _places(
+        [0.0, 100.0], {}, plants=(5.0, 5.0 + NextLookConfig().look_tolerance)
+    )
+    assert [look.global_id for look in _suggest(world, hypotheses)] == ["plant0", "plant1"]

@@ -141,3 +141,61 @@ def test_places_follow_the_rooms_objects_are_in():
     index = PlaceIndex(ObjectMap([a, b, c, d], up=[0, 0, 1], name="rooms"), RetrievalConfig())
     assert index.n_cells == 3  # one 4 m cell, cut by the rooms
     assert index.cell_of[0] == index.cell_of[3] != index.cell_of[1] != index.cell_of[2]
+
+
+def _spread(n: int = 5) -> PlaceIndex:
+    """n chairs in n cells, cell k holding chair k."""
+    chairs = [SemanticObject(f"c{k}", "chair", [4.0 * k + 0.5, 0.5, 0.5]) for k in range(n)]
+    index = PlaceIndex(ObjectMap(chairs, up=[0, 0, 1], name="cells"), RetrievalConfig())
+    assert index.cell_of.tolist() == list(range(n))
+    return index
+
+
+@pytest.mark.parametrize(
+    ("support", "kept"),
+    [
+        ([8, 6, 5, 1, 0], [0, 1]),  # a quarter of 8 is 2: down to 6
+        ([6, 5, 4, 1, 0], [0, 1]),  # a quarter of 6 is 1 (rounded down): down to 5
+        ([3, 2, 1, 0, 0], [0, 1]),  # at least one fewer
+        ([1, 1, 0, 0, 0], [0, 1]),  # never a cell that supports nothing
+        ([0, 0, 0, 0, 0], [0, 1, 2, 3, 4]),  # no cell supports it: every candidate
+    ],
+)
+def test_a_candidate_is_kept_when_its_cell_is_within_the_slack_of_the_best(support, kept):
+    index = _spread()
+    found = np.arange(5)
+    assert index.kept(np.array([support]), [found])[0].tolist() == kept
+
+
+def test_a_local_object_with_more_kept_candidates_than_wait_above_waits():
+    index = _spread()
+    index.config = RetrievalConfig(wait_above=2)
+    support = np.array([[3, 3, 0, 0, 0], [3, 3, 3, 0, 0]])
+    kept = index.kept(support, [np.arange(5), np.arange(5)])
+    assert [k.tolist() for k in kept] == [[0, 1], []]
+
+
+def _pair_support(local_gap: float, map_gap: float) -> int:
+    """The support of the one cell for a local chair with a table `local_gap` from it, when
+    the map's chair and table are `map_gap` apart (gamma 1, tolerance 0.5 m: a slack of
+    0.5 m; reach 6 m, bins of 0.5 m)."""
+    objects = [SemanticObject("c", "chair", [0.1, 0.1, 0.1]),
+               SemanticObject("t", "table", [0.1 + map_gap, 0.1, 0.1])]  # fmt: skip
+    config = RetrievalConfig(cell=20.0)
+    index = PlaceIndex(ObjectMap(objects, up=[0, 0, 1], name="pair"), config)
+    local_xyz = np.array([[0.0, 0, 0], [local_gap, 0, 0]])
+    support = index.support(local_xyz, [np.array([0]), np.array([1])], 1.0, 0.5)
+    return int(support[0].max())
+
+
+def test_a_local_pair_is_looked_up_only_when_every_consistent_map_distance_is_indexed():
+    """A pair 5.5 m apart with a slack of 0.5 m reaches 6 m, the index's reach: looked up;
+    5.6 m apart it could match a map pair beyond the reach, which the index does not hold."""
+    assert _pair_support(5.5, 5.5) == 1
+    assert _pair_support(5.6, 5.6) == 0
+
+
+def test_a_local_pair_looks_up_every_bin_within_its_slack():
+    """3.4 m apart with a slack of 0.5 m: the bins of 2.9 m to 3.9 m (bins 5 to 7)."""
+    assert _pair_support(3.4, 2.95) == 1 and _pair_support(3.4, 3.85) == 1
+    assert _pair_support(3.4, 2.45) == 0 and _pair_support(3.4, 4.05) == 0

@@ -14,9 +14,10 @@ from hypothesis import strategies as st
 
 import semloc
 from semloc import Localizer, ObjectMap, Prior
-from semloc.priors import OUTSIDE_PRIOR
+from semloc.priors import GATE_SLACK, OUTSIDE_PRIOR
 from semloc.results import Result
 from semloc.sim.layouts import layout, observe
+from semloc.tracking import TrackingConfig
 from semloc.transforms import pose_error, yaw_pose
 
 # ------------------------------------------------------------------------------ validation
@@ -80,6 +81,22 @@ def test_gate_keeps_what_the_prior_allows_and_drops_the_far():
     global_xyz = np.array([[0.0, 0, 0], [6.9, 0, 0], [7.1, 0, 0], [20, 0, 0]])
     keep = prior.gate(np.array([0.0, 4.0, 0.0]), global_xyz, np.full(4, 1.0))
     assert keep.tolist() == [True, True, False, False]  # reach 2 + 4 + 1 m
+
+
+def test_the_localizers_gate_allows_the_slack_and_a_quarter_of_each_objects_diagonal():
+    """A chair seen 4 m from the local origin, under a prior of radius 2 m: a map chair may lie
+    2 + 4 m plus `GATE_SLACK` plus a quarter of its diagonal from the prior's centre, no more
+    (a partially seen centre is biased by up to that much): at least tracking's tolerance, so
+    a detection that would support a place is never gated out."""
+    assert TrackingConfig().track_tolerance <= GATE_SLACK
+    size = np.array([0.5, 0.5, 1.0])
+    reach = 2.0 + 4.0 + GATE_SLACK + 0.25 * float(np.linalg.norm(size))
+    chairs = [semloc.SemanticObject(f"c{i}", "chair", [x, 0.0, 0.0], size=size)
+              for i, x in enumerate([reach - 0.01, reach + 0.01, 6.0])]  # fmt: skip
+    world = ObjectMap(chairs, up=[0, 0, 1])
+    localizer = Localizer(world, local_up=[0, 0, 1], prior=Prior(position=[0, 0, 0], radius=2))
+    seen = semloc.SemanticObject("l", "chair", [0.0, 4.0, 0.0])
+    assert localizer._prior_gated(seen, np.arange(3)).tolist() == [0, 2]
 
 
 @pytest.fixture(scope="module")

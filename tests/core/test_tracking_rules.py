@@ -113,6 +113,50 @@ def test_a_claim_ends_when_its_judged_objects_lose_the_supporting_share():
     assert young.contradicted(Verdict([], ["a"])) == 0  # only 4 judged
 
 
+def test_changed_objects_and_missing_ones_count_among_the_judged_objects():
+    """The share asks of every object judged (changed ones and missing ones too), each
+    counted once: a run of changed objects, one an update beside a re-detected supporting
+    one, never ends a claim by the recent rules but loses it its supporting share (2 of 5);
+    missing objects alone take a young claim past `min_judged` and below the share."""
+    claim = track(min_judged=4)
+    assert claim.contradicted(Verdict([(10, "a"), (11, "b")], [])) == 0
+    for k, moved in enumerate(["x", "y", "z"]):
+        ends = claim.contradicted(Verdict([(10, "a")], [], [(12 + k, moved)]))
+        assert ends == (1 if moved == "z" else 0), moved  # 2 of 4 keeps it, 2 of 5 does not
+    unseen = track(min_judged=4)
+    assert unseen.contradicted(Verdict([(10, "a"), (11, "b")], [], [], 0, 1.5)) == 0  # 2 of 3.5
+    assert unseen.contradicted(Verdict([(10, "a")], [], [], 0, 1.0)) == 1  # 2 of 4.5
+    assert unseen.missing == 2.5
+
+
+def test_accept_keeps_one_pair_per_map_object_and_a_refreshed_pair_is_the_newest():
+    claim = track()  # p0 -> 0, p1 -> 1, p2 -> 2
+    claim.accept(Verdict([(0, "q")], []))  # another local object on map object 0
+    assert claim.newest(5) == [(1, "p1"), (2, "p2"), (0, "q")]
+    claim.accept(Verdict([(7, "p1")], []))  # p1 seen again, on another map object
+    assert claim.newest(5) == [(2, "p2"), (0, "q"), (7, "p1")]
+    assert claim.newest(2) == [(0, "q"), (7, "p1")]
+
+
+def test_objects_that_left_the_window_are_no_longer_judged():
+    claim = track(min_judged=4)
+    claim.contradicted(Verdict([(10, "a"), (11, "b")], ["x"]))
+    claim.keep_only(["p0", "p1", "a", "x"])
+    assert claim.judged == {"a": "supported", "x": "contradicting"}
+    assert [l for _, l in claim.newest(5)] == ["p0", "p1"]
+
+
+def test_a_restored_track_ignores_a_verdict_it_does_not_know():
+    ids = [f"g{i}" for i in range(20)]
+    state = track().state(ids)
+    state["judged"] = {"a": "supported", "b": "puzzling"}
+    assert Track.restored(state, ids.index, TrackingConfig()).counts() == {
+        "supported": 1,
+        "changed": 0,
+        "contradicting": 0,
+    }
+
+
 def test_a_changed_or_contradicting_redetection_drops_its_pair_and_never_refits():
     claim = track()
     claim.accept(Verdict([(5, "x")], []))
@@ -137,6 +181,20 @@ def test_the_claims_confidence_moves_with_its_evidence():
     assert math.isclose(down, 1 / (1 + math.exp(-expected)))
     sure = track(confidence=0.999999)
     assert math.isclose(sure.current_confidence(), 1 / (1 + math.exp(-CONFIDENCE_CAP)))
+    unsure = track(confidence=1e-6)  # the cap holds both ways
+    assert math.isclose(unsure.current_confidence(), 1 / (1 + math.exp(CONFIDENCE_CAP)))
+
+
+def test_each_kind_of_judged_object_moves_the_confidence_by_its_logit():
+    """One supporting, one changed, one contradicting and 1.5 missing objects beyond the
+    tolerated share: the search's logit plus each one's log-likelihood ratio."""
+    claim = track(confidence=0.5)  # logit 0
+    claim.contradicted(Verdict([(5, "a")], ["c"], [(6, "b")], 0, 1.5))
+    logits = EVIDENCE_LOGITS
+    expected = (logits["supported"] + logits["changed"] + logits["contradicting"]
+                + 1.5 * logits["missing"])  # fmt: skip
+    assert math.isclose(claim.current_confidence(), 1 / (1 + math.exp(-expected)))
+    assert all(logits[k] < 0 for k in ("changed", "contradicting", "missing"))
 
 
 def test_a_track_round_trips_through_its_state_and_reads_an_old_one():
@@ -193,6 +251,10 @@ def test_the_prior_decides_among_places_whose_evidence_is_within_the_margin():
     assert prior_first([outside, inside])[0] is outside
     alone = [hypothesis(1, 1.0, True)]
     assert prior_first(alone) == alone
+    # a best place inside the prior keeps the order, outside places among the inside ones
+    ranked = [hypothesis(1, 3.0, False), hypothesis(2, 3.0, True), hypothesis(3, 3.0, False)]
+    assert [h.rank for h in prior_first(list(ranked))] == [1, 2, 3]
+    assert prior_first(list(ranked)) == ranked
 
 
 def test_the_missing_penalty_forgives_the_gone_share():
@@ -202,6 +264,10 @@ def test_the_missing_penalty_forgives_the_gone_share():
     assert missing_penalty(h) == 0.0  # 2 of 8 is the share an old map may lose
     h.missing = 4
     assert missing_penalty(h) == pytest.approx(2.0)
+    h.missing = 1  # fewer than the share: no penalty, and no bonus either
+    assert missing_penalty(h) == 0.0
+    h.missing, h.expected = 3, None  # a count without what was expected says nothing
+    assert missing_penalty(h) == 0.0
 
 
 # the Localizer outside the clean room ----------------------------------------------------------
@@ -363,3 +429,33 @@ def test_a_prior_picks_the_copy_inside_it_among_identical_copies():
         assert result.status == "localized"
         assert result.pose[0, 3] == pytest.approx(centre[0], abs=0.1)
     assert Localizer(twins, local_up=[0, 0, 1]).update(objects).status == "ambiguous"
+
+
+def held(min_pairs: int, track_min_pairs: int = 3) -> Localizer:
+    """The room claimed on its ten objects, with these least pairs for a claim and a track."""
+    building = ObjectMap(room(), up=[0, 0, 1])
+    localizer = Localizer(building, local_up=[0, 0, 1], min_pairs=min_pairs,
+                          tracking={"track_min_pairs": track_min_pairs})  # fmt: skip
+    localizer.update(local(room())[:5])
+    result = localizer.update(local(room())[5:])
+    assert result.status == "localized" and len(result.best.pairs) == 10
+    return localizer
+
+
+@pytest.mark.parametrize(("min_pairs", "track_min_pairs"), [(10, 3), (3, 10)])
+def test_a_track_holding_exactly_the_least_pairs_is_followed(min_pairs, track_min_pairs):
+    """The least pairs of a track are the larger of tracking's and the decision's: a track
+    with exactly that many supporting pairs in the window is still followed."""
+    result = held(min_pairs, track_min_pairs).update([])
+    assert result.status == "localized" and result.best.method.startswith("tracked/")
+
+
+@pytest.mark.parametrize(("min_pairs", "track_min_pairs"), [(10, 3), (3, 10)])
+def test_a_track_one_pair_short_of_the_least_lapses_into_the_search(min_pairs, track_min_pairs):
+    """A changed re-detection drops its pair (nine left): the claim is not renewed, and the
+    search, on nine pairs that still fit, claims only when nine are enough."""
+    localizer = held(min_pairs, track_min_pairs)
+    lamp = local(room())[2]
+    result = localizer.update([lamp.replace(position=lamp.position + [1.5, 0, 0])])
+    assert not result.best.method.startswith("tracked/")
+    assert result.status == ("ambiguous" if min_pairs == 10 else "localized")
