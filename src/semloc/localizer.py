@@ -66,6 +66,7 @@ from semloc.results import Hypothesis, Result, Status, Step, Support
 from semloc.semantics import pair_weight
 from semloc.tracking import (
     CONTRADICTED,
+    AgainstRate,
     Track,
     TrackingConfig,
     Verdict,
@@ -209,6 +210,7 @@ class Localizer:
         self._look: Coverage | None = None  # what the sensor covered at this update
         self._looks: deque[tuple[int, Coverage]] = deque(maxlen=LOOKS_KEPT)  # (update, look)
         self._run_changes = RunChanges()  # what changed, over the run's tracked claims
+        self._against = AgainstRate()  # how often the run's claims judged objects against
         self._map_tree: Any = None  # a KD-tree of the map's positions, for looks
         self._diagonals: np.ndarray | None = None
         self._reset_search()
@@ -257,6 +259,7 @@ class Localizer:
             "steps": [s.to_dict() for s in self._steps],
             "looks": [[update, look.to_dict()] for update, look in self._looks],
             "changes": self._run_changes.state(list(self.global_map.ids)),
+            "against": [self._against.against, self._against.judged],
             "n_steps": self._n_steps,
             "timing": dict(self._timing),
         }
@@ -282,10 +285,12 @@ class Localizer:
                 localizer.config.window, state["window"], objects
             )
             localizer._register(objects)
+            localizer._against = AgainstRate(*map(float, state.get("against", [0.0, 0.0])))
             if state["track"] is not None:
                 localizer._track = Track.restored(
-                    state["track"], localizer.global_map.index_of, localizer.config.tracking
-                )
+                    state["track"], localizer.global_map.index_of, localizer.config.tracking,
+                    localizer._against,
+                )  # fmt: skip
             localizer._steps.extend(Step(**s) for s in state["steps"])
             localizer._run_changes = RunChanges.restored(
                 state.get("changes", {}), localizer.global_map.index_of
@@ -597,7 +602,8 @@ class Localizer:
         if the claim ends)."""
         assert best.pose is not None
         pairs = [(self.global_map.index_of(g), l) for g, l in best.pairs]
-        self._track = Track(best.pose, pairs, best.confidence, best.score, self.config.tracking)
+        self._track = Track(best.pose, pairs, best.confidence, best.score, self.config.tracking,
+                            self._against)  # fmt: skip
         self._reset_search()
         self._search_stale = True
 

@@ -32,6 +32,13 @@ search's cost grows with the local objects; tracking costs a lookup per new obje
   not.  Over the whole claim, the objects judged since it began must stay at least half
   supporting (`min_support_share`, once `min_judged` are judged): a wrong place that a few
   lucky objects keep alive update by update loses it there.
+* **Unusual against this run.**  An old map and an erring detector make some objects judged
+  against a right place (changed or contradicting): few in a clean world, a quarter or more
+  in a hard one.  The run keeps that share over its tracked claims (`AgainstRate`, from a
+  prior of `PRIOR_AGAINST` worth `PRIOR_WEIGHT` objects); when the objects first judged in
+  the latest `CONTRADICTION_UPDATES` updates hold at least two against, more than that share
+  makes likely at `UNUSUAL` (a one-sided binomial test), the claim ends: the robot was carried
+  into a look-alike place whose objects mostly fit, but not as this run's places fit.
 * **Confidence.**  The claim's confidence moves with its evidence: the search's confidence
   (as a logit, at most `CONFIDENCE_CAP`) plus a log-likelihood ratio per judged object
   (`EVIDENCE_LOGITS`: supporting, changed, contradicting, missing).
@@ -66,6 +73,13 @@ EVIDENCE_LOGITS = {"supported": 0.6, "changed": -0.4, "contradicting": -1.2, "mi
 """Log-likelihood ratio (right place against a wrong one) of one judged object: a right place of
 an old map seen by an erring detector has about 65 % of its objects supporting, 15 % changed
 and 20 % contradicting; a wrong place about 25 / 25 / 50 %."""
+PRIOR_AGAINST = 0.25
+"""The share of new objects judged against a right place before the run has shown its own."""
+PRIOR_WEIGHT = 20.0
+"""How many judged objects the prior share is worth."""
+UNUSUAL = 0.01
+"""How unlikely, under the run's share, the latest updates' objects against a claim must be to
+end it."""
 _VERDICTS = ("supported", "changed", "contradicting")
 CONFIDENCE_CAP = 4.0
 """The search's confidence enters a claim's confidence as a logit of at most this."""
@@ -204,6 +218,33 @@ def allowances(global_map: ObjectMap, tolerance: float) -> np.ndarray:
     return tolerance + 0.25 * diagonal
 
 
+@dataclass
+class AgainstRate:
+    """The share of new objects this run's tracked claims judged against them (changed or
+    contradicting): what the latest updates of a claim are weighed against."""
+
+    against: float = 0.0
+    judged: float = 0.0
+
+    def add(self, against: int, judged: int) -> None:
+        self.against += against
+        self.judged += judged
+
+    @property
+    def share(self) -> float:
+        return (self.against + PRIOR_WEIGHT * PRIOR_AGAINST) / (self.judged + PRIOR_WEIGHT)
+
+    def unusual(self, against: int, judged: int) -> bool:
+        """Whether `against` of `judged` new objects is unlikely at this run's share (at
+        least two, one-sided binomial test at `UNUSUAL`)."""
+        if against < 2:
+            return False
+        p = self.share
+        tail = sum(math.comb(judged, k) * p**k * (1 - p) ** (judged - k)
+                   for k in range(against, judged + 1))  # fmt: skip
+        return tail < UNUSUAL
+
+
 class Track:
     """The place being tracked: its pose, confidence and score (from the answer that found it)
     and its supporting pairs, newest last."""
@@ -215,8 +256,11 @@ class Track:
         confidence: float | None,
         score: float,
         config: TrackingConfig,
+        rate: AgainstRate | None = None,
     ) -> None:
         self.pose = pose
+        self.rate = AgainstRate() if rate is None else rate  # (the run's, shared by its claims)
+        self._recent: deque[tuple[int, int]] = deque(maxlen=CONTRADICTION_UPDATES)
         self.confidence = confidence
         self.score = score
         self.config = config
@@ -231,7 +275,10 @@ class Track:
         """How many of the latest updates (this one included) contradict the place: 0 when
         they do not; 1 also when the claim's judged objects lost their supporting share."""
         self._verdicts.append(verdict)
-        self._judge(verdict)
+        new = self._judge(verdict)
+        if len(self._recent) == self._recent.maxlen:  # (the test's own updates stay out)
+            self.rate.add(*self._recent[0])
+        self._recent.append(new)
         least = self.config.contradiction
         if recent_contradiction([verdict], least):
             return 1
@@ -243,16 +290,20 @@ class Track:
             self.config.min_support_share * judged
         ):
             return 1
+        if self.rate.unusual(*map(sum, zip(*self._recent))):
+            return len(self._recent)
         return 0
 
-    def _judge(self, verdict: Verdict) -> None:
-        for _, object_id in verdict.supported:
-            self.judged[object_id] = "supported"
-        for _, object_id in verdict.changed:
-            self.judged[object_id] = "changed"
-        for object_id in verdict.contradicting:
-            self.judged[object_id] = "contradicting"
+    def _judge(self, verdict: Verdict) -> tuple[int, int]:
+        """Record the verdict's judgements (latest wins); how many of them are new or changed
+        (against the place, and in all)."""
+        judged = {l: "supported" for _, l in verdict.supported}
+        judged |= {l: "changed" for _, l in verdict.changed}
+        judged |= dict.fromkeys(verdict.contradicting, "contradicting")
+        new = [v for l, v in judged.items() if self.judged.get(l) != v]
+        self.judged |= judged
         self.missing += verdict.missing
+        return sum(v != "supported" for v in new), len(new)
 
     def counts(self) -> dict[str, int]:
         """The objects judged since the claim began, by their latest verdict."""
@@ -299,16 +350,18 @@ class Track:
             "verdicts": verdicts,
             "judged": dict(self.judged),
             "missing": self.missing,
+            "recent": [list(r) for r in self._recent],
         }
 
     @classmethod
     def restored(
-        cls, state: dict[str, Any], index_of: Callable[[str], int], config: TrackingConfig
-    ) -> Track:
+        cls, state: dict[str, Any], index_of: Callable[[str], int], config: TrackingConfig,
+        rate: AgainstRate | None = None,
+    ) -> Track:  # fmt: skip
         """The track of `state` (from `state()`); `index_of` maps a map object's id to its index."""
         pairs = [(index_of(g), str(l)) for g, l in state["pairs"]]
         track = cls(np.asarray(state["pose"], dtype=float), [], state["confidence"],
-                    float(state["score"]), config)  # fmt: skip
+                    float(state["score"]), config, rate)  # fmt: skip
         track.pairs = OrderedDict((l, g) for g, l in pairs)
         for supported, contradicting, *more in state["verdicts"]:  # (a state before changes:
             changed, repeated, missing = more or [[], 0, 0.0]  # two items a verdict)
@@ -320,6 +373,7 @@ class Track:
         judged = state.get("judged", {})
         track.judged = {str(l): str(v) for l, v in judged.items() if v in _VERDICTS}
         track.missing = float(state.get("missing", 0.0))
+        track._recent.extend((int(a), int(n)) for a, n in state.get("recent", []))
         return track
 
     def newest(self, n: int) -> list[tuple[int, str]]:

@@ -10,6 +10,7 @@ import math
 
 import numpy as np
 import pytest
+from scipy.stats import binom
 
 from semloc import Coverage, Localizer, ObjectMap, Prior, SemanticObject
 from semloc.changes import RunChanges
@@ -19,7 +20,12 @@ from semloc.results import Hypothesis
 from semloc.tracking import (
     CONFIDENCE_CAP,
     CONTRADICTED,
+    CONTRADICTION_UPDATES,
     EVIDENCE_LOGITS,
+    PRIOR_AGAINST,
+    PRIOR_WEIGHT,
+    UNUSUAL,
+    AgainstRate,
     Track,
     TrackingConfig,
     Verdict,
@@ -97,9 +103,11 @@ def test_the_three_update_rule_weighs_the_support_of_all_three():
     assert recent_contradiction(verdicts, least=2) is False  # 3.5 against, not > 2 x 2
 
 
-def track(n_pairs: int = 3, confidence: float = 0.99, **config) -> Track:
+def track(
+    n_pairs: int = 3, confidence: float = 0.99, rate: AgainstRate | None = None, **config
+) -> Track:
     pairs = [(i, f"p{i}") for i in range(n_pairs)]
-    return Track(np.eye(4), pairs, confidence, 3.0, TrackingConfig(**config))
+    return Track(np.eye(4), pairs, confidence, 3.0, TrackingConfig(**config), rate)
 
 
 def test_a_claim_ends_when_its_judged_objects_lose_the_supporting_share():
@@ -155,6 +163,43 @@ def test_a_restored_track_ignores_a_verdict_it_does_not_know():
         "changed": 0,
         "contradicting": 0,
     }
+
+
+@pytest.mark.parametrize("against, judged", [(1, 1), (2, 2), (2, 8), (3, 5), (4, 6), (5, 12)])
+@pytest.mark.parametrize("share", [(1, 100), (40, 100), (0, 0)])
+def test_new_objects_against_a_claim_are_unusual_by_the_binomial_tail_of_the_runs_share(
+    against, judged, share
+):
+    rate = AgainstRate(*share)
+    expected_share = (share[0] + PRIOR_WEIGHT * PRIOR_AGAINST) / (share[1] + PRIOR_WEIGHT)
+    assert rate.share == pytest.approx(expected_share)
+    tail = binom.sf(against - 1, judged, expected_share)
+    assert rate.unusual(against, judged) is bool(against >= 2 and tail < UNUSUAL)
+
+
+def test_a_clean_run_ends_a_claim_whose_new_objects_turn_against_it_as_its_places_never_did():
+    """Four new supporting objects and two contradicting ones per update: the old rules keep
+    the claim (twice as many for as against); a run whose claims saw 1 % of their objects
+    against ends it, a run that saw 40 % does not."""
+    updates = [Verdict([(10 + 2 * k, f"s{k}"), (11 + 2 * k, f"t{k}"), (30 + 2 * k, f"u{k}"),
+                        (31 + 2 * k, f"v{k}")], [f"x{k}", f"y{k}"]) for k in range(3)]  # fmt: skip
+    clean = track(rate=AgainstRate(1, 100))
+    hard = track(rate=AgainstRate(40, 100))
+    assert [clean.contradicted(v) for v in updates[:2]] == [0, 2]  # both updates' objects
+    assert [hard.contradicted(v) for v in updates] == [0, 0, 0]
+    assert not any(recent_contradiction([v], least=2) for v in updates)
+
+
+def test_the_runs_share_learns_from_a_claims_older_updates_only():
+    rate = AgainstRate()
+    claim = track(rate=rate)
+    first = Verdict([(10, "a"), (11, "b")], ["c"])
+    claim.contradicted(first)
+    for k in range(CONTRADICTION_UPDATES - 1):
+        claim.contradicted(Verdict([(20 + k, f"n{k}")], []))
+    assert (rate.against, rate.judged) == (0, 0)  # the latest updates are what is tested
+    claim.contradicted(Verdict([(30, "m")], []))
+    assert (rate.against, rate.judged) == (1, 3)  # the first update's new objects
 
 
 def test_a_changed_or_contradicting_redetection_drops_its_pair_and_never_refits():
