@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -9,7 +11,7 @@ from hypothesis import strategies as st
 from test_changes_fixtures import T, cube, room, seen_from_t
 
 import semloc
-from semloc.changes import Changes, Moved, explain
+from semloc.changes import Changes, ChangesConfig, Moved, RunChanges, explain
 from semloc.maps import ObjectMap, SemanticObject
 from semloc.transforms import pose_error, yaw_pose
 
@@ -260,3 +262,86 @@ def test_with_centres_only_a_moved_object_reads_as_new():
     local = [o.replace(points=None) for o in seen_from_t(objects)]
     changes = explain(g, local, T, [(f"g{i}", f"l{i}") for i in range(4)], candidates_of(g, local))
     assert changes.moved == [] and changes.new == ["l4"] and changes.missing == []
+
+
+# The run's change report (RunChanges) at its rules -------------------------------------------
+def test_a_new_object_seen_twice_is_reported_and_a_later_sighting_in_place_cancels_it():
+    ids = ["g0", "g1", "g2"]
+    run = RunChanges()
+    run.observe_new("l5", seen=3)
+    assert run.report(ids).new == []  # once: a phantom or a mislabel
+    run.observe_new("l5", seen=4)
+    assert run.report(ids).new == ["l5"] and run.report(ids).evidence["new"] == {"l5": 2}
+    run.observe_matched(0, "l5")  # the same detection found its map object after all
+    assert run.report(ids).new == [] and not run
+
+
+def test_a_run_with_only_missing_evidence_has_changes_and_reports_them_with_their_counts():
+    ids = ["g0", "g1", "g2"]
+    run = RunChanges()
+    assert not run
+    run.observe_missing([2])
+    assert run  # one look already counts as evidence, though not yet as a change
+    run.observe_missing([2])
+    run.observe_matched(1, "l1")
+    report = run.report(ids)
+    assert report.missing == ["g2"] and report.matched == ["g1"]
+    assert report.evidence == {"new": {}, "missing": {"g2": 2}}
+
+
+def test_a_run_s_report_round_trips_through_its_state_and_an_empty_state_is_an_empty_run():
+    ids = ["g0", "g1", "g2", "g3"]
+    run = RunChanges()
+    for seen in (3, 4):
+        run.observe_moved(1, "l1", 2.0 + seen / 10, seen=seen)
+        run.observe_new("l7", seen=seen)
+        run.observe_missing([2])
+    run.observe_matched(3, "l3")
+    state = json.loads(json.dumps(run.state(ids)))
+    assert set(state) == {"moved", "new", "missing", "matched"}
+    restored = RunChanges.restored(state, ids.index)
+    assert restored.state(ids) == state
+    assert restored.report(ids).to_dict() == run.report(ids).to_dict()
+    assert restored.report(ids).matched == ["g3"]
+    empty = RunChanges.restored({}, ids.index)
+    assert not empty and empty.report(ids).matched == []
+
+
+# The single view's rules at their bounds (identity pose, one map chair at the origin) -----------
+def one_chair() -> ObjectMap:
+    return ObjectMap([SemanticObject("g0", "chair", [0, 0, 0], size=[0.5, 0.5, 0.5])], up=[0, 0, 1])
+
+
+def observer(x: float, y: float) -> SemanticObject:
+    """A detection of another kind whose one observed point is at (x, y, 0)."""
+    return SemanticObject("l9", "bin", [x, y, 0], points=np.array([[x, y, 0.0]]))
+
+
+def changes_of(local: list[SemanticObject], config: ChangesConfig | None = None) -> Changes:
+    cands = {o.id: np.array([0] if o.label == "chair" else [], dtype=int) for o in local}
+    return explain(one_chair(), local, np.eye(4), [], cands, config)
+
+
+def test_an_object_is_matched_within_the_match_radius_not_at_it():
+    assert changes_of([SemanticObject("l0", "chair", [0.49, 0, 0])]).new == []
+    assert changes_of([SemanticObject("l0", "chair", [0.5, 0, 0])]).new == ["l0"]
+
+
+def test_an_object_moved_exactly_the_largest_offset_from_a_seen_place_is_moved():
+    seen = observer(0.0, 1.4)  # the chair's old place within the source radius (1.5 m): seen
+    chair = SemanticObject("l0", "chair", [3.0, 0, 0], size=[0.75, 0.75, 0.75])  # 1.5 x larger
+    changes = changes_of([chair, seen])
+    assert [(m.global_id, m.offset_m) for m in changes.moved] == [("g0", 3.0)]
+    assert changes.new == ["l9"] and changes.missing == []
+    assert changes_of([chair.replace(position=[3.01, 0, 0]), seen]).moved == []  # too far
+    assert changes_of([chair.replace(size=[0.76, 0.76, 0.76]), seen]).moved == []  # too large
+    assert changes_of([chair, observer(0.0, 1.51)]).moved == []  # the old place unseen
+    # exactly at the source radius still counts as seen (a wider observed radius lets the
+    # search of observed points reach that far)
+    wide = ChangesConfig(observed_radius=2.0)
+    assert [m.global_id for m in changes_of([chair, observer(0.0, 1.5)], wide).moved] == ["g0"]
+
+
+def test_a_map_object_is_missing_when_a_point_was_observed_within_the_radius_of_its_place():
+    assert changes_of([observer(0.5, 0.0)]).missing == ["g0"]
+    assert changes_of([observer(0.51, 0.0)]).missing == []
