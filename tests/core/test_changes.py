@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 from test_changes_fixtures import T, cube, room, seen_from_t
 
 import semloc
-from semloc.changes import Changes, ChangesConfig, Moved, RunChanges, explain
+from semloc.changes import Changes, ChangesConfig, Moved, RunChanges, answer_changes, explain
 from semloc.maps import ObjectMap, SemanticObject
 from semloc.transforms import pose_error, yaw_pose
 
@@ -345,3 +345,94 @@ def test_an_object_moved_exactly_the_largest_offset_from_a_seen_place_is_moved()
 def test_a_map_object_is_missing_when_a_point_was_observed_within_the_radius_of_its_place():
     assert changes_of([observer(0.5, 0.0)]).missing == ["g0"]
     assert changes_of([observer(0.51, 0.0)]).missing == []
+
+
+def test_a_local_object_without_candidates_is_new():
+    chair = SemanticObject("l0", "chair", [0.1, 0, 0], size=[2.0, 2.0, 2.0])
+    assert explain(one_chair(), [chair], np.eye(4), [], {}).new == ["l0"]
+
+
+def test_an_object_of_another_size_at_its_place_is_matched_one_to_one():
+    # boxes twice the map chair's: at its place a chair is that chair (the detector's box), not
+    # a moved one; a second chair beside it is not explained by the same map object
+    big = [1.0, 1.0, 1.0]
+    first = SemanticObject("l0", "chair", [0.1, 0, 0], size=big)
+    second = SemanticObject("l1", "chair", [0.2, 0, 0], size=big)
+    assert changes_of([first]).new == []
+    assert changes_of([first, second]).new == ["l1"]
+
+
+def test_a_relabelled_object_takes_the_nearest_map_object_at_its_place_only():
+    g = ObjectMap(
+        [SemanticObject("g0", "chair", [0, 0, 0], size=[0.5] * 3),
+         SemanticObject("g1", "table", [5, 0.4, 0], size=[0.5] * 3),
+         SemanticObject("g2", "shelf", [5, -0.1, 0], size=[0.5] * 3)],
+        up=[0, 0, 1],
+    )  # fmt: skip
+    chair = SemanticObject("l0", "chair", [0.1, 0, 0])  # matched at its place first
+    stool = SemanticObject("l1", "stool", [5, 0, 0], size=[0.5] * 3, points=np.array([[5, 0, 0.0]]))
+    changes = explain(
+        g, [chair, stool], np.eye(4), [], {"l0": np.array([0]), "l1": np.array([], dtype=int)}
+    )
+    # the stool is the shelf under another name (0.1 m); the table, 0.4 m from the observed
+    # point, stood in view and nobody explains it
+    assert changes.new == [] and changes.missing == ["g1"]
+
+
+def test_every_observed_point_counts_even_for_an_object_of_two():
+    two = SemanticObject("l9", "bin", [3.0, 0, 0], points=np.array([[3.0, 0, 0], [0.4, 0, 0]]))
+    assert changes_of([two]).missing == ["g0"]
+
+
+def test_a_box_is_observed_on_its_surface_as_it_is_turned():
+    # a 2 m long thin box 1 m from the chair, turned a quarter turn: its end reaches the chair
+    turned = yaw_pose(np.pi / 2, [0, 0, 0])[:3, :3]
+    long = SemanticObject("l9", "bin", [0, 1.0, 0], size=[2.0, 0.1, 0.1], rotation=turned)
+    assert changes_of([long]).missing == ["g0"]
+    assert changes_of([long.replace(rotation=None)]).missing == []  # along x: 1 m away
+
+
+def test_an_answer_s_changes_keep_only_the_pairs_of_both_maps_and_its_settings():
+    g = one_chair()
+    chair = SemanticObject("l0", "chair", [0.4, 0, 0])
+    cands = {"l0": np.array([0])}
+    pairs = [("g0", "l0"), ("gx", "l0"), ("g0", "lx")]
+    assert answer_changes(g, [chair], np.eye(4), pairs, candidates=cands) == Changes()
+    assert answer_changes(g, [chair], np.eye(4), [("gx", "l0")], candidates=cands) == Changes()
+    tight = ChangesConfig(match_radius=0.3)
+    assert answer_changes(g, [chair], np.eye(4), [], config=tight, candidates=cands).new == ["l0"]
+
+
+def test_a_run_s_changes_round_trip_through_their_document_with_their_evidence():
+    run = RunChanges()
+    for seen in (3, 4):
+        run.observe_moved(0, "l1", 1.23456789, seen=seen)
+        run.observe_new("l7", seen=seen)
+        run.observe_missing([1])
+    report = run.report(["g0", "g1"])
+    document = json.loads(json.dumps(report.to_dict()))
+    assert document == {
+        "moved": [
+            {"global": "g0", "local": "l1", "offset_m": 1.234568, "evidence": 2, "last_seen": 4}
+        ],
+        "new": ["l7"],
+        "missing": ["g1"],
+        "evidence": {"new": {"l7": 2}, "missing": {"g1": 2}},
+    }
+    again = Changes.from_dict(document)
+    assert again.to_dict() == document and again.moved[0] == Moved("g0", "l1", 1.234568, 2, 4)
+    plain = Changes([Moved("g0", "l1", 0.5)], ["l2"], ["g3"])
+    assert plain.to_dict() == {
+        "moved": [{"global": "g0", "local": "l1", "offset_m": 0.5}], "new": ["l2"], "missing": ["g3"]
+    }  # fmt: skip
+    assert Changes.from_dict(plain.to_dict()) == plain and Changes.from_dict({}) == Changes()
+
+
+@pytest.mark.parametrize(
+    "document",
+    [{"moved": [{"global": "g0"}]}, {"moved": 5}, {"evidence": {"new": 3}},
+     {"moved": [{"global": "g0", "local": "l", "offset_m": "far"}]}],
+)  # fmt: skip
+def test_a_document_that_is_not_a_changes_object_is_refused_in_one_line(document):
+    with pytest.raises(ValueError, match=r"^'changes' is not a changes object \("):
+        Changes.from_dict(document)

@@ -288,3 +288,13 @@ def test_an_object_stands_in_front_of_a_target_by_the_rule(blocker, size, shadow
         Looks(max_in_front=0),
     )  # fmt: skip
     assert (0 not in expected.tolist()) == shadows
+
+
+def test_what_stands_in_front_of_a_near_target_is_judged_along_the_ray_in_metres():
+    # a target 0.9 m ahead, an object 0.32 m ahead on the same ray: in front of it
+    positions = np.array([[0.9, 0, 0], [0.32, 0, 0]])
+    look = Coverage(CAMERA, 5.0, (120.0, 90.0))
+    expected, _ = expected_unseen(
+        np.eye(4), [look], positions, np.full(2, 0.5), [], np.full(2, 0.6), Looks(max_in_front=0)
+    )
+    assert 0 not in expected.tolist()
