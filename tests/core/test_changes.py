@@ -11,7 +11,15 @@ from hypothesis import strategies as st
 from test_changes_fixtures import T, cube, room, seen_from_t
 
 import semloc
-from semloc.changes import Changes, ChangesConfig, Moved, RunChanges, answer_changes, explain
+from semloc.changes import (
+    Changes,
+    ChangesConfig,
+    Moved,
+    RunChanges,
+    answer_changes,
+    apply_changes,
+    explain,
+)
 from semloc.maps import ObjectMap, SemanticObject
 from semloc.transforms import pose_error, yaw_pose
 
@@ -436,3 +444,27 @@ def test_a_run_s_changes_round_trip_through_their_document_with_their_evidence()
 def test_a_document_that_is_not_a_changes_object_is_refused_in_one_line(document):
     with pytest.raises(ValueError, match=r"^'changes' is not a changes object \("):
         Changes.from_dict(document)
+
+
+def test_applying_changes_moves_points_with_their_object_and_adds_new_ones_under_free_ids():
+    pts = np.array([[0.0, 0, 0], [0.2, 0, 0]])
+    prior = ObjectMap(
+        [SemanticObject("a", "chair", [0.1, 0, 0], points=pts),
+         SemanticObject("b", "sofa", [10, 0, 0]), SemanticObject("new:b", "lamp", [9, 0, 0]),
+         SemanticObject("gone", "bin", [5, 0, 0], extra={"missing": True})],
+        up=[0, 0, 1],
+    )  # fmt: skip
+    local = ObjectMap(
+        [SemanticObject("la", "chair", [2.1, 0, 0]), SemanticObject("a", "tv", [7, 0, 0]),
+         SemanticObject("new:a", "tv", [8, 0, 0]), SemanticObject("b", "tv", [6, 0, 0])],
+        up=[0, 0, 1],
+    )  # fmt: skip
+    changes = Changes([Moved("a", "la", 2.0)], ["a", "new:a", "b"], [])
+    updated = {o.id: o for o in apply_changes(prior, local, np.eye(4), changes)}
+    moved = updated["a"]
+    assert np.allclose(moved.position, [2.1, 0, 0]) and np.allclose(moved.points[:, 0], [2.0, 2.2])
+    assert moved.extra["moved_from"] == [0.1, 0, 0] and moved.extra["moved_m"] == 2.0
+    # "a" is taken: new:a; "new:a" then is taken too: new:new:a; "b" and new:b are taken: new2:b
+    assert {"new:a", "new:new:a", "new2:b"} <= set(updated)
+    assert updated["new2:b"].extra["new"] is True and updated["new2:b"].label == "tv"
+    assert updated["gone"].extra["missing"] is True  # not seen again: still flagged
