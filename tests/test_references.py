@@ -10,7 +10,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 SKIP = {".git", ".venv", ".pytest_cache", ".ruff_cache", ".hypothesis", "__pycache__",
-        "node_modules", "build", "dist", "demo_out", "bench_out"}  # fmt: skip
+        "node_modules", "build", "dist", "demo_out", "bench_out", "mutants"}  # fmt: skip
 TEXT = {".py", ".md", ".toml", ".txt", ".yml", ".yaml", ".cfg", ".json", ".sh"}
 OUTPUTS = {"TABLE.md"}
 """Names of files the tools write (`--markdown TABLE.md`), not documents."""

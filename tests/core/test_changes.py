@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -9,7 +11,15 @@ from hypothesis import strategies as st
 from test_changes_fixtures import T, cube, room, seen_from_t
 
 import semloc
-from semloc.changes import Changes, Moved, explain
+from semloc.changes import (
+    Changes,
+    ChangesConfig,
+    Moved,
+    RunChanges,
+    answer_changes,
+    apply_changes,
+    explain,
+)
 from semloc.maps import ObjectMap, SemanticObject
 from semloc.transforms import pose_error, yaw_pose
 
@@ -260,3 +270,201 @@ def test_with_centres_only_a_moved_object_reads_as_new():
     local = [o.replace(points=None) for o in seen_from_t(objects)]
     changes = explain(g, local, T, [(f"g{i}", f"l{i}") for i in range(4)], candidates_of(g, local))
     assert changes.moved == [] and changes.new == ["l4"] and changes.missing == []
+
+
+# The run's change report (RunChanges) at its rules -------------------------------------------
+def test_a_new_object_seen_twice_is_reported_and_a_later_sighting_in_place_cancels_it():
+    ids = ["g0", "g1", "g2"]
+    run = RunChanges()
+    run.observe_new("l5", seen=3)
+    assert run.report(ids).new == []  # once: a phantom or a mislabel
+    run.observe_new("l5", seen=4)
+    assert run.report(ids).new == ["l5"] and run.report(ids).evidence["new"] == {"l5": 2}
+    run.observe_matched(0, "l5")  # the same detection found its map object after all
+    assert run.report(ids).new == [] and not run
+
+
+def test_a_run_with_only_missing_evidence_has_changes_and_reports_them_with_their_counts():
+    ids = ["g0", "g1", "g2"]
+    run = RunChanges()
+    assert not run
+    run.observe_missing([2])
+    assert run  # one look already counts as evidence, though not yet as a change
+    run.observe_missing([2])
+    run.observe_matched(1, "l1")
+    report = run.report(ids)
+    assert report.missing == ["g2"] and report.matched == ["g1"]
+    assert report.evidence == {"new": {}, "missing": {"g2": 2}}
+
+
+def test_a_run_s_report_round_trips_through_its_state_and_an_empty_state_is_an_empty_run():
+    ids = ["g0", "g1", "g2", "g3"]
+    run = RunChanges()
+    for seen in (3, 4):
+        run.observe_moved(1, "l1", 2.0 + seen / 10, seen=seen)
+        run.observe_new("l7", seen=seen)
+        run.observe_missing([2])
+    run.observe_matched(3, "l3")
+    state = json.loads(json.dumps(run.state(ids)))
+    assert set(state) == {"moved", "new", "missing", "matched"}
+    restored = RunChanges.restored(state, ids.index)
+    assert restored.state(ids) == state
+    assert restored.report(ids).to_dict() == run.report(ids).to_dict()
+    assert restored.report(ids).matched == ["g3"]
+    empty = RunChanges.restored({}, ids.index)
+    assert not empty and empty.report(ids).matched == []
+
+
+# The single view's rules at their bounds (identity pose, one map chair at the origin) -----------
+def one_chair() -> ObjectMap:
+    return ObjectMap([SemanticObject("g0", "chair", [0, 0, 0], size=[0.5, 0.5, 0.5])], up=[0, 0, 1])
+
+
+def observer(x: float, y: float) -> SemanticObject:
+    """A detection of another kind whose one observed point is at (x, y, 0)."""
+    return SemanticObject("l9", "bin", [x, y, 0], points=np.array([[x, y, 0.0]]))
+
+
+def changes_of(local: list[SemanticObject], config: ChangesConfig | None = None) -> Changes:
+    cands = {o.id: np.array([0] if o.label == "chair" else [], dtype=int) for o in local}
+    return explain(one_chair(), local, np.eye(4), [], cands, config)
+
+
+def test_an_object_is_matched_within_the_match_radius_not_at_it():
+    assert changes_of([SemanticObject("l0", "chair", [0.49, 0, 0])]).new == []
+    assert changes_of([SemanticObject("l0", "chair", [0.5, 0, 0])]).new == ["l0"]
+
+
+def test_an_object_moved_exactly_the_largest_offset_from_a_seen_place_is_moved():
+    seen = observer(0.0, 1.4)  # the chair's old place within the source radius (1.5 m): seen
+    chair = SemanticObject("l0", "chair", [3.0, 0, 0], size=[0.75, 0.75, 0.75])  # 1.5 x larger
+    changes = changes_of([chair, seen])
+    assert [(m.global_id, m.offset_m) for m in changes.moved] == [("g0", 3.0)]
+    assert changes.new == ["l9"] and changes.missing == []
+    assert changes_of([chair.replace(position=[3.01, 0, 0]), seen]).moved == []  # too far
+    assert changes_of([chair.replace(size=[0.76, 0.76, 0.76]), seen]).moved == []  # too large
+    assert changes_of([chair, observer(0.0, 1.51)]).moved == []  # the old place unseen
+    # exactly at the source radius still counts as seen (a wider observed radius lets the
+    # search of observed points reach that far)
+    wide = ChangesConfig(observed_radius=2.0)
+    assert [m.global_id for m in changes_of([chair, observer(0.0, 1.5)], wide).moved] == ["g0"]
+
+
+def test_a_map_object_is_missing_when_a_point_was_observed_within_the_radius_of_its_place():
+    assert changes_of([observer(0.5, 0.0)]).missing == ["g0"]
+    assert changes_of([observer(0.51, 0.0)]).missing == []
+
+
+def test_a_local_object_without_candidates_is_new():
+    chair = SemanticObject("l0", "chair", [0.1, 0, 0], size=[2.0, 2.0, 2.0])
+    assert explain(one_chair(), [chair], np.eye(4), [], {}).new == ["l0"]
+
+
+def test_an_object_of_another_size_at_its_place_is_matched_one_to_one():
+    # boxes twice the map chair's: at its place a chair is that chair (the detector's box), not
+    # a moved one; a second chair beside it is not explained by the same map object
+    big = [1.0, 1.0, 1.0]
+    first = SemanticObject("l0", "chair", [0.1, 0, 0], size=big)
+    second = SemanticObject("l1", "chair", [0.2, 0, 0], size=big)
+    assert changes_of([first]).new == []
+    assert changes_of([first, second]).new == ["l1"]
+
+
+def test_a_relabelled_object_takes_the_nearest_map_object_at_its_place_only():
+    g = ObjectMap(
+        [SemanticObject("g0", "chair", [0, 0, 0], size=[0.5] * 3),
+         SemanticObject("g1", "table", [5, 0.4, 0], size=[0.5] * 3),
+         SemanticObject("g2", "shelf", [5, -0.1, 0], size=[0.5] * 3)],
+        up=[0, 0, 1],
+    )  # fmt: skip
+    chair = SemanticObject("l0", "chair", [0.1, 0, 0])  # matched at its place first
+    stool = SemanticObject("l1", "stool", [5, 0, 0], size=[0.5] * 3, points=np.array([[5, 0, 0.0]]))
+    changes = explain(
+        g, [chair, stool], np.eye(4), [], {"l0": np.array([0]), "l1": np.array([], dtype=int)}
+    )
+    # the stool is the shelf under another name (0.1 m); the table, 0.4 m from the observed
+    # point, stood in view and nobody explains it
+    assert changes.new == [] and changes.missing == ["g1"]
+
+
+def test_every_observed_point_counts_even_for_an_object_of_two():
+    two = SemanticObject("l9", "bin", [3.0, 0, 0], points=np.array([[3.0, 0, 0], [0.4, 0, 0]]))
+    assert changes_of([two]).missing == ["g0"]
+
+
+def test_a_box_is_observed_on_its_surface_as_it_is_turned():
+    # a 2 m long thin box 1 m from the chair, turned a quarter turn: its end reaches the chair
+    turned = yaw_pose(np.pi / 2, [0, 0, 0])[:3, :3]
+    long = SemanticObject("l9", "bin", [0, 1.0, 0], size=[2.0, 0.1, 0.1], rotation=turned)
+    assert changes_of([long]).missing == ["g0"]
+    assert changes_of([long.replace(rotation=None)]).missing == []  # along x: 1 m away
+
+
+def test_an_answer_s_changes_keep_only_the_pairs_of_both_maps_and_its_settings():
+    g = one_chair()
+    chair = SemanticObject("l0", "chair", [0.4, 0, 0])
+    cands = {"l0": np.array([0])}
+    pairs = [("g0", "l0"), ("gx", "l0"), ("g0", "lx")]
+    assert answer_changes(g, [chair], np.eye(4), pairs, candidates=cands) == Changes()
+    assert answer_changes(g, [chair], np.eye(4), [("gx", "l0")], candidates=cands) == Changes()
+    tight = ChangesConfig(match_radius=0.3)
+    assert answer_changes(g, [chair], np.eye(4), [], config=tight, candidates=cands).new == ["l0"]
+
+
+def test_a_run_s_changes_round_trip_through_their_document_with_their_evidence():
+    run = RunChanges()
+    for seen in (3, 4):
+        run.observe_moved(0, "l1", 1.23456789, seen=seen)
+        run.observe_new("l7", seen=seen)
+        run.observe_missing([1])
+    report = run.report(["g0", "g1"])
+    document = json.loads(json.dumps(report.to_dict()))
+    assert document == {
+        "moved": [
+            {"global": "g0", "local": "l1", "offset_m": 1.234568, "evidence": 2, "last_seen": 4}
+        ],
+        "new": ["l7"],
+        "missing": ["g1"],
+        "evidence": {"new": {"l7": 2}, "missing": {"g1": 2}},
+    }
+    again = Changes.from_dict(document)
+    assert again.to_dict() == document and again.moved[0] == Moved("g0", "l1", 1.234568, 2, 4)
+    plain = Changes([Moved("g0", "l1", 0.5)], ["l2"], ["g3"])
+    assert plain.to_dict() == {
+        "moved": [{"global": "g0", "local": "l1", "offset_m": 0.5}], "new": ["l2"], "missing": ["g3"]
+    }  # fmt: skip
+    assert Changes.from_dict(plain.to_dict()) == plain and Changes.from_dict({}) == Changes()
+
+
+@pytest.mark.parametrize(
+    "document",
+    [{"moved": [{"global": "g0"}]}, {"moved": 5}, {"evidence": {"new": 3}},
+     {"moved": [{"global": "g0", "local": "l", "offset_m": "far"}]}],
+)  # fmt: skip
+def test_a_document_that_is_not_a_changes_object_is_refused_in_one_line(document):
+    with pytest.raises(ValueError, match=r"^'changes' is not a changes object \("):
+        Changes.from_dict(document)
+
+
+def test_applying_changes_moves_points_with_their_object_and_adds_new_ones_under_free_ids():
+    pts = np.array([[0.0, 0, 0], [0.2, 0, 0]])
+    prior = ObjectMap(
+        [SemanticObject("a", "chair", [0.1, 0, 0], points=pts),
+         SemanticObject("b", "sofa", [10, 0, 0]), SemanticObject("new:b", "lamp", [9, 0, 0]),
+         SemanticObject("gone", "bin", [5, 0, 0], extra={"missing": True})],
+        up=[0, 0, 1],
+    )  # fmt: skip
+    local = ObjectMap(
+        [SemanticObject("la", "chair", [2.1, 0, 0]), SemanticObject("a", "tv", [7, 0, 0]),
+         SemanticObject("new:a", "tv", [8, 0, 0]), SemanticObject("b", "tv", [6, 0, 0])],
+        up=[0, 0, 1],
+    )  # fmt: skip
+    changes = Changes([Moved("a", "la", 2.0)], ["a", "new:a", "b"], [])
+    updated = {o.id: o for o in apply_changes(prior, local, np.eye(4), changes)}
+    moved = updated["a"]
+    assert np.allclose(moved.position, [2.1, 0, 0]) and np.allclose(moved.points[:, 0], [2.0, 2.2])
+    assert moved.extra["moved_from"] == [0.1, 0, 0] and moved.extra["moved_m"] == 2.0
+    # "a" is taken: new:a; "new:a" then is taken too: new:new:a; "b" and new:b are taken: new2:b
+    assert {"new:a", "new:new:a", "new2:b"} <= set(updated)
+    assert updated["new2:b"].extra["new"] is True and updated["new2:b"].label == "tv"
+    assert updated["gone"].extra["missing"] is True  # not seen again: still flagged

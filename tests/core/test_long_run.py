@@ -56,6 +56,53 @@ def test_window_retires_objects_detected_longer_ago_than_its_distance():
     assert window.travel == 29.0 and len(window) < 12
 
 
+def walked(window: LocalWindow, *stops: tuple[float, list[SemanticObject]]) -> None:
+    """Updates at these odometry x positions (metres along a line), each adding its objects."""
+    for x, objects in stops:
+        window.advance(np.array([x, 0.0, 0.0]))
+        window.add(objects)
+
+
+def test_an_object_detected_exactly_the_distance_ago_stays_and_just_beyond_it_retires():
+    window = LocalWindow(WindowConfig(objects=None, distance=8.0))
+    walked(window, (0.0, [obj(0)]), (3.0, [obj(1)]), (8.0, []))
+    assert window.retire() == []  # o0 was detected 8 m ago: at the bound, not beyond it
+    walked(window, (8.5, []))
+    assert window.retire() == ["o0"]  # 8.5 m ago: beyond; the cut keeps 6 m (o1, 5.5 m ago)
+
+
+def test_an_object_detected_at_the_cut_of_the_distance_bound_is_kept():
+    # beyond the bound the window keeps the last 3/4 of it: 6 of 8 m, an object at 6 m included
+    window = LocalWindow(WindowConfig(objects=None, distance=8.0))
+    walked(window, (0.0, [obj(0)]), (2.0, [obj(1)]), (3.0, [obj(2)]), (9.0, []))
+    assert window.retire() == ["o0", "o1"]  # 9 and 7 m ago; o2, 6 m ago, stays
+    assert [o.id for o in window.objects] == ["o2"]
+
+
+def test_the_distance_bound_counts_the_metres_since_the_detection_not_since_the_start():
+    window = LocalWindow(WindowConfig(objects=None, distance=6.0))
+    walked(window, (0.0, []), (5.0, [obj(0)]), (10.0, [obj(1)]))
+    assert window.retire() == []  # o0 was detected 5 m ago (at 5 m of 10 travelled)
+
+
+def test_without_a_distance_bound_the_count_bound_alone_retires_the_oldest():
+    window = LocalWindow(WindowConfig(objects=4, distance=None))
+    walked(window, (0.0, [obj(i) for i in range(4)]), (100.0, [obj(4)]))
+    assert window.retire() == ["o0", "o1"]  # down to 3 = 3/4 of 4, however far it walked
+    assert [o.id for o in window.objects] == ["o2", "o3", "o4"]
+
+
+def test_a_restored_window_keeps_its_bounds_travel_and_arrivals():
+    window = LocalWindow(WindowConfig(objects=4, distance=None))
+    walked(window, (0.0, [obj(0), obj(1)]), (3.0, [obj(2)]))
+    restored = LocalWindow.restored(window.config, window.state(), window.objects)
+    assert restored.state() == window.state() and restored.config == window.config
+    walked(restored, (4.0, [obj(3), obj(4)]))
+    assert restored.retire() == ["o0", "o1"]  # its own bound of 4 objects, not the default 80
+    with pytest.raises(ValueError, match=r"^the window.s objects are not those of its state$"):
+        LocalWindow.restored(window.config, window.state(), window.objects[:2])
+
+
 def test_localizer_window_and_steps_stay_bounded():
     building = layout(120, seed=3)
     localizer = Localizer(building, window={"objects": 10, "steps": 4}, local_up=[0, 0, 1])

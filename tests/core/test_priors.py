@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 
 import semloc
 from semloc import Localizer, ObjectMap, Prior
-from semloc.priors import GATE_SLACK, OUTSIDE_PRIOR
+from semloc.priors import GATE_SLACK, OUTSIDE_PRIOR, checked_prior
 from semloc.results import Result
 from semloc.sim.layouts import layout, observe
 from semloc.tracking import TrackingConfig
@@ -36,16 +36,69 @@ from semloc.transforms import pose_error, yaw_pose
         ({"position": [0, math.nan, 0], "radius": 1}, "position must be finite"),
         ({"position": "here", "radius": 1}, "position must be [x, y, z]"),
         ({"position": [0, 0, 0], "radius": 1, "floor": (2, 1)}, "z_min <= z_max"),
-        ({"position": [0, 0, 0], "radius": 1, "floor": (0, math.inf)}, "must be finite"),
+        (
+            {"position": [0, 0, 0], "radius": 1, "floor": (0, math.inf)},
+            "floor z_max must be finite",
+        ),
+        (
+            {"position": [0, 0, 0], "radius": 1, "floor": (math.nan, 0)},
+            "floor z_min must be finite",
+        ),
         ({"position": [0, 0, 0], "radius": 1, "floor": (0,)}, "floor must be (z_min, z_max)"),
         ({"position": [0, 0, 0], "radius": 1, "heading_tolerance": 10}, "needs a heading"),
         ({"position": [0, 0, 0], "radius": 1, "heading": 0, "heading_tolerance": 0}, "(0, 180]"),
         ({"position": [0, 0, 0], "radius": 1, "heading": math.nan}, "heading must be finite"),
+        (
+            {"position": [0, 0, 0], "radius": 1, "heading": 0, "heading_tolerance": math.nan},
+            "heading_tolerance must be finite",
+        ),
+        (
+            {"position": [0, 0, 0], "radius": 1, "heading": 0, "heading_tolerance": 180.5},
+            "(0, 180]",
+        ),
     ],
 )
 def test_invalid_priors_are_refused_clearly(kwargs, message):
-    with pytest.raises(ValueError, match=re.escape(message)):
+    with pytest.raises(ValueError, match="^prior: .*" + re.escape(message)):
         Prior(**kwargs)
+
+
+def test_the_bounds_of_a_valid_prior_are_inclusive():
+    # a floor band of one height, a tolerance just above 0, and 180 degrees: all valid
+    flat = Prior(position=[0, 0, 0], radius=1, floor=(1, 1))
+    assert flat.contains(yaw_pose(0.0, [0, 0, 1])) and not flat.contains(yaw_pose(0.0, [0, 0, 1.1]))
+    assert (
+        Prior(position=[0, 0, 0], radius=1, heading=0, heading_tolerance=0.5).heading_tolerance
+        == 0.5
+    )
+    assert (
+        Prior(position=[0, 0, 0], radius=1, heading=0, heading_tolerance=180).heading_tolerance
+        == 180
+    )
+    assert Prior(position=[0, 0, 0], radius=1).heading_tolerance is None
+
+
+@pytest.mark.parametrize(
+    ("data", "message"),
+    [
+        (
+            {"position": [0, 0, 0]},
+            "prior: an object with 'position' [x, y, z] and 'radius' is needed",
+        ),
+        ({"radius": 1}, "prior: an object with 'position' [x, y, z] and 'radius' is needed"),
+        (
+            ["position", "radius"],
+            "prior: an object with 'position' [x, y, z] and 'radius' is needed",
+        ),
+        (
+            {"position": [0, 0, 0], "radius": 1, "size": 2, "colour": 1},
+            "prior: unknown field(s) colour, size",
+        ),
+    ],
+)
+def test_a_json_prior_needs_its_fields_and_only_them(data, message):
+    with pytest.raises(ValueError, match="^" + re.escape(message) + "$"):
+        Prior.from_dict(data)
 
 
 def test_prior_round_trips_through_json_and_is_checked_by_the_api():
@@ -59,6 +112,77 @@ def test_prior_round_trips_through_json_and_is_checked_by_the_api():
         Localizer(g, prior=[0, 0, 0])
     with pytest.raises(TypeError, match="prior must be a semloc.Prior"):
         semloc.localize(g, g, prior=5.0)
+
+
+def test_a_prior_is_written_with_float_coordinates_and_its_own_tolerance():
+    assert Prior(position=[1, 2, 3], radius=4).to_dict() == {
+        "position": [1.0, 2.0, 3.0],
+        "radius": 4.0,
+    }
+    assert all(type(v) is float for v in Prior(position=[1, 2, 3], radius=4).to_dict()["position"])
+    written = Prior(position=[0, 0, 0], radius=1, heading=90, heading_tolerance=20).to_dict()
+    assert written["heading"] == 90 and written["heading_tolerance"] == 20
+
+
+def test_a_prior_equals_only_a_prior_of_the_same_fields():
+    prior = Prior(position=[0, 0, 0], radius=1)
+    assert prior == Prior(position=[0.0, 0.0, 0.0], radius=1.0) and prior != "prior"
+    assert prior != Prior(position=[0, 0, 0], radius=2)
+    assert len({prior, Prior(position=[0, 0, 0], radius=1)}) == 1
+
+
+def test_the_api_reads_a_json_prior_and_names_what_it_cannot_read():
+    data = {"position": [1, 2, 3], "radius": 4}
+    assert checked_prior(data) == Prior(**data) and checked_prior(None) is None
+    with pytest.raises(TypeError, match="^prior must be a semloc.Prior, got list$"):
+        checked_prior([0, 0, 0])
+
+
+def test_contains_includes_its_bounds_exactly():
+    prior = Prior(position=[1, 0, 0], radius=2, floor=(-0.5, 0.5))
+    assert prior.contains(yaw_pose(0.0, [3, 0, 0]))  # exactly at the radius
+    assert not prior.contains(yaw_pose(0.0, [3.01, 0, 0]))
+    assert prior.contains(yaw_pose(0.0, [1, 0, -0.5])) and prior.contains(
+        yaw_pose(0.0, [1, 0, 0.5])
+    )
+    assert not prior.contains(yaw_pose(0.0, [1, 0, -0.51]))
+    assert not prior.contains(yaw_pose(0.0, [1, 0, 0.51]))
+    # widened by `metres`: the band's both edges move out
+    assert prior.contains(yaw_pose(0.0, [1, 0, -0.75]), metres=0.25)
+    assert prior.contains(yaw_pose(0.0, [1, 0, 0.75]), metres=0.25)
+    assert not prior.contains(yaw_pose(0.0, [1, 0, -0.8]), metres=0.25)
+
+
+def test_the_heading_is_kept_exactly_at_its_tolerance_across_the_wrap():
+    # yaw 180 against a heading of -90: 90 degrees off, the long way round is 270
+    assert Prior(position=[0, 0, 0], radius=1, heading=-90, heading_tolerance=90).contains(
+        yaw_pose(np.pi, [0, 0, 0])
+    )
+    tight = Prior(position=[0, 0, 0], radius=1, heading=-90, heading_tolerance=89.5)
+    assert not tight.contains(yaw_pose(np.pi, [0, 0, 0]))  # by default no extra degrees
+    assert tight.contains(yaw_pose(np.pi, [0, 0, 0]), degrees=0.5)
+    # a heading of 0 along global +x (no y component) is a heading, within any tolerance
+    assert Prior(position=[0, 0, 0], radius=1, heading=0, heading_tolerance=1).contains(np.eye(4))
+
+
+def test_a_pose_whose_local_x_is_vertical_has_no_heading_and_is_outside_a_heading_prior():
+    pose = np.eye(4)
+    pose[:3, :3] = [[0, 0, -1], [0, 1, 0], [1, 0, 0]]  # local x along global z
+    assert not Prior(position=[0, 0, 0], radius=1, heading=0, heading_tolerance=180).contains(pose)
+    assert Prior(position=[0, 0, 0], radius=1).contains(pose)
+
+
+def test_the_reason_of_an_outside_answer_names_the_distance_and_the_prior_s_bounds():
+    pose = yaw_pose(0.0, [4, 0, 0])
+    plain = Prior(position=[1, 0, 0], radius=2)
+    assert plain.why_outside(pose) == (
+        f"{OUTSIDE_PRIOR}: its pose puts the local origin 3.00 m from the prior's position "
+        "(radius 2 m)"
+    )
+    full = Prior(position=[1, 0, 0], radius=2, floor=(0, 1), heading=0)
+    assert full.why_outside(pose).endswith(
+        "3.00 m from the prior's position (radius 2 m, floor band, heading)"
+    )
 
 
 def test_contains_checks_radius_floor_and_heading():
@@ -81,6 +205,18 @@ def test_gate_keeps_what_the_prior_allows_and_drops_the_far():
     global_xyz = np.array([[0.0, 0, 0], [6.9, 0, 0], [7.1, 0, 0], [20, 0, 0]])
     keep = prior.gate(np.array([0.0, 4.0, 0.0]), global_xyz, np.full(4, 1.0))
     assert keep.tolist() == [True, True, False, False]  # reach 2 + 4 + 1 m
+    at_reach = prior.gate(np.array([0.0, 4.0, 0.0]), np.array([[7.0, 0, 0]]), np.ones(1))
+    assert at_reach.tolist() == [True]  # exactly at the reach: kept
+
+
+def test_the_floor_band_s_gate_widens_by_the_local_distance_and_the_slack():
+    # a local object 2 m from the local origin may be a map object up to 2 m + slack (0.5 m)
+    # below or above the band (0, 1): z in [-2.5, 3.5]; the radius still holds
+    prior = Prior(position=[0, 0, 0], radius=10, floor=(0, 1))
+    z = [-2.5, -2.6, 3.5, 3.6, 0.5]
+    xyz = np.array([[0.0, 0, h] for h in z] + [[30.0, 0, 0.5]])
+    keep = prior.gate(np.array([0.0, 2.0, 0.0]), xyz, np.full(len(xyz), 0.5))
+    assert keep.tolist() == [True, False, True, False, True, False]
 
 
 def test_the_localizers_gate_allows_the_slack_and_a_quarter_of_each_objects_diagonal():
