@@ -6,6 +6,11 @@ numba's own cache check misses changes in other modules a cached kernel calls).
 
 DDS (Cyclone DDS, `tests/ros2`) is confined to loopback for every test (`CYCLONEDDS_URI`).
 
+Property tests draw the same examples on every run (Hypothesis's `derandomize`, no example
+database): the suite passes or fails the same way on every machine.  To search for new
+counterexamples, run with `SEMLOC_HYPOTHESIS=explore` (random examples, remembered in
+`.hypothesis/`); a counterexample found becomes an `@example` of its test once fixed.
+
 Helper modules: `format_fixtures.py` writes small dataset files in each importer's format;
 `helpers.py` holds small functions (real-data lookup that skips with a reason).  Yaw rotations
 and poses come from `semloc.transforms` (`yaw_rotation`, `yaw_pose`, `rigid`).
@@ -18,8 +23,13 @@ import sys
 from pathlib import Path
 
 import pytest
+from hypothesis import settings
 
 sys.path.insert(0, str(Path(__file__).parent))
+
+settings.register_profile("suite", derandomize=True, database=None)
+settings.register_profile("explore")
+settings.load_profile(os.environ.get("SEMLOC_HYPOTHESIS", "suite"))
 
 from numba_cache import use_fresh_cache  # noqa: E402
 
