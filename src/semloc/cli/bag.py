@@ -26,7 +26,13 @@ from semloc.cli.files import (
     read_config,
     read_label_map,
 )
-from semloc.cli.options import NearOption, RadiusOption, prior_option, topic_option
+from semloc.cli.options import (
+    CameraRangeOption,
+    NearOption,
+    RadiusOption,
+    prior_option,
+    topic_option,
+)
 from semloc.cli.render import support_line
 from semloc.io import load_map, write_files
 from semloc.localizer import LocalizerConfig
@@ -126,15 +132,7 @@ def localize(
             "against a place.",
         ),
     ] = None,
-    camera_range: Annotated[
-        float,
-        typer.Option(
-            "--range",
-            min=0.1,
-            max=1000.0,
-            help="How far (m) the detector finds objects reliably (with --camera-info).",
-        ),
-    ] = 5.0,
+    camera_range: CameraRangeOption = 5.0,
 ) -> None:
     """Localize a recorded run and write the answers as MCAP for Foxglove.
 

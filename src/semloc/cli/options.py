@@ -87,3 +87,14 @@ def prior_option(near: tuple[float, float, float] | None, radius: float | None) 
 def topic_option(name: str) -> str | None:
     """A topic option's value: None for 'none' (any case), for `bag localize` and `ros2 node`."""
     return None if name.lower() == "none" else name
+
+
+CameraRangeOption = Annotated[
+    float,
+    typer.Option(
+        "--range",
+        min=0.1,
+        max=1000.0,
+        help="How far (m) the detector finds objects reliably (with --camera-info).",
+    ),
+]

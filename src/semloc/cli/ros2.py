@@ -22,7 +22,13 @@ from semloc.cli import remote
 from semloc.cli.app import app, choices, console, err_console, fail, first_error, foxglove_option
 from semloc.cli.extras import need
 from semloc.cli.files import read_config
-from semloc.cli.options import NearOption, RadiusOption, prior_option, topic_option
+from semloc.cli.options import (
+    CameraRangeOption,
+    NearOption,
+    RadiusOption,
+    prior_option,
+    topic_option,
+)
 from semloc.client import Client, ServerError
 from semloc.io import load_map
 from semloc.localizer import LocalizerConfig
@@ -156,15 +162,7 @@ def node(
             "[default: none, no coverage].",
         ),
     ] = None,
-    camera_range: Annotated[
-        float,
-        typer.Option(
-            "--range",
-            min=0.1,
-            max=1000.0,
-            help="How far (m) the detector finds objects reliably (with --camera-info).",
-        ),
-    ] = DEFAULT_RANGE_M,
+    camera_range: CameraRangeOption = DEFAULT_RANGE_M,
 ) -> None:
     """Localize a robot's detections live: publish /semloc/pose, /tf, /semloc/status,
     /semloc/markers and /semloc/map on the DDS wire (Ctrl-C ends it).  --near/--radius: a
