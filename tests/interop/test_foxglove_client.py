@@ -65,7 +65,10 @@ def test_a_late_foxglove_client_decodes_the_latest_of_every_channel(run, subprot
     entities = msg["/semloc/map"]["entities"]
     assert sorted(e["id"] for e in entities) == sorted(f"map/{o.id}" for o in building)
     assert {e["texts"][0]["text"] for e in entities} == set(building.labels)
-    (placed,) = msg["/semloc/local"]["entities"]
+    by_id = {e["id"]: e for e in msg["/semloc/local"]["entities"]}
+    assert set(by_id) == {"local", "missing"}  # (missing: none without coverage)
+    placed = by_id["local"]
+    assert not by_id["missing"].get("cubes")
     assert len(placed["spheres"]) == len(local) and placed["frame_id"] == "map"
     ranks = [e["id"] for e in msg["/semloc/hypotheses"]["entities"]]
     assert ranks[0] == "hypothesis/1" and not [r for r in ranks if r.startswith("next_look")]
