@@ -335,21 +335,46 @@ class Decision(NamedTuple):
 
 
 def score_confidence(
-    hypotheses: Sequence[Hypothesis], model: ConfidenceModel, rival_overlap: float = 0.5
+    hypotheses: Sequence[Hypothesis],
+    model: ConfidenceModel,
+    rival_overlap: float = 0.5,
+    twinned: Collection[Hypothesis] = (),
 ) -> None:
     """Set `evidence` (less the negative evidence, `missing_penalty`) and `confidence` of
     hypotheses that carry `features` (distinct places);
     each one's rival is the best evidence among the others that are real rivals of it
     (`is_rival`: sharing less than `rival_overlap` of the pairs; a variant that keeps most of
-    its pairs and swaps one is the same answer, wrong in one object, not another place)."""
+    its pairs and swaps one is the same answer, wrong in one object, not another place).
+    Among `twinned` hypotheses (a place and its copies in the map, `semloc.twins`), one that
+    the view tells apart from another (`told_apart`) is not that one's rival."""
     scored = [h for h in hypotheses if h.features is not None]
+    twins = [h for h in scored if any(h is t for t in twinned)]
     for h in scored:
         h.evidence = model.evidence(h.features) - missing_penalty(h)
     for h in scored:
         others = [
             o.evidence for o in scored if o is not h and is_rival(h.pairs, o.pairs, rival_overlap)
-        ]
+            and not (_among(h, twins) and _among(o, twins) and told_apart(h, o))
+        ]  # fmt: skip
         h.confidence = model.confidence(h.evidence, max(others) if others else None)
+
+
+TWIN_APART = 2
+"""Local objects a place must hold that its copy lacks to be told apart from it."""
+
+
+def told_apart(place: Hypothesis, twin: Hypothesis) -> bool:
+    """Whether the view tells `place` from its copy `twin`: `place` pairs at least
+    `TWIN_APART` local objects that `twin` pairs with nothing, and `twin` none that `place`
+    does not.  Where a copy lacks an object of the layout, a detection there is one of the
+    place's: today's world adding an object of that label at that very spot of the copy is
+    rare, while the generic evidence weighs a missing pair as any pair."""
+    mine, theirs = {l for _, l in place.pairs}, {l for _, l in twin.pairs}
+    return len(mine - theirs) >= TWIN_APART and not theirs - mine
+
+
+def _among(h: Hypothesis, hypotheses: Sequence[Hypothesis]) -> bool:
+    return any(h is o for o in hypotheses)
 
 
 def decide(hypotheses: Sequence[Hypothesis], config: DecisionConfig, rank_by: RankBy) -> Decision:

@@ -15,6 +15,13 @@ that grew is recovered warm-started from the pose of its largest kept subset; a 
 local object drops the kept poses that used it.  Object clouds for pose recovery are prepared
 once per object (`pose.cached_cloud`), so all Localizers of one map share them.
 
+Look-alike rooms: before a best place is claimed, its copies in the map (`semloc.twins`) are
+weighed as hypotheses, listed by the sets or not (an old map can make the right copy's sets
+lose to another's); a copy the view does not tell apart (`decision.told_apart`) keeps the
+answer `ambiguous`.  While a place is tracked, objects that it cannot explain but one of its
+copies holds where the pose puts them (`TWIN_KIDNAP` over the latest updates) end the claim:
+the robot was carried into the copy.
+
 A position prior (`semloc.priors.Prior`: `Localizer(..., prior=P)`, `set_prior`) gates the
 candidates of each local object and marks the hypotheses whose pose lies outside it, which
 cannot be `localized`; a tracked place that leaves it ends the claim.
@@ -31,6 +38,7 @@ from typing import Any
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
+from scipy.spatial import cKDTree
 
 from semloc.association import (
     AssociationConfig,
@@ -54,6 +62,7 @@ from semloc.decision import (
     new_regions,
     prior_first,
     rank_places,
+    same_place,
     score_confidence,
     shipped_model,
 )
@@ -66,6 +75,7 @@ from semloc.results import Hypothesis, Result, Status, Step, Support
 from semloc.semantics import pair_weight
 from semloc.tracking import (
     CONTRADICTED,
+    CONTRADICTION_UPDATES,
     AgainstRate,
     Track,
     TrackingConfig,
@@ -75,6 +85,7 @@ from semloc.tracking import (
     recent_contradiction,
 )
 from semloc.transforms import centre_residual
+from semloc.twins import MIN_TWIN_PAIRS, label_codes, twin_pairs, twins
 from semloc.verification import (
     Evidence,
     MapSupport,
@@ -211,8 +222,12 @@ class Localizer:
         self._looks: deque[tuple[int, Coverage]] = deque(maxlen=LOOKS_KEPT)  # (update, look)
         self._run_changes = RunChanges()  # what changed, over the run's tracked claims
         self._against = AgainstRate()  # how often the run's claims judged objects against
-        self._map_tree: Any = None  # a KD-tree of the map's positions, for looks
-        self._diagonals: np.ndarray | None = None
+        self._map_tree: cKDTree | None = None  # the map's positions, for looks and twins
+        self._label_codes: np.ndarray | None = None  # the map's labels as integers (twins)
+        self._twin_motions: dict[tuple[int, ...], list[np.ndarray]] = {}  # map objects -> twins
+        self._track_twins: list[np.ndarray] | None = None  # the tracked place's copies
+        self._twin_fits: deque[np.ndarray] = deque(maxlen=CONTRADICTION_UPDATES)  # per copy
+        self._diagonal_lengths: np.ndarray | None = None
         self._reset_search()
         self._steps: deque[Step] = deque(maxlen=config.window.steps)
         self._n_steps = 0
@@ -447,7 +462,9 @@ class Localizer:
             excess = max(0.0, len(looked_unseen) - GONE_SHARE * len(expected))
             verdict = Verdict(verdict.supported, verdict.contradicting, verdict.changed,
                               verdict.repeated, excess)  # fmt: skip
-        against = track.contradicted(verdict)
+        against = track.contradicted(verdict) or self._carried_to_twin(
+            track, verdict, objects, candidates
+        )
         if against:  # a fresh window of the contradicting updates' objects
             return self._contradicted(against, objects, answer, start)
         track.accept(verdict)
@@ -490,26 +507,34 @@ class Localizer:
         if looks is None:
             assert self._look is not None
             looks = [(self.window.updates, self._look)]
-        if self._map_tree is None:
-            from scipy.spatial import cKDTree
-
-            self._map_tree = cKDTree(self.global_map.positions)
-            self._diagonals = np.linalg.norm(self.global_map.sizes, axis=1)
+        tree = self._tree()
         settings = Looks(move_m=self.config.tracking.move_m)
         expected: set[int] = set()
         unseen: set[int] = set()
         for update, look in looks:
             origin = pose[:3, :3] @ look.origin + pose[:3, 3]
-            near = np.array(self._map_tree.query_ball_point(origin, look.range_m + 0.5), dtype=int)
+            near = np.array(tree.query_ball_point(origin, look.range_m + 0.5), dtype=int)
             local = [(self._found[i][0].position, self._found[i][1])
                      for i in self.window.since(update)]  # fmt: skip
             seen, absent = expected_unseen(
-                pose, [look], self.global_map.positions, self._diagonals, local,
+                pose, [look], self.global_map.positions, self._diagonals(), local,
                 self._allowances(), settings, near,
             )  # fmt: skip
             expected.update(seen.tolist())
             unseen.update(absent.tolist())
         return np.array(sorted(expected), dtype=int), np.array(sorted(unseen), dtype=int)
+
+    def _tree(self) -> cKDTree:
+        """A KD-tree of the map's positions (looks, twins), built when first needed."""
+        if self._map_tree is None:
+            self._map_tree = cKDTree(self.global_map.positions)
+        return self._map_tree
+
+    def _diagonals(self) -> np.ndarray:
+        """Each map object's box diagonal (NaN without a box)."""
+        if self._diagonal_lengths is None:
+            self._diagonal_lengths = np.linalg.norm(self.global_map.sizes, axis=1)
+        return self._diagonal_lengths
 
     def _observe_changes(
         self, track: Track, verdict: Verdict, objects: list[SemanticObject],
@@ -610,6 +635,8 @@ class Localizer:
     def _end_track(self) -> None:
         self._track = None
         self._search_stale = True
+        self._track_twins = None  # (found again from the next claim's pairs)
+        self._twin_fits.clear()
 
     def _result(self, status: Status, hypotheses: list[Hypothesis], reason: str, explain) -> Result:
         result = Result.of(status, hypotheses, self._steps, self._timing, reason, explain)
@@ -822,13 +849,97 @@ class Localizer:
             self._hypothesis(rank, c, local_xyz, previous) for rank, c in enumerate(chosen, 1)
         ]
         ranked = rank_places(hypotheses, cfg.rank_by, cfg.decision, shipped_model(), anchor)
+        twins_ = self._twins(ranked, local_xyz, previous)
+        twinned: list[Hypothesis] = []
+        if twins_:  # copies of the best place, listed by the sets or not, weighed with them
+            places = [(h.pairs, h.pose) for h in (ranked[0], *twins_)]
+            ranked = rank_places(ranked + twins_, cfg.rank_by, cfg.decision, shipped_model(),
+                                 anchor)  # fmt: skip
+            twinned = [h for h in ranked if any(same_place((h.pairs, h.pose), p, cfg.decision,
+                                                           anchor) for p in places)]  # fmt: skip
+            score_confidence(ranked, shipped_model(), cfg.decision.rival_overlap, twinned)
         if self._prior is not None:  # conditioned on the prior: rivals outside it do not count
             for h in ranked:
                 h.outside_prior = h.pose is not None and not self._prior.admits(h.pose)
             ranked = prior_first(ranked)
             inside = [h for h in ranked if not h.outside_prior]
-            score_confidence(inside, shipped_model(), cfg.decision.rival_overlap)
+            score_confidence(inside, shipped_model(), cfg.decision.rival_overlap, twinned)
         return ranked
+
+    def _twins(
+        self, ranked: list[Hypothesis], local_xyz: np.ndarray, previous: dict
+    ) -> list[Hypothesis]:
+        """The map's copies of a best place that could be claimed (`semloc.twins`), as
+        hypotheses of the window's objects; none when it could not be claimed anyway."""
+        best = ranked[0] if ranked else None
+        up = self.global_map.up
+        if best is None or best.pose is None or best.confidence is None or up is None:
+            return []
+        if best.confidence < self.config.decision.min_confidence:
+            return []
+        positions, codes, tree = self.global_map.positions, self._codes(), self._tree()
+        tolerance = self.config.verification.inlier_tolerance
+        pairs = [(self.global_map.index_of(g), self._local_index[l]) for g, l in best.pairs]
+        members = np.array([g for g, _ in pairs])
+        sets = []
+        for S in self._twin_motions_of(members):
+            moved = twin_pairs(S, pairs, positions, codes, tolerance, tree)
+            moved = [(g, l) for g, l in moved if g in self._candidates_of[l]]
+            if len(moved) >= MIN_TWIN_PAIRS:
+                sets.append(moved)
+        if not sets:
+            return []
+        rows = np.array([p for pairs_ in sets for p in pairs_], dtype=np.int64)
+        sizes = np.array([len(p) for p in sets], dtype=np.int64)
+        verified = verify_sets(
+            rows, sizes, np.full(len(sets), best.score), local_xyz, positions,
+            (self.local_up, up), self.config.verification, self._support,
+        )  # fmt: skip
+        return [self._hypothesis(1, v, local_xyz, previous) for v in verified if len(v.pairs) >= 2]
+
+    def _codes(self) -> np.ndarray:
+        if self._label_codes is None:
+            self._label_codes = label_codes(self.global_map.labels)
+        return self._label_codes
+
+    def _twin_motions_of(self, members: np.ndarray) -> list[np.ndarray]:
+        """The twins of the map objects `members` (`semloc.twins`), kept for the latest
+        `TWINS_KEPT` sets of members (a place stays the best over several updates)."""
+        key = tuple(sorted(members.tolist()))
+        if key not in self._twin_motions:
+            if len(self._twin_motions) >= TWINS_KEPT:
+                self._twin_motions.pop(next(iter(self._twin_motions)))
+            up = self.global_map.up
+            self._twin_motions[key] = [] if up is None else twins(
+                self.global_map.positions, self._codes(), up, members,
+                self.config.verification.inlier_tolerance, tree=self._tree(),
+            )  # fmt: skip
+        return self._twin_motions[key]
+
+    def _carried_to_twin(
+        self, track: Track, verdict: Verdict, objects: list[SemanticObject], candidates: dict
+    ) -> int:
+        """How many of the latest updates show the robot in a copy of the tracked place (0:
+        they do not): `TWIN_KIDNAP` of their objects that the place does not explain
+        (changed or contradicting) lie where one copy (`semloc.twins`, of the claim's first
+        pairs) holds a map object they may be.  A look-alike room differs from the tracked
+        one where one of them lacks an object; a detection there that fits the other is the
+        robot's position told by its surroundings, not an old map's change."""
+        if self._track_twins is None:
+            self._track_twins = self._twin_motions_of(np.array(list(track.pairs.values())))
+        if not self._track_twins:
+            return 0
+        against = {l for _, l in verdict.changed} | set(verdict.contradicting)
+        positions, allowance = self.global_map.positions, self._allowances()
+        R, t = track.pose[:3, :3], track.pose[:3, 3]
+        fits = np.zeros(len(self._track_twins), dtype=int)
+        for obj in (o for o in objects if o.id in against):
+            found, at = candidates[obj.id], R @ obj.position + t
+            for i, S in enumerate(self._track_twins):
+                gaps = np.linalg.norm(positions[found] - (S[:3, :3] @ at + S[:3, 3]), axis=1)
+                fits[i] += bool((gaps <= allowance[found]).any())
+        self._twin_fits.append(fits)
+        return len(self._twin_fits) if np.sum(self._twin_fits, axis=0).max() >= TWIN_KIDNAP else 0
 
     def _screened_sets(self, by_size: bool) -> tuple[SetPairs, bool]:
         """The sets screened for hypotheses, and whether the screening was cut.  Ranked by
@@ -990,6 +1101,12 @@ def _warm_start(pairs: frozenset, previous: dict[_PoseKey, PoseEstimate | None])
 EMPTY_LOCAL_MAP = "the local map has no objects"
 LOOKS_KEPT = 6
 """The search weighs the sensor's looks of this many latest updates (negative evidence)."""
+TWIN_KIDNAP = 2
+"""Objects of the latest updates that fit a copy of the tracked place, not the place, that end
+the claim."""
+TWINS_KEPT = 64
+"""The twins (`semloc.twins`) of this many latest claimable places are kept, not looked up
+again."""
 NEWEST_CONTRADICT = "contradicted by the newest objects"
 STALE = "stale evidence"
 """The reason (its start) of a search's answer whose best place was not seen of late

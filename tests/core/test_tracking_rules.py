@@ -428,18 +428,18 @@ def test_gone_objects_within_the_tolerated_share_do_not_end_a_right_claim():
     assert result.support.missing == 2 and result.support.expected >= 8
 
 
-def lookalikes() -> ObjectMap:
-    """The room and a copy 30 m away that lacks four of its objects and has two others."""
+def lookalikes(extras: bool = True) -> ObjectMap:
+    """The room and a copy 30 m away that lacks four of its objects (and has two others)."""
     copy = room(offset=30.0, drop=(1, 3, 5, 7), prefix="b")
     extra = [SemanticObject("b10", "tv", [31.0, 3.5, 0.5], size=[0.5, 0.5, 1.0]),
              SemanticObject("b11", "bed", [35.0, 0.5, 0.5], size=[0.5, 0.5, 1.0])]  # fmt: skip
-    return ObjectMap([*room(), *copy, *extra], up=[0, 0, 1])
+    return ObjectMap([*room(), *copy, *(extra if extras else [])], up=[0, 0, 1])
 
 
-def kidnapped(coverage: Coverage | None) -> list[str]:
+def kidnapped(coverage: Coverage | None, extras: bool = True) -> list[str]:
     """Claim the room, then be carried to the same spot of the copy (odometry unaware): the
-    statuses of the three updates after the kidnap."""
-    building = lookalikes()
+    statuses of the three updates after the kidnap (the copy's extras in the first two)."""
+    building = lookalikes(extras)
     localizer = Localizer(building, local_up=[0, 0, 1])
     room_objects = local([o for o in building if o.id.startswith("a")])
     localizer.update(room_objects[:5], coverage=coverage)
@@ -448,11 +448,31 @@ def kidnapped(coverage: Coverage | None) -> list[str]:
     return [localizer.update(there[i::3], coverage=coverage).status for i in range(3)]
 
 
-def test_a_kidnap_into_a_lookalike_copy_is_caught_only_with_the_coverage():
+def test_a_kidnap_into_a_copy_lacking_objects_is_caught_only_with_the_coverage():
     """The copy's objects all fit the room where the tracked pose puts them; only the room's
     objects that the copy lacks, in plain view and not detected, tell the two apart."""
-    assert kidnapped(ALL_AROUND)[0] != "localized"
-    assert kidnapped(None) == ["localized"] * 3  # without coverage semloc cannot know
+    assert kidnapped(ALL_AROUND, extras=False)[0] != "localized"
+    assert kidnapped(None, extras=False) == ["localized"] * 3  # semloc cannot know
+
+
+def test_a_kidnap_into_a_copy_is_caught_by_two_of_its_own_objects_without_coverage():
+    """The copy's tv and bed stand where the room has nothing of their labels (so they
+    contradict it) and where the copy, a twin of the room (`semloc.twins`), has them."""
+    there = local([o for o in lookalikes() if o.id.startswith("b")], ids="k", shift=30.0)
+    assert [o.id for o in there[0::3]][-1] == "kb10" and [o.id for o in there[1::3]][-1] == "kb11"
+    assert kidnapped(None) == ["localized", "ambiguous", "ambiguous"]  # at the second one
+
+
+def test_after_a_kidnap_into_a_copy_the_copy_is_claimed():
+    building = lookalikes()
+    localizer = Localizer(building, local_up=[0, 0, 1])
+    room_objects = local([o for o in building if o.id.startswith("a")])
+    localizer.update(room_objects[:5], coverage=ALL_AROUND)
+    localizer.update(room_objects[5:], coverage=ALL_AROUND)
+    there = local([o for o in building if o.id.startswith("b")], ids="k", shift=30.0)
+    statuses = [localizer.update(there[i::3], coverage=ALL_AROUND) for i in range(3)]
+    assert [r.status for r in statuses] == ["ambiguous", "localized", "localized"]
+    assert {g[0] for g, _ in statuses[-1].hypotheses[0].pairs} == {"b"}
 
 
 def test_a_search_claim_that_the_newest_objects_contradict_is_not_made():
