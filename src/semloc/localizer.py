@@ -225,7 +225,8 @@ class Localizer:
         self._map_tree: cKDTree | None = None  # the map's positions, for looks and twins
         self._label_codes: np.ndarray | None = None  # the map's labels as integers (twins)
         self._twin_motions: dict[tuple[int, ...], list[np.ndarray]] = {}  # map objects -> twins
-        self._track_twins: list[np.ndarray] | None = None  # the tracked place's copies
+        self._track_twins: tuple[np.ndarray, list[np.ndarray]] | None = None  # (its pairs'
+        # map objects when found, the copies) of the tracked place where the robot is
         self._twin_fits: deque[np.ndarray] = deque(maxlen=CONTRADICTION_UPDATES)  # per copy
         self._diagonal_lengths: np.ndarray | None = None
         self._reset_search()
@@ -275,6 +276,7 @@ class Localizer:
             "looks": [[update, look.to_dict()] for update, look in self._looks],
             "changes": self._run_changes.state(list(self.global_map.ids)),
             "against": [self._against.against, self._against.judged],
+            "twins": self._twins_state(),
             "n_steps": self._n_steps,
             "timing": dict(self._timing),
         }
@@ -313,12 +315,29 @@ class Localizer:
             localizer._looks.extend(
                 (int(update), Coverage.from_dict(look)) for update, look in state.get("looks", [])
             )
+            localizer._restore_twins(state.get("twins"))
             localizer._n_steps = int(state["n_steps"])
             localizer._timing.update({k: float(v) for k, v in state["timing"].items()})
         except (KeyError, TypeError, IndexError) as exc:
             raise ValueError(f"the Localizer state is malformed ({exc!r})") from None
         localizer._search_stale = True
         return localizer
+
+    def _twins_state(self) -> dict[str, list] | None:
+        """The tracked place's copies were found from these map objects; the latest updates'
+        objects that fit each copy (`_carried_to_twin`)."""
+        if self._track_twins is None:
+            return None
+        ids = self.global_map.ids
+        return {"members": [str(ids[g]) for g in self._track_twins[0].tolist()],
+                "fits": [f.tolist() for f in self._twin_fits]}  # fmt: skip
+
+    def _restore_twins(self, twins_state: dict[str, list] | None) -> None:
+        if twins_state is None:
+            return
+        members = np.array([self.global_map.index_of(g) for g in twins_state["members"]], int)
+        self._track_twins = (members, self._twin_motions_of(members))
+        self._twin_fits.extend(np.array(f, dtype=int) for f in twins_state["fits"])
 
     @property
     def tracking(self) -> bool:
@@ -921,21 +940,25 @@ class Localizer:
     ) -> int:
         """How many of the latest updates show the robot in a copy of the tracked place (0:
         they do not): `TWIN_KIDNAP` of their objects that the place does not explain
-        (changed or contradicting) lie where one copy (`semloc.twins`, of the claim's first
-        pairs) holds a map object they may be.  A look-alike room differs from the tracked
+        (changed or contradicting) lie where one copy (`semloc.twins` of the claim's newest
+        pairs: the copies of where the robot is) holds a map object they may be.  A look-alike room differs from the tracked
         one where one of them lacks an object; a detection there that fits the other is the
         robot's position told by its surroundings, not an old map's change."""
-        if self._track_twins is None:
-            self._track_twins = self._twin_motions_of(np.array(list(track.pairs.values())))
-        if not self._track_twins:
+        members = np.array(list(track.pairs.values()))
+        held = self._track_twins[0] if self._track_twins else np.zeros(0, dtype=int)
+        if np.isin(members, held).sum() < 0.5 * len(members):  # the robot walked on
+            self._track_twins = (members, self._twin_motions_of(members))
+            self._twin_fits.clear()  # (counted per copy)
+        motions = self._track_twins[1]
+        if not motions:
             return 0
         against = {l for _, l in verdict.changed} | set(verdict.contradicting)
         positions, allowance = self.global_map.positions, self._allowances()
         R, t = track.pose[:3, :3], track.pose[:3, 3]
-        fits = np.zeros(len(self._track_twins), dtype=int)
+        fits = np.zeros(len(motions), dtype=int)
         for obj in (o for o in objects if o.id in against):
             found, at = candidates[obj.id], R @ obj.position + t
-            for i, S in enumerate(self._track_twins):
+            for i, S in enumerate(motions):
                 gaps = np.linalg.norm(positions[found] - (S[:3, :3] @ at + S[:3, 3]), axis=1)
                 fits[i] += bool((gaps <= allowance[found]).any())
         self._twin_fits.append(fits)
