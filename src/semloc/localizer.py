@@ -51,6 +51,7 @@ from semloc.changes import Changes, ChangesConfig, RunChanges, answer_changes
 from semloc.clustering import ClusteringConfig, HierarchicalClustering, SetPairs
 from semloc.coverage import GONE_SHARE, Coverage, Looks, checked_coverage, expected_unseen
 from semloc.decision import (
+    PLACE_APART,
     Decision,
     DecisionConfig,
     RankBy,
@@ -227,7 +228,8 @@ class Localizer:
         self._twin_motions: dict[tuple[int, ...], list[np.ndarray]] = {}  # map objects -> twins
         self._track_twins: tuple[np.ndarray, list[np.ndarray]] | None = None  # (its pairs'
         # map objects when found, the copies) of the tracked place where the robot is
-        self._twin_fits: deque[np.ndarray] = deque(maxlen=CONTRADICTION_UPDATES)  # per copy
+        self._twin_fits: deque[np.ndarray | None] = deque(maxlen=CONTRADICTION_UPDATES)  # per
+        # copy, each latest update's objects that fit it (None: none against the place)
         self._diagonal_lengths: np.ndarray | None = None
         self._reset_search()
         self._steps: deque[Step] = deque(maxlen=config.window.steps)
@@ -330,14 +332,15 @@ class Localizer:
             return None
         ids = self.global_map.ids
         return {"members": [str(ids[g]) for g in self._track_twins[0].tolist()],
-                "fits": [f.tolist() for f in self._twin_fits]}  # fmt: skip
+                "fits": [None if f is None else f.tolist() for f in self._twin_fits]}  # fmt: skip
 
     def _restore_twins(self, twins_state: dict[str, list] | None) -> None:
         if twins_state is None:
             return
         members = np.array([self.global_map.index_of(g) for g in twins_state["members"]], int)
         self._track_twins = (members, self._twin_motions_of(members))
-        self._twin_fits.extend(np.array(f, dtype=int) for f in twins_state["fits"])
+        self._twin_fits.extend(None if f is None else np.array(f, dtype=int)
+                               for f in twins_state["fits"])  # fmt: skip
 
     @property
     def tracking(self) -> bool:
@@ -914,7 +917,9 @@ class Localizer:
             rows, sizes, np.full(len(sets), best.score), local_xyz, positions,
             (self.local_up, up), self.config.verification, self._support,
         )  # fmt: skip
-        return [self._hypothesis(1, v, local_xyz, previous) for v in verified if len(v.pairs) >= 2]
+        unrefined = self.config.refine_top + 1  # (as the search's rivals of the best are)
+        return [self._hypothesis(unrefined, v, local_xyz, previous, looks=True)
+                for v in verified if len(v.pairs) >= 2]  # fmt: skip
 
     def _codes(self) -> np.ndarray:
         if self._label_codes is None:
@@ -931,7 +936,7 @@ class Localizer:
             up = self.global_map.up
             self._twin_motions[key] = [] if up is None else twins(
                 self.global_map.positions, self._codes(), up, members,
-                self.config.verification.inlier_tolerance, tree=self._tree(),
+                self.config.verification.inlier_tolerance, tree=self._tree(), apart=PLACE_APART,
             )  # fmt: skip
         return self._twin_motions[key]
 
@@ -941,9 +946,15 @@ class Localizer:
         """How many of the latest updates show the robot in a copy of the tracked place (0:
         they do not): `TWIN_KIDNAP` of their objects that the place does not explain
         (changed or contradicting) lie where one copy (`semloc.twins` of the claim's newest
-        pairs: the copies of where the robot is) holds a map object they may be.  A look-alike room differs from the tracked
-        one where one of them lacks an object; a detection there that fits the other is the
-        robot's position told by its surroundings, not an old map's change."""
+        pairs: the copies of where the robot is) holds a map object they may be.  A
+        look-alike room differs from the tracked one where one of them lacks an object; a
+        detection there that fits the other is the robot's position told by its
+        surroundings, not an old map's change.  The copies are looked up only when an update
+        has such objects."""
+        against = {l for _, l in verdict.changed} | set(verdict.contradicting)
+        if not against:
+            self._twin_fits.append(None)
+            return 0
         members = np.array(list(track.pairs.values()))
         held = self._track_twins[0] if self._track_twins else np.zeros(0, dtype=int)
         if np.isin(members, held).sum() < 0.5 * len(members):  # the robot walked on
@@ -952,7 +963,6 @@ class Localizer:
         motions = self._track_twins[1]
         if not motions:
             return 0
-        against = {l for _, l in verdict.changed} | set(verdict.contradicting)
         positions, allowance = self.global_map.positions, self._allowances()
         R, t = track.pose[:3, :3], track.pose[:3, 3]
         fits = np.zeros(len(motions), dtype=int)
@@ -962,7 +972,8 @@ class Localizer:
                 gaps = np.linalg.norm(positions[found] - (S[:3, :3] @ at + S[:3, 3]), axis=1)
                 fits[i] += bool((gaps <= allowance[found]).any())
         self._twin_fits.append(fits)
-        return len(self._twin_fits) if np.sum(self._twin_fits, axis=0).max() >= TWIN_KIDNAP else 0
+        most = sum(f for f in self._twin_fits if f is not None).max()
+        return len(self._twin_fits) if most >= TWIN_KIDNAP else 0
 
     def _screened_sets(self, by_size: bool) -> tuple[SetPairs, bool]:
         """The sets screened for hypotheses, and whether the screening was cut.  Ranked by
@@ -994,9 +1005,11 @@ class Localizer:
         )  # fmt: skip
 
     def _hypothesis(
-        self, rank: int, verified: Verified, local_xyz: np.ndarray, previous: dict
-    ) -> Hypothesis:
-        """Full pose recovery of a verified set's inlier pairs, and its evidence."""
+        self, rank: int, verified: Verified, local_xyz: np.ndarray, previous: dict,
+        looks: bool = False,
+    ) -> Hypothesis:  # fmt: skip
+        """Full pose recovery of a verified set's inlier pairs, and its evidence (with the
+        negative evidence of the recent looks when refined or `looks`)."""
         local_objects = list(self._local.values())
         globals_ = [self.global_map[g] for g, _ in verified.pairs]
         locals_ = [local_objects[l] for _, l in verified.pairs]
@@ -1023,7 +1036,7 @@ class Localizer:
             ).features()  # fmt: skip
         ids = self.global_map.ids
         missing = expected = None
-        if pose is not None and self._looks and refine:  # (the places that decide)
+        if pose is not None and self._looks and (refine or looks):  # (the places that decide)
             seen, unseen = self._unseen(pose, list(self._looks))
             missing, expected = len(unseen), len(seen)
         return Hypothesis(

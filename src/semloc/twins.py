@@ -10,11 +10,13 @@ place is claimed, its twins are looked up in the map itself and weighed as hypot
 A twin of a set of map objects G is a rigid motion S about the map's up axis (yaw and a
 translation: copies of a room stand upright) that puts at least `min_share` of G, and at
 least 3 of them, within `tolerance` of map objects of the same label.  Candidate motions come
-from anchors: G's objects of the rarest labels the map holds more than once, each with the
-member of G farthest from it, matched to every map pair of the same two labels at the same
-distance and height difference.  Motions that move G's centroid by less than `same_place` m
-are the place itself; twins closer than that to each other are one twin (the one that places
-most objects).  Exact labels only: a twin is the map's own copy, in the map's vocabulary.
+from anchors: G's objects of the rarest labels the map holds more than once, each with a
+member of G of a rare label a few metres away, matched to every map pair of the same two
+labels at the same distance and height difference (rare labels: few pairs to try).  Motions
+that move G's centroid by less than `apart` m (a room's size) are the place itself or its own
+repeated objects (a row of chairs shifted by one: the search weighs those); twins closer than
+that to each other are one twin (the one that places most objects).  Exact labels only: a
+twin is the map's own copy, in the map's vocabulary.
 """
 
 from __future__ import annotations
@@ -42,7 +44,7 @@ def twins(
     tree: cKDTree | None = None,
     min_share: float = 0.5,
     anchors: int = 3,
-    same_place: float = 1.0,
+    apart: float = 4.0,
     most: int = 8,
 ) -> list[np.ndarray]:
     """The 4x4 motions S (map to map) that put the map objects `members` on copies of
@@ -55,85 +57,105 @@ def twins(
     need = max(MIN_TWIN_PAIRS, int(np.ceil(min_share * len(members))))
     found: list[tuple[int, np.ndarray]] = []
     for a, b in _anchor_pairs(positions, codes, members, up, anchors):
-        for S in _motions(positions, codes, up, a, b, tolerance, tree):
-            placed = _placed(S, positions, codes, members, tolerance, tree)
-            if placed >= need:
-                found.append((placed, S))
+        motions = _motions(positions, codes, up, a, b, tolerance, tree)
+        placed = _placed(motions, positions, codes, members, tolerance, tree)
+        found += [(int(n), S) for n, S in zip(placed, motions) if n >= need]
     centroid = positions[members].mean(axis=0)
     kept: list[tuple[int, np.ndarray]] = []
     for placed, S in sorted(found, key=lambda f: -f[0]):
+        if len(kept) == most:
+            break
         moved = S[:3, :3] @ centroid + S[:3, 3]
-        if np.linalg.norm(moved - centroid) < same_place:
-            continue  # the place itself
-        if all(np.linalg.norm(moved - (T[:3, :3] @ centroid + T[:3, 3])) >= same_place
+        if np.linalg.norm(moved - centroid) < apart:
+            continue  # the place itself, or its own repeated objects (a row of chairs)
+        if all(np.linalg.norm(moved - (T[:3, :3] @ centroid + T[:3, 3])) >= apart
                for _, T in kept):  # fmt: skip
             kept.append((placed, S))
-    return [S for _, S in kept[:most]]
+    return [S for _, S in kept]
 
 
 def _anchor_pairs(
     positions: np.ndarray, codes: np.ndarray, members: np.ndarray, up: np.ndarray, anchors: int
 ) -> list[tuple[int, int]]:
     """Up to `anchors` (a, b): members of the rarest labels that the map holds more than once,
-    each with the member farthest from it across the up axis (the pair that fixes the yaw
-    best)."""
+    each with the member of the rarest label at least `SPAN` m from it across the up axis
+    (the farthest of those; the farthest of all when none is that far): few map pairs to
+    match, a yaw fixed well."""
     counts = np.bincount(codes)[codes[members]]
     order = members[np.argsort(counts, kind="stable")][np.sort(counts) > 1]  # (1: no copy)
-    pairs = []
+    pairs: list[tuple[int, int]] = []
     for a in order[:anchors]:
         offsets = positions[members] - positions[a]
         across = np.linalg.norm(offsets - np.outer(offsets @ up, up), axis=1)
-        b = members[int(np.argmax(across))]
-        if across.max() > 0:
-            pairs.append((int(a), int(b)))
+        used = np.isin(members, np.array(pairs, dtype=np.int64).ravel())  # (other pairs)
+        across = np.where((counts > 1) & ~used, across, 0.0)
+        if across.max() <= 0:
+            continue
+        far = across >= min(SPAN, across.max())
+        pick = np.lexsort((-across, counts))  # rarest label first, then farthest
+        pairs.append((int(a), int(members[pick[far[pick]][0]])))
     return pairs
+
+
+SPAN = 2.0
+"""An anchor pair's members lie at least this far apart (m) when the place allows."""
 
 
 def _motions(
     positions: np.ndarray, codes: np.ndarray, up: np.ndarray, a: int, b: int,
     tolerance: float, tree: cKDTree,
-) -> list[np.ndarray]:  # fmt: skip
-    """Every yaw-and-translation motion taking (a, b) onto a map pair of the same labels at
-    the same distance (within `tolerance`) and height difference."""
+) -> np.ndarray:  # fmt: skip
+    """Every yaw-and-translation motion (M, 4, 4) taking (a, b) onto a map pair of the same
+    labels at the same distance (within `tolerance`) and height difference."""
     offset = positions[b] - positions[a]
     distance, height = np.linalg.norm(offset), offset @ up
-    others = np.flatnonzero(codes == codes[a])
-    reach = tree.query_ball_point(positions[others], distance + tolerance)
-    motions = []
-    for a2, near in zip(others.tolist(), reach):
-        for b2 in near:
-            if codes[b2] != codes[b] or b2 == a2:
-                continue
-            offset2 = positions[b2] - positions[a2]
-            if abs(np.linalg.norm(offset2) - distance) > tolerance:
-                continue
-            if abs(offset2 @ up - height) > tolerance:
-                continue
-            motions.append(_yaw_motion(positions[a], offset, positions[a2], offset2, up))
-    return motions
+    others, labelled_b = np.flatnonzero(codes == codes[a]), np.flatnonzero(codes == codes[b])
+    reach = cKDTree(positions[labelled_b]).query_ball_point(positions[others], distance + tolerance)
+    a2 = np.repeat(others, [len(r) for r in reach])
+    b2 = labelled_b[np.concatenate([np.asarray(r, dtype=np.int64) for r in reach])]
+    keep = b2 != a2
+    a2, b2 = a2[keep], b2[keep]
+    offsets = positions[b2] - positions[a2]
+    keep = (np.abs(np.linalg.norm(offsets, axis=1) - distance) <= tolerance) & (
+        np.abs(offsets @ up - height) <= tolerance
+    )
+    return _yaw_motions(positions[a], offset, positions[a2[keep]], offsets[keep], up)
 
 
-def _yaw_motion(
+def _yaw_motions(
     p: np.ndarray, v: np.ndarray, p2: np.ndarray, v2: np.ndarray, up: np.ndarray
 ) -> np.ndarray:
-    """The rotation about `up` taking v's horizontal part onto v2's, with p onto p2."""
-    h, h2 = v - (v @ up) * up, v2 - (v2 @ up) * up
-    angle = np.arctan2(np.cross(h, h2) @ up, h @ h2)
+    """The rotations about `up` taking v's horizontal part onto each v2's, with p onto each
+    p2 (M, 4, 4)."""
+    h = v - (v @ up) * up
+    h2 = v2 - np.outer(v2 @ up, up)
+    angles = np.arctan2(np.cross(h, h2) @ up, h2 @ h)
     K = np.array([[0, -up[2], up[1]], [up[2], 0, -up[0]], [-up[1], up[0], 0]])
-    R = np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * (K @ K)
-    S = np.eye(4)
-    S[:3, :3], S[:3, 3] = R, p2 - R @ p
+    sin, cos = np.sin(angles)[:, None, None], np.cos(angles)[:, None, None]
+    R = np.eye(3) + sin * K + (1 - cos) * (K @ K)
+    S = np.tile(np.eye(4), (len(angles), 1, 1))
+    S[:, :3, :3], S[:, :3, 3] = R, p2 - R @ p
     return S
+
+
+NEAREST = 4
+"""How many nearest map objects of a moved member are looked at for one of its label."""
 
 
 def _placed(
     S: np.ndarray, positions: np.ndarray, codes: np.ndarray, members: np.ndarray,
     tolerance: float, tree: cKDTree,
-) -> int:  # fmt: skip
-    """How many `members` S puts within `tolerance` of a map object of their label."""
-    moved = positions[members] @ S[:3, :3].T + S[:3, 3]
-    near = tree.query_ball_point(moved, tolerance)
-    return sum(any(codes[j] == codes[m] for j in js) for m, js in zip(members.tolist(), near))
+) -> np.ndarray:  # fmt: skip
+    """For each motion of S (M, 4, 4): how many `members` it puts within `tolerance` of a map
+    object of their label (among their `NEAREST` nearest)."""
+    if not len(S):
+        return np.zeros(0, dtype=int)
+    moved = np.einsum("mij,kj->mki", S[:, :3, :3], positions[members]) + S[:, None, :3, 3]
+    gaps, near = tree.query(moved.reshape(-1, 3), k=NEAREST, distance_upper_bound=tolerance)
+    found = np.isfinite(gaps)
+    labels = np.where(found, codes[np.minimum(near, len(codes) - 1)], -1)
+    hit = (labels == np.tile(codes[members], len(S))[:, None]).any(axis=1)
+    return hit.reshape(len(S), len(members)).sum(axis=1)
 
 
 def twin_pairs(
