@@ -345,12 +345,13 @@ class HierarchicalClustering:
         self._live_members = None  # the graph's rows change: known again once it is built
         positions = np.array(local_positions, dtype=float).reshape(-1, 3)  # a copy: see moves
         moved = self._moved_locals(positions, detections)
+        changed = self._changed_locals(positions, detections)
         self._local_distances = self._distances_to(positions)
         self._local_positions = positions
         self._local_ids = list(local_ids)
         stale, detected = self._register_candidates(detections)
         self._forget_edges(moved, stale)
-        fresh_rows = self._revalidate(stale, moved)
+        fresh_rows = self._revalidate(stale, moved, changed)
         fresh_rows = np.concatenate([fresh_rows, self._add_singletons(detected)])
         self._cover_live()
         self._cluster(np.unique(fresh_rows))
@@ -364,6 +365,20 @@ class HierarchicalClustering:
             if local < known
             and np.linalg.norm(positions[local] - self._local_positions[local]) > 1e-6
         }
+
+    def _changed_locals(
+        self, positions: np.ndarray, detections: dict[int, np.ndarray]
+    ) -> np.ndarray:
+        """The known local objects whose position changed at all (moved or not)."""
+        known = len(self._local_positions)
+        return np.array(
+            [
+                local
+                for local in detections
+                if local < known and np.any(positions[local] != self._local_positions[local])
+            ],
+            dtype=np.int64,
+        )
 
     def _register_candidates(
         self, detections: dict[int, np.ndarray]
@@ -507,19 +522,26 @@ class HierarchicalClustering:
             out[:, j] = row
         return out
 
-    def _gate_of_sets(self, members: np.ndarray) -> np.ndarray:
-        """Whether every pair of members of each set (rows, -1 padded) passes the criterion."""
+    def _gate_of_sets(self, members: np.ndarray, changed: np.ndarray) -> np.ndarray:
+        """Whether every pair of members of each set (rows, -1 padded) passes the criterion.
+
+        Only pairs with a member whose local object `changed` position are measured: each set
+        is a clique of compatible candidates, and the pairs of unchanged members are measured
+        as they were when it was formed."""
         valid = members >= 0
         m = np.maximum(members, 0)
+        rows, slots = np.nonzero(valid & np.isin(self._cand_l[m], changed))
         g = self._global_positions[self._cand_g[m]]
         l = self._local_positions[self._cand_l[m]]
-        d_global = np.linalg.norm(g[:, :, None] - g[:, None], axis=3)
-        d_local = np.linalg.norm(l[:, :, None] - l[:, None], axis=3)
+        d_global = np.linalg.norm(g[rows, slots][:, None] - g[rows], axis=2)
+        d_local = np.linalg.norm(l[rows, slots][:, None] - l[rows], axis=2)
         compatible = self.criterion.compatible(d_global, d_local)
-        pair = valid[:, :, None] & valid[:, None, :] & ~np.eye(members.shape[1], dtype=bool)
-        return np.all(compatible | ~pair, axis=(1, 2))
+        pair = valid[rows] & (np.arange(members.shape[1])[None] != slots[:, None])
+        passes = np.ones(len(members), dtype=bool)
+        passes[rows[~np.all(compatible | ~pair, axis=1)]] = False
+        return passes
 
-    def _revalidate(self, stale: np.ndarray, moved: set[int]) -> np.ndarray:
+    def _revalidate(self, stale: np.ndarray, moved: set[int], changed: np.ndarray) -> np.ndarray:
         """Drop sets with stale candidates or broken cliques; return the rows of the sets with
         moved objects (fresh: they take part in the next round as new ones)."""
         if not len(self._score) or not (len(stale) or moved):
@@ -532,7 +554,7 @@ class HierarchicalClustering:
         )
         check = np.flatnonzero(touched & keep)
         if len(check):
-            keep[check] = self._gate_of_sets(members[check])
+            keep[check] = self._gate_of_sets(members[check], changed)
         self._keep_rows(keep)
         return np.flatnonzero(touched[keep])
 

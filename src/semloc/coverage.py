@@ -145,8 +145,26 @@ def expected_unseen(
 
     `local`: (position in the local frame, candidate map indices) of each window object;
     `near`: the map indices worth testing (default: all)."""
+    expected = expected_objects(pose, looks, global_positions, diagonals, settings, near)
+    if not len(expected):
+        return expected, expected
+    accounting = Accounting(pose, global_positions, allowance, settings.move_m)
+    accounted = accounting.accounted(list(enumerate(local)))
+    return expected, expected[~accounted[expected]]
+
+
+def expected_objects(
+    pose: np.ndarray,
+    looks: Sequence[Coverage],
+    global_positions: np.ndarray,
+    diagonals: np.ndarray,
+    settings: Looks = Looks(),
+    near: np.ndarray | None = None,
+) -> np.ndarray:
+    """The map objects (indices) that `pose` puts well inside one of `looks` and in nobody's
+    shadow (`expected_unseen`'s first half)."""
     if not looks:
-        return np.zeros(0, dtype=int), np.zeros(0, dtype=int)
+        return np.zeros(0, dtype=int)
     indices = np.arange(len(global_positions)) if near is None else np.asarray(near, dtype=int)
     inverse = np.linalg.inv(pose)
     in_local = global_positions[indices] @ inverse[:3, :3].T + inverse[:3, 3]
@@ -156,40 +174,53 @@ def expected_unseen(
         seen[seen] = _unshadowed(in_local[seen], look.origin, in_local, diagonals[indices],
                                  settings.max_in_front)  # fmt: skip
         covered |= seen
-    expected = indices[covered]
-    if not len(expected):
-        return expected, expected
-    accounted = _accounted(pose, global_positions, local, allowance, settings.move_m)
-    return expected, expected[~accounted[expected]]
+    return indices[covered]
 
 
-def _accounted(
-    pose: np.ndarray,
-    global_positions: np.ndarray,
-    local: Iterable[tuple[np.ndarray, np.ndarray]],
-    allowance: np.ndarray,
-    move_m: float,
-) -> np.ndarray:
-    """Which map objects a local object accounts for, one each: the nearest candidate within
-    its allowance; failing that, the nearest one within `move_m` not yet accounted for."""
-    accounted = np.zeros(len(global_positions), dtype=bool)
-    R, t = pose[:3, :3], pose[:3, 3]
-    farther: list[tuple[np.ndarray, np.ndarray]] = []
-    for position, candidates in local:
-        if not len(candidates):
-            continue
-        gaps = np.linalg.norm(global_positions[candidates] - (R @ position + t), axis=1)
-        nearest = int(np.argmin(gaps))
-        if gaps[nearest] <= allowance[candidates[nearest]]:
-            accounted[candidates[nearest]] = True
-        else:
-            farther.append((gaps, candidates))
-    for gaps, candidates in farther:
-        order = np.argsort(gaps)
-        free = [i for i in order if gaps[i] <= move_m and not accounted[candidates[i]]]
-        if free:
-            accounted[candidates[free[0]]] = True
-    return accounted
+class Accounting:
+    """Which map objects local objects account for under one pose, one each: the nearest
+    candidate within its allowance; failing that, the nearest one within `move_m` not yet
+    accounted for.  Each local object's distances to its candidates are measured once (by
+    its key), however many looks ask about it."""
+
+    def __init__(
+        self, pose: np.ndarray, global_positions: np.ndarray, allowance: np.ndarray,
+        move_m: float,
+    ) -> None:  # fmt: skip
+        self._R, self._t = pose[:3, :3], pose[:3, 3]
+        self._positions, self._allowance, self._move_m = global_positions, allowance, move_m
+        self._measured: dict[Any, tuple[np.ndarray, np.ndarray, int] | None] = {}
+
+    def accounted(self, local: Sequence[tuple[Any, tuple[np.ndarray, np.ndarray]]]) -> np.ndarray:
+        """Per map object, whether one of `local` ((key, (position in the local frame,
+        candidate map indices)), in their order) accounts for it."""
+        accounted = np.zeros(len(self._positions), dtype=bool)
+        farther: list[tuple[np.ndarray, np.ndarray]] = []
+        for key, (position, candidates) in local:
+            measured = self._measure(key, position, candidates)
+            if measured is None:
+                continue
+            gaps, order, nearest = measured
+            if gaps[nearest] <= self._allowance[candidates[nearest]]:
+                accounted[candidates[nearest]] = True
+            else:
+                farther.append((gaps[order], candidates[order]))
+        for gaps, candidates in farther:  # ascending by gap
+            free = np.flatnonzero((gaps <= self._move_m) & ~accounted[candidates])
+            if len(free):
+                accounted[candidates[free[0]]] = True
+        return accounted
+
+    def _measure(self, key: Any, position: np.ndarray, candidates: np.ndarray):
+        """(gaps to the candidates, their ascending order, the nearest); None: no candidates."""
+        if key not in self._measured:
+            measured = None
+            if len(candidates):
+                gaps = np.linalg.norm(self._positions[candidates] - (self._R @ position + self._t),
+                                      axis=1)  # fmt: skip
+                measured = (gaps, np.argsort(gaps), int(np.argmin(gaps)))
+            self._measured[key] = measured
+        return self._measured[key]
 
 
 def _unshadowed(

@@ -49,7 +49,14 @@ from semloc.association import (
 )
 from semloc.changes import Changes, ChangesConfig, RunChanges, answer_changes
 from semloc.clustering import ClusteringConfig, HierarchicalClustering, SetPairs
-from semloc.coverage import GONE_SHARE, Coverage, Looks, checked_coverage, expected_unseen
+from semloc.coverage import (
+    GONE_SHARE,
+    Accounting,
+    Coverage,
+    Looks,
+    checked_coverage,
+    expected_objects,
+)
 from semloc.decision import (
     PLACE_APART,
     Decision,
@@ -224,6 +231,7 @@ class Localizer:
         self._run_changes = RunChanges()  # what changed, over the run's tracked claims
         self._against = AgainstRate()  # how often the run's claims judged objects against
         self._map_tree: cKDTree | None = None  # the map's positions, for looks and twins
+        self._unseen_of: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}  # this update's, by pose
         self._label_codes: np.ndarray | None = None  # the map's labels as integers (twins)
         self._twin_motions: dict[tuple[int, ...], list[np.ndarray]] = {}  # map objects -> twins
         self._track_twins: tuple[np.ndarray, list[np.ndarray]] | None = None  # (its pairs'
@@ -400,6 +408,7 @@ class Localizer:
             self.local_up = objects.up
         objects = self._described(_checked_objects(objects))
         self._look = checked_coverage(coverage)
+        self._unseen_of = {}
         self.window.advance(_robot_position(position))
         if self._look is not None:
             self._looks.append((self.window.updates, self._look))
@@ -518,6 +527,7 @@ class Localizer:
         self._end_track()
         self.window.keep_only(self.window.since(self.window.updates - updates + 1))
         self._found = {i: f for i, f in self._found.items() if i in self.window}
+        self._unseen_of = {}
         return self._search_update(objects, answer, start, reason=CONTRADICTED)
 
     def _unseen(
@@ -529,21 +539,31 @@ class Localizer:
         if looks is None:
             assert self._look is not None
             looks = [(self.window.updates, self._look)]
+        key = (pose.tobytes(), tuple(update for update, _ in looks))
+        if key not in self._unseen_of:  # (the answer's support asks again for its best pose)
+            self._unseen_of[key] = self._unseen_now(pose, looks)
+        return self._unseen_of[key]
+
+    def _unseen_now(
+        self, pose: np.ndarray, looks: list[tuple[int, Coverage]]
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """`_unseen`, computed: each window object's distances to its candidates are measured
+        once for all the looks (`semloc.coverage.Accounting`)."""
         tree = self._tree()
         settings = Looks(move_m=self.config.tracking.move_m)
+        positions = self.global_map.positions
+        accounting = Accounting(pose, positions, self._allowances(), settings.move_m)
         expected: set[int] = set()
         unseen: set[int] = set()
         for update, look in looks:
             origin = pose[:3, :3] @ look.origin + pose[:3, 3]
             near = np.array(tree.query_ball_point(origin, look.range_m + 0.5), dtype=int)
-            local = [(self._found[i][0].position, self._found[i][1])
-                     for i in self.window.since(update)]  # fmt: skip
-            seen, absent = expected_unseen(
-                pose, [look], self.global_map.positions, self._diagonals(), local,
-                self._allowances(), settings, near,
-            )  # fmt: skip
+            seen = expected_objects(pose, [look], positions, self._diagonals(), settings, near)
             expected.update(seen.tolist())
-            unseen.update(absent.tolist())
+            if len(seen):
+                local = [(i, (self._found[i][0].position, self._found[i][1]))
+                         for i in self.window.since(update)]  # fmt: skip
+                unseen.update(seen[~accounting.accounted(local)[seen]].tolist())
         return np.array(sorted(expected), dtype=int), np.array(sorted(unseen), dtype=int)
 
     def _tree(self) -> cKDTree:

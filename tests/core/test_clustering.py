@@ -570,3 +570,53 @@ def test_top_pairs_are_the_top_sets_as_arrays():
         assert rows.pairs.tolist() == [list(p) for s in sets for p in s.pairs]
         assert all(list(s.pairs) == sorted(s.pairs) for s in sets)
         assert len(sets) > 5 and max(rows.sizes) >= 3
+
+
+def _gate_of_every_pair(self, members: np.ndarray, changed: np.ndarray) -> np.ndarray:
+    """The clique check measuring every pair of members (what `_gate_of_sets` spares)."""
+    valid = members >= 0
+    m = np.maximum(members, 0)
+    g = self._global_positions[self._cand_g[m]]
+    l = self._local_positions[self._cand_l[m]]
+    d_global = np.linalg.norm(g[:, :, None] - g[:, None], axis=3)
+    d_local = np.linalg.norm(l[:, :, None] - l[:, None], axis=3)
+    compatible = self.criterion.compatible(d_global, d_local)
+    pair = valid[:, :, None] & valid[:, None, :] & ~np.eye(members.shape[1], dtype=bool)
+    return np.all(compatible | ~pair, axis=(1, 2))
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_redetections_check_only_the_pairs_of_changed_objects_with_the_same_pool(monkeypatch, seed):
+    """Re-detections that move objects (by noise, or far enough to break sets) leave the same
+    pool whether the clique check measures every pair or only those of changed objects."""
+    rng = np.random.default_rng(seed)
+    g = rng.uniform(0, 8, (24, 3))
+    labels = rng.integers(0, 4, len(g))
+    chosen = rng.choice(len(g), 9, replace=False)
+    config = ClusteringConfig(distance_tolerance=0.4)
+    fast, full = clustering(g, config), clustering(g, config)
+    checks = {"full": 0, "dropped": 0}
+
+    def every_pair(self, members, changed):
+        checks["full"] += len(members)
+        kept = _gate_of_every_pair(self, members, changed)
+        checks["dropped"] += int((~kept).sum())
+        return kept
+
+    local: list[np.ndarray] = []
+    for step in range(30):
+        if len(local) < len(chosen) and (step % 3 != 2 or len(local) < 2):
+            local.append(g[chosen[len(local)]] + rng.normal(0, 0.15, 3))
+            detected = [len(local) - 1]
+        else:  # re-detect two known objects: noise, or a move that breaks their sets
+            detected = rng.choice(len(local), 2, replace=False).tolist()
+            for i in detected:
+                jump = rng.uniform(1, 3) if rng.random() < 0.3 else 0.0
+                local[i] = g[chosen[i]] + rng.normal(0, 0.15, 3) + [jump, 0, 0]
+        detections = {i: np.flatnonzero(labels == labels[chosen[i]]) for i in detected}
+        feed(fast, local, detections)
+        with monkeypatch.context() as patch:
+            patch.setattr(HierarchicalClustering, "_gate_of_sets", every_pair)
+            feed(full, local, detections)
+        assert pair_sets(fast) == pair_sets(full)
+    assert checks["full"] > 0 and checks["dropped"] > 0
