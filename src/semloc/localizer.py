@@ -472,6 +472,7 @@ class Localizer:
         self._add_step(scores, end - start, status)
         if status is None:
             return None
+        hypotheses = hypotheses[: self.config.top_k]  # (twins weighed beyond it: not listed)
         result = self._result(status, hypotheses, reason, self._changes(hypotheses))
         if status == "localized" and self.config.tracking.track:
             self._start_track(hypotheses[0])
