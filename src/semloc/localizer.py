@@ -72,6 +72,7 @@ from semloc.tracking import (
     Verdict,
     allowances,
     check,
+    one_to_one,
     recent_contradiction,
 )
 from semloc.transforms import centre_residual
@@ -450,8 +451,9 @@ class Localizer:
         against = track.contradicted(verdict)
         if against:  # a fresh window of the contradicting updates' objects
             return self._contradicted(against, objects, answer, start)
+        report = self._report_verdict(track, objects, candidates, verdict)
         track.accept(verdict)
-        self._observe_changes(track, verdict, objects, candidates, looked_unseen)
+        self._observe_changes(track, report, objects, candidates, looked_unseen)
         self._search_stale = True  # the search did not see these objects
         lapsed = len(track.pairs) < self._min_track_pairs() or self._stale(list(track.pairs))
         followed = None if lapsed else self._follow(track)
@@ -511,6 +513,25 @@ class Localizer:
             unseen.update(absent.tolist())
         return np.array(sorted(expected), dtype=int), np.array(sorted(unseen), dtype=int)
 
+    def _report_verdict(
+        self, track: Track, objects: list[SemanticObject], candidates: dict[str, np.ndarray],
+        verdict: Verdict,
+    ) -> Verdict:  # fmt: skip
+        """This update's objects judged for the run's change report (`tracking.one_to_one`):
+        against the claim's pairs of other local objects (before this update's replace them)
+        and the map objects the run saw at their place; its contradicting objects are
+        tracking's."""
+        R, t = track.pose[:3, :3], track.pose[:3, 3]
+        now = {o.id for o in objects}
+        held = {g: float(np.linalg.norm(self.global_map.positions[g]
+                                        - (R @ self._found[l][0].position + t)))
+                for l, g in track.pairs.items() if l not in now and l in self._found}  # fmt: skip
+        judged = one_to_one(track.pose, objects, candidates, self.global_map.positions,
+                            self._allowances(), self.config.tracking.move_m, held,
+                            self._run_changes.matched)  # fmt: skip
+        return Verdict(judged.supported, verdict.contradicting, judged.changed,
+                       sources=judged.sources)  # fmt: skip
+
     def _observe_changes(
         self, track: Track, verdict: Verdict, objects: list[SemanticObject],
         candidates: dict[str, np.ndarray], unseen: np.ndarray,
@@ -522,8 +543,11 @@ class Localizer:
             run.observe_matched(g, object_id)
         for g, object_id in verdict.changed:
             obj = by_id[object_id]
-            offset = float(np.linalg.norm(self.global_map.positions[g] - (R @ obj.position + t)))
-            run.observe_moved(g, object_id, offset, obj.seen)
+            sources = verdict.sources.get(object_id, [g])
+            gaps = np.linalg.norm(
+                self.global_map.positions[sources] - (R @ obj.position + t), axis=1
+            )
+            run.observe_undecided(object_id, dict(zip(sources, gaps.tolist())), obj.seen)
         for obj in objects:
             if not len(candidates[obj.id]):
                 run.observe_new(obj.id, obj.seen, unknown_label=True)

@@ -54,7 +54,7 @@ from __future__ import annotations
 
 import math
 from collections import OrderedDict, deque
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Callable, Collection, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -147,6 +147,8 @@ class Verdict:
     repeated: int = 0  # supporting objects already paired with the same map object
     missing: float = 0.0  # map objects the look expected but nothing accounts for, beyond
     # the tolerated share
+    sources: dict[str, list[int]] = field(default_factory=dict)  # changed local id -> the
+    # map objects it may have moved from, when more than one (`one_to_one`)
 
     @property
     def against(self) -> float:
@@ -188,6 +190,67 @@ def check(
         else:
             contradicting.append(obj.id)
     return Verdict(supported, contradicting, changed, repeated)
+
+
+def one_to_one(
+    pose: np.ndarray,
+    objects: Iterable[SemanticObject],
+    candidates: Mapping[str, np.ndarray],
+    global_positions: np.ndarray,
+    allowance: np.ndarray,
+    move_m: float,
+    held: Mapping[int, float],
+    settled: Collection[int] = (),
+) -> Verdict:
+    """The update's objects judged for the run's change report: `check`'s rule, but each map
+    object explains one object, and a move names the sources it may come from.
+
+    `held`: the map objects the claim's other local objects are paired with (map index -> how
+    far that object lies from it under `pose`); `settled`: map objects seen at their place
+    before, which may be seen there again but are no one's source.  Nearest first over all of
+    them, each object takes its nearest candidate within `move_m` that no nearer object took;
+    it supports it within `allowance`, else it is changed.  A changed object with other free
+    candidates within `move_m` (neither taken, held nor settled) lists them all in
+    `sources`, nearest first: of two chairs gone from their places, which one stands here
+    cannot be told yet.  An object that takes none is contradicting."""
+    R, t = pose[:3, :3], pose[:3, 3]
+    found = [(float(d), None, int(g)) for g, d in held.items()]
+    judged: list[str] = []
+    reach: dict[str, dict[int, float]] = {}  # local id -> its candidates within move_m
+    for obj in objects:
+        indices = np.asarray(candidates.get(obj.id, ()), dtype=int)
+        if not len(indices):
+            continue
+        judged.append(obj.id)
+        gaps = np.linalg.norm(global_positions[indices] - (R @ obj.position + t), axis=1)
+        reach[obj.id] = {int(g): float(d) for g, d in zip(indices, gaps) if d <= move_m}
+        found += [(float(d), obj.id, int(g)) for d, g in zip(gaps, indices)
+                  if d <= allowance[g] or (d <= move_m and g not in settled)]  # fmt: skip
+    taken = _nearest_first(found)
+    supported = [(g, l) for g, (d, l) in taken.items() if l is not None and d <= allowance[g]]
+    changed = [(g, l) for g, (d, l) in taken.items() if l is not None and d > allowance[g]]
+    claimed = set(taken) | set(settled)
+    sources = {l: [g, *sorted(reach[l].keys() - claimed, key=lambda h: reach[l][h])]
+               for g, l in changed if reach[l].keys() - claimed}  # fmt: skip
+    placed = {l for _, (_, l) in taken.items()}
+    return Verdict(sorted(supported, key=lambda p: p[1]), [l for l in judged if l not in placed],
+                   sorted(changed, key=lambda p: p[1]), sources=sources)  # fmt: skip
+
+
+def _nearest_first(
+    found: list[tuple[float, str | None, int]],
+) -> dict[int, tuple[float, str | None]]:
+    """(gap, local id or None for a held pair, map index), one to one, nearest first (ties:
+    held pairs first, then by id): each map index -> the (gap, local id) that took it."""
+    taken: dict[int, tuple[float, str | None]] = {}
+    placed: set[str] = set()
+    for gap, local_id, g in sorted(found, key=lambda f: (f[0], f[1] or "", f[2])):
+        if g in taken or local_id in placed:
+            continue
+        taken[g] = (gap, local_id)
+        if local_id is not None:
+            placed.add(local_id)
+    return taken
 
 
 def recent_contradiction(verdicts: Sequence[Verdict], least: int) -> bool:
