@@ -146,13 +146,27 @@ UNDECIDED_KEPT = 1000
 class RunChanges:
     """What changed since the map was made, accumulated over the tracked claims of a run.
 
-    Fed by tracking's verdicts (`semloc.tracking`): an object changed under the claim (its
-    nearest candidate beyond the tracking tolerance, within a plausible move) is evidence that
-    that map object moved; one without candidates, or contradicting, that it is new; a map
-    object the sensor's look should have shown that nobody accounts for, that it is missing.
-    A map object seen at its place cancels its moved and missing evidence.  A change is
-    reported once `min_evidence` detections (or looks) said so: a phantom or a mislabel is
-    seen once, a moved chair again at each look."""
+    Fed by tracking's judgement for the report (`semloc.tracking.one_to_one`: each map object
+    explains one detection, nearest first, against the claim's other pairs): an object changed
+    under the claim (the map object it takes lies beyond the tracking tolerance, within a
+    plausible move) is evidence that that map object moved; one without candidates, or
+    contradicting, that it is new; a map object the sensor's look should have shown that
+    nobody accounts for, that it is missing.  A map object seen at its place cancels its moved
+    and missing evidence, and is no one's source for the rest of the run.  A changed object
+    with several free sources within reach (two chairs gone from their places, one chair
+    between them) is undecided: its detection counts for the source left once the run has
+    seen the others at their places, and for none while several are left (a wrong source is
+    two errors: a chair reported moved that is not, and one moved that is not reported).  A
+    change is reported once `min_evidence` detections (or looks) said so: a phantom or a
+    mislabel is seen once, a moved chair again at each look.
+
+    The report survives the end of a claim (a kidnap, a contradiction, a lapse) and is never
+    reset within a run: it is about the map, not the claim, and a chair that moved is still
+    moved after the robot was carried off, so dropping it would lose what the run already
+    established (the next tracked answer shows it again, with the later evidence added; the
+    Localizer's `state` keeps it).  The price is that a wrong claim's evidence stays too; it
+    needs `min_evidence` detections, and the map objects later seen at their places cancel
+    it."""
 
     def __init__(self, min_evidence: int = 2) -> None:
         self.min_evidence = min_evidence

@@ -84,8 +84,9 @@ def judged(
 ) -> dict[str, tuple]:
     """Each object's (verdict, map index) by `one_to_one` (-1: none; absent: ambiguous)."""
     candidates = {o.id: np.array([0, 1]) for o in objects}
+    holders = {g: TWO_CHAIRS[g] - [d, 0, 0] for g, d in held.items()}  # behind the chair
     verdict = one_to_one(
-        np.eye(4), objects, candidates, TWO_CHAIRS, ALLOWANCE, move_m, held, settled
+        np.eye(4), objects, candidates, TWO_CHAIRS, ALLOWANCE, move_m, holders, settled
     )
     found = {l: ("supported", g) for g, l in verdict.supported}
     found |= {l: ("changed", g) for g, l in verdict.changed}
@@ -126,6 +127,23 @@ def test_an_object_between_two_free_chairs_names_both_as_its_sources(x, move_m, 
     verdict = one_to_one(np.eye(4), [at(x)], candidates, TWO_CHAIRS, ALLOWANCE, move_m, {})
     assert verdict.changed == [(1, "l")]
     assert verdict.sources == ({"l": sources} if len(sources) > 1 else {})
+
+
+@pytest.mark.parametrize(("holder", "found"), [(-0.125, ("changed", 1)), (-0.0625, None)])
+def test_an_object_overlapping_the_detection_that_took_its_chair_is_a_part_of_it(holder, found):
+    """Chair 0 (half its diagonal 0.5 m) is taken by a nearer detection: an object 0.375 m
+    from the chair and 0.5 m from that detection is another chair (moved from chair 1); closer
+    to it, the two overlap: one chair split in two by the detector, which says nothing."""
+    part_m = np.full(3, 0.5)
+    candidates = {"l": np.array([0, 1])}
+    held = {0: np.array([holder, 0.0, 0.0])}
+    verdict = one_to_one(
+        np.eye(4), [at(0.375)], candidates, TWO_CHAIRS, ALLOWANCE, 3.0, held, (), part_m
+    )
+    judgement = {l: ("changed", g) for g, l in verdict.changed}
+    judgement |= {l: ("supported", g) for g, l in verdict.supported}
+    judgement |= {l: ("contradicting", -1) for l in verdict.contradicting}
+    assert judgement == ({} if found is None else {"l": found})
 
 
 def test_a_chair_seen_at_its_place_before_is_no_source_but_may_be_seen_there_again():
