@@ -72,7 +72,7 @@ from semloc.tracking import (
     Verdict,
     allowances,
     check,
-    diagonals,
+    footprints,
     one_to_one,
     recent_contradiction,
 )
@@ -199,7 +199,7 @@ class Localizer:
         self.window = LocalWindow(config.window)
         self._track: Track | None = None
         self._allowance: np.ndarray | None = None  # per map object, for tracking checks
-        self._part_m: np.ndarray | None = None  # per map object, half its diagonal
+        self._part_m: np.ndarray | None = None  # per map object, half its footprint
         self._found: dict[str, tuple[SemanticObject, np.ndarray, np.ndarray]] = {}
         self._prior = checked_prior(prior)
         self._prior_slack: np.ndarray | None = None  # per map object, for the prior's gate
@@ -528,7 +528,7 @@ class Localizer:
         held = {g: R @ self._found[l][0].position + t
                 for l, g in track.pairs.items() if l not in now and l in self._found}  # fmt: skip
         if self._part_m is None:
-            self._part_m = 0.5 * diagonals(self.global_map)
+            self._part_m = 0.5 * footprints(self.global_map)
         judged = one_to_one(track.pose, objects, candidates, self.global_map.positions,
                             self._allowances(), self.config.tracking.move_m, held,
                             self._run_changes.matched, self._part_m)  # fmt: skip

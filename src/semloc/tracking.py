@@ -220,8 +220,8 @@ def one_to_one(
     each object takes its nearest candidate within `move_m` that no nearer object took; it
     supports it within `allowance`, else it is changed.  An object within `allowance` of a map
     object g that a nearer object took, and within `part_m[g]` of that object (half g's
-    diagonal: two objects do not overlap), is a part of it (a detector's split): it says
-    nothing.  A changed object with other free candidates within `move_m` (neither taken,
+    footprint diagonal, `footprints`: two objects do not overlap), is a part of it (a
+    detector's split): it says nothing.  A changed object with other free candidates within `move_m` (neither taken,
     held nor settled) lists them all in `sources`, nearest first: of two chairs gone from
     their places, which one stands here cannot be told yet.  An object that takes none is
     contradicting."""
@@ -284,6 +284,22 @@ def allowances(global_map: ObjectMap, tolerance: float) -> np.ndarray:
     of the object's diagonal (its box, else its points), since a partial view moves a centre
     towards the side seen, by up to about half the object's extent."""
     return tolerance + 0.25 * diagonals(global_map)
+
+
+def footprints(global_map: ObjectMap) -> np.ndarray:
+    """Each map object's footprint diagonal (m) across the map's `up` (z when it has none): its
+    box's, else its points' bounding box's; 0 without either."""
+    up = np.array([0.0, 0.0, 1.0]) if global_map.up is None else global_map.up
+    across = np.eye(3) - np.outer(up, up)
+    corners = np.array(np.meshgrid(*[[-0.5, 0.5]] * 3)).reshape(3, -1).T
+    found = np.zeros(len(global_map))
+    for i, (size, rotation) in enumerate(zip(global_map.sizes, global_map.rotations)):
+        if not np.isnan(size).any():  # the widest pair of the box's corners
+            flat = (corners * size) @ rotation.T @ across
+            found[i] = np.max(np.linalg.norm(flat[:, None] - flat[None], axis=2))
+        elif (points := global_map[i].points) is not None and len(points):
+            found[i] = np.linalg.norm(np.ptp(points @ across, axis=0))
+    return found
 
 
 def diagonals(global_map: ObjectMap) -> np.ndarray:

@@ -30,6 +30,7 @@ from semloc.tracking import (
     TrackingConfig,
     Verdict,
     check,
+    footprints,
     one_to_one,
     recent_contradiction,
 )
@@ -144,6 +145,19 @@ def test_an_object_overlapping_the_detection_that_took_its_chair_is_a_part_of_it
     judgement |= {l: ("supported", g) for g, l in verdict.supported}
     judgement |= {l: ("contradicting", -1) for l in verdict.contradicting}
     assert judgement == ({} if found is None else {"l": found})
+
+
+def test_a_footprint_is_the_widest_extent_across_up_of_the_box_else_of_the_points():
+    turn = np.array([[0.0, -1, 0], [1, 0, 0], [0, 0, 1]])
+    objects = [
+        SemanticObject("box", "bed", [0, 0, 0], size=[0.6, 0.8, 2.0]),
+        SemanticObject("turned", "bed", [0, 0, 0], size=[0.6, 0.8, 2.0], rotation=turn),
+        SemanticObject("points", "bed", [0, 0, 0], points=[[0, 0, 0], [0.3, 0.4, 5.0]]),
+        SemanticObject("centre", "bed", [0, 0, 0]),
+    ]
+    assert footprints(ObjectMap(objects, up=[0, 0, 1])) == pytest.approx([1.0, 1.0, 0.5, 0.0])
+    lying = ObjectMap(objects[:1], up=[1, 0, 0])  # across x: 0.8 by 2.0
+    assert footprints(lying) == pytest.approx([np.hypot(0.8, 2.0)])
 
 
 def test_a_chair_seen_at_its_place_before_is_no_source_but_may_be_seen_there_again():
