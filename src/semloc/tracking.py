@@ -221,25 +221,23 @@ def one_to_one(
     supports it within `allowance`, else it is changed.  An object within `allowance` of a map
     object g that a nearer object took, and within `part_m[g]` of that object (half g's
     footprint diagonal, `footprints`: two objects do not overlap), is a part of it (a
-    detector's split): it says nothing.  A changed object with other free candidates
-    (neither taken, held nor settled) within `move_m` plus their allowance (a chair moved
-    `move_m` may stand that much farther under the tracked pose) lists them all in `sources`,
-    nearest first: of two chairs gone from their places, which one stands here cannot be told
-    yet.  An object that takes none is contradicting."""
+    detector's split): it says nothing.  A changed object with other free candidates within `move_m` (neither taken,
+    held nor settled) lists them all in `sources`, nearest first: of two chairs gone from
+    their places, which one stands here cannot be told yet.  An object that takes none is
+    contradicting."""
     R, t = pose[:3, :3], pose[:3, 3]
     found = [
         (float(np.linalg.norm(global_positions[g] - p)), None, int(g)) for g, p in held.items()
     ]
     placed: dict[str, np.ndarray] = {}
-    reach: dict[str, dict[int, float]] = {}  # local id -> the candidates it may come from
+    reach: dict[str, dict[int, float]] = {}  # local id -> its candidates within move_m
     for obj in objects:
         indices = np.asarray(candidates.get(obj.id, ()), dtype=int)
         if not len(indices):
             continue
         placed[obj.id] = R @ obj.position + t
         gaps = np.linalg.norm(global_positions[indices] - placed[obj.id], axis=1)
-        reach[obj.id] = {int(g): float(d) for g, d in zip(indices, gaps)
-                         if d <= move_m + allowance[g]}  # fmt: skip
+        reach[obj.id] = {int(g): float(d) for g, d in zip(indices, gaps) if d <= move_m}
         found += [(float(d), obj.id, int(g)) for d, g in zip(gaps, indices)
                   if d <= allowance[g] or (d <= move_m and g not in settled)]  # fmt: skip
     taken: dict[int, tuple[float, str | None]] = {}  # map index -> (gap, its taker; None: held)

@@ -118,13 +118,14 @@ def test_a_freed_object_takes_only_a_candidate_within_the_move_distance(move_m, 
     assert judged([at(0.4)], {0: 0.0}, move_m=move_m) == {"l": verdict}
 
 
-@pytest.mark.parametrize(("move_m", "sources"), [(3.0, [1, 0]), (0.875, [1, 0]), (0.75, [1])])
-def test_an_object_between_two_free_chairs_names_both_as_its_sources(move_m, sources):
+@pytest.mark.parametrize(
+    ("x", "move_m", "sources"), [(1.1, 3.0, [1, 0]), (1.1, 1.1, [1, 0]), (1.1, 1.09, [1])]
+)
+def test_an_object_between_two_free_chairs_names_both_as_its_sources(x, move_m, sources):
     """Which of two chairs gone from their places stands between them cannot be told yet:
-    it takes the nearer, 0.625 m away, and both are its sources, nearest first, when the
-    other (1.375 m away) lies within `move_m` plus its allowance (0.5 m)."""
+    both within `move_m` are its sources, nearest first."""
     candidates = {"l": np.array([0, 1])}
-    verdict = one_to_one(np.eye(4), [at(1.375)], candidates, TWO_CHAIRS, ALLOWANCE, move_m, {})
+    verdict = one_to_one(np.eye(4), [at(x)], candidates, TWO_CHAIRS, ALLOWANCE, move_m, {})
     assert verdict.changed == [(1, "l")]
     assert verdict.sources == ({"l": sources} if len(sources) > 1 else {})
 
