@@ -136,7 +136,7 @@ class Moved:
     """The moved objects a run reported and those it could have (see the module docstring)."""
 
     def __init__(self, walk: LongWalk) -> None:
-        self.ids = walk.map.ids
+        self.index = {str(g): i for i, g in enumerate(walk.map.ids)}
         self.truth = set(np.flatnonzero(np.any(walk.offsets != 0, axis=1)).tolist())
         self.detected: Counter[int] = Counter()  # moved map index -> keyframes seen rightly
         self.reported: set[int] = set()
@@ -148,8 +148,7 @@ class Moved:
             self.detected.update({g for g in frame.truth.values() if g in self.truth})
         changes = result.changes
         if changes is not None and changes.evidence is not None:  # the run's report
-            index = {str(g): i for i, g in enumerate(self.ids)}
-            self.reported |= {index[m.global_id] for m in changes.moved}
+            self.reported |= {self.index[m.global_id] for m in changes.moved}
 
     def counts(self) -> dict[str, int]:
         reportable = {g for g, n in self.detected.items() if n >= REPORTABLE}
