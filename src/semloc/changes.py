@@ -224,7 +224,7 @@ class RunChanges:
         self.missing.pop(g, None)
         self.new.pop(local_id, None)
         if any(g in offsets for _, offsets, _ in self.undecided):
-            undecided, self.undecided = self.undecided, []
+            undecided, self.undecided = self.undecided, deque(maxlen=UNDECIDED_KEPT)
             for l, offsets, seen in undecided:
                 self._decide(l, {h: o for h, o in offsets.items() if h != g}, seen)
 

@@ -221,10 +221,10 @@ def one_to_one(
     supports it within `allowance`, else it is changed.  An object within `allowance` of a map
     object g that a nearer object took, and within `part_m[g]` of that object (half g's
     footprint diagonal, `footprints`: two objects do not overlap), is a part of it (a
-    detector's split): it says nothing.  A changed object with other free candidates within `move_m` (neither taken,
-    held nor settled) lists them all in `sources`, nearest first: of two chairs gone from
-    their places, which one stands here cannot be told yet.  An object that takes none is
-    contradicting."""
+    detector's split): it says nothing.  A changed object with other free candidates within
+    `move_m` (neither taken, held nor settled) lists them all in `sources`, nearest first: of
+    two chairs gone from their places, which one stands here cannot be told yet.  An object
+    that takes none is contradicting."""
     R, t = pose[:3, :3], pose[:3, 3]
     found = [
         (float(np.linalg.norm(global_positions[g] - p)), None, int(g)) for g, p in held.items()

@@ -12,6 +12,7 @@ from test_changes_fixtures import T, cube, room, seen_from_t
 
 import semloc
 from semloc.changes import (
+    UNDECIDED_KEPT,
     Changes,
     ChangesConfig,
     Moved,
@@ -329,6 +330,16 @@ def test_an_undecided_move_counts_for_the_source_left_once_the_others_are_seen_i
     assert run.moved[2][2] == 1 and not run.undecided
     run.observe_matched(1, "l1")  # and all sources seen in place: nothing left to decide
     assert [m.global_id for m in run.report(ids).moved] == []
+
+
+def test_the_undecided_detections_kept_are_the_latest_ones():
+    run = RunChanges()
+    for seen in range(UNDECIDED_KEPT + 5):
+        run.observe_undecided("l5", {0: 1.0, 1: 2.0}, seen=seen)
+    run.observe_undecided("l6", {0: 1.0, 2: 2.0}, seen=UNDECIDED_KEPT + 5)
+    run.observe_matched(2, "l2")  # decides l6's detection, and keeps the latest others
+    assert len(run.undecided) == UNDECIDED_KEPT - 1 and run.undecided[0][2] == 6
+    assert run.moved[0][2] == 1 and run.undecided.maxlen == UNDECIDED_KEPT
 
 
 @pytest.mark.parametrize("least", [1, 3])
