@@ -31,7 +31,8 @@ applies unless the versions written since touched what it changes or relies on
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections import deque
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -138,16 +139,34 @@ def _count(value: Any) -> int | None:
     return None if value is None else int(value)
 
 
+UNDECIDED_KEPT = 1000
+"""The run's report keeps this many of the latest undecided detections (`RunChanges`)."""
+
+
 class RunChanges:
     """What changed since the map was made, accumulated over the tracked claims of a run.
 
-    Fed by tracking's verdicts (`semloc.tracking`): an object changed under the claim (its
-    nearest candidate beyond the tracking tolerance, within a plausible move) is evidence that
-    that map object moved; one without candidates, or contradicting, that it is new; a map
-    object the sensor's look should have shown that nobody accounts for, that it is missing.
-    A map object seen at its place cancels its moved and missing evidence.  A change is
-    reported once `min_evidence` detections (or looks) said so: a phantom or a mislabel is
-    seen once, a moved chair again at each look."""
+    Fed by tracking's judgement for the report (`semloc.tracking.one_to_one`: each map object
+    explains one detection, nearest first, against the claim's other pairs): an object changed
+    under the claim (the map object it takes lies beyond the tracking tolerance, within a
+    plausible move) is evidence that that map object moved; one without candidates, or
+    contradicting, that it is new; a map object the sensor's look should have shown that
+    nobody accounts for, that it is missing.  A map object seen at its place cancels its moved
+    and missing evidence, and is no one's source for the rest of the run.  A changed object
+    with several free sources within reach (two chairs gone from their places, one chair
+    between them) is undecided: its detection counts for the source left once the run has
+    seen the others at their places, and for none while several are left (a wrong source is
+    two errors: a chair reported moved that is not, and one moved that is not reported).  A
+    change is reported once `min_evidence` detections (or looks) said so: a phantom or a
+    mislabel is seen once, a moved chair again at each look.
+
+    The report survives the end of a claim (a kidnap, a contradiction, a lapse) and is never
+    reset within a run: it is about the map, not the claim, and a chair that moved is still
+    moved after the robot was carried off, so dropping it would lose what the run already
+    established (the next tracked answer shows it again, with the later evidence added; the
+    Localizer's `state` keeps it).  The price is that a wrong claim's evidence stays too; it
+    needs `min_evidence` detections, and the map objects later seen at their places cancel
+    it."""
 
     def __init__(self, min_evidence: int = 2) -> None:
         self.min_evidence = min_evidence
@@ -156,16 +175,35 @@ class RunChanges:
         self.new: dict[str, tuple[int, int]] = {}  # local id -> (detections, last seen)
         self.missing: dict[int, int] = {}  # map index -> looks that missed it
         self.matched: set[int] = set()
+        self.undecided: deque[tuple[str, dict[int, float], int]] = deque(maxlen=UNDECIDED_KEPT)
+        # (local id, {source map index: offset m}, seen) of detections that may have moved from
+        # several map objects
 
     def __bool__(self) -> bool:
-        return bool(self.moved or self.new or self.missing)
+        return bool(self.moved or self.new or self.missing or self.undecided)
 
     def observe_moved(self, g: int, local_id: str, offset: float, seen: int) -> None:
         g, seen = int(g), int(seen)
         if g in self.matched:
             return
-        _, _, count, _ = self.moved.get(g, (local_id, offset, 0, seen))
+        latest, _, count, last = self.moved.get(g, (local_id, offset, 0, seen))
+        if seen < last:  # (an undecided detection decided later: the newer one is named)
+            local_id, offset, seen = latest, self.moved[g][1], last
         self.moved[g] = (str(local_id), float(offset), count + 1, seen)
+
+    def observe_undecided(self, local_id: str, offsets: Mapping[int, float], seen: int) -> None:
+        """A detection of a changed object that may have moved from any of several map objects
+        (map index -> offset m): evidence for the one left once the run saw the others at their
+        place."""
+        left = {int(g): float(o) for g, o in offsets.items() if int(g) not in self.matched}
+        self._decide(str(local_id), left, int(seen))
+
+    def _decide(self, local_id: str, offsets: dict[int, float], seen: int) -> None:
+        if len(offsets) == 1:
+            g, offset = next(iter(offsets.items()))
+            self.observe_moved(g, local_id, offset, seen)
+        elif offsets:
+            self.undecided.append((local_id, offsets, seen))
 
     def observe_new(self, local_id: str, seen: int, unknown_label: bool = False) -> None:
         """A detection of a new object: one the map has no candidate for (`unknown_label`,
@@ -185,12 +223,17 @@ class RunChanges:
         self.moved.pop(g, None)
         self.missing.pop(g, None)
         self.new.pop(local_id, None)
+        if any(g in offsets for _, offsets, _ in self.undecided):
+            undecided, self.undecided = self.undecided, deque(maxlen=UNDECIDED_KEPT)
+            for l, offsets, seen in undecided:
+                self._decide(l, {h: o for h, o in offsets.items() if h != g}, seen)
 
     def copy(self) -> RunChanges:
         """The report as it stands (later observations do not change the copy)."""
         copied = RunChanges(self.min_evidence)
         copied.moved, copied.new = dict(self.moved), dict(self.new)
         copied.missing, copied.matched = dict(self.missing), set(self.matched)
+        copied.undecided = deque(self.undecided, maxlen=UNDECIDED_KEPT)
         return copied
 
     def report(self, global_ids: Sequence[str]) -> Changes:
@@ -211,16 +254,25 @@ class RunChanges:
             "new": [[l, n, s] for l, (n, s) in self.new.items()],
             "missing": [[ids[g], n] for g, n in self.missing.items()],
             "matched": [ids[g] for g in sorted(self.matched)],
+            "undecided": [
+                [l, [[ids[g], o] for g, o in offsets.items()], s]
+                for l, offsets, s in self.undecided
+            ],  # fmt: skip
         }
 
     @classmethod
-    def restored(cls, state: Mapping[str, Any], index_of) -> RunChanges:
-        run = cls()
+    def restored(
+        cls, state: Mapping[str, Any], index_of: Callable[[str], int], min_evidence: int = 2
+    ) -> RunChanges:
+        """The report of `state()`, reporting at `min_evidence` as the one saved did."""
+        run = cls(min_evidence)
         run.moved = {index_of(g): (str(l), float(o), int(n), int(s))
                      for g, l, o, n, s in state.get("moved", [])}  # fmt: skip
         run.new = {str(l): (int(n), int(s)) for l, n, s in state.get("new", [])}
         run.missing = {index_of(g): int(n) for g, n in state.get("missing", [])}
         run.matched = {index_of(g) for g in state.get("matched", [])}
+        run.undecided.extend((str(l), {index_of(g): float(o) for g, o in offsets}, int(s))
+                             for l, offsets, s in state.get("undecided", []))  # fmt: skip
         return run
 
 

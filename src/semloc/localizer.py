@@ -90,6 +90,8 @@ from semloc.tracking import (
     Verdict,
     allowances,
     check,
+    footprints,
+    one_to_one,
     recent_contradiction,
 )
 from semloc.transforms import centre_residual
@@ -216,6 +218,7 @@ class Localizer:
         self.window = LocalWindow(config.window)
         self._track: Track | None = None
         self._allowance: np.ndarray | None = None  # per map object, for tracking checks
+        self._part_m: np.ndarray | None = None  # per map object, half its footprint
         self._found: dict[str, tuple[SemanticObject, np.ndarray, np.ndarray]] = {}
         self._prior = checked_prior(prior)
         self._prior_slack: np.ndarray | None = None  # per map object, for the prior's gate
@@ -499,8 +502,9 @@ class Localizer:
         )
         if against:  # a fresh window of the contradicting updates' objects
             return self._contradicted(against, objects, answer, start)
+        report = self._report_verdict(track, objects, candidates, verdict)
         track.accept(verdict)
-        self._observe_changes(track, verdict, objects, candidates, looked_unseen)
+        self._observe_changes(track, report, objects, candidates, looked_unseen)
         self._search_stale = True  # the search did not see these objects
         lapsed = len(track.pairs) < self._min_track_pairs() or self._stale(list(track.pairs))
         followed = None if lapsed else self._follow(track)
@@ -579,6 +583,26 @@ class Localizer:
             self._diagonal_lengths = np.linalg.norm(self.global_map.sizes, axis=1)
         return self._diagonal_lengths
 
+    def _report_verdict(
+        self, track: Track, objects: list[SemanticObject], candidates: dict[str, np.ndarray],
+        verdict: Verdict,
+    ) -> Verdict:  # fmt: skip
+        """This update's objects judged for the run's change report (`tracking.one_to_one`):
+        against the claim's pairs of other local objects (before this update's replace them)
+        and the map objects the run saw at their place; its contradicting objects are
+        tracking's."""
+        R, t = track.pose[:3, :3], track.pose[:3, 3]
+        now = {o.id for o in objects}
+        held = {g: R @ self._found[l][0].position + t
+                for l, g in track.pairs.items() if l not in now and l in self._found}  # fmt: skip
+        if self._part_m is None:
+            self._part_m = 0.5 * footprints(self.global_map)
+        judged = one_to_one(track.pose, objects, candidates, self.global_map.positions,
+                            self._allowances(), self.config.tracking.move_m, held,
+                            self._run_changes.matched, self._part_m)  # fmt: skip
+        return Verdict(judged.supported, verdict.contradicting, judged.changed,
+                       sources=judged.sources)  # fmt: skip
+
     def _observe_changes(
         self, track: Track, verdict: Verdict, objects: list[SemanticObject],
         candidates: dict[str, np.ndarray], unseen: np.ndarray,
@@ -590,8 +614,11 @@ class Localizer:
             run.observe_matched(g, object_id)
         for g, object_id in verdict.changed:
             obj = by_id[object_id]
-            offset = float(np.linalg.norm(self.global_map.positions[g] - (R @ obj.position + t)))
-            run.observe_moved(g, object_id, offset, obj.seen)
+            sources = verdict.sources.get(object_id, [g])
+            gaps = np.linalg.norm(
+                self.global_map.positions[sources] - (R @ obj.position + t), axis=1
+            )
+            run.observe_undecided(object_id, dict(zip(sources, gaps.tolist())), obj.seen)
         for obj in objects:
             if not len(candidates[obj.id]):
                 run.observe_new(obj.id, obj.seen, unknown_label=True)
@@ -938,8 +965,7 @@ class Localizer:
             rows, sizes, np.full(len(sets), best.score), local_xyz, positions,
             (self.local_up, up), self.config.verification, self._support,
         )  # fmt: skip
-        unrefined = self.config.refine_top + 1  # (as the search's rivals of the best are)
-        return [self._hypothesis(unrefined, v, local_xyz, previous, looks=True)
+        return [self._hypothesis(1, v, local_xyz, previous)  # (refined as the best is)
                 for v in verified if len(v.pairs) >= 2]  # fmt: skip
 
     def _codes(self) -> np.ndarray:

@@ -14,6 +14,14 @@ search's cost grows with the local objects; tracking costs a lookup per new obje
   with the same map object is the same evidence again: it refreshes the pair for the pose but
   counts as half a supporting object in the decision, so that re-detections of paired objects
   never outvote new objects that contradict the place.
+* **The change report's judgement.**  The check above weighs a place; what changed is told
+  one to one (`one_to_one`, fed to `semloc.changes.RunChanges`): nearest first, each map
+  object explains one object, of this update or of the claim's other pairs, so that a moved
+  chair standing by another chair that its own detection holds is not that chair, and
+  re-takes the nearest free candidate instead; a map object the run saw at its place is no
+  one's source.  A changed object with several free candidates within `move_m` lists them
+  all as its sources: which one moved is decided later, if ever.  Only the report reads this
+  judgement; the place is weighed on the check's, as before.
 * **Missing.**  When the update says what the sensor covered (`semloc.coverage`), the map
   objects the place puts well inside that look that no window object accounts for, beyond
   `coverage.GONE_SHARE` of those it expects (an old map loses objects), count against it.
@@ -54,7 +62,7 @@ from __future__ import annotations
 
 import math
 from collections import OrderedDict, deque
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Callable, Collection, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -147,6 +155,8 @@ class Verdict:
     repeated: int = 0  # supporting objects already paired with the same map object
     missing: float = 0.0  # map objects the look expected but nothing accounts for, beyond
     # the tolerated share
+    sources: dict[str, list[int]] = field(default_factory=dict)  # changed local id -> the
+    # map objects it may have moved from, when more than one (`one_to_one`)
 
     @property
     def against(self) -> float:
@@ -190,6 +200,71 @@ def check(
     return Verdict(supported, contradicting, changed, repeated)
 
 
+def one_to_one(
+    pose: np.ndarray,
+    objects: Iterable[SemanticObject],
+    candidates: Mapping[str, np.ndarray],
+    global_positions: np.ndarray,
+    allowance: np.ndarray,
+    move_m: float,
+    held: Mapping[int, np.ndarray],
+    settled: Collection[int] = (),
+    part_m: np.ndarray | None = None,
+) -> Verdict:
+    """The update's objects judged for the run's change report: `check`'s rule, but each map
+    object explains one object, and a move names the sources it may come from.
+
+    `held`: the map objects the claim's other local objects are paired with (map index ->
+    where that object lies under `pose`); `settled`: map objects seen at their place before,
+    which may be seen there again but are no one's source.  Nearest first over all of them,
+    each object takes its nearest candidate within `move_m` that no nearer object took; it
+    supports it within `allowance`, else it is changed.  An object within `allowance` of a map
+    object g that a nearer object took, and within `part_m[g]` of that object (half g's
+    footprint diagonal, `footprints`: two objects do not overlap), is a part of it (a
+    detector's split): it says nothing.  A changed object with other free candidates within
+    `move_m` (neither taken, held nor settled) lists them all in `sources`, nearest first: of
+    two chairs gone from their places, which one stands here cannot be told yet.  An object
+    that takes none is contradicting."""
+    R, t = pose[:3, :3], pose[:3, 3]
+    found = [
+        (float(np.linalg.norm(global_positions[g] - p)), None, int(g)) for g, p in held.items()
+    ]
+    placed: dict[str, np.ndarray] = {}
+    reach: dict[str, dict[int, float]] = {}  # local id -> its candidates within move_m
+    for obj in objects:
+        indices = np.asarray(candidates.get(obj.id, ()), dtype=int)
+        if not len(indices):
+            continue
+        placed[obj.id] = R @ obj.position + t
+        gaps = np.linalg.norm(global_positions[indices] - placed[obj.id], axis=1)
+        reach[obj.id] = {int(g): float(d) for g, d in zip(indices, gaps) if d <= move_m}
+        found += [(float(d), obj.id, int(g)) for d, g in zip(gaps, indices)
+                  if d <= allowance[g] or (d <= move_m and g not in settled)]  # fmt: skip
+    taken: dict[int, tuple[float, str | None]] = {}  # map index -> (gap, its taker; None: held)
+    assigned: set[str] = set()  # local ids that took a map object or are a part of one
+    for gap, local_id, g in sorted(found, key=lambda f: (f[0], f[1] or "", f[2])):
+        if local_id is None:
+            taken.setdefault(g, (gap, None))
+        elif local_id in assigned:
+            continue
+        elif g not in taken:
+            taken[g] = (gap, local_id)
+            assigned.add(local_id)
+        elif part_m is not None and gap <= allowance[g]:
+            taker = taken[g][1]
+            where = held[g] if taker is None else placed[taker]
+            if np.linalg.norm(placed[local_id] - where) < part_m[g]:
+                assigned.add(local_id)
+    supported = [(g, l) for g, (d, l) in taken.items() if l is not None and d <= allowance[g]]
+    changed = [(g, l) for g, (d, l) in taken.items() if l is not None and d > allowance[g]]
+    claimed = set(taken) | set(settled)
+    sources = {l: [g, *sorted(reach[l].keys() - claimed, key=lambda h: reach[l][h])]
+               for g, l in changed if reach[l].keys() - claimed}  # fmt: skip
+    return Verdict(sorted(supported, key=lambda p: p[1]),
+                   [l for l in placed if l not in assigned],
+                   sorted(changed, key=lambda p: p[1]), sources=sources)  # fmt: skip
+
+
 def recent_contradiction(verdicts: Sequence[Verdict], least: int) -> bool:
     """Whether the latest updates' verdicts on a place (oldest first) contradict it: the
     newest alone holds at least `least` against and more than twice as much for, or all of
@@ -208,14 +283,34 @@ def allowances(global_map: ObjectMap, tolerance: float) -> np.ndarray:
     """How far (m) from each map object a detection of it may land: `tolerance` plus a quarter
     of the object's diagonal (its box, else its points), since a partial view moves a centre
     towards the side seen, by up to about half the object's extent."""
-    sizes = global_map.sizes
-    diagonal = np.linalg.norm(sizes, axis=1)
+    return tolerance + 0.25 * diagonals(global_map)
+
+
+def footprints(global_map: ObjectMap) -> np.ndarray:
+    """Each map object's footprint diagonal (m) across the map's `up` (z when it has none): its
+    box's, else its points' bounding box's; 0 without either."""
+    up = np.array([0.0, 0.0, 1.0]) if global_map.up is None else global_map.up
+    across = np.eye(3) - np.outer(up, up)
+    corners = np.array(np.meshgrid(*[[-0.5, 0.5]] * 3)).reshape(3, -1).T
+    found = np.zeros(len(global_map))
+    for i, (size, rotation) in enumerate(zip(global_map.sizes, global_map.rotations)):
+        if not np.isnan(size).any():  # the widest pair of the box's corners
+            flat = (corners * size) @ rotation.T @ across
+            found[i] = np.max(np.linalg.norm(flat[:, None] - flat[None], axis=2))
+        elif (points := global_map[i].points) is not None and len(points):
+            found[i] = np.linalg.norm(np.ptp(points @ across, axis=0))
+    return found
+
+
+def diagonals(global_map: ObjectMap) -> np.ndarray:
+    """Each map object's diagonal (m): its box's, else its points' (0 without either)."""
+    diagonal = np.linalg.norm(global_map.sizes, axis=1)
     for i in np.flatnonzero(np.isnan(diagonal)):
         points = global_map[int(i)].points
         diagonal[i] = (
             0.0 if points is None or not len(points) else np.linalg.norm(np.ptp(points, axis=0))
         )
-    return tolerance + 0.25 * diagonal
+    return diagonal
 
 
 @dataclass

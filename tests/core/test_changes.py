@@ -12,6 +12,7 @@ from test_changes_fixtures import T, cube, room, seen_from_t
 
 import semloc
 from semloc.changes import (
+    UNDECIDED_KEPT,
     Changes,
     ChangesConfig,
     Moved,
@@ -305,14 +306,52 @@ def test_a_run_s_report_round_trips_through_its_state_and_an_empty_state_is_an_e
         run.observe_new("l7", seen=seen)
         run.observe_missing([2])
     run.observe_matched(3, "l3")
+    run.observe_undecided("l8", {0: 1.5, 2: 2.5}, seen=5)
     state = json.loads(json.dumps(run.state(ids)))
-    assert set(state) == {"moved", "new", "missing", "matched"}
+    assert set(state) == {"moved", "new", "missing", "matched", "undecided"}
     restored = RunChanges.restored(state, ids.index)
     assert restored.state(ids) == state
     assert restored.report(ids).to_dict() == run.report(ids).to_dict()
     assert restored.report(ids).matched == ["g3"]
     empty = RunChanges.restored({}, ids.index)
     assert not empty and empty.report(ids).matched == []
+
+
+def test_an_undecided_move_counts_for_the_source_left_once_the_others_are_seen_in_place():
+    ids = ["g0", "g1", "g2"]
+    run = RunChanges()
+    run.observe_undecided("l5", {0: 1.2, 1: 2.0}, seen=3)
+    run.observe_undecided("l5", {0: 1.1, 1: 2.1}, seen=4)
+    assert run and run.report(ids).moved == []  # g0 or g1: cannot be told
+    run.observe_matched(0, "l0")  # g0 stands at its place: l5 came from g1, twice
+    assert [(m.global_id, m.local_id, m.offset_m, m.evidence, m.last_seen)
+            for m in run.report(ids).moved] == [("g1", "l5", 2.1, 2, 4)]  # fmt: skip
+    run.observe_undecided("l6", {0: 1.0, 2: 2.0}, seen=5)  # g0 seen in place: one left
+    assert run.moved[2][2] == 1 and not run.undecided
+    run.observe_matched(1, "l1")  # and all sources seen in place: nothing left to decide
+    assert [m.global_id for m in run.report(ids).moved] == []
+
+
+def test_the_undecided_detections_kept_are_the_latest_ones():
+    run = RunChanges()
+    for seen in range(UNDECIDED_KEPT + 5):
+        run.observe_undecided("l5", {0: 1.0, 1: 2.0}, seen=seen)
+    run.observe_undecided("l6", {0: 1.0, 2: 2.0}, seen=UNDECIDED_KEPT + 5)
+    run.observe_matched(2, "l2")  # decides l6's detection, and keeps the latest others
+    assert len(run.undecided) == UNDECIDED_KEPT - 1 and run.undecided[0][2] == 6
+    assert run.moved[0][2] == 1 and run.undecided.maxlen == UNDECIDED_KEPT
+
+
+@pytest.mark.parametrize("least", [1, 3])
+def test_a_restored_report_keeps_the_evidence_it_was_given(least):
+    ids = ["g0", "g1"]
+    run = RunChanges(least)
+    for seen in (3, 4):
+        run.observe_moved(1, "l1", 2.0, seen=seen)
+    restored = RunChanges.restored(json.loads(json.dumps(run.state(ids))), ids.index, least)
+    assert restored.min_evidence == least
+    assert restored.report(ids).moved == run.report(ids).moved
+    assert bool(restored.report(ids).moved) is (least <= 2)
 
 
 # The single view's rules at their bounds (identity pose, one map chair at the origin) -----------

@@ -30,6 +30,8 @@ from semloc.tracking import (
     TrackingConfig,
     Verdict,
     check,
+    footprints,
+    one_to_one,
     recent_contradiction,
 )
 
@@ -72,6 +74,97 @@ def test_a_redetection_of_a_paired_object_is_a_repeat_but_not_of_another_pairing
 def test_the_evidence_against_counts_contradictions_changes_and_missing_objects():
     verdict = Verdict([(0, "a")], ["b", "c"], [(1, "d")], 0, 1.5)
     assert verdict.against == 2 + 1 + 1.5 and verdict.towards == 1
+
+
+# one_to_one: the change report's judgement, each map object explaining one object ----------
+TWO_CHAIRS = np.array([[0.0, 0, 0], [2.0, 0, 0], [20.0, 0, 0]])
+
+
+def judged(
+    objects: list, held: dict[int, float], move_m: float = 3.0, settled: tuple[int, ...] = ()
+) -> dict[str, tuple]:
+    """Each object's (verdict, map index) by `one_to_one` (-1: none; absent: ambiguous)."""
+    candidates = {o.id: np.array([0, 1]) for o in objects}
+    holders = {g: TWO_CHAIRS[g] - [d, 0, 0] for g, d in held.items()}  # behind the chair
+    verdict = one_to_one(
+        np.eye(4), objects, candidates, TWO_CHAIRS, ALLOWANCE, move_m, holders, settled
+    )
+    found = {l: ("supported", g) for g, l in verdict.supported}
+    found |= {l: ("changed", g) for g, l in verdict.changed}
+    return found | {l: ("contradicting", -1) for l in verdict.contradicting}
+
+
+@pytest.mark.parametrize(
+    ("held_m", "verdict"),
+    [(0.3, ("changed", 1)), (0.29, ("changed", 1)), (0.31, ("supported", 0))],
+)
+def test_an_object_by_a_chair_a_nearer_pair_holds_is_the_other_chair_moved(held_m, verdict):
+    """The map's chair 0 is held by another object of the claim `held_m` from it: an object
+    0.3 m from it (ties go to the pair) takes the free chair 1, 1.7 m away: moved."""
+    assert judged([at(0.3)], {0: held_m}) == {"l": verdict}
+
+
+def test_two_objects_of_one_update_share_no_map_object_and_the_nearer_keeps_it():
+    found = judged([at(0.1, i="a"), at(0.4, i="b")], {})
+    assert found == {"a": ("supported", 0), "b": ("changed", 1)}
+    held = judged([at(0.1, i="a"), at(0.4, i="b")], {1: 0.0})  # the other chair held too
+    assert held == {"a": ("supported", 0), "b": ("contradicting", -1)}
+
+
+@pytest.mark.parametrize(
+    ("move_m", "verdict"), [(1.6, ("changed", 1)), (1.59, ("contradicting", -1))]
+)
+def test_a_freed_object_takes_only_a_candidate_within_the_move_distance(move_m, verdict):
+    assert judged([at(0.4)], {0: 0.0}, move_m=move_m) == {"l": verdict}
+
+
+@pytest.mark.parametrize(
+    ("x", "move_m", "sources"), [(1.1, 3.0, [1, 0]), (1.1, 1.1, [1, 0]), (1.1, 1.09, [1])]
+)
+def test_an_object_between_two_free_chairs_names_both_as_its_sources(x, move_m, sources):
+    """Which of two chairs gone from their places stands between them cannot be told yet:
+    both within `move_m` are its sources, nearest first."""
+    candidates = {"l": np.array([0, 1])}
+    verdict = one_to_one(np.eye(4), [at(x)], candidates, TWO_CHAIRS, ALLOWANCE, move_m, {})
+    assert verdict.changed == [(1, "l")]
+    assert verdict.sources == ({"l": sources} if len(sources) > 1 else {})
+
+
+@pytest.mark.parametrize(("holder", "found"), [(-0.125, ("changed", 1)), (-0.0625, None)])
+def test_an_object_overlapping_the_detection_that_took_its_chair_is_a_part_of_it(holder, found):
+    """Chair 0 (half its diagonal 0.5 m) is taken by a nearer detection: an object 0.375 m
+    from the chair and 0.5 m from that detection is another chair (moved from chair 1); closer
+    to it, the two overlap: one chair split in two by the detector, which says nothing."""
+    part_m = np.full(3, 0.5)
+    candidates = {"l": np.array([0, 1])}
+    held = {0: np.array([holder, 0.0, 0.0])}
+    verdict = one_to_one(
+        np.eye(4), [at(0.375)], candidates, TWO_CHAIRS, ALLOWANCE, 3.0, held, (), part_m
+    )
+    judgement = {l: ("changed", g) for g, l in verdict.changed}
+    judgement |= {l: ("supported", g) for g, l in verdict.supported}
+    judgement |= {l: ("contradicting", -1) for l in verdict.contradicting}
+    assert judgement == ({} if found is None else {"l": found})
+
+
+def test_a_footprint_is_the_widest_extent_across_up_of_the_box_else_of_the_points():
+    turn = np.array([[0.0, -1, 0], [1, 0, 0], [0, 0, 1]])
+    objects = [
+        SemanticObject("box", "bed", [0, 0, 0], size=[0.6, 0.8, 2.0]),
+        SemanticObject("turned", "bed", [0, 0, 0], size=[0.6, 0.8, 2.0], rotation=turn),
+        SemanticObject("points", "bed", [0, 0, 0], points=[[0, 0, 0], [0.3, 0.4, 5.0]]),
+        SemanticObject("centre", "bed", [0, 0, 0]),
+    ]
+    assert footprints(ObjectMap(objects, up=[0, 0, 1])) == pytest.approx([1.0, 1.0, 0.5, 0.0])
+    lying = ObjectMap(objects[:1], up=[1, 0, 0])  # across x: 0.8 by 2.0
+    assert footprints(lying) == pytest.approx([np.hypot(0.8, 2.0)])
+
+
+def test_a_chair_seen_at_its_place_before_is_no_source_but_may_be_seen_there_again():
+    assert judged([at(1.0)], {}, settled=(0,)) == {"l": ("changed", 1)}
+    assert judged([at(0.51)], {}, settled=(0,)) == {"l": ("changed", 1)}
+    assert judged([at(0.5)], {}, settled=(0,)) == {"l": ("supported", 0)}
+    assert judged([at(1.0)], {}, settled=(0, 1)) == {"l": ("contradicting", -1)}
 
 
 # the contradiction rules ---------------------------------------------------------------------
@@ -336,9 +429,10 @@ def local(objects: list, ids: str = "l", shift: float = 0.0) -> list:
 ALL_AROUND = Coverage(np.eye(4) @ np.diag([1, 1, 1, 1.0]), 12.0)
 
 
-def claimed(global_map: ObjectMap) -> Localizer:
+def claimed(global_map: ObjectMap, unseen: tuple[str, ...] = ()) -> Localizer:
+    """A Localizer tracking the place of the map's first ten objects (but `unseen`)."""
     localizer = Localizer(global_map, local_up=[0, 0, 1])
-    objects = local(list(global_map)[:10])
+    objects = local([o for o in list(global_map)[:10] if o.id not in unseen])
     result = localizer.update(objects[:5])
     result = localizer.update(objects[5:])
     assert result.status == "localized" and np.allclose(result.pose, np.eye(4), atol=0.05)
@@ -347,7 +441,7 @@ def claimed(global_map: ObjectMap) -> Localizer:
 
 def test_a_moved_object_is_reported_moved_and_does_not_move_the_pose():
     building = ObjectMap(room(), up=[0, 0, 1])
-    localizer = claimed(building)
+    localizer = claimed(building, unseen=("a2",))  # the lamp not seen at its place
     before = localizer.update([]).pose
     lamp = building[building.index_of("a2")]
     moved = lamp.replace(id="moved-lamp", position=lamp.position + [2.0, 0, 0], size=None)
@@ -358,6 +452,16 @@ def test_a_moved_object_is_reported_moved_and_does_not_move_the_pose():
     assert result.changes.moved[0].offset_m == pytest.approx(2.0, abs=0.05)
     assert np.allclose(result.pose, before, atol=1e-6)
     assert ("a2", "moved-lamp") not in result.best.pairs
+
+
+def test_a_lamp_seen_at_its_place_is_not_reported_moved_by_a_second_lamp_elsewhere():
+    building = ObjectMap(room(), up=[0, 0, 1])
+    localizer = claimed(building)  # its detection `la2` holds the map's lamp a2
+    lamp = building[building.index_of("a2")]
+    other = lamp.replace(id="other-lamp", position=lamp.position + [2.0, 0, 0], size=None)
+    for _ in range(2):
+        result = localizer.update([other])
+    assert result.status == "localized" and result.changes.moved == []
 
 
 def test_a_claim_needs_a_detection_of_its_place_within_the_stale_distance():
