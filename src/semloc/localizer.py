@@ -919,10 +919,10 @@ class Localizer:
             self._hypothesis(rank, c, local_xyz, previous) for rank, c in enumerate(chosen, 1)
         ]
         ranked = rank_places(hypotheses, cfg.rank_by, cfg.decision, shipped_model(), anchor)
-        twins_ = self._twins(ranked, local_xyz, previous)
+        twins_, listed = self._twins(ranked, local_xyz, previous, anchor)
         twinned: list[Hypothesis] = []
-        if twins_:  # copies of the best place, listed by the sets or not, weighed with them
-            places = [(h.pairs, h.pose) for h in (ranked[0], *twins_)]
+        if twins_ or listed:  # copies of the best place, listed by the sets or not, weighed
+            places = [(h.pairs, h.pose) for h in (ranked[0], *twins_)] + listed
             ranked = rank_places(ranked + twins_, cfg.rank_by, cfg.decision, shipped_model(),
                                  anchor)  # fmt: skip
             twinned = [h for h in ranked if any(same_place((h.pairs, h.pose), p, cfg.decision,
@@ -937,36 +937,43 @@ class Localizer:
         return ranked
 
     def _twins(
-        self, ranked: list[Hypothesis], local_xyz: np.ndarray, previous: dict
-    ) -> list[Hypothesis]:
-        """The map's copies of a best place that could be claimed (`semloc.twins`), as
-        hypotheses of the window's objects; none when it could not be claimed anyway."""
+        self, ranked: list[Hypothesis], local_xyz: np.ndarray, previous: dict, anchor
+    ) -> tuple[list[Hypothesis], list[tuple[list, np.ndarray]]]:
+        """The map's copies of a best place that could be claimed (`semloc.twins`): those
+        the search did not list, as hypotheses of the window's objects, and the places
+        (no pairs, the pose) of those it listed; none when it could not be claimed anyway."""
         best = ranked[0] if ranked else None
         up = self.global_map.up
         if best is None or best.pose is None or best.confidence is None or up is None:
-            return []
+            return [], []
         if best.confidence < self.config.decision.min_confidence:
-            return []
+            return [], []
         positions, codes, tree = self.global_map.positions, self._codes(), self._tree()
         tolerance = self.config.verification.inlier_tolerance
         pairs = [(self.global_map.index_of(g), self._local_index[l]) for g, l in best.pairs]
         members = np.array([g for g, _ in pairs])
-        sets = []
+        sets, listed = [], []
         for S in self._twin_motions_of(members):
+            place: tuple[list, np.ndarray] = ([], S @ best.pose)
+            if any(same_place(place, (h.pairs, h.pose), self.config.decision, anchor)
+                   for h in ranked[1:]):  # fmt: skip
+                listed.append(place)  # (weighed already)
+                continue
             moved = twin_pairs(S, pairs, positions, codes, tolerance, tree)
             moved = [(g, l) for g, l in moved if g in self._candidates_of[l]]
             if len(moved) >= MIN_TWIN_PAIRS:
                 sets.append(moved)
         if not sets:
-            return []
+            return [], listed
         rows = np.array([p for pairs_ in sets for p in pairs_], dtype=np.int64)
         sizes = np.array([len(p) for p in sets], dtype=np.int64)
         verified = verify_sets(
             rows, sizes, np.full(len(sets), best.score), local_xyz, positions,
             (self.local_up, up), self.config.verification, self._support,
         )  # fmt: skip
-        return [self._hypothesis(1, v, local_xyz, previous)  # (refined as the best is)
-                for v in verified if len(v.pairs) >= 2]  # fmt: skip
+        found = [self._hypothesis(1, v, local_xyz, previous)  # (refined as the best is)
+                 for v in verified if len(v.pairs) >= 2]  # fmt: skip
+        return found, listed
 
     def _codes(self) -> np.ndarray:
         if self._label_codes is None:
@@ -984,6 +991,7 @@ class Localizer:
             self._twin_motions[key] = [] if up is None else twins(
                 self.global_map.positions, self._codes(), up, members,
                 self.config.verification.inlier_tolerance, tree=self._tree(), apart=PLACE_APART,
+                most=TWINS_WEIGHED,
             )  # fmt: skip
         return self._twin_motions[key]
 
@@ -1187,6 +1195,8 @@ LOOKS_KEPT = 6
 TWIN_KIDNAP = 2
 """Objects of the latest updates that fit a copy of the tracked place, not the place, that end
 the claim."""
+TWINS_WEIGHED = 4
+"""The copies of a place weighed: those that hold most of its objects."""
 TWINS_KEPT = 64
 """The twins (`semloc.twins`) of this many latest claimable places are kept, not looked up
 again."""
