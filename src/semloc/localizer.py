@@ -982,8 +982,12 @@ class Localizer:
 
     def _twin_motions_of(self, members: np.ndarray) -> list[np.ndarray]:
         """The twins of the map objects `members` (`semloc.twins`), kept for the latest
-        `TWINS_KEPT` sets of members (a place stays the best over several updates)."""
+        `TWINS_KEPT` sets of members: a set that shares most of its members with a kept one
+        is the same place (grown by an object or two) and has its copies."""
         key = tuple(sorted(members.tolist()))
+        for kept in reversed(self._twin_motions):
+            if len(set(kept) & set(key)) >= 0.75 * max(len(key), len(kept)):
+                return self._twin_motions[kept]
         if key not in self._twin_motions:
             if len(self._twin_motions) >= TWINS_KEPT:
                 self._twin_motions.pop(next(iter(self._twin_motions)))
