@@ -1064,11 +1064,9 @@ class Localizer:
         )  # fmt: skip
 
     def _hypothesis(
-        self, rank: int, verified: Verified, local_xyz: np.ndarray, previous: dict,
-        looks: bool = False,
-    ) -> Hypothesis:  # fmt: skip
-        """Full pose recovery of a verified set's inlier pairs, and its evidence (with the
-        negative evidence of the recent looks when refined or `looks`)."""
+        self, rank: int, verified: Verified, local_xyz: np.ndarray, previous: dict
+    ) -> Hypothesis:
+        """Full pose recovery of a verified set's inlier pairs, and its evidence."""
         local_objects = list(self._local.values())
         globals_ = [self.global_map[g] for g, _ in verified.pairs]
         locals_ = [local_objects[l] for _, l in verified.pairs]
@@ -1095,7 +1093,7 @@ class Localizer:
             ).features()  # fmt: skip
         ids = self.global_map.ids
         missing = expected = None
-        if pose is not None and self._looks and (refine or looks):  # (the places that decide)
+        if pose is not None and self._looks and refine:  # (the places that decide)
             seen, unseen = self._unseen(pose, list(self._looks))
             missing, expected = len(unseen), len(seen)
         return Hypothesis(
