@@ -30,7 +30,8 @@ a kidnap into one cannot be told by any evidence).
 
 Printed per world, condition and coverage (seeds pooled): keyframes; share right after the
 first right answer; share `localized`; wrong `localized` claims (all seeds; per seed the
-largest); keyframes from the look-alike kidnap to the end of the claim (median, max: 0 = not
+largest) and of them those the view could have told (`Told`: after a kidnap, only once an
+object seen since stands where the claimed place has none of its kind); keyframes from the look-alike kidnap to the end of the claim (median, max: 0 = not
 claimed at the kidnap's keyframe) and to a right `localized` answer (median); moved objects
 found over the run (precision / recall, below); share of updates whose
 answer used negative evidence (`support.missing` given); update ms, first / last 100
@@ -66,6 +67,7 @@ from semloc import Localizer, LocalizerConfig, ObjectMap  # noqa: E402
 from semloc.eval.datasets import real_data_dir  # noqa: E402
 from semloc.sim.layouts import layout  # noqa: E402
 from semloc.sim.longwalk import Drift, LongWalk, WalkConfig, World, tiled  # noqa: E402
+from semloc.tracking import TrackingConfig, allowances  # noqa: E402
 
 REPORTABLE = 2
 """A moved object counts in the recall once detected under a right tracked claim at this many
@@ -114,6 +116,7 @@ def one_run(task: tuple[str, str, bool, int, int]) -> dict:
     localizer = Localizer(global_map, LocalizerConfig(), local_up=[0, 0, 1]).prepare()
     right, status, ms, rss, negative = [], [], [], [], 0
     moved = Moved(walk)
+    told = Told(walk.map)
     import time
 
     for frame in walk:
@@ -125,11 +128,42 @@ def one_run(task: tuple[str, str, bool, int, int]) -> dict:
         m, deg = errors(result.pose, frame)
         right.append(m < 0.5 and deg < 15.0)
         status.append(result.status)
+        told.add(frame, result.pose if result.status == "localized" and not right[-1] else None)
         rss.append(rss_mb())
         support = getattr(result, "support", None)
         negative += getattr(support, "missing", None) is not None
         moved.add(frame, result, tracked and right[-1])
-    return summary(config, np.array(right), np.array(status), ms, rss, negative, moved)
+    found = summary(config, np.array(right), np.array(status), ms, rss, negative, moved)
+    return {**found, "wrong_told": told.wrong}
+
+
+class Told:
+    """Wrong claims the view could have told: at a keyframe when, since the latest kidnap,
+    an object was detected where the claimed place holds no map object of its kind (its true
+    label, within `tracking.allowances` of where the claimed pose puts it).  Before that,
+    nothing seen since the robot was carried off differs from the place it left: the same spot
+    of an identical room, or views of objects both places hold, cannot be told by any tracker
+    (the one failure an honest evidence rule must make)."""
+
+    def __init__(self, global_map: ObjectMap) -> None:
+        self.map = global_map
+        self.allowance = allowances(global_map, TrackingConfig().track_tolerance)
+        self.since: list[tuple[np.ndarray, int]] = []  # since the kidnap: (local xyz, map index)
+        self.wrong = 0
+
+    def add(self, frame, wrong_pose: np.ndarray | None) -> None:
+        if frame.kidnapped:
+            self.since = []
+        self.since += [(o.position, g) for o in frame.objects
+                       if (g := frame.truth.get(o.id)) is not None]  # fmt: skip
+        if wrong_pose is not None and any(self._tells(wrong_pose, *seen) for seen in self.since):
+            self.wrong += 1
+
+    def _tells(self, pose: np.ndarray, xyz: np.ndarray, g: int) -> bool:
+        at = pose[:3, :3] @ xyz + pose[:3, 3]
+        kind = np.flatnonzero(self.map.labels == self.map.labels[g])
+        gaps = np.linalg.norm(self.map.positions[kind] - at, axis=1)
+        return not bool((gaps <= self.allowance[kind]).any())
 
 
 class Moved:
@@ -185,10 +219,10 @@ def summary(config, right, status, ms, rss, negative, moved: Moved) -> dict:
 def table(rows: list[tuple[str, str, bool, list[dict]]]) -> str:
     head = (
         "| world | condition | coverage | seeds x keyframes | right after first right | "
-        "localized | wrong claims (largest per seed) | look-alike kidnap → claim ended "
+        "localized | wrong claims (largest per seed) | of them after the view told | look-alike kidnap → claim ended "
         "(median / max) | → right localized (median) | moved precision / recall (of those "
         "detected twice under a right tracked claim) | "
-        "updates with negative evidence | ms first / last 100 | memory MB |\n|" + "---|" * 13
+        "updates with negative evidence | ms first / last 100 | memory MB |\n|" + "---|" * 14
     )
     lines = [head]
     for world, condition, coverage, runs in rows:
@@ -206,6 +240,7 @@ def table(rows: list[tuple[str, str, bool, list[dict]]]) -> str:
             f"{np.mean([r['right'] for r in runs]):.3f} | "
             f"{np.mean([r['localized'] for r in runs]):.3f} | "
             f"{sum(r['wrong'] for r in runs)} ({max(r['wrong'] for r in runs)}) | "
+            f"{sum(r['wrong_told'] for r in runs)} | "
             f"{_median(ends)} / {max(ends) if ends else 'n/a'} | {_median(backs)} | "
             f"{precision} / {recall} | {np.mean([r['negative'] for r in runs]):.2f} | "
             f"{np.median([r['ms_first'] for r in runs]):.1f} / "

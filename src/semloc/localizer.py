@@ -239,8 +239,8 @@ class Localizer:
         self._twin_motions: dict[tuple[int, ...], list[np.ndarray]] = {}  # map objects -> twins
         self._track_twins: tuple[np.ndarray, list[np.ndarray]] | None = None  # (its pairs'
         # map objects when found, the copies) of the tracked place where the robot is
-        self._twin_fits: deque[np.ndarray | None] = deque(maxlen=CONTRADICTION_UPDATES)  # per
-        # copy, each latest update's objects that fit it (None: none against the place)
+        self._twin_fits: deque[list[list[str]] | None] = deque(maxlen=CONTRADICTION_UPDATES)
+        # (each latest update's objects that tell the place from each copy; None: not weighed)
         self._diagonal_lengths: np.ndarray | None = None
         self._reset_search()
         self._steps: deque[Step] = deque(maxlen=config.window.steps)
@@ -342,16 +342,20 @@ class Localizer:
         if self._track_twins is None:
             return None
         ids = self.global_map.ids
-        return {"members": [str(ids[g]) for g in self._track_twins[0].tolist()],
-                "fits": [None if f is None else f.tolist() for f in self._twin_fits]}  # fmt: skip
+        return {
+            "members": [str(ids[g]) for g in self._track_twins[0].tolist()],
+            "fits": list(self._twin_fits),
+        }
 
     def _restore_twins(self, twins_state: dict[str, list] | None) -> None:
         if twins_state is None:
             return
         members = np.array([self.global_map.index_of(g) for g in twins_state["members"]], int)
         self._track_twins = (members, self._twin_motions_of(members))
-        self._twin_fits.extend(None if f is None else np.array(f, dtype=int)
-                               for f in twins_state["fits"])  # fmt: skip
+        self._twin_fits.extend(  # (a state of counts per copy, before the objects: none)
+            f if f is None or all(isinstance(keys, list) for keys in f) else None
+            for f in twins_state["fits"]
+        )
 
     @property
     def tracking(self) -> bool:
@@ -498,7 +502,7 @@ class Localizer:
             verdict = Verdict(verdict.supported, verdict.contradicting, verdict.changed,
                               verdict.repeated, excess)  # fmt: skip
         against = track.contradicted(verdict) or self._carried_to_twin(
-            track, verdict, objects, candidates
+            track, verdict, objects, candidates, looked_unseen
         )
         if against:  # a fresh window of the contradicting updates' objects
             return self._contradicted(against, objects, answer, start)
@@ -1000,39 +1004,79 @@ class Localizer:
         return self._twin_motions[key]
 
     def _carried_to_twin(
-        self, track: Track, verdict: Verdict, objects: list[SemanticObject], candidates: dict
+        self,
+        track: Track,
+        verdict: Verdict,
+        objects: list[SemanticObject],
+        candidates: dict,
+        unseen: np.ndarray,
     ) -> int:
         """How many of the latest updates show the robot in a copy of the tracked place (0:
-        they do not): `TWIN_KIDNAP` of their objects that the place does not explain
-        (changed or contradicting) lie where one copy (`semloc.twins` of the claim's newest
-        pairs: the copies of where the robot is) holds a map object they may be.  A
-        look-alike room differs from the tracked one where one of them lacks an object; a
-        detection there that fits the other is the robot's position told by its
-        surroundings, not an old map's change.  The copies are looked up only when an update
-        has such objects."""
+        they do not).  A look-alike room differs from the tracked one where one of them lacks
+        an object, so per copy (`semloc.twins` of the claim's newest pairs: the copies of where
+        the robot is) each update weighs the objects that tell the two apart.  For the copy: a
+        detection the place does not explain (changed or contradicting) that lies where the
+        copy holds a map object it may be, and, with the sensor's coverage, a map object the
+        look expects of the place (`unseen`: none accounts for it) where the copy holds none
+        of its label.  For the place: a supporting detection where the copy holds no map
+        object it may be.  When, over the latest updates, one copy's count exceeds the place's
+        by `TWIN_KIDNAP`, the robot was carried into it: an old map's change or a detector's
+        error is as likely to speak for the place as against it.  The copies are looked up
+        only when an update has objects against the place."""
         against = {l for _, l in verdict.changed} | set(verdict.contradicting)
-        if not against:
-            self._twin_fits.append(None)
-            return 0
         members = np.array(list(track.pairs.values()))
         held = self._track_twins[0] if self._track_twins else np.zeros(0, dtype=int)
         if np.isin(members, held).sum() < 0.5 * len(members):  # the robot walked on
+            if not against and not len(unseen):
+                self._twin_fits.append(None)
+                return 0
             self._track_twins = (members, self._twin_motions_of(members))
             self._twin_fits.clear()  # (counted per copy)
         motions = self._track_twins[1]
         if not motions:
             return 0
-        positions, allowance = self.global_map.positions, self._allowances()
-        R, t = track.pose[:3, :3], track.pose[:3, 3]
-        fits = np.zeros(len(motions), dtype=int)
-        for obj in (o for o in objects if o.id in against):
-            found, at = candidates[obj.id], R @ obj.position + t
-            for i, S in enumerate(motions):
-                gaps = np.linalg.norm(positions[found] - (S[:3, :3] @ at + S[:3, 3]), axis=1)
-                fits[i] += bool((gaps <= allowance[found]).any())
-        self._twin_fits.append(fits)
-        most = sum(f for f in self._twin_fits if f is not None).max()
-        return len(self._twin_fits) if most >= TWIN_KIDNAP else 0
+        R, t, ids, codes = track.pose[:3, :3], track.pose[:3, 3], self.global_map.ids, self._codes()
+        by_id = {o.id: o for o in objects}
+        # (where, the kinds it may be, key, whether it is evidence when the copy holds it)
+        placed = [(R @ by_id[l].position + t, codes[candidates[l]], f"+local {l}", True)
+                  for l in against]  # fmt: skip
+        placed += [(R @ by_id[l].position + t, codes[candidates[l]], f"-map {ids[g]}", False)
+                   for g, l in verdict.supported]  # fmt: skip
+        placed += [(self.global_map.positions[u], codes[[u]], f"+map {ids[u]}", False)
+                   for u in unseen]  # fmt: skip
+        told: list[list[str]] = []  # per copy: "+" what speaks for it, "-" for the place
+        for S in motions:
+            told.append([key for at, kinds, key, if_held in placed
+                         if self._copy_holds(S, at, kinds) == if_held])  # fmt: skip
+        self._twin_fits.append(told)
+        lead, updates = self._best_twin_lead()
+        return updates if lead >= TWIN_KIDNAP else 0
+
+    def _copy_holds(self, S: np.ndarray, at: np.ndarray, kinds: np.ndarray) -> bool:
+        """Whether the copy `S` (a map motion) holds a map object of one of `kinds` (label
+        codes) where `at` (a map point) lies: any of the map's, not only the candidates a
+        prior or the retrieval left (the copy lies elsewhere)."""
+        point = S[:3, :3] @ at + S[:3, 3]
+        allowance = self._allowances()
+        near = np.asarray(self._tree().query_ball_point(point, allowance.max()), dtype=int)
+        near = near[np.isin(self._codes()[near], kinds)]
+        gaps = np.linalg.norm(self.global_map.positions[near] - point, axis=1)
+        return bool((gaps <= allowance[near]).any())
+
+    def _best_twin_lead(self) -> tuple[int, int]:
+        """By how many objects the latest updates (the newest `n` of them, for the `n` that
+        gives most, the fewest of those) tell the best copy rather than the tracked place, and that `n`: each
+        object (a detection against the place; a map object seen at its place or missing from
+        a look) counts once, by its newest evidence.  Updates before the robot was carried
+        off speak for the place; they do not outweigh what it sees since."""
+        updates = list(self._twin_fits)
+        best = (0, 0)  # (lead, -n)
+        for i in range(len(updates[-1]) if updates and updates[-1] is not None else 0):
+            for n in range(1, len(updates) + 1):
+                newest = {key[1:]: key[0] for told in updates[-n:] if told for key in told[i]}
+                lead = sum(1 if sign == "+" else -1 for sign in newest.values())
+                best = max(best, (lead, -n))
+        return best[0], -best[1]
 
     def _screened_sets(self, by_size: bool) -> tuple[SetPairs, bool]:
         """The sets screened for hypotheses, and whether the screening was cut.  Ranked by
@@ -1195,8 +1239,8 @@ EMPTY_LOCAL_MAP = "the local map has no objects"
 LOOKS_KEPT = 6
 """The search weighs the sensor's looks of this many latest updates (negative evidence)."""
 TWIN_KIDNAP = 2
-"""Objects of the latest updates that fit a copy of the tracked place, not the place, that end
-the claim."""
+"""By how many objects of the latest updates a copy of the tracked place must explain them
+better than the place (`Localizer._carried_to_twin`) to end the claim."""
 TWINS_WEIGHED = 4
 """The copies of a place weighed: those that hold most of its objects."""
 TWINS_KEPT = 64

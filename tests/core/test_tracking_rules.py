@@ -572,16 +572,32 @@ def test_a_kidnap_into_a_copy_is_caught_by_two_of_its_own_objects_without_covera
     assert kidnapped(None, extras=1) == ["localized a"] * 3  # one could be the map's change
 
 
-def test_after_a_kidnap_into_a_copy_the_copy_is_claimed():
+def test_after_a_kidnap_into_a_copy_the_copy_is_claimed_and_kept():
+    """Each look's update holds every object in view (the coverage's contract): the copy's
+    whole view ends the room's claim, then the copy is claimed, and its claim holds."""
     building = lookalikes()
     localizer = Localizer(building, local_up=[0, 0, 1])
     room_objects = local([o for o in building if o.id.startswith("a")])
     localizer.update(room_objects[:5], coverage=ALL_AROUND)
-    localizer.update(room_objects[5:], coverage=ALL_AROUND)
+    localizer.update(room_objects, coverage=ALL_AROUND)
     there = local([o for o in building if o.id.startswith("b")], ids="k", shift=30.0)
-    statuses = [localizer.update(there[i::3], coverage=ALL_AROUND) for i in range(3)]
-    assert [r.status for r in statuses] == ["ambiguous", "localized", "localized"]
+    statuses = [localizer.update(there, coverage=ALL_AROUND) for _ in range(4)]
+    assert [r.status for r in statuses] == ["ambiguous", "localized", "localized", "localized"]
     assert {g[0] for g, _ in statuses[-1].hypotheses[0].pairs} == {"b"}
+
+
+def test_a_look_missing_objects_the_copy_lacks_ends_the_claim():
+    """Tracking the copy, a look that misses the two objects only the copy holds (tv, bed)
+    is explained by the room (it lacks them): two objects for the room, none for the copy."""
+    building = lookalikes()
+    localizer = Localizer(building, local_up=[0, 0, 1])
+    there = local([o for o in building if o.id.startswith("b")], ids="k", shift=30.0)
+    localizer.update(there, coverage=ALL_AROUND)
+    assert localizer.update(there, coverage=ALL_AROUND).status == "localized"
+    without_one = [o for o in there if o.id != "kb11"]
+    assert localizer.update(without_one, coverage=ALL_AROUND).status == "localized"
+    without_both = [o for o in there if o.id not in ("kb10", "kb11")]
+    assert localizer.update(without_both, coverage=ALL_AROUND).reason == CONTRADICTED
 
 
 def test_a_search_claim_that_the_newest_objects_contradict_is_not_made():
@@ -646,6 +662,6 @@ def test_a_restored_localizer_counts_a_copys_objects_as_the_uninterrupted_one():
     one.update(room_objects[5:])
     assert one.update(there[0::3]).status == "localized"  # the tv: one object of the copy
     state = json.loads(json.dumps(one.state()))
-    assert state["twins"]["fits"] == [[1]]  # the tv
+    assert state["twins"]["fits"] == [[["+local kb10"]]]  # the tv, for the only copy
     other = Localizer.restore(building, state, list(one.local_map), local_up=[0, 0, 1])
     assert [one.update(there[1::3]).status, other.update(there[1::3]).status] == ["ambiguous"] * 2
