@@ -83,7 +83,6 @@ from semloc.results import Hypothesis, Result, Status, Step, Support
 from semloc.semantics import pair_weight
 from semloc.tracking import (
     CONTRADICTED,
-    CONTRADICTION_UPDATES,
     AgainstRate,
     Track,
     TrackingConfig,
@@ -239,7 +238,7 @@ class Localizer:
         self._twin_motions: dict[tuple[int, ...], list[np.ndarray]] = {}  # map objects -> twins
         self._track_twins: tuple[np.ndarray, list[np.ndarray]] | None = None  # (its pairs'
         # map objects when found, the copies) of the tracked place where the robot is
-        self._twin_fits: deque[list[list[str]] | None] = deque(maxlen=CONTRADICTION_UPDATES)
+        self._twin_fits: deque[list[list[str]] | None] = deque(maxlen=TWIN_UPDATES)
         # (each latest update's objects that tell the place from each copy; None: not weighed)
         self._diagonal_lengths: np.ndarray | None = None
         self._reset_search()
@@ -492,7 +491,7 @@ class Localizer:
         candidates = {o.id: self._found[o.id][1] for o in objects}
         verdict = check(
             track.pose, objects, candidates, self.global_map.positions, self._allowances(),
-            self.config.tracking.move_m, track.pairs,
+            self.config.tracking.move_m, track.pairs, self._parts(),
         )  # fmt: skip
         looked, looked_unseen = None, np.zeros(0, dtype=int)
         if self._look is not None:
@@ -599,11 +598,9 @@ class Localizer:
         now = {o.id for o in objects}
         held = {g: R @ self._found[l][0].position + t
                 for l, g in track.pairs.items() if l not in now and l in self._found}  # fmt: skip
-        if self._part_m is None:
-            self._part_m = 0.5 * footprints(self.global_map)
         judged = one_to_one(track.pose, objects, candidates, self.global_map.positions,
                             self._allowances(), self.config.tracking.move_m, held,
-                            self._run_changes.matched, self._part_m)  # fmt: skip
+                            self._run_changes.matched, self._parts())  # fmt: skip
         return Verdict(judged.supported, verdict.contradicting, judged.changed,
                        sources=judged.sources)  # fmt: skip
 
@@ -642,8 +639,15 @@ class Localizer:
                        if self.window.arrival(i).update == update]  # fmt: skip
             candidates = {o.id: self._found[o.id][1] for o in objects}
             verdicts.append(check(best.pose, objects, candidates, self.global_map.positions,
-                                  self._allowances(), tracking.move_m))  # fmt: skip
+                                  self._allowances(), tracking.move_m, part_m=self._parts()))  # fmt: skip
         return recent_contradiction(verdicts, tracking.contradiction)
+
+    def _parts(self) -> np.ndarray:
+        """How near (m) to a detection of a map object another one is a part of it (a
+        detector's split): half the object's footprint (`tracking.footprints`)."""
+        if self._part_m is None:
+            self._part_m = 0.5 * footprints(self.global_map)
+        return self._part_m
 
     def _allowances(self) -> np.ndarray:
         if self._allowance is None:
@@ -1065,16 +1069,20 @@ class Localizer:
 
     def _best_twin_lead(self) -> tuple[int, int]:
         """By how many objects the latest updates (the newest `n` of them, for the `n` that
-        gives most, the fewest of those) tell the best copy rather than the tracked place, and that `n`: each
-        object (a detection against the place; a map object seen at its place or missing from
-        a look) counts once, by its newest evidence.  Updates before the robot was carried
-        off speak for the place; they do not outweigh what it sees since."""
+        gives most, the fewest of those) tell the best copy rather than the tracked place, and
+        that `n`: each object (a detection against the place; a map object seen at its place
+        or missing from a look) counts once, by its newest evidence.  Updates before the robot
+        was carried off speak for the place; they do not outweigh what it sees since."""
         updates = list(self._twin_fits)
         best = (0, 0)  # (lead, -n)
         for i in range(len(updates[-1]) if updates and updates[-1] is not None else 0):
-            for n in range(1, len(updates) + 1):
-                newest = {key[1:]: key[0] for told in updates[-n:] if told for key in told[i]}
-                lead = sum(1 if sign == "+" else -1 for sign in newest.values())
+            newest: dict[str, str] = {}
+            lead = 0
+            for n, told in enumerate(reversed(updates), start=1):
+                for key in told[i] if told else ():
+                    if key[1:] not in newest:
+                        newest[key[1:]] = key[0]
+                        lead += 1 if key[0] == "+" else -1
                 best = max(best, (lead, -n))
         return best[0], -best[1]
 
@@ -1241,6 +1249,9 @@ LOOKS_KEPT = 6
 TWIN_KIDNAP = 2
 """By how many objects of the latest updates a copy of the tracked place must explain them
 better than the place (`Localizer._carried_to_twin`) to end the claim."""
+TWIN_UPDATES = 12
+"""The latest updates weighed for a copy (`TWIN_KIDNAP`): a view shows what tells look-alike
+rooms apart one object at a time, often several updates apart."""
 TWINS_WEIGHED = 4
 """The copies of a place weighed: those that hold most of its objects."""
 TWINS_KEPT = 64

@@ -9,7 +9,11 @@ search's cost grows with the local objects; tracking costs a lookup per new obje
   says it is.  It *supports* the place when a candidate lies within `track_tolerance` plus a
   quarter of that candidate's diagonal (a partial view moves a large object's centre) of that
   point; it is *changed* when the nearest candidate lies farther but within `move_m` (a moved
-  chair of an old map); otherwise it *contradicts* the place.  Objects without candidates say
+  chair of an old map); otherwise it *contradicts* the place.  A map object supports one
+  object of the update, the nearest: two chairs of one view are not one chair of the map (a
+  wrong place's few chairs would otherwise explain a view of many); the other, unless it lies
+  within half the map object's footprint of the first (a detector's split: a part, it says
+  nothing), is judged on its other candidates.  Objects without candidates say
   nothing (a label the map does not hold: new).  A re-detection of an object already paired
   with the same map object is the same evidence again: it refreshes the pair for the pose but
   counts as half a supporting object in the decision, so that re-detections of paired objects
@@ -175,29 +179,56 @@ def check(
     allowance: np.ndarray,
     move_m: float = 0.0,
     paired: Mapping[str, int] | None = None,
+    part_m: np.ndarray | None = None,
 ) -> Verdict:
     """Each object with candidates, put by `pose` (T_global_local) into the global frame:
-    supported by its nearest candidate g within `allowance[g]` (metres), changed when that
-    candidate lies within `move_m`, else contradicting.  `paired`: the local objects already
-    paired (local id -> map index), whose support again is a repeat."""
-    supported, contradicting, changed, repeated = [], [], [], 0
+    supported by its nearest candidate g within `allowance[g]` (metres), changed when its
+    nearest candidate lies within `move_m`, else contradicting.  A map object supports one
+    object of the update, the nearest (two chairs of one view are not one chair of the map):
+    another object within its allowance is a part of it when within `part_m[g]` of the first
+    (half its footprint: a detector's split; it says nothing), else it takes its next free
+    candidate, or is judged on the free ones.  `paired`: the local objects already paired
+    (local id -> map index), whose support again is a repeat."""
     R, t = pose[:3, :3], pose[:3, 3]
     paired = paired or {}
+    placed: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+    near: list[tuple[float, str, int]] = []
     for obj in objects:
-        found = candidates.get(obj.id)
-        if found is None or not len(found):
+        found = np.asarray(candidates.get(obj.id, ()), dtype=int)
+        if not len(found):
             continue
-        gaps = np.linalg.norm(global_positions[found] - (R @ obj.position + t), axis=1)
-        nearest = int(np.argmin(gaps))
-        g = int(found[nearest])
-        if gaps[nearest] <= allowance[g]:
-            supported.append((g, obj.id))
-            repeated += paired.get(obj.id) == g
-        elif gaps[nearest] <= move_m:
-            changed.append((g, obj.id))
+        at = R @ obj.position + t
+        gaps = np.linalg.norm(global_positions[found] - at, axis=1)
+        placed[obj.id] = (at, found, gaps)
+        near += [(float(d), obj.id, int(g)) for d, g in zip(gaps, found) if d <= allowance[g]]
+    taken: dict[int, str] = {}  # map index -> the local id it supports
+    support_of: dict[str, int] = {}
+    for _, local_id, g in sorted(near):
+        if g not in taken and local_id not in support_of:
+            taken[g], support_of[local_id] = local_id, g
+    supported = [(support_of[l], l) for l in placed if l in support_of]
+    contradicting, changed = [], []
+    for local_id, (at, found, gaps) in placed.items():
+        if local_id in support_of or _a_part(at, found, gaps, allowance, taken, placed, part_m):
+            continue
+        free = [i for i, g in enumerate(found) if g not in taken]
+        nearest = min(free, key=lambda i: gaps[i]) if free else None
+        if nearest is not None and gaps[nearest] <= move_m:
+            changed.append((int(found[nearest]), local_id))
         else:
-            contradicting.append(obj.id)
+            contradicting.append(local_id)
+    repeated = sum(paired.get(l) == g for g, l in supported)
     return Verdict(supported, contradicting, changed, repeated)
+
+
+def _a_part(at, found, gaps, allowance, taken, placed, part_m) -> bool:
+    """Whether an object at `at` is a part of a map object that another object took: within
+    that object's allowance, and within `part_m` of the object that took it."""
+    if part_m is None:
+        return False
+    return any(g in taken and gaps[i] <= allowance[g]
+               and np.linalg.norm(at - placed[taken[g]][0]) < part_m[g]
+               for i, g in enumerate(found.tolist()))  # fmt: skip
 
 
 def one_to_one(

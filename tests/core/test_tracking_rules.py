@@ -71,6 +71,37 @@ def test_a_redetection_of_a_paired_object_is_a_repeat_but_not_of_another_pairing
     assert same.towards == 0.5 and other.towards == 1.0
 
 
+@pytest.mark.parametrize(
+    ("second", "part_m", "verdict"),
+    [
+        (0.4, None, ("changed", 1)),  # no part rule: chair 1, 1.6 m off, moved
+        (0.4, 0.31, None),  # 0.3 m from the first: a part of the same chair (split)
+        (0.4, 0.3, ("changed", 1)),  # just outside half the footprint: another chair
+    ],
+)
+def test_one_map_object_supports_one_object_of_an_update_the_nearest(second, part_m, verdict):
+    """Two chairs of one view near chair 0 of the map: the nearer is its support; the other is
+    judged on the free candidates (chair 1 within the move distance: changed), unless it lies
+    within half the chair's footprint of the first (a detector's split: it says nothing)."""
+    chairs = np.array([[0.0, 0, 0], [2.0, 0, 0], [20.0, 0, 0]])
+    objects = [at(0.1, i="a"), at(second, i="b")]
+    candidates = {"a": np.array([0, 1]), "b": np.array([0, 1])}
+    parts = None if part_m is None else np.full(3, part_m)
+    found = check(np.eye(4), objects, candidates, chairs, ALLOWANCE, 3.0, part_m=parts)
+    assert found.supported == [(0, "a")]
+    judgement = {l: ("changed", g) for g, l in found.changed}
+    judgement |= {l: ("contradicting", -1) for l in found.contradicting}
+    assert judgement == ({} if verdict is None else {"b": verdict})
+
+
+def test_an_object_whose_only_chair_another_took_contradicts_beyond_the_move_distance():
+    objects = [at(0.1, i="a"), at(0.4, i="b")]
+    candidates = {"a": np.array([0]), "b": np.array([0])}
+    found = check(np.eye(4), objects, candidates, GLOBALS, ALLOWANCE, 3.0)
+    assert found.supported == [(0, "a")] and found.contradicting == ["b"]
+    assert found.against == 1 and found.towards == 1
+
+
 def test_the_evidence_against_counts_contradictions_changes_and_missing_objects():
     verdict = Verdict([(0, "a")], ["b", "c"], [(1, "d")], 0, 1.5)
     assert verdict.against == 2 + 1 + 1.5 and verdict.towards == 1
