@@ -94,7 +94,7 @@ from semloc.tracking import (
     recent_contradiction,
 )
 from semloc.transforms import centre_residual
-from semloc.twins import MIN_TWIN_PAIRS, label_codes, twin_pairs, twins
+from semloc.twins import MIN_TWIN_PAIRS, copy_holds, label_codes, twin_lead, twin_pairs, twins
 from semloc.verification import (
     Evidence,
     MapSupport,
@@ -639,7 +639,8 @@ class Localizer:
                        if self.window.arrival(i).update == update]  # fmt: skip
             candidates = {o.id: self._found[o.id][1] for o in objects}
             verdicts.append(check(best.pose, objects, candidates, self.global_map.positions,
-                                  self._allowances(), tracking.move_m, part_m=self._parts()))  # fmt: skip
+                                  self._allowances(), tracking.move_m,
+                                  part_m=self._parts()))  # fmt: skip
         return recent_contradiction(verdicts, tracking.contradiction)
 
     def _parts(self) -> np.ndarray:
@@ -1025,8 +1026,9 @@ class Localizer:
         of its label.  For the place: a supporting detection where the copy holds no map
         object it may be.  When, over the latest updates, one copy's count exceeds the place's
         by `TWIN_KIDNAP`, the robot was carried into it: an old map's change or a detector's
-        error is as likely to speak for the place as against it.  The copies are looked up
-        only when an update has objects against the place."""
+        error is as likely to speak for the place as against it (`semloc.twins.twin_lead`).
+        The copies are looked up only when an update has objects against the place or
+        missing from its look."""
         against = {l for _, l in verdict.changed} | set(verdict.contradicting)
         members = np.array(list(track.pairs.values()))
         held = self._track_twins[0] if self._track_twins else np.zeros(0, dtype=int)
@@ -1048,43 +1050,12 @@ class Localizer:
                    for g, l in verdict.supported]  # fmt: skip
         placed += [(self.global_map.positions[u], codes[[u]], f"+map {ids[u]}", False)
                    for u in unseen]  # fmt: skip
-        told: list[list[str]] = []  # per copy: "+" what speaks for it, "-" for the place
-        for S in motions:
-            told.append([key for at, kinds, key, if_held in placed
-                         if self._copy_holds(S, at, kinds) == if_held])  # fmt: skip
-        self._twin_fits.append(told)
-        lead, updates = self._best_twin_lead()
+        where = (self.global_map.positions, codes, self._allowances(), self._tree())
+        self._twin_fits.append([[key for at, kinds, key, if_held in placed
+                                 if copy_holds(S, at, kinds, *where) == if_held]
+                                for S in motions])  # fmt: skip
+        lead, updates = twin_lead(list(self._twin_fits))
         return updates if lead >= TWIN_KIDNAP else 0
-
-    def _copy_holds(self, S: np.ndarray, at: np.ndarray, kinds: np.ndarray) -> bool:
-        """Whether the copy `S` (a map motion) holds a map object of one of `kinds` (label
-        codes) where `at` (a map point) lies: any of the map's, not only the candidates a
-        prior or the retrieval left (the copy lies elsewhere)."""
-        point = S[:3, :3] @ at + S[:3, 3]
-        allowance = self._allowances()
-        near = np.asarray(self._tree().query_ball_point(point, allowance.max()), dtype=int)
-        near = near[np.isin(self._codes()[near], kinds)]
-        gaps = np.linalg.norm(self.global_map.positions[near] - point, axis=1)
-        return bool((gaps <= allowance[near]).any())
-
-    def _best_twin_lead(self) -> tuple[int, int]:
-        """By how many objects the latest updates (the newest `n` of them, for the `n` that
-        gives most, the fewest of those) tell the best copy rather than the tracked place, and
-        that `n`: each object (a detection against the place; a map object seen at its place
-        or missing from a look) counts once, by its newest evidence.  Updates before the robot
-        was carried off speak for the place; they do not outweigh what it sees since."""
-        updates = list(self._twin_fits)
-        best = (0, 0)  # (lead, -n)
-        for i in range(len(updates[-1]) if updates and updates[-1] is not None else 0):
-            newest: dict[str, str] = {}
-            lead = 0
-            for n, told in enumerate(reversed(updates), start=1):
-                for key in told[i] if told else ():
-                    if key[1:] not in newest:
-                        newest[key[1:]] = key[0]
-                        lead += 1 if key[0] == "+" else -1
-                best = max(best, (lead, -n))
-        return best[0], -best[1]
 
     def _screened_sets(self, by_size: bool) -> tuple[SetPairs, bool]:
         """The sets screened for hypotheses, and whether the screening was cut.  Ranked by

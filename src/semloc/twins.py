@@ -17,9 +17,14 @@ that move G's centroid by less than `apart` m (a room's size) are the place itse
 repeated objects (a row of chairs shifted by one: the search weighs those); twins closer than
 that to each other are one twin (the one that places most objects).  Exact labels only: a
 twin is the map's own copy, in the map's vocabulary.
+
+While a place is tracked, each of its twins is weighed against it on the objects that tell
+the two apart (`copy_holds`, `twin_lead`): the Localizer ends the claim when a twin leads.
 """
 
 from __future__ import annotations
+
+from collections.abc import Sequence
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -182,3 +187,38 @@ def twin_pairs(
             taken.add(j)
             out.append((int(j), int(l)))
     return out
+
+
+def copy_holds(
+    S: np.ndarray, at: np.ndarray, kinds: np.ndarray, positions: np.ndarray,
+    codes: np.ndarray, allowance: np.ndarray, tree: cKDTree,
+) -> bool:  # fmt: skip
+    """Whether the copy `S` (a map motion) holds a map object of one of `kinds` (label codes)
+    within its `allowance` of where `S` puts the map point `at`: any of the map's objects, not
+    only a detection's candidates (a prior or the retrieval leave out where the copy lies)."""
+    point = S[:3, :3] @ at + S[:3, 3]
+    near = np.asarray(tree.query_ball_point(point, allowance.max()), dtype=np.int64)
+    near = near[np.isin(codes[near], kinds)]
+    gaps = np.linalg.norm(positions[near] - point, axis=1)
+    return bool((gaps <= allowance[near]).any())
+
+
+def twin_lead(updates: Sequence[list[list[str]] | None]) -> tuple[int, int]:
+    """By how many objects the latest updates (oldest first; per update, per copy, the keys of
+    the objects that tell the copy from the place: "+..." for the copy, "-..." for the place;
+    None: not weighed) tell the best copy rather than the place, over the newest `n` updates
+    for the `n` that gives most (the fewest of those), and that `n`.  An object (a key without
+    its sign) counts once, by its newest evidence.  The updates before the robot was carried
+    off speak for the place; they do not outweigh what it sees since."""
+    best = (0, 0)  # (lead, -n)
+    copies = len(updates[-1]) if updates and updates[-1] is not None else 0
+    for i in range(copies):
+        newest: set[str] = set()
+        lead = 0
+        for n, told in enumerate(reversed(updates), start=1):
+            for key in told[i] if told else ():
+                if key[1:] not in newest:
+                    newest.add(key[1:])
+                    lead += 1 if key[0] == "+" else -1
+            best = max(best, (lead, -n))
+    return best[0], -best[1]

@@ -4,13 +4,14 @@ Localizer weighing a copy its search did not list before it claims."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial import cKDTree
 
 from semloc import Localizer, LocalizerConfig, ObjectMap, SemanticObject
 from semloc.transforms import yaw_pose
-from semloc.twins import label_codes, twin_pairs, twins
+from semloc.twins import copy_holds, label_codes, twin_lead, twin_pairs, twins
 
 UP = np.array([0.0, 0.0, 1.0])
 ROOM = [  # (label, x, y, z): a room whose labels are all different
@@ -131,3 +132,47 @@ def test_told_apart_needs_two_objects_the_copy_lacks_and_none_it_adds():
     assert not told_apart(place("abcde"), place("abcd"))  # one object: a gone object's share
     assert not told_apart(place("abcde"), place("abcf"))  # the copy pairs one the place lacks
     assert not told_apart(place("abc"), place("abcde"))
+
+
+# twin_lead: the evidence of the latest updates for a copy against the tracked place --------
+@pytest.mark.parametrize(
+    ("updates", "lead"),
+    [
+        ([[["+local a", "+local b"]]], (2, 1)),
+        ([[["+local a"]], [["+local a"]]], (1, 1)),  # a re-detection is the same object
+        ([[["-map x"]], [["+map x"]]], (1, 1)),  # seen, then missing: its newest evidence
+        ([[["+map x"]], [["-map x"]]], (0, 0)),  # missing, then seen at its place
+        ([[["+local a"]], None, [["+local b"]]], (2, 3)),  # an update not weighed
+        ([[["+local a", "+local b", "-map y"]]], (1, 1)),
+    ],
+)
+def test_twin_lead_counts_each_object_once_by_its_newest_evidence(updates, lead):
+    assert twin_lead(updates) == lead
+
+
+def test_twin_lead_weighs_only_the_updates_since_the_robot_was_carried_off():
+    """Three objects for the place before, two for the copy since: the copy leads by two over
+    the newest two updates (the older ones are the place the robot left)."""
+    before = [["-map x", "-map y", "-map z"]]
+    since = [[["+local a"]], [["+local b"]]]
+    assert twin_lead([before, *since]) == (2, 2)
+    assert twin_lead([before, [["+local a", "-map w"]]]) == (0, 0)
+
+
+def test_twin_lead_takes_the_best_copy():
+    updates = [[["+local a"], ["+local a", "+local b", "+map x"]]]
+    assert twin_lead(updates) == (3, 1)
+    assert twin_lead([]) == (0, 0) and twin_lead([None]) == (0, 0)
+
+
+@pytest.mark.parametrize(("kinds", "x", "held"), [([0], 0.5, True), ([0], 0.51, False),
+                                                  ([1], 0.0, False), ([1, 0], 0.0, True)])  # fmt: skip
+def test_copy_holds_a_map_object_of_the_kinds_within_its_allowance(kinds, x, held):
+    """The copy S moves the map by 10 m along x; a chair (kind 0) stands at 10 m."""
+    positions = np.array([[0.0, 0, 0], [10.0, 0, 0], [30.0, 0, 0]])
+    codes, allowance = np.array([0, 0, 1]), np.array([0.5, 0.5, 0.5])
+    S = np.eye(4)
+    S[0, 3] = 10.0
+    at = np.array([x, 0.0, 0.0])
+    found = copy_holds(S, at, np.array(kinds), positions, codes, allowance, cKDTree(positions))
+    assert found is held
