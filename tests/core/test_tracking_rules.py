@@ -554,6 +554,10 @@ def test_the_prior_decides_among_places_whose_evidence_is_within_the_margin():
     ranked = [hypothesis(1, 3.0, False), hypothesis(2, 3.0, True), hypothesis(3, 3.0, False)]
     assert [h.rank for h in prior_first(list(ranked))] == [1, 2, 3]
     assert prior_first(list(ranked)) == ranked
+    # without the evidence of either, nothing tells the places apart: the order stays
+    for best, candidate in [(3.0, None), (None, 3.0)]:
+        ranked = [hypothesis(1, best, True), hypothesis(2, candidate, False)]
+        assert prior_first(list(ranked)) == ranked and ranked[0].rank == 1
 
 
 def test_the_missing_penalty_forgives_the_gone_share():
