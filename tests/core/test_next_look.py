@@ -377,3 +377,10 @@ def test_two_objects_of_a_label_within_look_tolerance_are_one_spot(apart):
     after it is the lamp, another spot."""
     world, hypotheses = _places([0.0, 100.0], {0: -4.0}, plants=(5.0, 5.0 + apart))
     assert [look.global_id for look in _suggest(world, hypotheses)] == ["plant0", "lamp0"]
+
+
+def test_no_posed_hypothesis_has_nothing_to_suggest():
+    world, hypotheses = _places([0.0, 20.0], {0: 3.0})
+    for h in hypotheses:
+        h.pose = None
+    assert _suggest(world, hypotheses) == [] and _suggest(world, []) == []

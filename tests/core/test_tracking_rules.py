@@ -306,6 +306,14 @@ def test_three_updates_together_end_a_claim_more_than_twice_their_support(last, 
     assert recent_contradiction(verdicts, least=2) is ends
 
 
+def test_a_claim_weighs_only_its_latest_updates_together():
+    """1.5 missing objects, then 0.5 in each of three updates: the latest three hold 1.5
+    against, short of `contradiction` + 1; the first update's no longer counts."""
+    claim = track()
+    updates = [1.5, 0.5, 0.5, 0.5]
+    assert [claim.contradicted(Verdict([], [], [], 0, m)) for m in updates] == [0, 0, 0, 0]
+
+
 def test_no_update_contradicts_nothing():
     assert recent_contradiction([], least=1) is False
 
@@ -488,6 +496,7 @@ def test_a_track_round_trips_through_its_state_and_reads_an_old_one():
     claim.contradicted(Verdict([(5, "a")], ["b"], [(7, "c")], 1, 0.5))
     claim.accept(Verdict([(5, "a")], ["b"], [(7, "c")], 1, 0.5))
     state = json.loads(json.dumps(claim.state(ids)))
+    assert state["confidence"] == 0.99 and state["score"] == 3.0
     again = Track.restored(state, ids.index, TrackingConfig())
     assert again.state(ids) == state and again.counts() == claim.counts()
     old = {**state, "verdicts": [v[:2] for v in state["verdicts"]]}

@@ -174,6 +174,18 @@ def test_anchor_pairs_take_the_rarest_labels_each_with_its_rarest_farthest_partn
     assert _anchor_pairs(positions, codes, np.arange(5), UP, 5) == [(0, 1), (1, 4), (2, 3)]
 
 
+def test_a_copy_found_by_one_anchor_pair_is_kept_whatever_the_next_pairs_find():
+    """The place above, its copy 100 m off without member 3: the pairs (0, 1) and (1, 4) find
+    the copy, the last pair (2, 3) only the place itself."""
+    place = [[0.0, 0, 0], [3.0, 0, 0], [1.0, 0, 0], [1.8, 0, 5], [-1.0, 0, 0]]
+    copy = [[100 + x, y, z] for k, (x, y, z) in enumerate(place) if k != 3]
+    positions = np.array(place + copy)
+    codes = np.array([0, 1, 2, 2, 2, 0, 1, 2, 2])
+    found = twins(positions, codes, UP, np.arange(5), 0.3)
+    assert len(found) == 1
+    np.testing.assert_allclose(found[0], yaw_pose(0.0, [100.0, 0.0, 0.0]), atol=1e-9)
+
+
 def _turned_building(up: np.ndarray, S: np.ndarray) -> tuple[ObjectMap, np.ndarray]:
     """`ROOM`, its objects each at another height, and its copy moved by `S` about z; both
     turned so that z becomes `up`: the map and the copy's motion in it."""
