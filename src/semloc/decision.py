@@ -221,6 +221,8 @@ def distinct(
     `places` is consumed lazily, so a generator computes poses only as far as needed.  Each
     place is tested against all picks at once (`same_place`'s pose test, compiled)."""
     chosen: list[int] = []
+    if top_k < 1:
+        return chosen
     pair_sets: list[set] = []
     poses = np.empty((min(top_k, 16), 4, 4))  # grown as needed: top_k may be huge
     posed = 0

@@ -26,19 +26,27 @@ from hypothesis import strategies as st
 from semloc.decision import (
     FEATURES,
     RIVAL_LOGIT_GAP,
+    SEARCH_CUT,
+    ConfidenceModel,
+    Decision,
     DecisionConfig,
     _different,
     _dominates,
+    cut_search,
     decide,
     distinct,
+    duplicates,
     is_rival,
+    local_anchor,
+    rank,
+    rank_places,
     same_place,
     same_place_index,
     score_confidence,
     shipped_model,
 )
 from semloc.results import Hypothesis
-from semloc.transforms import yaw_pose
+from semloc.transforms import pose_error, yaw_pose
 
 EPS = 1e-9
 CONFIGS = [
@@ -142,7 +150,7 @@ def test_a_best_without_a_pose_is_ambiguous(config, make):
     assert decide([best], config, "evidence") == ("localized", "")
     best.pose = None
     status, reason = decide([best], config, "evidence")
-    assert status == "ambiguous" and "pose is under-determined" in reason
+    assert status == "ambiguous" and reason == "the best hypothesis's pose is under-determined"
 
 
 # min_pairs -----------------------------------------------------------------------------------
@@ -220,7 +228,7 @@ def test_a_sure_best_with_a_rival_whose_centres_fit_nearly_as_well_is_ambiguous(
     assert status == "ambiguous"
     assert reason.startswith(
         "a rival place within the margin: rank 2 fits the centres nearly "
-        f"as well ({len(best.pairs)} pairs, residual "
+        f"as well ({len(best.pairs)} pairs, residual {limit - EPS:.2f} m)"
     )
     assert decide([best, rival(best, residual=limit + EPS)], config, "evidence") == (
         "localized",
@@ -490,6 +498,36 @@ def test_same_place_index_just_inside_and_outside(config, anchor):
     assert same_place_index(HERE, np.zeros((0, 4, 4)), config, anchor) is None
 
 
+@pytest.mark.parametrize("config", CONFIGS, ids=IDS)
+def test_same_place_exactly_at_the_thresholds_is_another_place(config):
+    """A pose exactly `distinct_rotation_deg` or exactly `distinct_translation` from another
+    is another place (the thresholds are strict); the rotation threshold is set to the angle
+    `pose_error` measures, so the case sits exactly on it."""
+    turned = yaw_pose(np.radians(config.distinct_rotation_deg))
+    exact = config.model_copy(update={"distinct_rotation_deg": pose_error(turned, HERE)[0]})
+    assert not same_place(((), turned), ((), HERE), exact)
+    shifted = yaw_pose(0.0, [config.distinct_translation, 0.0, 0.0])
+    assert pose_error(shifted, HERE)[1] == config.distinct_translation
+    assert not same_place(((), shifted), ((), HERE), config)
+
+
+def test_duplicates_counts_the_posed_hypotheses_at_a_better_ones_place():
+    config = DecisionConfig()
+    near = yaw_pose(0.0, [0.1, 0.0, 0.0])
+    ranked = [
+        Hypothesis(1, 1.0, pairs(3), HERE),
+        Hypothesis(2, 1.0, pairs(3, 10), None),  # no pose: not counted
+        Hypothesis(3, 1.0, pairs(3, 20), ELSEWHERE),
+        Hypothesis(4, 1.0, pairs(3, 30), near),  # at the best's place
+        Hypothesis(5, 1.0, pairs(3, 40), ELSEWHERE),  # at rank 3's
+    ]
+    assert duplicates(ranked, config, None) == 2
+    assert duplicates(ranked[:3], config, None) == 0
+    turned = [Hypothesis(1, 1.0, pairs(3), HERE), Hypothesis(2, 1.0, pairs(3, 10), yaw_pose(0.02))]
+    assert duplicates(turned, config, None) == 1  # 1.1 deg and no shift at the origin
+    assert duplicates(turned, config, np.array([30.0, 0.0, 0.0])) == 0  # 0.6 m apart there
+
+
 def test_same_place_by_pairs():
     config = DecisionConfig()
     four = pairs(4)
@@ -628,6 +666,13 @@ def test_distinct_takes_any_top_k():
     assert distinct(places, 10**15, config) == list(range(40))
 
 
+@pytest.mark.parametrize("top_k", [0, -1])
+def test_distinct_picks_nothing_when_asked_for_nothing(top_k):
+    places = [((), yaw_pose(0.0, [float(i), 0.0, 0.0])) for i in range(3)]
+    assert distinct(places, top_k, DecisionConfig()) == []
+    assert distinct(places, 1, DecisionConfig()) == [0]
+
+
 # exactly at each boundary (values whose products are exact in binary) ------------------------
 def test_dominance_exactly_at_the_margin_is_dominance_by_score_and_fitness():
     """score / fitness: the best dominates a rival of exactly 1 / (1 + margin) of it."""
@@ -682,3 +727,122 @@ def test_a_variant_does_not_lower_the_confidence_a_rival_does():
     score_confidence([best, other], model, 0.5)
     assert best.confidence == model.confidence(best.evidence, other.evidence)
     assert best.confidence < model.confidence(best.evidence, None)
+
+
+# the confidence model, ranking and the search's cut ----------------------------------------
+WEIGHTS = {"pairs": 0.5, "rejected_share": -1.0, "residual": -2.0, "fitness": 1.0, "support": 0.25,
+           "conflict_share": -1.5}  # fmt: skip
+FEATURE_VALUES = {"pairs": 4.0, "rejected_share": 0.1, "residual": 0.2, "fitness": 0.8,
+                  "support": 2.0, "conflict_share": 0.3}  # fmt: skip
+
+
+def hand_model(**fields) -> ConfidenceModel:
+    values = dict(evidence_bias=-1.0, evidence_weights=WEIGHTS, confidence_bias=0.1,
+                  confidence_evidence=0.7, confidence_rival=-1.3, confidence_gap=0.4,
+                  min_confidence=0.9)  # fmt: skip
+    return ConfidenceModel(**(values | fields))
+
+
+def sigmoid(x: float) -> float:
+    return 1.0 / (1.0 + math.exp(-x))
+
+
+def test_the_ranking_logit_is_its_own_fit_else_the_evidence():
+    dot = sum(WEIGHTS[k] * FEATURE_VALUES[k] for k in FEATURES)
+    assert hand_model().ranking(FEATURE_VALUES) == pytest.approx(-1.0 + dot)
+    twice = {k: 2 * w for k, w in WEIGHTS.items()}
+    assert hand_model(ranking_weights=twice).ranking(FEATURE_VALUES) == pytest.approx(2 * dot)
+    fitted = hand_model(ranking_weights=twice, ranking_bias=0.5)
+    assert fitted.ranking(FEATURE_VALUES) == pytest.approx(0.5 + 2 * dot)
+
+
+@pytest.mark.parametrize(("evidence", "rival"), [(1.5, 0.5), (1.5, None), (2.0, -6.0), (9.0, 0.0)])
+def test_the_confidence_is_the_logistic_of_evidence_rival_and_gap(evidence, rival):
+    r = -4.0 if rival is None else max(rival, -4.0)
+    gap = min(evidence - r, 4.0)
+    logit = 0.1 + 0.7 * evidence - 1.3 * sigmoid(r) + 0.4 * gap
+    assert hand_model().confidence(evidence, rival) == pytest.approx(sigmoid(logit))
+
+
+def test_local_anchor_is_the_centroid_of_the_local_objects():
+    assert local_anchor(np.array([[0.0, 0, 0], [2.0, 4, 6]])) == pytest.approx([1.0, 2.0, 3.0])
+    assert local_anchor(np.zeros((0, 3))) is None
+
+
+def test_rank_numbers_the_hypotheses_from_one_in_order():
+    hypotheses = [Hypothesis(9, score, pairs(3), HERE) for score in (1.0, 3.0, 2.0)]
+    ordered = rank(hypotheses, "score")
+    assert [(h.rank, h.score) for h in ordered] == [(1, 3.0), (2, 2.0), (3, 1.0)]
+
+
+def featured(rank_: int, score: float, features: dict, pose=HERE, start: int = 0, **fields):
+    return Hypothesis(rank_, score, pairs(4, start), pose, features=features, **fields)
+
+
+def test_rank_places_orders_by_the_ranking_logit_less_the_missing_penalty():
+    """The second hypothesis has the larger ranking logit (and score), but its pose expects
+    three objects nobody saw beyond the gone share: it ranks second."""
+    model = hand_model()
+    low = featured(1, 1.0, FEATURE_VALUES)
+    high = featured(2, 5.0, FEATURE_VALUES | {"pairs": 5.0}, ELSEWHERE, 10, missing=4, expected=4)
+    kept = rank_places([high, low], "evidence", DecisionConfig(), model)
+    assert kept == [low, high] and [h.rank for h in kept] == [1, 2]
+
+
+def test_rank_places_merges_same_places_where_the_local_objects_are():
+    """Two poses 1.1 deg apart: the same place at the origin, another 30 m off, where the
+    local objects are (the anchor)."""
+    turned = [
+        featured(1, 2.0, FEATURE_VALUES),
+        featured(2, 1.0, FEATURE_VALUES, yaw_pose(0.02), 10),
+    ]
+    config = DecisionConfig()
+    assert len(rank_places(list(turned), "score", config, hand_model())) == 1
+    far = np.array([30.0, 0.0, 0.0])
+    assert len(rank_places(list(turned), "score", config, hand_model(), far)) == 2
+
+
+def test_rank_places_weighs_rivals_by_the_configured_overlap():
+    """Sharing 3 of 4 pairs: a variant at `rival_overlap` 0.5, a rival at 0.8."""
+    model = hand_model()
+    for overlap, rival_counts in [(0.5, False), (0.8, True)]:
+        best = featured(1, 2.0, FEATURE_VALUES)
+        other = Hypothesis(2, 1.0, shared(best.pairs, 4, 3), ELSEWHERE, features=FEATURE_VALUES)
+        rank_places([best, other], "score", DecisionConfig(rival_overlap=overlap), model)
+        expected = model.confidence(best.evidence, other.evidence if rival_counts else None)
+        assert best.confidence == expected
+
+
+def test_score_confidence_takes_a_variant_for_no_rival_by_default():
+    model = hand_model()
+    best = featured(1, 2.0, FEATURE_VALUES)
+    variant = Hypothesis(2, 1.0, shared(best.pairs, 4, 3), ELSEWHERE, features=FEATURE_VALUES)
+    score_confidence([best, variant], model)
+    assert best.confidence == model.confidence(best.evidence, None)
+
+
+def test_a_twin_the_view_tells_apart_is_no_rival_another_place_is():
+    """`place` pairs two local objects its twin lacks: the twin is not its rival; a place
+    that is not a twin, told apart alike, still is."""
+    model = hand_model()
+
+    def place(locals_: str, start: int, pose=HERE) -> Hypothesis:
+        return Hypothesis(1, 1.0, [(f"g{start + i}", l) for i, l in enumerate(locals_)], pose,
+                          features=FEATURE_VALUES)  # fmt: skip
+
+    best, twin, other = place("abcde", 0), place("abc", 10, ELSEWHERE), place("abc", 20)
+    score_confidence([best, twin], model, twinned=[best, twin])
+    assert best.confidence == model.confidence(best.evidence, None)
+    score_confidence([best, twin, other], model, twinned=[best, twin])
+    assert best.confidence == model.confidence(best.evidence, other.evidence)
+
+
+@pytest.mark.parametrize("reason", ["", "low fitness"])
+def test_a_cut_search_says_so_first(reason):
+    decision = cut_search(Decision("localized" if not reason else "ambiguous", reason), True, 5)
+    assert decision.status == "ambiguous"
+    why = (
+        f"{SEARCH_CUT}: places as well supported as the best (5 pairs) were left out of the "
+        "hypotheses, and the right one may be among them"
+    )
+    assert decision.reason == (why if not reason else f"{why}; {reason}")

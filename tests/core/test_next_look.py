@@ -318,3 +318,69 @@ def test_two_objects_of_a_label_look_tolerance_apart_are_two_spots():
         [0.0, 100.0], {}, plants=(5.0, 5.0 + NextLookConfig().look_tolerance)
     )
     assert [look.global_id for look in _suggest(world, hypotheses)] == ["plant0", "plant1"]
+
+
+def test_a_one_object_map_can_tell_two_places_apart():
+    """A lamp 3 m beside place 1 of a map holding nothing else tells it from place 2."""
+    world = ObjectMap([SemanticObject("lamp", "lamp", [3.0, 0.0, 0.5])], up=[0, 0, 1])
+    _, hypotheses = _places([0.0, 20.0], {})
+    looks = _suggest(world, hypotheses)
+    assert [(look.global_id, look.separates) for look in looks] == [("lamp", [1])]
+
+
+@pytest.mark.parametrize("suggestions", [0, 1])
+def test_at_most_the_configured_suggestions(suggestions):
+    world, hypotheses = _places([0.0, 100.0], {0: 3.0}, plants=(5.0, 7.0))
+    config = NextLookConfig(suggestions=suggestions)
+    looks = next_look(hypotheses, world, ["table"], np.array([[0.0, 0.0, 0.5]]), config)
+    assert len(looks) == suggestions
+
+
+def test_the_second_widening_weighs_the_best_two():
+    """A lamp 12 m beside place 1 of three: only the search widened to twice the reach finds
+    it, and that search weighs the best two places."""
+    world, hypotheses = _places([0.0, 100.0, 200.0], {0: 12.0})
+    looks = _suggest(world, hypotheses)
+    assert [look.global_id for look in looks] == ["lamp0"] and sorted(looks[0].where) == [1, 2]
+
+
+def test_the_gain_weighs_the_places_by_their_confidences_normalised():
+    """Confidences 0.2, 0.2 and none: the place without one weighs nothing, the two others
+    half each, so telling place 1 apart gains 1 bit."""
+    world, hypotheses = _places([0.0, 20.0, 40.0], {0: 3.0})
+    hypotheses[2].confidence = None
+    looks = _suggest(world, hypotheses)
+    assert looks[0].separates == [1] and looks[0].gain == pytest.approx(1.0)
+
+
+def test_a_telling_object_beside_the_second_place_is_found_through_its_pose():
+    world, hypotheses = _places([0.0, 20.0], {1: 3.0})
+    looks = _suggest(world, hypotheses)
+    assert [(look.global_id, look.separates) for look in looks] == [("lamp1", [2])]
+    assert sorted(looks[0].where) == [1, 2]
+
+
+def test_a_spot_below_the_least_gain_does_not_hide_the_spots_after_it():
+    """Place 3 is all but ruled out: its lamp (listed first in the map) tells too little, the
+    plant beside place 1 tells enough, in the first search over all three places."""
+    world, hypotheses = _places([0.0, 20.0, 40.0], {2: 3.0}, plants=(-3.0,))
+    for h, confidence in zip(hypotheses, [0.96, 0.035, 0.005]):
+        h.confidence = confidence
+    looks = _suggest(world, hypotheses)
+    assert [look.global_id for look in looks] == ["plant0"]
+    assert sorted(looks[0].where) == [1, 2, 3]
+
+
+@pytest.mark.parametrize("apart", [0.5, 0.99])
+def test_two_objects_of_a_label_within_look_tolerance_are_one_spot(apart):
+    """Plants 0.5 m apart beside place 1 are one spot: the nearer is suggested, and the look
+    after it is the lamp, another spot."""
+    world, hypotheses = _places([0.0, 100.0], {0: -4.0}, plants=(5.0, 5.0 + apart))
+    assert [look.global_id for look in _suggest(world, hypotheses)] == ["plant0", "lamp0"]
+
+
+def test_no_posed_hypothesis_has_nothing_to_suggest():
+    world, hypotheses = _places([0.0, 20.0], {0: 3.0})
+    for h in hypotheses:
+        h.pose = None
+    assert _suggest(world, hypotheses) == [] and _suggest(world, []) == []

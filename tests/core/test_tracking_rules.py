@@ -10,6 +10,7 @@ import math
 
 import numpy as np
 import pytest
+from scipy.optimize import brentq
 from scipy.stats import binom
 
 from semloc import Coverage, Localizer, ObjectMap, Prior, SemanticObject
@@ -102,6 +103,21 @@ def test_an_object_whose_only_chair_another_took_contradicts_beyond_the_move_dis
     assert found.against == 1 and found.towards == 1
 
 
+def test_without_a_move_distance_an_object_beyond_the_allowance_contradicts():
+    verdict = check(np.eye(4), [at(0.51)], {"l": np.array([0])}, GLOBALS, ALLOWANCE)
+    assert verdict == Verdict([], ["l"], [], 0)
+
+
+def test_check_skips_objects_without_candidates_and_counts_every_repeat():
+    """Objects without candidates say nothing and do not stop the others; two re-detections
+    of paired objects in one update are two repeats."""
+    objects = [at(0.0, i="new"), at(0.1, i="a"), at(10.1, i="b"), at(20.1, i="c")]
+    candidates = {"a": np.array([0]), "b": np.array([1]), "c": np.array([2])}
+    paired = {"a": 0, "b": 1}
+    verdict = check(np.eye(4), objects, candidates, GLOBALS, ALLOWANCE, 3.0, paired)
+    assert verdict.supported == [(0, "a"), (1, "b"), (2, "c")] and verdict.repeated == 2
+
+
 def test_the_evidence_against_counts_contradictions_changes_and_missing_objects():
     verdict = Verdict([(0, "a")], ["b", "c"], [(1, "d")], 0, 1.5)
     assert verdict.against == 2 + 1 + 1.5 and verdict.towards == 1
@@ -178,6 +194,79 @@ def test_an_object_overlapping_the_detection_that_took_its_chair_is_a_part_of_it
     assert judgement == ({} if found is None else {"l": found})
 
 
+@pytest.mark.parametrize(("x", "found"), [(0.5, None), (0.51, ("changed", 1))])
+def test_a_part_lies_within_the_allowance_of_the_chair_another_detection_took(x, found):
+    """Detection "a" takes chair 0; "b" overlaps it (within `part_m`): exactly at chair 0's
+    allowance (0.5 m) it is a part of "a" and says nothing, just beyond it is chair 1 moved."""
+    part_m = np.full(3, 0.5)
+    objects = [at(0.25, i="a"), at(x, i="b")]
+    candidates = {"a": np.array([0, 1]), "b": np.array([0, 1])}
+    verdict = one_to_one(np.eye(4), objects, candidates, TWO_CHAIRS, ALLOWANCE, 3.0, {}, (), part_m)
+    assert verdict.supported == [(0, "a")] and verdict.contradicting == []
+    assert verdict.changed == ([] if found is None else [(1, "b")])
+
+
+def test_one_to_one_skips_objects_without_candidates_and_judges_the_others():
+    """An object without candidates (absent or empty) says nothing, and does not stop the
+    objects after it from being judged."""
+    objects = [at(0.0, i="new"), at(0.0, i="none"), at(0.1, i="a")]
+    candidates = {"none": np.zeros(0, int), "a": np.array([0])}
+    verdict = one_to_one(np.eye(4), objects, candidates, TWO_CHAIRS, ALLOWANCE, 3.0, {})
+    assert verdict == Verdict([(0, "a")], [], [])
+
+
+def test_one_to_one_puts_each_object_where_the_pose_says():
+    """Under a pose that shifts the local frame by +5 m, a local object at -5 m is chair 0."""
+    pose = np.eye(4)
+    pose[0, 3] = 5.0
+    verdict = one_to_one(pose, [at(-4.9)], {"l": np.array([0, 1])}, TWO_CHAIRS, ALLOWANCE, 3.0, {})
+    assert verdict.supported == [(0, "l")]
+
+
+def test_an_object_that_took_its_chair_does_not_stop_the_others():
+    """ "a" takes chair 0 (its gap to chair 1 comes next in the nearest-first walk, and is
+    passed over); "b", 2 m beyond chair 1, then takes chair 1: moved."""
+    assert judged([at(0.1, i="a"), at(4.0, i="b")], {}) == {
+        "a": ("supported", 0),
+        "b": ("changed", 1),
+    }
+
+
+@pytest.mark.parametrize("local_id", ["A", "l", "~"])
+def test_a_tie_between_a_held_pair_and_a_new_object_goes_to_the_pair(local_id):
+    """Whatever the new object's id sorts as, at an equal gap the claim's pair keeps the chair."""
+    objects = [at(0.3, i=local_id)]
+    candidates = {local_id: np.array([0, 1])}
+    held = {0: np.array([-0.3, 0.0, 0.0])}
+    verdict = one_to_one(np.eye(4), objects, candidates, TWO_CHAIRS, ALLOWANCE, 3.0, held)
+    assert verdict.changed == [(1, local_id)] and verdict.supported == []
+
+
+def test_the_judgements_are_listed_by_local_id():
+    """Supported and changed objects are listed by their local id, not by map object."""
+    chairs = np.array([[0.0, 0, 0], [2.0, 0, 0], [10.0, 0, 0], [12.0, 0, 0]])
+    objects = [at(2.1, i="a"), at(0.1, i="b"), at(13.0, i="c"), at(11.0, i="d")]
+    candidates = {"a": np.array([1]), "b": np.array([0]), "c": np.array([3]), "d": np.array([2])}
+    allowance = np.full(4, 0.5)
+    verdict = one_to_one(np.eye(4), objects, candidates, chairs, allowance, 3.0, {})
+    assert verdict.supported == [(1, "a"), (0, "b")]
+    assert verdict.changed == [(3, "c"), (2, "d")]
+
+
+def test_the_sources_of_a_moved_object_are_listed_nearest_first():
+    """Three free chairs 0.8, 1 and 2 m from an object: it took the nearest, and its other
+    sources are the next nearest first, whatever their order in the map."""
+    chairs = np.array([[2.0, 0, 0], [-1.0, 0, 0], [0.8, 0, 0]])
+    candidates = {"l": np.array([0, 1, 2])}
+    verdict = one_to_one(np.eye(4), [at(0.0)], candidates, chairs, np.full(3, 0.5), 3.0, {})
+    assert verdict.changed == [(2, "l")] and verdict.sources == {"l": [2, 1, 0]}
+
+
+def test_a_footprint_across_a_map_without_up_is_across_z():
+    box = SemanticObject("box", "bed", [0, 0, 0], size=[0.6, 0.8, 2.0])
+    assert footprints(ObjectMap([box])) == pytest.approx([1.0])
+
+
 def test_a_footprint_is_the_widest_extent_across_up_of_the_box_else_of_the_points():
     turn = np.array([[0.0, -1, 0], [1, 0, 0], [0, 0, 1]])
     objects = [
@@ -225,6 +314,39 @@ def test_the_three_update_rule_weighs_the_support_of_all_three():
     assert recent_contradiction(verdicts, least=2) is True  # 3.5 against > 2 x 1 for
     verdicts = [against(1.0), against(1.0, towards=2), against(1.5)]
     assert recent_contradiction(verdicts, least=2) is False  # 3.5 against, not > 2 x 2
+
+
+def supported_updates(*latest: Verdict) -> list[Verdict]:
+    """Two updates of three supporting objects each, then `latest`."""
+    return [against(0, towards=3), against(0, towards=3), *latest]
+
+
+@pytest.mark.parametrize(("n", "towards", "ends"), [(2, 0, True), (1.99, 0, False), (4, 2, False), (4.01, 2, True)])  # fmt: skip
+def test_the_newest_update_alone_ends_a_claim_its_older_updates_supported(n, towards, ends):
+    """The older updates' support keeps the three-update rule quiet: the newest update ends
+    the claim by itself, at least `least` against and more than twice its own support."""
+    verdicts = supported_updates(against(n, towards))
+    assert recent_contradiction(verdicts[:-1], least=2) is False
+    assert recent_contradiction(verdicts, least=2) is ends
+
+
+@pytest.mark.parametrize(("last", "ends"), [(1.0, False), (1.01, True)])
+def test_three_updates_together_end_a_claim_more_than_twice_their_support(last, ends):
+    """1.5 + 1.5 + `last` against, 2 for: 4 is not more than twice 2, 4.01 is."""
+    verdicts = [against(1.5, towards=1), against(1.5, towards=1), against(last)]
+    assert recent_contradiction(verdicts, least=2) is ends
+
+
+def test_a_claim_weighs_only_its_latest_updates_together():
+    """1.5 missing objects, then 0.5 in each of three updates: the latest three hold 1.5
+    against, short of `contradiction` + 1; the first update's no longer counts."""
+    claim = track()
+    updates = [1.5, 0.5, 0.5, 0.5]
+    assert [claim.contradicted(Verdict([], [], [], 0, m)) for m in updates] == [0, 0, 0, 0]
+
+
+def test_no_update_contradicts_nothing():
+    assert recent_contradiction([], least=1) is False
 
 
 def track(
@@ -301,6 +423,36 @@ def test_new_objects_against_a_claim_are_unusual_by_the_binomial_tail_of_the_run
     assert rate.unusual(against, judged) is bool(against >= 2 and tail < UNUSUAL)
 
 
+@pytest.mark.parametrize(("against", "judged"), [(2, 3), (3, 6)])
+def test_new_objects_are_unusual_just_below_the_share_where_the_tail_is_unusual(against, judged):
+    """At the run's share where the binomial tail of `against` of `judged` is `UNUSUAL`: just
+    below that share they are unusual, just above it they are not."""
+    border = brentq(lambda p: binom.sf(against - 1, judged, p) - UNUSUAL, 1e-6, 0.5)
+
+    def rate(share: float) -> AgainstRate:  # 1000 judged objects at `share`, with the prior
+        return AgainstRate(share * (1000 + PRIOR_WEIGHT) - PRIOR_WEIGHT * PRIOR_AGAINST, 1000)
+
+    assert rate(border * (1 - 1e-6)).unusual(against, judged)
+    assert not rate(border * (1 + 1e-6)).unusual(against, judged)
+
+
+def test_the_runs_share_adds_up_every_claims_objects():
+    rate = AgainstRate()
+    rate.add(1, 3)
+    rate.add(2, 5)
+    assert (rate.against, rate.judged) == (3, 8)
+
+
+def test_an_object_judged_again_alike_is_not_new_to_the_runs_share():
+    """The same verdict on the same objects, update after update: only the first update's
+    objects are new (1 against of 3); the later updates add nothing to the run's share."""
+    rate = AgainstRate()
+    claim = track(rate=rate)
+    for _ in range(CONTRADICTION_UPDATES + 2):
+        claim.contradicted(Verdict([(10, "a"), (11, "b")], ["c"]))
+    assert (rate.against, rate.judged) == (1, 3)
+
+
 def test_a_clean_run_ends_a_claim_whose_new_objects_turn_against_it_as_its_places_never_did():
     """Four new supporting objects and two contradicting ones per update: the old rules keep
     the claim (twice as many for as against); a run whose claims saw 1 % of their objects
@@ -352,6 +504,9 @@ def test_the_claims_confidence_moves_with_its_evidence():
     assert math.isclose(sure.current_confidence(), 1 / (1 + math.exp(-CONFIDENCE_CAP)))
     unsure = track(confidence=1e-6)  # the cap holds both ways
     assert math.isclose(unsure.current_confidence(), 1 / (1 + math.exp(CONFIDENCE_CAP)))
+    certain = track(confidence=1.0)  # a certain search is capped too
+    assert math.isclose(certain.current_confidence(), 1 / (1 + math.exp(-CONFIDENCE_CAP)))
+    assert track(confidence=None).current_confidence() == 0.5  # no confidence: even odds
 
 
 def test_each_kind_of_judged_object_moves_the_confidence_by_its_logit():
@@ -372,12 +527,27 @@ def test_a_track_round_trips_through_its_state_and_reads_an_old_one():
     claim.contradicted(Verdict([(5, "a")], ["b"], [(7, "c")], 1, 0.5))
     claim.accept(Verdict([(5, "a")], ["b"], [(7, "c")], 1, 0.5))
     state = json.loads(json.dumps(claim.state(ids)))
+    assert state["confidence"] == 0.99 and state["score"] == 3.0
     again = Track.restored(state, ids.index, TrackingConfig())
     assert again.state(ids) == state and again.counts() == claim.counts()
     old = {**state, "verdicts": [v[:2] for v in state["verdicts"]]}
-    for key in ("judged", "missing"):
+    for key in ("judged", "missing", "recent"):
         old.pop(key)
-    assert Track.restored(old, ids.index, TrackingConfig()).counts()["supported"] == 0
+    restored = Track.restored(old, ids.index, TrackingConfig())
+    assert restored.counts()["supported"] == 0
+    upgraded = restored.state(ids)  # an old verdict: no change, no repeat, nothing missing
+    assert upgraded["verdicts"] == [[*v, [], 0, 0.0] for v in old["verdicts"]]
+    assert upgraded["missing"] == 0.0 and upgraded["recent"] == []
+
+
+def test_a_restored_track_shares_the_runs_against_rate():
+    """A restored claim adds its older updates' objects to the run's share it is given."""
+    ids = [f"g{i}" for i in range(40)]
+    rate = AgainstRate()
+    claim = Track.restored(track().state(ids), ids.index, TrackingConfig(), rate)
+    for k in range(CONTRADICTION_UPDATES + 1):
+        claim.contradicted(Verdict([(10 + k, f"a{k}"), (20 + k, f"b{k}")], [f"c{k}"]))
+    assert (rate.against, rate.judged) == (1, 3)
 
 
 # the run's change report ---------------------------------------------------------------------
@@ -424,6 +594,10 @@ def test_the_prior_decides_among_places_whose_evidence_is_within_the_margin():
     ranked = [hypothesis(1, 3.0, False), hypothesis(2, 3.0, True), hypothesis(3, 3.0, False)]
     assert [h.rank for h in prior_first(list(ranked))] == [1, 2, 3]
     assert prior_first(list(ranked)) == ranked
+    # without the evidence of either, nothing tells the places apart: the order stays
+    for best, candidate in [(3.0, None), (None, 3.0)]:
+        ranked = [hypothesis(1, best, True), hypothesis(2, candidate, False)]
+        assert prior_first(list(ranked)) == ranked and ranked[0].rank == 1
 
 
 def test_the_missing_penalty_forgives_the_gone_share():

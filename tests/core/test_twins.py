@@ -11,7 +11,15 @@ from scipy.spatial import cKDTree
 
 from semloc import Localizer, LocalizerConfig, ObjectMap, SemanticObject
 from semloc.transforms import yaw_pose
-from semloc.twins import copy_holds, label_codes, twin_lead, twin_pairs, twins
+from semloc.twins import (
+    _anchor_pairs,
+    _motions,
+    copy_holds,
+    label_codes,
+    twin_lead,
+    twin_pairs,
+    twins,
+)
 
 UP = np.array([0.0, 0.0, 1.0])
 ROOM = [  # (label, x, y, z): a room whose labels are all different
@@ -176,3 +184,111 @@ def test_copy_holds_a_map_object_of_the_kinds_within_its_allowance(kinds, x, hel
     at = np.array([x, 0.0, 0.0])
     found = copy_holds(S, at, np.array(kinds), positions, codes, allowance, cKDTree(positions))
     assert found is held
+
+
+def test_twin_pairs_take_the_nearest_object_of_the_label_each_once():
+    """A pair moved to (10, 0, 0) takes the nearer of two chairs within the tolerance (the
+    one 0.1 m off, not the one 0.15 m off listed first); a second pair moved there finds it
+    taken and takes the other chair; with one chair, it takes none."""
+    positions = np.array([[0.0, 0, 0], [9.85, 0, 0], [10.0, 0.1, 0], [0.05, 0, 0]])
+    codes = np.zeros(4, dtype=np.int64)
+    S = yaw_pose(0.0, [10.0, 0.0, 0.0])
+    tree = cKDTree(positions)
+    assert twin_pairs(S, [(0, 7)], positions, codes, 0.3, tree) == [(2, 7)]
+    assert twin_pairs(S, [(0, 7), (3, 8)], positions, codes, 0.3, tree) == [(2, 7), (1, 8)]
+    one = positions[[0, 2]], codes[:2], cKDTree(positions[[0, 2]])
+    assert twin_pairs(S, [(0, 7), (0, 8)], *one[:2], 0.3, one[2]) == [(1, 7)]
+
+
+@pytest.mark.parametrize(
+    ("b2", "kept"),
+    [((9.75, 0), True), ((9.7, 0), False), ((10.0, 0.25), True), ((10.0, 0.3), False)],
+)
+def test_an_anchor_pair_matches_map_pairs_at_its_distance_and_height_within_the_tolerance(b2, kept):
+    """The anchor pair (a, b) lies 2 m apart along x at one height; a map pair of the same
+    labels (a at 8 m) matches it when its distance and its height difference are each within
+    0.25 m of the anchor pair's (1.75 m apart, or 0.25 m higher, exactly: kept)."""
+    positions = np.array([[0.0, 0, 0], [2.0, 0, 0], [8.0, 0, 0], [b2[0], 0, b2[1]]])
+    codes = np.array([0, 1, 0, 1], dtype=np.int64)
+    motions = _motions(positions, codes, UP, 0, 1, 0.25, cKDTree(positions))
+    moves = sorted(round(float(S[0, 3]), 6) for S in motions)
+    assert moves == ([0.0, 8.0] if kept else [0.0])
+
+
+def test_anchor_pairs_take_the_rarest_labels_each_with_its_rarest_farthest_partner():
+    """Members 0 (label A) and 1 (B) are rarer than 2, 3, 4 (C): 0 pairs with 1, its rarest
+    partner beyond `SPAN` across up; 1 with the farthest unused C (4, 4 m off); 2 with the
+    only one left, 0.8 m across (nearer than `SPAN`: the farthest there is; 5 m above it does
+    not count); 3 and 4 find no unused member."""
+    place = [[0.0, 0, 0], [3.0, 0, 0], [1.0, 0, 0], [1.8, 0, 5], [-1.0, 0, 0]]
+    positions = np.array(place + [[100 + x, y, z] for x, y, z in place])
+    codes = np.array([0, 1, 2, 2, 2] * 2)
+    assert _anchor_pairs(positions, codes, np.arange(5), UP, 5) == [(0, 1), (1, 4), (2, 3)]
+
+
+def test_a_copy_found_by_one_anchor_pair_is_kept_whatever_the_next_pairs_find():
+    """The place above, its copy 100 m off without member 3: the pairs (0, 1) and (1, 4) find
+    the copy, the last pair (2, 3) only the place itself."""
+    place = [[0.0, 0, 0], [3.0, 0, 0], [1.0, 0, 0], [1.8, 0, 5], [-1.0, 0, 0]]
+    copy = [[100 + x, y, z] for k, (x, y, z) in enumerate(place) if k != 3]
+    positions = np.array(place + copy)
+    codes = np.array([0, 1, 2, 2, 2, 0, 1, 2, 2])
+    found = twins(positions, codes, UP, np.arange(5), 0.3)
+    assert len(found) == 1
+    np.testing.assert_allclose(found[0], yaw_pose(0.0, [100.0, 0.0, 0.0]), atol=1e-9)
+
+
+def _turned_building(up: np.ndarray, S: np.ndarray) -> tuple[ObjectMap, np.ndarray]:
+    """`ROOM`, its objects each at another height, and its copy moved by `S` about z; both
+    turned so that z becomes `up`: the map and the copy's motion in it."""
+    e3 = up / np.linalg.norm(up)
+    e1 = np.cross(e3, [1.0, 0.0, 0.0]) if abs(e3[0]) < 0.9 else np.cross(e3, [0.0, 1.0, 0.0])
+    e1 /= np.linalg.norm(e1)
+    Q = np.eye(4)
+    Q[:3, :3] = np.column_stack([e1, np.cross(e3, e1), e3])
+    objects = []
+    for i, T in enumerate([np.eye(4), S]):
+        for k, (label, x, y, _) in enumerate(ROOM):
+            p = Q @ T @ np.array([x, y, 0.3 * k, 1.0])
+            objects.append(SemanticObject(id=f"{label}-{i}", label=label, position=p[:3]))
+    return ObjectMap(objects, up=e3), Q @ S @ Q.T
+
+
+@pytest.mark.parametrize("up", [(0.0, 0.0, 1.0), (0.0, 2.0, 0.0), (1.0, 2.0, 2.0)])
+def test_a_copy_is_found_about_any_up_axis_of_any_length(up):
+    """Objects at different heights (every anchor pair has a height difference), the map's up
+    along z, y or tilted, given at any length: the copy's motion about it is found."""
+    up = np.array(up)
+    m, S = _turned_building(up, yaw_pose(np.pi / 3, [25.0, -10.0, 0.0]))
+    found = twins(m.positions, label_codes(m.labels), up, np.arange(len(ROOM)), 0.3)
+    assert len(found) == 1
+    np.testing.assert_allclose(found[0], S, atol=1e-9)
+
+
+def test_a_place_of_three_objects_has_twins():
+    S = yaw_pose(0.5, [30.0, 0.0, 0.0])
+    assert len(find(building([S]), range(3))) == 1
+
+
+SQUARE = [("sofa", 0.0, 0.0), ("table", 2.0, 0.5), ("lamp", 3.5, 2.5), ("tv", 2.5, 3.0)]
+"""A place whose centroid (2, 1.5) and copies' moves are exact in binary."""
+
+
+def _square_copies(shifts: list[float]) -> ObjectMap:
+    objects = [SemanticObject(f"{label}-{i}", label, [x + dx, y, 0.5])
+               for i, dx in enumerate([0.0, *shifts]) for label, x, y in SQUARE]  # fmt: skip
+    return ObjectMap(objects, up=UP)
+
+
+@pytest.mark.parametrize(("shifts", "found"), [([4.0], [4.0]), ([3.75], []), ([8.0, 12.0], [8.0, 12.0])])  # fmt: skip
+def test_twins_lie_at_least_apart_from_the_place_and_from_each_other(shifts, found):
+    """A copy 4 m off (`apart`) is a twin, one 3.75 m off is the place's own repetition; two
+    copies 4 m from each other are two twins."""
+    m = _square_copies(shifts)
+    moves = twins(m.positions, label_codes(m.labels), UP, np.arange(len(SQUARE)), 0.25)
+    assert sorted(float(S[0, 3]) for S in moves) == found
+
+
+def test_at_most_eight_twins_are_listed():
+    copies = [yaw_pose(0.0, [20.0 * k, 0.0, 0.0]) for k in range(1, 10)]
+    assert len(find(building(copies), range(len(ROOM)))) == 8
