@@ -94,7 +94,15 @@ from semloc.tracking import (
     recent_contradiction,
 )
 from semloc.transforms import centre_residual
-from semloc.twins import MIN_TWIN_PAIRS, copy_holds, label_codes, twin_lead, twin_pairs, twins
+from semloc.twins import (
+    ANCHORS,
+    MIN_TWIN_PAIRS,
+    copy_holds,
+    label_codes,
+    twin_lead,
+    twin_pairs,
+    twins,
+)
 from semloc.verification import (
     Evidence,
     MapSupport,
@@ -235,7 +243,8 @@ class Localizer:
         self._map_tree: cKDTree | None = None  # the map's positions, for looks and twins
         self._unseen_of: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}  # this update's, by pose
         self._label_codes: np.ndarray | None = None  # the map's labels as integers (twins)
-        self._twin_motions: dict[tuple[int, ...], list[np.ndarray]] = {}  # map objects -> twins
+        self._twin_motions: dict[tuple[int, ...], list[np.ndarray]] = {}  # (anchors, map
+        # objects) -> twins
         self._track_twins: tuple[np.ndarray, list[np.ndarray]] | None = None  # (its pairs'
         # map objects when found, the copies) of the tracked place where the robot is
         self._twin_fits: deque[list[list[str]] | None] = deque(maxlen=TWIN_UPDATES)
@@ -350,7 +359,7 @@ class Localizer:
         if twins_state is None:
             return
         members = np.array([self.global_map.index_of(g) for g in twins_state["members"]], int)
-        self._track_twins = (members, self._twin_motions_of(members))
+        self._track_twins = (members, self._twin_motions_of(members, TRACK_ANCHORS))
         self._twin_fits.extend(  # (a state of counts per copy, before the objects: none)
             f if f is None or all(isinstance(keys, list) for keys in f) else None
             for f in twins_state["fits"]
@@ -989,13 +998,16 @@ class Localizer:
             self._label_codes = label_codes(self.global_map.labels)
         return self._label_codes
 
-    def _twin_motions_of(self, members: np.ndarray) -> list[np.ndarray]:
-        """The twins of the map objects `members` (`semloc.twins`), kept for the latest
-        `TWINS_KEPT` sets of members: a set that shares most of its members with a kept one
-        is the same place (grown by an object or two) and has its copies."""
-        key = tuple(sorted(members.tolist()))
+    def _twin_motions_of(self, members: np.ndarray, anchors: int = ANCHORS) -> list[np.ndarray]:
+        """The twins of the map objects `members` (`semloc.twins`, through `anchors` anchor
+        pairs), kept for the latest `TWINS_KEPT` sets of members: a set that shares most of
+        its members with a kept one is the same place (grown by an object or two) and has its
+        copies."""
+        found = tuple(sorted(members.tolist()))
+        key = (anchors, *found)
         for kept in reversed(self._twin_motions):
-            if len(set(kept) & set(key)) >= 0.75 * max(len(key), len(kept)):
+            same = kept[0] == anchors and len(set(kept[1:]) & set(found))
+            if same and same >= 0.75 * max(len(found), len(kept) - 1):
                 return self._twin_motions[kept]
         if key not in self._twin_motions:
             if len(self._twin_motions) >= TWINS_KEPT:
@@ -1004,7 +1016,7 @@ class Localizer:
             self._twin_motions[key] = [] if up is None else twins(
                 self.global_map.positions, self._codes(), up, members,
                 self.config.verification.inlier_tolerance, tree=self._tree(), apart=PLACE_APART,
-                most=TWINS_WEIGHED,
+                most=TWINS_WEIGHED, anchors=anchors,
             )  # fmt: skip
         return self._twin_motions[key]
 
@@ -1030,13 +1042,13 @@ class Localizer:
         The copies are looked up only when an update has objects against the place or
         missing from its look."""
         against = {l for _, l in verdict.changed} | set(verdict.contradicting)
-        members = np.array(list(track.pairs.values()))
+        members = np.array([g for g, _ in track.newest(self.config.tracking.track_pairs)])
         held = self._track_twins[0] if self._track_twins else np.zeros(0, dtype=int)
         if np.isin(members, held).sum() < 0.5 * len(members):  # the robot walked on
             if not against and not len(unseen):
                 self._twin_fits.append(None)
                 return 0
-            self._track_twins = (members, self._twin_motions_of(members))
+            self._track_twins = (members, self._twin_motions_of(members, TRACK_ANCHORS))
             self._twin_fits.clear()  # (counted per copy)
         motions = self._track_twins[1]
         if not motions:
@@ -1223,6 +1235,11 @@ better than the place (`Localizer._carried_to_twin`) to end the claim."""
 TWIN_UPDATES = 12
 """The latest updates weighed for a copy (`TWIN_KIDNAP`): a view shows what tells look-alike
 rooms apart one object at a time, often several updates apart."""
+TRACK_ANCHORS = 8
+"""Anchor pairs tried for the copies of a tracked place (`semloc.twins.ANCHORS` before a
+claim): the copy the robot may be carried into must be among them, and a tracked place looks
+its copies up only when its objects change; a copy keeping a random 70 % of the objects is
+missed about once in 200 (three pairs: once in eight)."""
 TWINS_WEIGHED = 4
 """The copies of a place weighed: those that hold most of its objects."""
 TWINS_KEPT = 64

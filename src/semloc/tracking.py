@@ -323,12 +323,15 @@ def footprints(global_map: ObjectMap) -> np.ndarray:
     up = np.array([0.0, 0.0, 1.0]) if global_map.up is None else global_map.up
     across = np.eye(3) - np.outer(up, up)
     corners = np.array(np.meshgrid(*[[-0.5, 0.5]] * 3)).reshape(3, -1).T
+    sizes = global_map.sizes
+    boxed = ~np.isnan(sizes).any(axis=1)
     found = np.zeros(len(global_map))
-    for i, (size, rotation) in enumerate(zip(global_map.sizes, global_map.rotations)):
-        if not np.isnan(size).any():  # the widest pair of the box's corners
-            flat = (corners * size) @ rotation.T @ across
-            found[i] = np.max(np.linalg.norm(flat[:, None] - flat[None], axis=2))
-        elif (points := global_map[i].points) is not None and len(points):
+    # A box is symmetric about its centre: its widest pair of corners, flattened across up,
+    # is a corner and its opposite, twice the farthest corner from the centre.
+    turned = np.einsum("bij,bkj->bki", global_map.rotations[boxed], corners * sizes[boxed, None])
+    found[boxed] = 2 * np.linalg.norm(turned @ across, axis=2).max(axis=1, initial=0.0)
+    for i in np.flatnonzero(~boxed):
+        if (points := global_map[int(i)].points) is not None and len(points):
             found[i] = np.linalg.norm(np.ptp(points @ across, axis=0))
     return found
 

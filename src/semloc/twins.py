@@ -31,10 +31,11 @@ from scipy.spatial import cKDTree
 
 MIN_TWIN_PAIRS = 3
 """A twin places at least this many of the objects (fewer fix no pose)."""
-ANCHORS = 8
-"""Anchor pairs tried: a copy is found through a pair it holds both members of, and a copy of
-an old or partial room (one keeping a random 70 % of the objects) holds a given pair about half
-the time; eight pairs miss it about once in 200 (three, once in eight)."""
+ANCHORS = 3
+"""Anchor pairs tried by default: a copy is found through a pair it holds both members of, and
+a copy of an old or partial room (one keeping a random 70 % of the objects) holds a given pair
+about half the time, so three pairs miss it about once in eight and eight about once in 200
+(each pair more costs a match over the map's pairs of two more common labels)."""
 
 
 def label_codes(labels: np.ndarray) -> np.ndarray:
