@@ -245,8 +245,6 @@ class LiveNode:
         if self._initialpose is not None:
             for message in samples(self._initialpose):
                 self._estimate = message  # the latest estimate wins
-        if self._estimate is not None:
-            self._apply_estimate()
         self._read_camera()
         if self._points is not None:
             for message in samples(self._points):
@@ -256,7 +254,10 @@ class LiveNode:
         for message in samples(self._detections):
             self._waiting.append((time.monotonic(), message))
         answered = 0
-        while self._waiting:
+        while True:
+            self._apply_estimate_when_due()  # (before each detection: in stamp order)
+            if not self._waiting:
+                break
             received, message = self._waiting[0]
             waited = time.monotonic() - received
             frame = self._frame(message, waited)
@@ -370,6 +371,15 @@ class LiveNode:
             self._skip("detection messages whose camera no static transform places (used "
                        "without coverage)", str(exc))  # fmt: skip
             return None
+
+    def _apply_estimate_when_due(self) -> None:
+        """Apply the pending pose estimate once no waiting detection is stamped before it: a
+        detection made before the estimate is answered without it, however late it is read
+        (a busy node may take both in one poll), as `bag localize` reads a bag in order."""
+        if self._estimate is not None:
+            stamp = msgs.stamp_ns(self._estimate.header.stamp)
+            if all(msgs.stamp_ns(m.header.stamp) >= stamp for _, m in self._waiting):
+                self._apply_estimate()
 
     def _apply_estimate(self) -> None:
         """The pending pose estimate as the prior from the next update on, once the odometry
