@@ -221,7 +221,11 @@ def check(
     return Verdict(supported, contradicting, changed, repeated)
 
 
-def _a_part(at, found, gaps, allowance, taken, placed, part_m) -> bool:
+def _a_part(
+    at: np.ndarray, found: np.ndarray, gaps: np.ndarray, allowance: np.ndarray,
+    taken: Mapping[int, str], placed: Mapping[str, tuple[np.ndarray, ...]],
+    part_m: np.ndarray | None,
+) -> bool:  # fmt: skip
     """Whether an object at `at` is a part of a map object that another object took: within
     that object's allowance, and within `part_m` of the object that took it."""
     if part_m is None:
