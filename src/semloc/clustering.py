@@ -141,7 +141,7 @@ class ClusteringConfig(BaseModel):
 class MergeCriterion:
     """The merge criterion: what two candidates add to a set's score, and whether they may
     share a set at all.  The rule itself is compiled (`_clustering_fast.agreement`, `gate`,
-    `gate_reach`, the ones the clustering runs); these methods apply it to arrays.
+    `gate_window`, the ones the clustering runs); these methods apply it to arrays.
 
     * `score` is the paper's h = min(d^B/d^A, d^A/d^B) (with `min_distance`), at most
       `UPPER_BOUND`; the clustering's exact pruning bounds (`_survival_floor`, `_best_merges`)
@@ -500,15 +500,15 @@ class HierarchicalClustering:
 
         Few pairs: all of them, tested in one compiled pass; many: a sweep along the map's
         longest axis per pair of local objects (only global pairs within the gate's reach)."""
-        cfg = self.config
+        rule = self.criterion
         candidates = (added, covered, self._cand_g, self._cand_l, self._global_positions)
-        gate = (cfg.distance_tolerance, cfg.gamma, cfg.min_distance)
+        gate = (rule.tolerance, rule.gamma, rule.min_distance)
         distances = self._local_distances
         if len(added) * (len(added) + len(covered)) <= _BRUTE_FORCE_PAIRS:
             arguments: tuple = (*candidates, distances, *gate)
             kernel = compatible_among
         else:
-            reach = self.criterion.window(distances)[1] * (1 + 1e-9) + 1e-12  # gate decides
+            reach = rule.window(distances)[1] * (1 + 1e-9) + 1e-12  # the gate decides
             order = self._sweep_order()
             arguments = (*candidates, distances, reach, *gate, *order, _WINDOW_ENTRIES)
             kernel = compatible_sweep
