@@ -49,7 +49,7 @@ from semloc.association import (
     label_report,
 )
 from semloc.changes import Changes, ChangesConfig, RunChanges, answer_changes
-from semloc.clustering import ClusteringConfig, HierarchicalClustering, SetPairs
+from semloc.clustering import ClusteringConfig, HierarchicalClustering, MergeCriterion, SetPairs
 from semloc.coverage import (
     GONE_SHARE,
     Accounting,
@@ -826,7 +826,7 @@ class Localizer:
         found = [self._prior_gated(o, self._found[o.id][1]) for o in objects]
         positions = np.array([o.position for o in objects]).reshape(-1, 3)
         cfg = self.config.clustering
-        support = self._places.support(positions, found, cfg.gamma, cfg.distance_tolerance)
+        support = self._places.support(positions, found, MergeCriterion.of(cfg))
         kept = self._places.kept(support, found)
         retrieved = {o.id: k for o, k in zip(objects, kept)}
         held = {i: self._retrieved[i] for i in self._local if i in self._retrieved}
