@@ -16,7 +16,7 @@ from scipy.stats import binom
 from semloc import Coverage, Localizer, ObjectMap, Prior, SemanticObject
 from semloc.changes import RunChanges
 from semloc.decision import RIVAL_LOGIT_GAP, missing_penalty, prior_first
-from semloc.localizer import NEWEST_CONTRADICT, STALE, TWIN_DOUBTED, TWIN_UPDATES
+from semloc.localizer import DOUBTED, NEWEST_CONTRADICT, STALE, TWIN_DOUBTED, TWIN_UPDATES
 from semloc.results import Hypothesis
 from semloc.tracking import (
     CONFIDENCE_CAP,
@@ -454,6 +454,20 @@ def test_a_claim_is_doubted_when_its_newest_objects_hold_an_unlikely_share_again
     assert calm.contradicted(view) == 0 and not calm.doubted()
 
 
+def test_an_update_against_the_place_restarts_a_clean_run_from_it_and_a_hard_run_from_three():
+    """Two new objects against and none for end a claim by the newest update alone.  Unusual
+    at a 5 % share (tail 0.0025 < `UNUSUAL`): the search restarts from that update; at 37.5 %
+    (0.14) from the latest `CONTRADICTION_UPDATES` updates."""
+    calm = [Verdict([(10, "a")], []), Verdict([(11, "b")], [])]
+    view = Verdict([], ["x", "y"])
+    assert recent_contradiction([view], least=2)
+    assert not recent_contradiction([*calm, view][:2], least=2)
+    for share, restart in [(0.05, 1), (0.375, CONTRADICTION_UPDATES)]:
+        claim = track(rate=at_share(share))
+        assert [claim.contradicted(v) for v in calm] == [0, 0]
+        assert claim.contradicted(view) == restart, share
+
+
 def test_a_doubt_weighs_the_newest_judged_objects_across_updates():
     """Updates without new objects change nothing (a robot carried off sees nothing for a
     while: no news); a doubt lifts once `DOUBT_OBJECTS` - 1 newer objects support the place
@@ -691,6 +705,23 @@ def claimed(global_map: ObjectMap, unseen: tuple[str, ...] = ()) -> Localizer:
     result = localizer.update(objects[5:])
     assert result.status == "localized" and np.allclose(result.pose, np.eye(4), atol=0.05)
     return localizer
+
+
+def test_a_claim_whose_newest_objects_speak_against_it_is_doubted_then_claimed_again():
+    """In a run whose claims saw 5 % of their objects against them, four objects of the room
+    and two chairs where it has none: no end rule fires, but two of the newest six against is
+    unlikely at that share (`Track.doubted`); five more of the room's objects lift the doubt
+    (one against of the newest six)."""
+    building = ObjectMap(room(), up=[0, 0, 1])
+    localizer = claimed(building, unseen=("a6", "a7", "a8", "a9"))
+    localizer._against.against, localizer._against.judged = 46.0, 1000.0  # the run's share
+    rest = local([o for o in building if o.id in {"a6", "a7", "a8", "a9"}])
+    strays = [SemanticObject(f"s{i}", "chair", [20.0 + 5 * i, 20.0, 0.5]) for i in range(2)]
+    doubted = localizer.update([*rest, *strays])
+    assert doubted.status == "ambiguous" and doubted.reason == DOUBTED
+    assert localizer.tracking and doubted.best.confidence <= 0.5
+    again = localizer.update(local(room(), ids="m")[:5])  # the room's objects, seen anew
+    assert again.status == "localized" and np.allclose(again.pose, np.eye(4), atol=0.05)
 
 
 def test_a_moved_object_is_reported_moved_and_does_not_move_the_pose():
