@@ -69,16 +69,20 @@ def test_from_dict_is_the_inverse_of_to_dict():
 @pytest.mark.parametrize(
     ("change", "message"),
     [
-        ({"status": "maybe"}, "'status' must be one of"),
+        ({"status": "maybe"}, "'status': Input should be 'localized', 'ambiguous' or 'failed'"),
         (
-            {"hypotheses": [{"pairs": [], "score": "high"}]},
-            "'hypotheses[0].score' must be a number",
+            {"hypotheses": [{"rank": 1, "pairs": [], "pose": None, "score": "high"}]},
+            "'hypotheses[0].score': Input should be a valid number",
         ),
-        ({"changes": {"moved": [{"global": "g"}]}}, "'changes.moved[0]' must be"),
-        ({"changes": {"moved": [], "new": 3}}, "'changes' is not a changes object"),
-        ({"steps": [{"when": 1}]}, "'steps' are not steps"),
+        ({"changes": {"moved": [{"global": "g"}]}}, "'changes.moved[0].local': Field required"),
+        ({"changes": {"moved": [], "new": 3}}, "'changes.new': Input should be a valid list"),
+        ({"steps": [{"when": 1}]}, "'steps[0].step': Field required"),
+        ({"pose": [[1, 0, 0, 2e6], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]},
+         "'pose': the translation is beyond"),
+        ({"pose": [[2, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]},
+         "'pose': pose: the rotation part is not a proper rotation"),
     ],
-)
+)  # fmt: skip
 def test_from_dict_names_what_is_wrong(change, message):
     document = {**json.loads(result().to_json()), **change}
     with pytest.raises(ValueError, match=re.escape(message)):

@@ -380,18 +380,20 @@ def test_camera_info_makes_each_update_say_what_the_camera_covered(walk, tmp_pat
                      "/camera_info", "--range", "6", "--jsonl", str(looks)) == 0  # fmt: skip
     results = [line["result"] for line in _lines(looks)]
     supported = [r["support"] for r in results if r["support"] is not None]
-    assert supported and all(s["expected"] is not None for s in supported)
-    assert any(s["expected"] > 0 for s in supported)
+    assert supported and all(s["n_expected"] is not None for s in supported)
+    assert any(s["n_expected"] > 0 for s in supported)
     best = [r["hypotheses"][0] for r in results if r["hypotheses"] and r["hypotheses"][0]["pose"]]
-    assert best and all("missing" in h and "expected" in h for h in best)
+    assert best and all("n_missing" in h and "n_expected" in h for h in best)
     assert results[-1]["status"] == "localized"
     last = results[-1]["support"]
-    assert len(last["missing_ids"]) == min(last["missing"], 50)
-    said = f"support: {last['pairs']} pairs; {last['missing']} of {last['expected']} map objects"
+    assert len(last["missing_ids"]) == min(last["n_missing"], 50)
+    said = (
+        f"support: {last['n_pairs']} pairs; {last['n_missing']} of {last['n_expected']} map objects"
+    )
     assert said in " ".join(capsys.readouterr().out.split())
     plain = [line["result"] for line in _lines(walk / "out.jsonl")] if (
         walk / "out.jsonl").exists() else []  # fmt: skip
-    assert all(r["support"] is None or r["support"]["missing"] is None for r in plain)
+    assert all(r["support"] is None or r["support"]["n_missing"] is None for r in plain)
 
 
 def test_a_camera_info_topic_of_another_type_ends_in_one_line(walk, tmp_path, capsys):
