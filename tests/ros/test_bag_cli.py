@@ -121,6 +121,25 @@ def test_the_mcap_output_reads_back_with_its_topics_and_schemas(localized):
     )
 
 
+def test_every_line_and_status_is_the_one_answer_schema(localized):
+    """The `--jsonl` lines are `schema.BagLine`s and every `/semloc/status` a
+    `schema.StatusAnswer` (the localize JSON at its stamp, as the ROS 2 node publishes it)."""
+    from mcap.reader import make_reader
+
+    from semloc import schema
+
+    lines = _lines(localized / "out.jsonl")
+    assert [schema.problems(line, schema.BagLine) for line in lines] == [[]] * len(lines)
+    with open(localized / "out.mcap", "rb") as handle:
+        statuses = [json.loads(msgs.deserialize(m.data, s.name).data)
+                    for s, c, m in make_reader(handle).iter_messages(topics=["/semloc/status"])]  # fmt: skip
+    assert len(statuses) == len(lines)
+    assert [schema.problems(s, schema.StatusAnswer) for s in statuses] == [[]] * len(lines)
+    for status, line in zip(statuses, lines):
+        assert status["stamp"] == line["stamp"] and status["status"] == line["result"]["status"]
+        assert status["hypotheses"] == line["result"]["hypotheses"][:3]  # pairs: a list
+
+
 @pytest.mark.parametrize("storage", ["sqlite3", "mcap"])
 @pytest.mark.parametrize("points", [False, True])
 def test_bags_built_by_rosbags_localize(tmp_path, storage, points):
