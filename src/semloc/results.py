@@ -336,7 +336,7 @@ def parse_answer(data: Any, model: type[AnswerModel] = schema.Answer) -> AnswerM
     if not isinstance(data, dict):
         raise ValueError("a result must be an object")
     try:
-        return model.model_validate(data)
+        return model.model_validate(data, context=schema.PARSING)
     except ValidationError as exc:
         raise ValueError(schema.field_error(exc)) from None
 

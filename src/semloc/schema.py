@@ -25,7 +25,6 @@ Conventions, the same in every part:
 
 from __future__ import annotations
 
-import math
 from typing import Annotated, Any, ClassVar, Literal
 
 from pydantic import (
@@ -37,6 +36,7 @@ from pydantic import (
     PlainSerializer,
     SerializerFunctionWrapHandler,
     ValidationError,
+    ValidationInfo,
     model_serializer,
     model_validator,
 )
@@ -52,15 +52,10 @@ def _rounded(digits: int) -> PlainSerializer:
     return PlainSerializer(lambda v: round(v, digits), return_type=float)
 
 
-def _finite(value: float) -> float:
-    if not math.isfinite(value):
-        raise ValueError("must be a finite number")
-    return value
-
-
-Number = Annotated[float, AfterValidator(_finite)]
-Rounded3 = Annotated[float, AfterValidator(_finite), _rounded(3)]
-Rounded6 = Annotated[float, AfterValidator(_finite), _rounded(6)]
+Finite = Field(allow_inf_nan=False)
+Number = Annotated[float, Finite]
+Rounded3 = Annotated[float, Finite, _rounded(3)]
+Rounded6 = Annotated[float, Finite, _rounded(6)]
 
 
 def _as_id(value: Any) -> Any:
@@ -78,7 +73,11 @@ def _listed(value: Any) -> Any:
     return value.tolist() if hasattr(value, "tolist") else value
 
 
-def _rigid(rows: list[list[float]]) -> list[list[float]]:
+def _rigid(rows: list[list[float]], info: ValidationInfo) -> list[list[float]]:
+    """A pose read from a document is a rigid transform (one the core built is: not checked
+    again, see `PARSING`)."""
+    if not (info.context or {}).get("parsing"):
+        return rows
     pose = as_pose(rows)
     if abs(pose[:3, 3]).max() > MAX_COORDINATE:
         raise ValueError(f"the translation is beyond ±{MAX_COORDINATE:g} m (the input limit)")
@@ -107,10 +106,14 @@ Point = Annotated[
 ]
 
 
+PARSING = {"parsing": True}
+"""The validation context of a document read (`model_validate(data, context=PARSING)`): its
+poses are checked to be rigid transforms."""
+
+
 class Part(BaseModel):
-    """A part of an answer: unknown keys kept (see `unknown_keys`); the fields named in
-    `OMITTED_IF_NONE` left out when None (and not required in the schema of what is
-    written)."""
+    """A part of an answer: unknown keys kept (see `problems`); what is always written is
+    required in the schema of what is written."""
 
     model_config = ConfigDict(
         extra="allow",
@@ -119,6 +122,11 @@ class Part(BaseModel):
         json_schema_extra=lambda schema, model: _optional_when_omitted(schema, model),
     )
     OMITTED_IF_NONE: ClassVar[frozenset[str]] = frozenset()
+
+
+class Omitting(Part):
+    """A part whose fields named in `OMITTED_IF_NONE` are left out when None (and are not
+    required in the schema of what is written)."""
 
     @model_serializer(mode="wrap")
     def _omit_nones(self, handler: SerializerFunctionWrapHandler):
@@ -142,7 +150,7 @@ class Pair(Part):
     local: Id = Field(description="The local object's id.")
 
 
-class Hypothesis(Part):
+class Hypothesis(Omitting):
     """One candidate answer: an association set and the pose it implies."""
 
     OMITTED_IF_NONE = frozenset({"outside_prior", "n_missing", "n_expected"})
@@ -192,7 +200,7 @@ class Step(Part):
     )
 
 
-class Moved(Part):
+class Moved(Omitting):
     """A map object seen elsewhere."""
 
     OMITTED_IF_NONE = frozenset({"evidence", "last_seen"})
@@ -203,7 +211,7 @@ class Moved(Part):
     last_seen: int | None = Field(None, description="The `seen` of the latest of them (a run).")
 
 
-class Changes(Part):
+class Changes(Omitting):
     """What changed since the map was made, under the best hypothesis."""
 
     OMITTED_IF_NONE = frozenset({"evidence"})
@@ -264,7 +272,7 @@ class LabelMatch(Part):
     map_labels: list[str] = Field(description="The map labels it may be, most similar first.")
 
 
-class Prior(Part):
+class Prior(Omitting):
     """A position prior (`semloc.Prior`): the local frame's origin lies within `radius` metres
     of `position` in the map's frame; optionally its height within `floor` and its heading
     within `heading_tolerance` degrees of `heading`."""
@@ -303,7 +311,7 @@ class GroundTruth(Part):
     )
 
 
-class Answer(Part):
+class Answer(Omitting):
     """A localization answer: the JSON of `semloc localize --format json` (`Result.to_dict`)."""
 
     OMITTED_IF_NONE = frozenset({"ground_truth", "warm_up_ms"})
@@ -373,7 +381,7 @@ def problems(document: Any, model: type[Part] = Answer) -> list[str]:
     a field not as the model says, a key no model declares, a field the writer must write
     and did not, or a value not written as the schema writes it (e.g. not rounded)."""
     try:
-        parsed = model.model_validate(document)
+        parsed = model.model_validate(document, context=PARSING)
     except ValidationError as exc:
         return [field_error(exc)]
     found = _strays(parsed, "")
