@@ -130,7 +130,7 @@ def test_problems_names_what_is_not_the_schema():
     assert schema.problems(absent) == ["missing key 'labels'"]
     unrounded = {**document, "timing_ms": {"total": 1.23456}}
     assert schema.problems(unrounded) == ["not written as the schema writes it"]
-    assert schema.problems({**document, "status": "lost"})[0].startswith("'status':")
+    assert schema.problems({**document, "status": "lost"})[0].startswith("'status' must be")
 
 
 def test_a_writer_field_the_model_lacks_is_refused():

@@ -1,19 +1,19 @@
 """What a localization returns: `Result` (status, pose, ranked `Hypothesis` list, `Step` records).
 
 Shared by the Localizer and every baseline, so that callers, the CLI, the evaluation and the
-JSON output see one model.  `Status` is the decision's vocabulary (see `decision.py`).  Results
-are written as JSON by `Result.to_json` and read back by `saved_result` (every field checked:
-the CLI's `view`, `export` and `update-map --result`); no file access here.
+JSON output see one model.  `Status` is the decision's vocabulary (see `decision.py`).  Their
+JSON is `semloc.schema`'s: written by `Result.to_dict` / `to_json`, read back by
+`Result.from_dict` and `saved_result` (the CLI's `view`, `export` and `update-map --result`),
+every field checked by the schema; no file access here.
 """
 
 from __future__ import annotations
 
 import json
-import reprlib
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import cached_property
-from typing import Any, ClassVar, Literal, TypeVar
+from typing import Any, ClassVar, TypeVar
 
 import numpy as np
 from pydantic import ValidationError
@@ -25,8 +25,7 @@ from semloc.maps import MAX_COORDINATE
 from semloc.priors import Prior
 from semloc.transforms import as_pose
 
-Status = Literal["localized", "ambiguous", "failed"]
-STATUSES: tuple[Status, ...] = ("localized", "ambiguous", "failed")
+Status = schema.Status
 
 
 @dataclass
@@ -366,19 +365,20 @@ class SavedResult:
 
 
 def saved_result(data: dict[str, Any]) -> SavedResult:
-    """A parsed result document (or a ground-truth document, `T_global_local`), every field
-    checked: `ValueError` naming the field and what it must be."""
-    key = "pose" if "pose" in data else "T_global_local"
-    pose = None if data.get(key) is None else saved_pose(data[key], key)
-    status = data.get("status")
-    if status is not None and status not in STATUSES:
-        raise ValueError(f"'status' must be one of {', '.join(STATUSES)}, got {_brief(status)}")
-    hypotheses = _list_field(data.get("hypotheses"), "hypotheses")
+    """A result document (`schema.Answer` as `Result.to_json` writes it; an older or a shorter
+    one needs only `status`, and of each hypothesis its `pairs`), or a document of a pose
+    alone (no `status`: `pose`, or a ground truth's `T_global_local`), every field checked:
+    `ValueError` naming the field and what is wrong."""
+    if "status" not in data:
+        key = "pose" if "pose" in data else "T_global_local"
+        pose = data.get(key)
+        return SavedResult(None if pose is None else saved_pose(pose, key))
+    answer = parse_answer(data)
     return SavedResult(
-        pose,
-        status,
-        tuple(_hypothesis(h, i) for i, h in enumerate(hypotheses)),
-        _moved(data.get("changes")),
+        _pose_of(answer.pose),
+        answer.status,
+        tuple((_pose_of(h.pose), _pairs_of(h.pairs)) for h in answer.hypotheses),
+        tuple((m.global_, m.local) for m in answer.changes.moved),
     )
 
 
@@ -389,52 +389,3 @@ def saved_pose(value: object, what: str = "pose") -> np.ndarray:
     if np.abs(pose[:3, 3]).max() > MAX_COORDINATE:
         raise ValueError(f"{what} has a translation beyond ±{MAX_COORDINATE:g} m (the input limit)")
     return pose
-
-
-def _moved(changes: object) -> tuple[tuple[str, str], ...]:
-    """The (global id, local id) pairs of a result's `changes.moved` (none without changes)."""
-    if changes is None:
-        return ()
-    if not isinstance(changes, dict):
-        raise ValueError(f"'changes' must be an object, got {_brief(changes)}")
-    moved = []
-    for j, entry in enumerate(_list_field(changes.get("moved"), "changes.moved")):
-        ids = (entry.get("global"), entry.get("local")) if isinstance(entry, dict) else (None,)
-        if len(ids) != 2 or not all(
-            isinstance(i, (str, int)) and not isinstance(i, bool) for i in ids
-        ):
-            raise ValueError(f"'changes.moved[{j}]' must be {MOVED_SHAPE}, got {_brief(entry)}")
-        moved.append((str(ids[0]), str(ids[1])))
-    return tuple(moved)
-
-
-def _hypothesis(value: object, index: int) -> tuple[np.ndarray | None, list[tuple[str, str]]]:
-    where = f"hypotheses[{index}]"
-    if not isinstance(value, dict):
-        raise ValueError(f"'{where}' must be an object, got {_brief(value)}")
-    raw = value.get("pose")
-    pose = None if raw is None else saved_pose(raw, f"{where}.pose")
-    pairs = []
-    for j, pair in enumerate(_list_field(value.get("pairs"), f"{where}.pairs")):
-        ids = (pair.get("global"), pair.get("local")) if isinstance(pair, dict) else (None, None)
-        if not all(isinstance(i, (str, int)) and not isinstance(i, bool) for i in ids):
-            raise ValueError(f"'{where}.pairs[{j}]' must be {PAIR_SHAPE}, got {_brief(pair)}")
-        pairs.append((str(ids[0]), str(ids[1])))
-    return pose, pairs
-
-
-PAIR_SHAPE = '{"global": ID, "local": ID}'
-MOVED_SHAPE = '{"global": ID, "local": ID, "offset_m": NUMBER}'
-
-
-def _list_field(value: object, where: str) -> list:
-    """`value` if a list (None: empty), else one line naming the field."""
-    if value is None:
-        return []
-    if not isinstance(value, list):
-        raise ValueError(f"'{where}' must be a list, got {_brief(value)}")
-    return value
-
-
-def _brief(value: object) -> str:
-    return reprlib.repr(value)[:60]

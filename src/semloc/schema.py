@@ -16,8 +16,10 @@ Conventions, the same in every part:
   written answer and writing it again gives the same text.
 - A field in a model's `OMITTED_IF_NONE` is left out when it is None (it only applies with
   a prior, with coverage, over a run, with a ground truth...); every other field is always
-  written, null when it has no value.  Parsing is lenient where an older answer may lack a
-  field (a default), never about a field's type.
+  written, null when it has no value, and required in the schema of what is written (the
+  OpenAPI's).  Reading is lenient where an older or a hand-written answer may lack a field (a
+  default: a result file for `semloc view --result` needs only `status`, and of each
+  hypothesis its `pairs`), never about a field's type.
 - Answers allow keys these models do not know (a newer writer may add some); `problems`
   says what keeps a document from being exactly what semloc writes (unknown or absent keys,
   values not as written), for the tests that check each writer against this schema.
@@ -25,6 +27,7 @@ Conventions, the same in every part:
 
 from __future__ import annotations
 
+import re
 from typing import Annotated, Any, ClassVar, Literal
 
 from pydantic import (
@@ -154,10 +157,10 @@ class Hypothesis(Omitting):
     """One candidate answer: an association set and the pose it implies."""
 
     OMITTED_IF_NONE = frozenset({"outside_prior", "n_missing", "n_expected"})
-    rank: int = Field(ge=1)
-    score: Rounded6 = Field(description="The association set's clustering score.")
+    rank: int = Field(1, ge=1, description="1 for the best (read: its place when absent).")
+    score: Rounded6 = Field(0.0, description="The association set's clustering score.")
     pairs: list[Pair]
-    pose: Pose | None
+    pose: Pose | None = None
     fitness: Rounded6 | None = Field(None, description="Share of local points on the map.")
     rmse: Rounded6 | None = Field(None, description="RMS point distance after ICP (m).")
     residual: Rounded6 | None = Field(
@@ -323,8 +326,8 @@ class Answer(Omitting):
     pose_is_answer: bool = Field(
         False, description="Whether `pose` is a trusted answer (localized), not a best guess."
     )
-    pose: Pose | None = Field(description="The best hypothesis's pose (null: failed).")
-    hypotheses: list[Hypothesis] = Field(description="Ranked, best first.")
+    pose: Pose | None = Field(None, description="The best hypothesis's pose (null: failed).")
+    hypotheses: list[Hypothesis] = Field([], description="Ranked, best first.")
     steps: list[Step] = Field([], description="The latest updates.")
     timing_ms: dict[str, Rounded3] = {}
     changes: Changes = Field(default_factory=Changes)
@@ -340,6 +343,13 @@ class Answer(Omitting):
     warm_up_ms: Rounded3 | None = Field(
         None, description="Start-up time before the first update (the CLI's)."
     )
+
+    @model_validator(mode="after")
+    def _ranked(self) -> Answer:
+        for place, hypothesis in enumerate(self.hypotheses, start=1):
+            if "rank" not in hypothesis.model_fields_set:  # (a shorter document)
+                hypothesis.rank = place
+        return self
 
 
 class ServiceAnswer(Answer):
@@ -412,14 +422,19 @@ def _strays_in(value: Any, where: str) -> list[str]:
     return []
 
 
-def field_error(exc: Exception) -> str:
-    """A pydantic ValidationError as one line naming the field ('hypotheses[1].pairs[0]')."""
+def field_error(exc: Exception, where: str = "") -> str:
+    """A pydantic ValidationError as one line naming the first field not as the schema says
+    ("'hypotheses[1].pairs' must be a valid list"); `where`: the path of what was validated."""
     errors = getattr(exc, "errors", None)
     if errors is None:
         return str(exc)
     first = errors()[0]
-    where = ""
     for part in first["loc"]:
         where += f"[{part}]" if isinstance(part, int) else f"{'.' if where else ''}{part}"
-    message = first["msg"].removeprefix("Value error, ")
-    return f"'{where}': {message}" if where else message
+    message = re.sub(r"a valid dictionary or instance of \w+", "an object", first["msg"])
+    message = message.removeprefix("Value error, ").replace("Input should be", "must be", 1)
+    message = "is required" if message == "Field required" else message
+    if not where:
+        return message
+    joined = message.startswith(("must be", "is required"))
+    return f"'{where}' {message}" if joined else f"'{where}': {message}"

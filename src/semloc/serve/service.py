@@ -736,7 +736,7 @@ def _reported_answer(body: dict) -> tuple[np.ndarray, list[tuple[str, str]]]:
     try:
         pairs = _PAIRS.validate_python((best.get("pairs") or []) if isinstance(best, dict) else [])
     except ValidationError as exc:
-        detail = f"hypotheses[0].pairs: {schema.field_error(exc)}"
+        detail = schema.field_error(exc, "hypotheses[0].pairs")
         raise Invalid("invalid change report", detail) from None
     return pose, [(p.global_, p.local) for p in pairs]
 
