@@ -56,7 +56,6 @@ def _rounded(digits: int) -> PlainSerializer:
 
 
 Finite = Field(allow_inf_nan=False)
-Number = Annotated[float, Finite]
 Rounded3 = Annotated[float, Finite, _rounded(3)]
 Rounded6 = Annotated[float, Finite, _rounded(6)]
 

@@ -7,7 +7,9 @@ has refused NaN, duplicate keys and oversized input; a map's deeper rules (uniqu
 rotations, non-zero directions) are `semloc.io.map_from_dict`'s, which a JSON Schema cannot
 state and the descriptions do.  Answers allow extra keys (later versions may add some).
 
-The shapes follow docs/format.md (a semloc map) and the JSON of `semloc localize --format json`.
+The shapes follow docs/format.md (a semloc map); the answers of a localization are the one
+answer schema's models (`semloc.schema`: the JSON of `semloc localize --format json` and what
+the service adds), declared as they are written (what is always there is required).
 """
 
 from __future__ import annotations
