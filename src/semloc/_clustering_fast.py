@@ -7,6 +7,11 @@ iteration over the frontier (`merges_of_frontier`), the compatibility graph of n
 candidates (`compatible_among` for few pairs, `compatible_sweep` along the map's longest axis),
 and the lookup of unions already in the pool (`find_by_keys`).  Every kernel works on plain
 arrays; the rules they implement are documented in `clustering.py`.
+
+The merge rule itself lives here, once: `agreement` (h, and h_ε with a tolerance), `gate`
+(h_ε > γ) and `gate_window` (the global distances the gate may pass for a local one).  The
+clustering's kernels call them; `clustering.MergeCriterion` applies them to arrays, and place
+retrieval (`places.py`) looks up the distances within `gate_window`.
 """
 
 from __future__ import annotations
@@ -299,21 +304,8 @@ def merges_of_frontier(
 
 @njit(cache=True, nogil=True)
 def ratio(global_xyz, local_xyz, i, j, min_distance):
-    """The paper's h of live candidates i and j (as `merge_metric` with no tolerance)."""
-    d_global = np.sqrt(
-        (global_xyz[i, 0] - global_xyz[j, 0]) ** 2
-        + (global_xyz[i, 1] - global_xyz[j, 1]) ** 2
-        + (global_xyz[i, 2] - global_xyz[j, 2]) ** 2
-    )
-    d_local = np.sqrt(
-        (local_xyz[i, 0] - local_xyz[j, 0]) ** 2
-        + (local_xyz[i, 1] - local_xyz[j, 1]) ** 2
-        + (local_xyz[i, 2] - local_xyz[j, 2]) ** 2
-    )
-    d_max = max(d_global, d_local)
-    if d_max < min_distance or d_max <= 0:
-        return 1.0
-    return 1.0 - abs(d_global - d_local) / d_max
+    """The paper's h of live candidates i and j: `agreement` with no tolerance."""
+    return agreement(distance(global_xyz, i, j), distance(local_xyz, i, j), 0.0, min_distance)
 
 
 @njit(cache=True, nogil=True)
@@ -379,14 +371,65 @@ def distance(xyz, i, j):
     )
 
 
+# ---------------------------------------------------------------------------------------------
+# The merge rule: `agreement` and `gate` are the rule itself, `gate_window` the global
+# distances it may pass; `clustering.MergeCriterion` and `merge_metric` apply them element-wise
+# (`agreements`, `gates`, `gate_windows`), the clustering's sweep and place retrieval look up
+# the distances within `gate_window`.  tests/core/test_merge_rule.py checks that they agree.
 @njit(cache=True, nogil=True)
-def gate(d_global, d_local, tolerance, gamma, min_distance):
-    """`MergeCriterion.compatible` for one pair of distances."""
+def agreement(d_global, d_local, tolerance, min_distance):
+    """h_ε of a global and a local distance: 1 − max(0, |d^A − d^B| − ε) / max(d^A, d^B), and
+    1 when both are below `min_distance` (or zero); with ε = 0 it is the paper's h, at most 1
+    (`MergeCriterion.UPPER_BOUND`)."""
     d_max = max(d_global, d_local)
     if d_max < min_distance or d_max <= 0:
-        return gamma < 1.0
+        return 1.0
     excess = max(abs(d_global - d_local) - tolerance, 0.0)
-    return 1.0 - excess / d_max > gamma
+    return 1.0 - excess / d_max
+
+
+@njit(cache=True, nogil=True)
+def gate(d_global, d_local, tolerance, gamma, min_distance):
+    """Whether two candidates at these distances may share a set: h_ε > γ."""
+    return agreement(d_global, d_local, tolerance, min_distance) > gamma
+
+
+@njit(cache=True, nogil=True)
+def gate_window(d_local, tolerance, gamma, min_distance):
+    """The global distances `gate` may pass for `d_local` lie within (lowest, highest):
+    γ·d^B − ε to (d^B + ε) / γ (h_ε > γ solved for d^A below and above d^B), from 0 to at
+    least `min_distance` when d^B is below it."""
+    highest = max((d_local + tolerance) / gamma, min_distance)
+    lowest = 0.0 if d_local < min_distance else max(gamma * d_local - tolerance, 0.0)
+    return lowest, highest
+
+
+@njit(cache=True, nogil=True)
+def agreements(d_global, d_local, tolerance, min_distance):
+    """`agreement` of each element of two flat arrays of equal length."""
+    out = np.empty(len(d_global))
+    for i in range(len(d_global)):
+        out[i] = agreement(d_global[i], d_local[i], tolerance, min_distance)
+    return out
+
+
+@njit(cache=True, nogil=True)
+def gates(d_global, d_local, tolerance, gamma, min_distance):
+    """`gate` of each element of two flat arrays of equal length."""
+    out = np.empty(len(d_global), dtype=np.bool_)
+    for i in range(len(d_global)):
+        out[i] = gate(d_global[i], d_local[i], tolerance, gamma, min_distance)
+    return out
+
+
+@njit(cache=True, nogil=True)
+def gate_windows(d_local, tolerance, gamma, min_distance):
+    """`gate_window` of each element of a flat array: the lowest and the highest distances."""
+    lowest = np.empty(len(d_local))
+    highest = np.empty(len(d_local))
+    for i in range(len(d_local)):
+        lowest[i], highest[i] = gate_window(d_local[i], tolerance, gamma, min_distance)
+    return lowest, highest
 
 
 @njit(cache=True, nogil=True)

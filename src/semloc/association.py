@@ -148,6 +148,7 @@ class CandidateIndex:
     ) -> None:
         self.config = config
         self._label_map = {k.strip().lower(): v for k, v in config.label_map.items()}
+        self._label_map_key = tuple(sorted(self._label_map.items()))
         self._by_label = label_groups(global_map, self._label_map)
         self._map = global_map
         self._stacks: dict[tuple[int, ...], tuple[np.ndarray, np.ndarray]] = {}
@@ -163,8 +164,7 @@ class CandidateIndex:
     ) -> np.ndarray:
         """`compute(label)` (a similarity per map object) of source `source`, computed once
         per map, source, label map and label, then shared read-only."""
-        key = (source, tuple(sorted(self._label_map.items())))
-        cache = self._caches.setdefault(key, {})
+        cache = self._caches.setdefault((source, self._label_map_key), {})
         if label not in cache:
             values = np.asarray(compute(label), dtype=float)
             values.flags.writeable = False

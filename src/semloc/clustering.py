@@ -83,10 +83,13 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
 from semloc._clustering_fast import (
+    agreements,
     candidate_keys,
     compatible_among,
     compatible_sweep,
     find_by_keys,
+    gate_windows,
+    gates,
     held,
     kept_edges,
     merges_of_frontier,
@@ -136,14 +139,17 @@ class ClusteringConfig(BaseModel):
 
 @dataclass(frozen=True)
 class MergeCriterion:
-    """The merge criterion in one place: what two candidates add to a set's score, and whether
-    they may share a set at all.
+    """The merge criterion: what two candidates add to a set's score, and whether they may
+    share a set at all.  The rule itself is compiled (`_clustering_fast.agreement`, `gate`,
+    `gate_window`, the ones the clustering runs); these methods apply it to arrays.
 
     * `score` is the paper's h = min(d^B/d^A, d^A/d^B) (with `min_distance`), at most
       `UPPER_BOUND`; the clustering's exact pruning bounds (`_survival_floor`, `_best_merges`)
       rely on that bound, so a new score must keep it or change `UPPER_BOUND`.
     * `compatible` is the gate h_ε > γ, where h_ε is h with the slack ε (`tolerance`) taken
       off the distance difference; one-to-one-ness is checked by the caller.
+    * `window` bounds the global distances the gate may pass for a local distance (the
+      windows of the clustering's sweep and of place retrieval).
     """
 
     gamma: float
@@ -160,8 +166,15 @@ class MergeCriterion:
         return merge_metric(d_global, d_local, 0.0, self.min_distance)
 
     def compatible(self, d_global: np.ndarray, d_local: np.ndarray) -> np.ndarray:
-        gate = merge_metric(d_global, d_local, self.tolerance, self.min_distance)
-        return gate > self.gamma
+        shape, (d_global, d_local) = _flat(d_global, d_local)
+        passes = gates(d_global, d_local, self.tolerance, self.gamma, self.min_distance)
+        return passes.reshape(shape)
+
+    def window(self, d_local: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The lowest and the highest global distance the gate may pass for each local one."""
+        shape, (d_local,) = _flat(d_local)
+        lowest, highest = gate_windows(d_local, self.tolerance, self.gamma, self.min_distance)
+        return lowest.reshape(shape), highest.reshape(shape)
 
 
 def merge_metric(
@@ -170,13 +183,17 @@ def merge_metric(
     tolerance: float = 0.0,
     min_distance: float = 0.05,
 ) -> np.ndarray:
-    """h for arrays of global and local distances (broadcasting); 1 is perfect agreement."""
-    d_global, d_local = np.broadcast_arrays(np.asarray(d_global), np.asarray(d_local))
-    d_max = np.maximum(d_global, d_local)
-    excess = np.maximum(np.abs(d_global - d_local) - tolerance, 0.0)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        h = 1.0 - excess / d_max
-    return np.where(d_max < min_distance, 1.0, np.where(d_max > 0, h, 1.0))
+    """h_ε for arrays of global and local distances (broadcasting; `_clustering_fast.agreement`
+    element-wise); 1 is perfect agreement."""
+    shape, (d_global, d_local) = _flat(d_global, d_local)
+    return agreements(d_global, d_local, tolerance, min_distance).reshape(shape)
+
+
+def _flat(*arrays: np.ndarray) -> tuple[tuple[int, ...], list[np.ndarray]]:
+    """The shape the arrays broadcast to, and each of them broadcast to it as a flat float
+    array (the compiled kernels take flat arrays)."""
+    found = np.broadcast_arrays(*(np.asarray(a, dtype=float) for a in arrays))
+    return found[0].shape, [a.ravel() for a in found]
 
 
 @dataclass(frozen=True)
@@ -483,17 +500,15 @@ class HierarchicalClustering:
 
         Few pairs: all of them, tested in one compiled pass; many: a sweep along the map's
         longest axis per pair of local objects (only global pairs within the gate's reach)."""
-        cfg = self.config
+        rule = self.criterion
         candidates = (added, covered, self._cand_g, self._cand_l, self._global_positions)
-        gate = (cfg.distance_tolerance, cfg.gamma, cfg.min_distance)
+        gate = (rule.tolerance, rule.gamma, rule.min_distance)
         distances = self._local_distances
         if len(added) * (len(added) + len(covered)) <= _BRUTE_FORCE_PAIRS:
             arguments: tuple = (*candidates, distances, *gate)
             kernel = compatible_among
         else:
-            # the gate 1 - max(0, |d^A - d^B| - ε) / max(d^A, d^B) > γ needs d^A < (d^B + ε) / γ
-            reach = np.maximum((distances + cfg.distance_tolerance) / cfg.gamma, cfg.min_distance)
-            reach = reach * (1 + 1e-9) + 1e-12  # the exact test decides at the boundary
+            reach = rule.window(distances)[1] * (1 + 1e-9) + 1e-12  # the gate decides
             order = self._sweep_order()
             arguments = (*candidates, distances, reach, *gate, *order, _WINDOW_ENTRIES)
             kernel = compatible_sweep

@@ -19,8 +19,9 @@ Look-alike rooms: before a best place is claimed, its copies in the map (`semloc
 weighed as hypotheses, listed by the sets or not (an old map can make the right copy's sets
 lose to another's); a copy the view does not tell apart (`decision.told_apart`) keeps the
 answer `ambiguous`.  While a place is tracked, objects that it cannot explain but one of its
-copies holds where the pose puts them (`TWIN_KIDNAP` over the latest updates) end the claim:
-the robot was carried into the copy.
+copies holds where the pose puts them make the answer `ambiguous` while that copy leads over
+the latest updates (`TWIN_DOUBT`, the copy listed as the second hypothesis) and end the claim
+when it leads by more (`TWIN_KIDNAP`): the robot was carried into the copy.
 
 A position prior (`semloc.priors.Prior`: `Localizer(..., prior=P)`, `set_prior`) gates the
 candidates of each local object and marks the hypotheses whose pose lies outside it, which
@@ -48,7 +49,7 @@ from semloc.association import (
     label_report,
 )
 from semloc.changes import Changes, ChangesConfig, RunChanges, answer_changes
-from semloc.clustering import ClusteringConfig, HierarchicalClustering, SetPairs
+from semloc.clustering import ClusteringConfig, HierarchicalClustering, MergeCriterion, SetPairs
 from semloc.coverage import (
     GONE_SHARE,
     Accounting,
@@ -98,8 +99,8 @@ from semloc.twins import (
     ANCHORS,
     MIN_TWIN_PAIRS,
     copy_holds,
+    copy_leads,
     label_codes,
-    twin_lead,
     twin_pairs,
     twins,
 )
@@ -247,7 +248,7 @@ class Localizer:
         # objects) -> twins
         self._track_twins: tuple[np.ndarray, list[np.ndarray]] | None = None  # (its pairs'
         # map objects when found, the copies) of the tracked place where the robot is
-        self._twin_fits: deque[list[list[str]] | None] = deque(maxlen=TWIN_UPDATES)
+        self._twin_fits: deque[tuple[int, list[list[str]]]] = deque(maxlen=TWIN_UPDATES)
         # (each latest update's objects that tell the place from each copy; None: not weighed)
         self._diagonal_lengths: np.ndarray | None = None
         self._reset_search()
@@ -352,7 +353,7 @@ class Localizer:
         ids = self.global_map.ids
         return {
             "members": [str(ids[g]) for g in self._track_twins[0].tolist()],
-            "fits": list(self._twin_fits),
+            "fits": [[update, told] for update, told in self._twin_fits],
         }
 
     def _restore_twins(self, twins_state: dict[str, list] | None) -> None:
@@ -360,10 +361,14 @@ class Localizer:
             return
         members = np.array([self.global_map.index_of(g) for g in twins_state["members"]], int)
         self._track_twins = (members, self._twin_motions_of(members, TRACK_ANCHORS))
-        self._twin_fits.extend(  # (a state of counts per copy, before the objects: none)
-            f if f is None or all(isinstance(keys, list) for keys in f) else None
-            for f in twins_state["fits"]
-        )
+        fits = twins_state["fits"]
+        for i, fit in enumerate(fits):
+            if fit and isinstance(fit[0], int) and len(fit) == 2:
+                update, told = fit
+            else:  # (a state of every update's objects, consecutive, or of counts: none)
+                update, told = self.window.updates - len(fits) + 1 + i, fit
+            if told and all(isinstance(keys, list) for keys in told) and any(told):
+                self._twin_fits.append((int(update), told))
 
     @property
     def tracking(self) -> bool:
@@ -509,9 +514,12 @@ class Localizer:
             excess = max(0.0, len(looked_unseen) - GONE_SHARE * len(expected))
             verdict = Verdict(verdict.supported, verdict.contradicting, verdict.changed,
                               verdict.repeated, excess)  # fmt: skip
-        against = track.contradicted(verdict) or self._carried_to_twin(
-            track, verdict, objects, candidates, looked_unseen
-        )
+        against, doubt = track.contradicted(verdict), None
+        if not against:
+            lead, updates, doubt = self._carried_to_twin(
+                track, verdict, objects, candidates, looked_unseen
+            )
+            against = updates if lead >= TWIN_KIDNAP else 0
         if against:  # a fresh window of the contradicting updates' objects
             return self._contradicted(against, objects, answer, start)
         report = self._report_verdict(track, objects, candidates, verdict)
@@ -531,10 +539,19 @@ class Localizer:
         hypothesis.confidence = track.current_confidence()
         if looked is not None:
             hypothesis.n_missing, hypothesis.n_expected = looked
-        self._add_step([hypothesis.score], end - start, "localized" if answer else None)
+        doubted = doubt is not None or track.doubted()
+        self._add_step([hypothesis.score], end - start,
+                       None if not answer else "ambiguous" if doubted else "localized")  # fmt: skip
         if not answer:
             return None
-        return self._result("localized", [hypothesis], "", self._changes([hypothesis]))
+        if not doubted:
+            return self._result("localized", [hypothesis], "", self._changes([hypothesis]))
+        # (no more likely than not; the claim is kept and weighed on)
+        hypothesis.confidence = min(hypothesis.confidence, 0.5)
+        if doubt is None:
+            return self._result("ambiguous", [hypothesis], DOUBTED, self._changes([hypothesis]))
+        hypotheses = [hypothesis, self._copy_hypothesis(hypothesis, doubt)]
+        return self._result("ambiguous", hypotheses, TWIN_DOUBTED, self._changes(hypotheses))
 
     def _contradicted(
         self, updates: int, objects: list[SemanticObject], answer: bool, start: float
@@ -814,7 +831,7 @@ class Localizer:
         found = [self._prior_gated(o, self._found[o.id][1]) for o in objects]
         positions = np.array([o.position for o in objects]).reshape(-1, 3)
         cfg = self.config.clustering
-        support = self._places.support(positions, found, cfg.gamma, cfg.distance_tolerance)
+        support = self._places.support(positions, found, MergeCriterion.of(cfg))
         kept = self._places.kept(support, found)
         retrieved = {o.id: k for o, k in zip(objects, kept)}
         held = {i: self._retrieved[i] for i in self._local if i in self._retrieved}
@@ -1032,32 +1049,34 @@ class Localizer:
         objects: list[SemanticObject],
         candidates: dict,
         unseen: np.ndarray,
-    ) -> int:
-        """How many of the latest updates show the robot in a copy of the tracked place (0:
-        they do not).  A look-alike room differs from the tracked one where one of them lacks
+    ) -> tuple[int, int, np.ndarray | None]:
+        """By how many objects the latest updates show the robot in a copy of the tracked
+        place rather than in it, over how many updates, and that copy (a map motion; (0, 0,
+        None): no copy leads).  A look-alike room differs from the tracked one where one of them lacks
         an object, so per copy (`semloc.twins` of the claim's newest pairs: the copies of where
         the robot is) each update weighs the objects that tell the two apart.  For the copy: a
         detection the place does not explain (changed or contradicting) that lies where the
         copy holds a map object it may be, and, with the sensor's coverage, a map object the
         look expects of the place (`unseen`: none accounts for it) where the copy holds none
         of its label.  For the place: a supporting detection where the copy holds no map
-        object it may be.  When, over the latest updates, one copy's count exceeds the place's
-        by `TWIN_KIDNAP`, the robot was carried into it: an old map's change or a detector's
-        error is as likely to speak for the place as against it (`semloc.twins.twin_lead`).
-        The copies are looked up only when an update has objects against the place or
-        missing from its look."""
+        object it may be (`semloc.twins.copy_leads`).  Only the updates with such objects
+        are kept (`TWIN_UPDATES` of them): a robot carried off may see nothing that tells
+        the rooms apart for a while, and nothing seen is no news.  The copies are looked up
+        again when the robot walked on (the claim's newest pairs changed) and an update has
+        objects against the place or missing from its look, or a copy leads."""
         against = {l for _, l in verdict.changed} | set(verdict.contradicting)
         members = np.array([g for g, _ in track.newest(self.config.tracking.track_pairs)])
         held = self._track_twins[0] if self._track_twins else np.zeros(0, dtype=int)
         if np.isin(members, held).sum() < 0.5 * len(members):  # the robot walked on
-            if not against and not len(unseen):
-                self._twin_fits.append(None)
-                return 0
+            leading = bool(self._twin_fits) and self._copy_lead()[0] > 0
+            if not against and not len(unseen) and not leading:
+                return 0, 0, None
+            old = self._track_twins[1] if self._track_twins else []
             self._track_twins = (members, self._twin_motions_of(members, TRACK_ANCHORS))
-            self._twin_fits.clear()  # (counted per copy)
+            self._carry_fits(old, self._track_twins[1], track.pose[:3, 3])
         motions = self._track_twins[1]
         if not motions:
-            return 0
+            return 0, 0, None
         R, t, ids, codes = track.pose[:3, :3], track.pose[:3, 3], self.global_map.ids, self._codes()
         by_id = {o.id: o for o in objects}
         # (where, the kinds it may be, key, whether it is evidence when the copy holds it)
@@ -1068,11 +1087,50 @@ class Localizer:
         placed += [(self.global_map.positions[u], codes[[u]], f"+map {ids[u]}", False)
                    for u in unseen]  # fmt: skip
         where = (self.global_map.positions, codes, self._allowances(), self._tree())
-        self._twin_fits.append([[key for at, kinds, key, if_held in placed
-                                 if copy_holds(S, at, kinds, *where) == if_held]
-                                for S in motions])  # fmt: skip
-        lead, updates = twin_lead(list(self._twin_fits))
-        return updates if lead >= TWIN_KIDNAP else 0
+        told = [[key for at, kinds, key, if_held in placed
+                 if copy_holds(S, at, kinds, *where) == if_held] for S in motions]  # fmt: skip
+        if any(told):
+            self._twin_fits.append((self.window.updates, told))
+        lead, updates, best = self._copy_lead()
+        return (lead, updates, motions[best]) if lead > 0 else (0, 0, None)
+
+    def _copy_lead(self) -> tuple[int, int, int]:
+        """The kept evidence's lead of the best copy over the tracked place, how many of the
+        latest updates it spans, and that copy's index (`semloc.twins.copy_leads`)."""
+        if not self._twin_fits:
+            return 0, 0, 0
+        leads = copy_leads([told for _, told in self._twin_fits])
+        best = max(range(len(leads)), key=lambda i: leads[i], default=0)
+        lead, kept = leads[best] if leads else (0, 0)
+        if lead <= 0:
+            return 0, 0, best
+        return lead, self.window.updates - self._twin_fits[-kept][0] + 1, best
+
+    def _carry_fits(self, old: list[np.ndarray], new: list[np.ndarray], at: np.ndarray) -> None:
+        """The kept evidence of the copies `old`, for the copies `new` of the place the robot
+        walked on to: a copy is the same when it puts the robot (`at`) within `PLACE_APART`
+        of where the other does; a new copy has none."""
+        moved = [S[:3, :3] @ at + S[:3, 3] for S in old]
+        same = [next((i for i, m in enumerate(moved)
+                      if np.linalg.norm(S[:3, :3] @ at + S[:3, 3] - m) < PLACE_APART), None)
+                for S in new]  # fmt: skip
+        kept = [(update, [[] if i is None else told[i] for i in same])
+                for update, told in self._twin_fits]  # fmt: skip
+        self._twin_fits.clear()
+        self._twin_fits.extend((u, told) for u, told in kept if any(told))
+
+    def _copy_hypothesis(self, place: Hypothesis, S: np.ndarray) -> Hypothesis:
+        """The copy `S` (a map motion) of a tracked place, as its rival: the place's pairs
+        moved onto the copy's objects, the place's pose moved by `S`."""
+        assert place.pose is not None
+        index, ids = self.global_map.index_of, self.global_map.ids
+        moved = twin_pairs(
+            S, [(index(g), i) for i, (g, _) in enumerate(place.pairs)], self.global_map.positions,
+            self._codes(), self.config.verification.inlier_tolerance, self._tree(),
+        )  # fmt: skip
+        pairs = [(str(ids[g]), place.pairs[i][1]) for g, i in moved]
+        return Hypothesis(rank=2, score=float(len(pairs)), pairs=pairs, pose=S @ place.pose,
+                          method="copy")  # fmt: skip
 
     def _screened_sets(self, by_size: bool) -> tuple[SetPairs, bool]:
         """The sets screened for hypotheses, and whether the screening was cut.  Ranked by
@@ -1236,10 +1294,17 @@ LOOKS_KEPT = 6
 """The search weighs the sensor's looks of this many latest updates (negative evidence)."""
 TWIN_KIDNAP = 2
 """By how many objects of the latest updates a copy of the tracked place must explain them
-better than the place (`Localizer._carried_to_twin`) to end the claim."""
+better than the place (`Localizer._carried_to_twin`) to end the claim; leading by less, the
+copy makes the answer `ambiguous` (`TWIN_DOUBTED`) and the claim is weighed on: an old map's
+change or a detector's error is as likely to speak for the copy as against it, and the robot
+carried into a copy must not be claimed where it was while the evidence says otherwise."""
+TWIN_DOUBTED = "a copy of the tracked place explains the latest objects better"
+DOUBTED = "the newest objects speak against the tracked place"
+"""The reason of a tracked place's answer doubted by its newest objects (`Track.doubted`)."""
 TWIN_UPDATES = 12
-"""The latest updates weighed for a copy (`TWIN_KIDNAP`): a view shows what tells look-alike
-rooms apart one object at a time, often several updates apart."""
+"""The latest updates with objects that tell the tracked place from a copy weighed for it
+(`TWIN_KIDNAP`): a view shows what tells look-alike rooms apart one object at a time, often
+several updates apart."""
 TRACK_ANCHORS = 8
 """Anchor pairs tried for the copies of a tracked place (`semloc.twins.ANCHORS` before a
 claim): the copy the robot may be carried into must be among them, and a tracked place looks

@@ -18,11 +18,12 @@ index), its memory bounded by the map's object pairs within `reach`, and at most
 word and cell.
 
 **Retrieval.**  For each local object a and each other local object b within `reach` of it,
-the words (label of a candidate of a, label of a candidate of b, every bin within the
-clustering's distance tolerance of |ab|, (ε + (1 − γ)·|ab|) / γ, within `reach`) are looked up; a
-cell *supports* a for b when it holds one of them.  The support of a cell for a (how many
-local objects b it supports a for) bounds from above the number of local objects a candidate
-of a in that cell is consistent with.  A candidate of a is kept when its cell's support is
+the words (label of a candidate of a, label of a candidate of b, every bin of a map distance
+the clustering's merge gate may pass for |ab| (`MergeCriterion.window`), widened to as far
+below |ab| as it reaches above, and within `reach`) are looked up; a cell *supports* a for b
+when it holds one of them.  The support of a cell for a (how many local objects b it
+supports a for) bounds from above the number of local objects a candidate of a in that cell
+is consistent with.  A candidate of a is kept when its cell's support is
 within `slack` of the best cell's support for a (`slack`: a share of it, at least one object,
 for detections the map lacks or mislabelled ones).  A local object with no neighbour within
 `reach` keeps every candidate.  Every place as good as the best is kept, so a view that has
@@ -50,6 +51,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from scipy.spatial import cKDTree
 
 from semloc._places_fast import cell_support
+from semloc.clustering import MergeCriterion
 from semloc.maps import ObjectMap
 
 __all__ = ["PlaceIndex", "RetrievalConfig", "place_index"]
@@ -138,10 +140,11 @@ class PlaceIndex:
     def nbytes(self) -> int:
         return int(self.words.nbytes + self.cells.nbytes + self.cell_of.nbytes)
 
-    def support(self, local_positions: np.ndarray, candidates: list[np.ndarray], gamma: float,
-                tolerance: float) -> np.ndarray:  # fmt: skip
+    def support(
+        self, local_positions: np.ndarray, candidates: list[np.ndarray], criterion: MergeCriterion
+    ) -> np.ndarray:
         """Per local object (rows) and cell (columns): for how many other local objects the
-        cell holds a word of the pair (the clustering's merge test: `gamma`, `tolerance` ε)."""
+        cell holds a word of the pair at a distance the clustering's merge gate may pass."""
         local_positions = np.asarray(local_positions, dtype=float).reshape(-1, 3)
         n = len(local_positions)
         codes = [np.unique(self.label_codes[c]) for c in candidates]
@@ -149,13 +152,14 @@ class PlaceIndex:
         starts[1:] = np.cumsum([len(c) for c in codes])
         flat = np.concatenate(codes).astype(np.int64) if n else np.zeros(0, np.int64)
         gaps = np.linalg.norm(local_positions[:, None] - local_positions[None], axis=2)
-        slack = (tolerance + (1.0 - gamma) * gaps) / gamma  # |dA - dB| below it may merge
+        lowest, highest = criterion.window(gaps)  # the map distances the gate may pass
         # only pairs whose every consistent map distance is indexed (within reach)
-        near = (gaps + slack <= self.config.reach) & ~np.eye(n, dtype=bool)
+        near = (highest <= self.config.reach) & ~np.eye(n, dtype=bool)
         first, second = np.nonzero(near)
-        d, slack = gaps[first, second], slack[first, second]
-        low = np.maximum((d - slack) // self.config.bin, 0).astype(np.int64)
-        high = np.minimum((d + slack) // self.config.bin, self.n_bins - 1).astype(np.int64)
+        d, lowest, highest = gaps[first, second], lowest[first, second], highest[first, second]
+        lowest = np.minimum(lowest, d - (highest - d))  # as far below |ab| as above it
+        low = np.maximum(lowest // self.config.bin, 0).astype(np.int64)
+        high = np.minimum(highest // self.config.bin, self.n_bins - 1).astype(np.int64)
         return cell_support(
             self.words, self.cells, first.astype(np.int64), second.astype(np.int64), low, high,
             starts, flat, self.n_labels, self.n_bins, n, self.n_cells,

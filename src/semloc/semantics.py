@@ -19,6 +19,10 @@ The similarity is symmetric; `relation(a, b)` names the kind as seen from `a` ("
 is a parent class of `a`).  Embeddings (e.g. CLIP features) are compared by cosine similarity
 mapped linearly onto [0, 1] between `EMBEDDING_FLOOR` (→ 0) and `EMBEDDING_FULL` (→ 1).
 
+Each label is read once per process (`reading`: its key and class; the taxonomy never
+changes) and each pair of classes related once (`class_relation`): a new local label is
+compared with every label of a map, and those are few and recur in every comparison.
+
 Pure computation: the one resource read is the package's own taxonomy file.
 """
 
@@ -143,16 +147,30 @@ def taxonomy() -> Taxonomy:
 
 
 @lru_cache(maxsize=65536)
+def reading(label: str) -> tuple[str, str | None]:
+    """How the taxonomy reads `label`: its key (`Taxonomy.key`) and its class (None: not known).
+    Computed once per label: a map's labels and a robot's are few and recur in every pair."""
+    tax = taxonomy()
+    return tax.key(label), tax.resolve(label)
+
+
+@lru_cache(maxsize=65536)
 def relation(a: str, b: str) -> tuple[Relation, float]:
     """How label `b` relates to label `a` (as seen from `a`), and their similarity."""
-    tax = taxonomy()
-    if tax.key(a) == tax.key(b):
+    (key_a, ca), (key_b, cb) = reading(a), reading(b)
+    if key_a == key_b:
         return "exact", EXACT
-    ca, cb = tax.resolve(a), tax.resolve(b)
     if ca is None or cb is None:
         return "unrelated", 0.0
+    return class_relation(ca, cb)
+
+
+@lru_cache(maxsize=65536)
+def class_relation(ca: str, cb: str) -> tuple[Relation, float]:
+    """How class `cb` relates to class `ca` (both canonical, e.g. from `reading`)."""
     if ca == cb:
         return "synonym", SYNONYM
+    tax = taxonomy()
     up = tax.depth(ca, cb)
     if up is not None:
         return "parent", PARENT if up == 1 else ANCESTOR

@@ -51,6 +51,12 @@ search's cost grows with the local objects; tracking costs a lookup per new obje
   the latest `CONTRADICTION_UPDATES` updates hold at least two against, more than that share
   makes likely at `UNUSUAL` (a one-sided binomial test), the claim ends: the robot was carried
   into a look-alike place whose objects mostly fit, but not as this run's places fit.
+* **Doubt.**  Short of that, when the newest `DOUBT_OBJECTS` judged objects (whatever the
+  updates they came in) hold at least two against, more than the run's share makes likely at
+  `DOUBT`, the claim is doubted: the answer is `ambiguous` until newer objects support the
+  place again or the evidence ends the claim.  A robot carried off sees a few objects that
+  happen to fit, then a few that do not, then nothing for a while: a claim is an action's
+  licence, and it is not given while the newest evidence speaks against it.
 * **Confidence.**  The claim's confidence moves with its evidence: the search's confidence
   (as a logit, at most `CONFIDENCE_CAP`) plus a log-likelihood ratio per judged object
   (`EVIDENCE_LOGITS`: supporting, changed, contradicting, missing).
@@ -92,6 +98,12 @@ PRIOR_WEIGHT = 20.0
 UNUSUAL = 0.01
 """How unlikely, under the run's share, the latest updates' objects against a claim must be to
 end it."""
+DOUBT_OBJECTS = 6
+"""The newest judged objects weighed for a doubt (`Track.doubted`), across updates: a robot
+carried off may see nothing for several updates, and nothing seen is no news."""
+DOUBT = 0.05
+"""How unlikely, under the run's share, the newest judged objects against a claim must be to
+doubt it."""
 _VERDICTS = ("supported", "changed", "contradicting")
 CONFIDENCE_CAP = 4.0
 """The search's confidence enters a claim's confidence as a logit of at most this."""
@@ -367,15 +379,15 @@ class AgainstRate:
     def share(self) -> float:
         return (self.against + PRIOR_WEIGHT * PRIOR_AGAINST) / (self.judged + PRIOR_WEIGHT)
 
-    def unusual(self, against: int, judged: int) -> bool:
+    def unusual(self, against: int, judged: int, level: float = UNUSUAL) -> bool:
         """Whether `against` of `judged` new objects is unlikely at this run's share (at
-        least two, one-sided binomial test at `UNUSUAL`)."""
+        least two, one-sided binomial test at `level`)."""
         if against < 2:
             return False
         p = self.share
         tail = sum(math.comb(judged, k) * p**k * (1 - p) ** (judged - k)
                    for k in range(against, judged + 1))  # fmt: skip
-        return tail < UNUSUAL
+        return tail < level
 
 
 class Track:
@@ -399,6 +411,7 @@ class Track:
         self.config = config
         self.pairs: OrderedDict[str, int] = OrderedDict()  # local id -> global index
         self._verdicts: deque[Verdict] = deque(maxlen=CONTRADICTION_UPDATES)
+        self._newest: deque[bool] = deque(maxlen=DOUBT_OBJECTS)  # judged against, newest last
         self.judged: dict[str, str] = {}  # local id -> its latest verdict since the claim began
         self.missing = 0.0  # missing objects beyond the tolerated share, since the claim began
         self.base = _logit(confidence, CONFIDENCE_CAP)
@@ -434,9 +447,15 @@ class Track:
         judged |= {l: "changed" for _, l in verdict.changed}
         judged |= dict.fromkeys(verdict.contradicting, "contradicting")
         new = [v for l, v in judged.items() if self.judged.get(l) != v]
+        self._newest.extend(v != "supported" for v in new)
         self.judged |= judged
         self.missing += verdict.missing
         return sum(v != "supported" for v in new), len(new)
+
+    def doubted(self) -> bool:
+        """Whether the newest judged objects speak against the place beyond this run's share
+        (at `DOUBT`; see the module docstring)."""
+        return self.rate.unusual(sum(self._newest), len(self._newest), DOUBT)
 
     def counts(self) -> dict[str, int]:
         """The objects judged since the claim began, by their latest verdict."""
@@ -484,6 +503,7 @@ class Track:
             "judged": dict(self.judged),
             "missing": self.missing,
             "recent": [list(r) for r in self._recent],
+            "newest": [int(a) for a in self._newest],
         }
 
     @classmethod
@@ -507,6 +527,7 @@ class Track:
         track.judged = {str(l): str(v) for l, v in judged.items() if v in _VERDICTS}
         track.missing = float(state.get("missing", 0.0))
         track._recent.extend((int(a), int(n)) for a, n in state.get("recent", []))
+        track._newest.extend(bool(a) for a in state.get("newest", []))
         return track
 
     def newest(self, n: int) -> list[tuple[int, str]]:

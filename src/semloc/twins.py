@@ -19,7 +19,8 @@ that to each other are one twin (the one that places most objects).  Exact label
 twin is the map's own copy, in the map's vocabulary.
 
 While a place is tracked, each of its twins is weighed against it on the objects that tell
-the two apart (`copy_holds`, `twin_lead`): the Localizer ends the claim when a twin leads.
+the two apart (`copy_holds`, `copy_leads`): the Localizer doubts the claim when a twin leads
+and ends it when a twin leads by more.
 """
 
 from __future__ import annotations
@@ -205,21 +206,29 @@ def copy_holds(
 
 
 def twin_lead(updates: Sequence[list[list[str]] | None]) -> tuple[int, int]:
-    """By how many objects the latest updates (oldest first; per update, per copy, the keys of
-    the objects that tell the copy from the place: "+..." for the copy, "-..." for the place;
-    None: not weighed) tell the best copy rather than the place, over the newest `n` updates
-    for the `n` that gives most (the fewest of those), and that `n`.  An object (a key without
-    its sign) counts once, by its newest evidence.  The updates before the robot was carried
-    off speak for the place; they do not outweigh what it sees since."""
-    best = (0, 0)  # (lead, -n)
+    """By how many objects the latest updates tell the best copy rather than the place, and
+    over how many updates (`copy_leads`, the best copy's; (0, 0) when none leads)."""
+    return max(copy_leads(updates), default=(0, 0))
+
+
+def copy_leads(updates: Sequence[list[list[str]] | None]) -> list[tuple[int, int]]:
+    """Per copy, by how many objects the latest updates (oldest first; per update, per copy,
+    the keys of the objects that tell the copy from the place: "+..." for the copy, "-..."
+    for the place; None: not weighed) tell the copy rather than the place, over the newest
+    `n` updates for the `n` that gives most (the fewest of those), and that `n` (0, 0: no
+    suffix leads).  An object (a key without its sign) counts once, by its newest evidence.
+    The updates before the robot was carried off speak for the place; they do not outweigh
+    what it sees since."""
     copies = len(updates[-1]) if updates and updates[-1] is not None else 0
+    leads = []
     for i in range(copies):
         newest: set[str] = set()
-        lead = 0
+        lead, best = 0, (0, 0)  # (lead, -n)
         for n, told in enumerate(reversed(updates), start=1):
             for key in told[i] if told else ():
                 if key[1:] not in newest:
                     newest.add(key[1:])
                     lead += 1 if key[0] == "+" else -1
             best = max(best, (lead, -n))
-    return best[0], -best[1]
+        leads.append((best[0], -best[1]))
+    return leads

@@ -11,6 +11,7 @@ from hypothesis import strategies as st
 
 import semloc
 from semloc import Localizer, ObjectMap
+from semloc.clustering import MergeCriterion
 from semloc.localizer import LocalizerConfig
 from semloc.maps import SemanticObject
 from semloc.places import PlaceIndex, RetrievalConfig, place_index
@@ -51,7 +52,7 @@ def test_the_true_candidates_are_always_retrieved(seed, size, noise, yaw):
     localizer = Localizer(world, RETRIEVE_ALL)
     found = [localizer._candidates.candidates(o) for o in view]
     cfg = localizer.config.clustering
-    support = index.support(view.positions, found, cfg.gamma, cfg.distance_tolerance)
+    support = index.support(view.positions, found, MergeCriterion.of(cfg))
     for true, kept in zip(near, index.kept(support, found)):
         assert true in kept
 
@@ -184,7 +185,7 @@ def _pair_support(local_gap: float, map_gap: float) -> int:
     config = RetrievalConfig(cell=20.0)
     index = PlaceIndex(ObjectMap(objects, up=[0, 0, 1], name="pair"), config)
     local_xyz = np.array([[0.0, 0, 0], [local_gap, 0, 0]])
-    support = index.support(local_xyz, [np.array([0]), np.array([1])], 1.0, 0.5)
+    support = index.support(local_xyz, [np.array([0]), np.array([1])], MergeCriterion(1.0, 0.5))
     return int(support[0].max())
 
 

@@ -12,6 +12,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 import semloc
+from semloc import semantics
 from semloc.association import AssociationConfig, CandidateIndex, label_report
 from semloc.semantics import (
     EXACT,
@@ -190,3 +191,25 @@ def test_embeddings_decide_where_both_objects_carry_one():
     assert np.allclose(result.pose, np.linalg.inv(T), atol=1e-6)
     index = CandidateIndex(room, AssociationConfig())
     assert label_report(index, local)["thing"].resolved == "embedding"
+
+
+def test_each_label_is_read_once_however_many_pairs_it_is_in(monkeypatch):
+    """A new local label against a map compares with every map label, but each label is
+    normalised only when first read (`semantics.reading`), not once per pair."""
+    calls: list[str] = []
+    monkeypatch.setattr(
+        semantics, "normalise", lambda label: calls.append(label) or normalise(label)
+    )
+    semantics.reading.cache_clear()
+    semantics.relation.cache_clear()
+    map_labels = ["Chair", "office chair", "sofa", "Table", "desk", "lamp", "pillows"]
+    objects = [semloc.SemanticObject(f"g{i}", x, [i, 0.0, 0.0]) for i, x in enumerate(map_labels)]
+    gmap = semloc.ObjectMap(objects)
+    index = CandidateIndex(gmap, AssociationConfig())
+    local_labels = ["armchair", "couch", "cushion", "chair"]
+    for local in local_labels:
+        index.label_similarity(local)
+    read = {x.lower() for x in map_labels} | set(local_labels)  # map labels as canonical
+    assert sorted(set(calls)) == sorted(read)
+    assert all(calls.count(label) == 2 for label in read)  # its key, then its class
+    assert relation("armchair", "chair") == ("parent", 0.7)

@@ -16,12 +16,14 @@ from scipy.stats import binom
 from semloc import Coverage, Localizer, ObjectMap, Prior, SemanticObject
 from semloc.changes import RunChanges
 from semloc.decision import RIVAL_LOGIT_GAP, missing_penalty, prior_first
-from semloc.localizer import NEWEST_CONTRADICT, STALE
+from semloc.localizer import NEWEST_CONTRADICT, STALE, TWIN_DOUBTED, TWIN_UPDATES
 from semloc.results import Hypothesis
 from semloc.tracking import (
     CONFIDENCE_CAP,
     CONTRADICTED,
     CONTRADICTION_UPDATES,
+    DOUBT,
+    DOUBT_OBJECTS,
     EVIDENCE_LOGITS,
     PRIOR_AGAINST,
     PRIOR_WEIGHT,
@@ -436,6 +438,53 @@ def test_new_objects_are_unusual_just_below_the_share_where_the_tail_is_unusual(
     assert not rate(border * (1 + 1e-6)).unusual(against, judged)
 
 
+def at_share(share: float) -> AgainstRate:
+    """A run that judged 1000 objects at `share` against its claims (the prior included)."""
+    return AgainstRate(share * (1000 + PRIOR_WEIGHT) - PRIOR_WEIGHT * PRIOR_AGAINST, 1000)
+
+
+def test_a_claim_is_doubted_when_its_newest_objects_hold_an_unlikely_share_against_it():
+    """Two of the newest six against: at a run share of 5 % the tail (0.033) lies between
+    `UNUSUAL` and `DOUBT`: the claim holds (not ended) but is doubted; at 10 % (0.114) not."""
+    assert UNUSUAL < binom.sf(1, 6, 0.05) < DOUBT < binom.sf(1, 6, 0.10)
+    view = Verdict([(10, "a"), (11, "b"), (12, "c"), (13, "d")], ["x", "y"])
+    doubted = track(rate=at_share(0.05))
+    assert doubted.contradicted(view) == 0 and doubted.doubted()
+    calm = track(rate=at_share(0.10))
+    assert calm.contradicted(view) == 0 and not calm.doubted()
+
+
+def test_a_doubt_weighs_the_newest_judged_objects_across_updates():
+    """Updates without new objects change nothing (a robot carried off sees nothing for a
+    while: no news); a doubt lifts once `DOUBT_OBJECTS` - 1 newer objects support the place
+    (one against of six is never unusual); an object judged again alike is not new."""
+    claim = track(rate=at_share(0.05))
+    claim.contradicted(Verdict([(10, "a"), (11, "b"), (12, "c"), (13, "d")], ["x", "y"]))
+    for _ in range(3):
+        claim.contradicted(Verdict([], []))
+        claim.contradicted(Verdict([(10, "a")], ["x"]))  # the same objects, the same verdicts
+        assert claim.doubted()
+    supporting = [(20 + k, f"s{k}") for k in range(DOUBT_OBJECTS - 1)]
+    for k, pair in enumerate(supporting, start=1):
+        claim.contradicted(Verdict([pair], []))
+        assert claim.doubted() is (k < DOUBT_OBJECTS - 1), k  # [y, s0..s4]: one against left
+
+
+def test_one_object_against_never_doubts_a_claim():
+    claim = track(rate=at_share(0.0))
+    claim.contradicted(Verdict([], ["x"]))
+    assert not claim.doubted()
+
+
+def test_a_restored_track_keeps_its_newest_judged_objects():
+    ids = [f"g{i}" for i in range(40)]
+    claim = track(rate=at_share(0.05))
+    claim.contradicted(Verdict([(10, "a"), (11, "b"), (12, "c"), (13, "d")], ["x", "y"]))
+    state = json.loads(json.dumps(claim.state(ids)))
+    again = Track.restored(state, ids.index, TrackingConfig(), at_share(0.05))
+    assert again.doubted() and list(again._newest) == list(claim._newest)
+
+
 def test_the_runs_share_adds_up_every_claims_objects():
     rate = AgainstRate()
     rate.add(1, 3)
@@ -773,8 +822,72 @@ def test_a_kidnap_into_a_copy_is_caught_by_two_of_its_own_objects_without_covera
     contradict it) and where the copy, a twin of the room (`semloc.twins`), has them."""
     there = local([o for o in lookalikes() if o.id.startswith("b")], ids="k", shift=30.0)
     assert [o.id for o in there[0::3]][-1] == "kb10" and [o.id for o in there[1::3]][-1] == "kb11"
-    assert kidnapped(None) == ["localized a", "ambiguous", "localized b"]  # at the second
-    assert kidnapped(None, extras=1) == ["localized a"] * 3  # one could be the map's change
+    # the first makes the copy lead (the claim is doubted), the second ends the claim
+    assert kidnapped(None) == ["ambiguous", "ambiguous", "localized b"]
+    # one could be the map's change: the claim is doubted, not ended, while the copy leads
+    assert kidnapped(None, extras=1) == ["ambiguous"] * 3
+
+
+def test_a_copy_leading_by_one_object_makes_the_answer_ambiguous_with_the_copy_listed():
+    building = lookalikes(extras=1)
+    localizer = Localizer(building, local_up=[0, 0, 1])
+    room_objects = local([o for o in building if o.id.startswith("a")])
+    localizer.update(room_objects[:5])
+    assert localizer.update(room_objects[5:]).status == "localized"
+    there = local([o for o in building if o.id.startswith("b")], ids="k", shift=30.0)
+    doubted = localizer.update(there[0::3])
+    assert doubted.status == "ambiguous" and doubted.reason == TWIN_DOUBTED
+    assert localizer.tracking  # weighed on, not ended
+    place, copy = doubted.hypotheses
+    assert {g[0] for g, _ in place.pairs} == {"a"} and place.confidence <= 0.5
+    assert copy.method == "copy" and copy.pairs and {g[0] for g, _ in copy.pairs} == {"b"}
+    assert {l for _, l in copy.pairs} <= {l for _, l in place.pairs}
+    np.testing.assert_allclose(copy.pose[:3, 3] - place.pose[:3, 3], [30.0, 0.0, 0.0], atol=0.2)
+
+
+def test_a_doubt_lasts_while_nothing_tells_the_place_from_its_copy():
+    """Updates of objects both rooms hold say nothing of which one the robot is in: the tv
+    keeps the copy ahead however many of them follow (nothing seen is no news)."""
+    building = lookalikes(extras=1)
+    localizer = Localizer(building, local_up=[0, 0, 1])
+    room_objects = local([o for o in building if o.id.startswith("a")])
+    localizer.update(room_objects[:5])
+    localizer.update(room_objects[5:])
+    there = local([o for o in building if o.id.startswith("b")], ids="k", shift=30.0)
+    assert localizer.update(there[0::3]).reason == TWIN_DOUBTED
+    both_hold = [o for o in there if o.id != "kb10"]
+    for _ in range(2 * TWIN_UPDATES):
+        assert localizer.update(both_hold[:3]).reason == TWIN_DOUBTED
+
+
+def test_a_restored_localizer_reads_the_older_state_of_every_updates_objects():
+    """A state written before only the telling updates were kept (one list per update)."""
+    building = lookalikes(extras=1)
+    one = Localizer(building, local_up=[0, 0, 1])
+    room_objects = local([o for o in building if o.id.startswith("a")])
+    one.update(room_objects[:5])
+    one.update(room_objects[5:])
+    there = local([o for o in building if o.id.startswith("b")], ids="k", shift=30.0)
+    one.update(there[0::3])
+    state = json.loads(json.dumps(one.state()))
+    state["twins"]["fits"] = [None, [[]], [["+local kb10"]]]
+    other = Localizer.restore(building, state, list(one.local_map), local_up=[0, 0, 1])
+    assert list(other._twin_fits) == [(3, [["+local kb10"]])]
+    assert other.update(there[1::3]).reason == TWIN_DOUBTED
+
+
+def test_the_place_seen_again_lifts_the_doubt():
+    """Once an object only the room holds is seen, the copy no longer leads."""
+    building = lookalikes(extras=1)
+    localizer = Localizer(building, local_up=[0, 0, 1])
+    room_objects = local([o for o in building if o.id.startswith("a")])
+    localizer.update(room_objects[:5])
+    localizer.update(room_objects[5:])
+    tv = local([o for o in building if o.id == "b10"], ids="k", shift=30.0)
+    assert localizer.update(tv).status == "ambiguous"  # a tv where the room has none
+    only_the_room = [o for o in room_objects if o.id in {"la1", "la3"}]  # the copy lacks them
+    assert len(only_the_room) == 2
+    assert localizer.update(only_the_room).status == "localized"
 
 
 def test_after_a_kidnap_into_a_copy_the_copy_is_claimed_and_kept():
@@ -865,8 +978,10 @@ def test_a_restored_localizer_counts_a_copys_objects_as_the_uninterrupted_one():
     one = Localizer(building, local_up=[0, 0, 1])
     one.update(room_objects[:5])
     one.update(room_objects[5:])
-    assert one.update(there[0::3]).status == "localized"  # the tv: one object of the copy
+    assert one.update(there[0::3]).reason == TWIN_DOUBTED  # the tv: one object of the copy
     state = json.loads(json.dumps(one.state()))
-    assert state["twins"]["fits"] == [[["+local kb10"]]]  # the tv, for the only copy
+    assert state["twins"]["fits"] == [[3, [["+local kb10"]]]]  # the tv at the third update
     other = Localizer.restore(building, state, list(one.local_map), local_up=[0, 0, 1])
-    assert [one.update(there[1::3]).status, other.update(there[1::3]).status] == ["ambiguous"] * 2
+    assert other.tracking
+    ended = [one.update(there[1::3]), other.update(there[1::3])]
+    assert [r.reason for r in ended] == [CONTRADICTED] * 2 and not one.tracking

@@ -92,3 +92,12 @@ def test_maps_delete_needs_write_and_yes_and_numbers_go_on(hub, building, tmp_pa
     assert writer.put_map("office", building) == 3  # a number never names two documents
     assert [v["version"] for v in reader.versions("office")] == [3]
     assert reader.get_map("office").ids.tolist() == building.ids.tolist()
+
+
+def test_a_new_id_never_starts_with_a_dash(monkeypatch):
+    """A session id starting with "-" was read as an option by `semloc sessions show`."""
+    from semloc.serve import service
+
+    drawn = iter(["-jcuolRcH4g9AFeo0pEHihv8", "--cuolRcH4g9AFeo0pEHihv", "jcuolRcH4g9AFeo0pEHihv8"])
+    monkeypatch.setattr(service.secrets, "token_urlsafe", lambda n: next(drawn))
+    assert service.new_id() == "jcuolRcH4g9AFeo0pEHihv8"

@@ -343,7 +343,7 @@ class Service:
         local = parse_map(document)
         result = localize(global_map, local, self.config, prior=prior)
         document = result.to_dict(schema.LocalizeAnswer, map_version=version,
-                                  localization_id=secrets.token_urlsafe(18))  # fmt: skip
+                                  localization_id=new_id())  # fmt: skip
         kept = {"local": map_to_dict(local), "answer": _answer_record(document)}
         self.store.put_localization(document["localization_id"], map_id, kept)
         return document
@@ -365,7 +365,7 @@ class Service:
                 _objects_map([], up, "body")  # validates `up` as a map's
             prior = _prior(body.get("prior"))
         version, global_map = self.object_map(map_id)
-        session_id = secrets.token_urlsafe(18)
+        session_id = new_id()
         localizer, state = None, None
         if prior is not None:
             localizer = Localizer(global_map, self.config, local_up=up, prior=prior)
@@ -785,3 +785,12 @@ def _summary(document: dict[str, Any]) -> dict[str, Any]:
     if (document.get("support") or {}).get("tracked") and document.get("changes"):
         summary[RUN_CHANGES] = document["changes"]  # the run's report (see report_changes)
     return summary
+
+
+def new_id() -> str:
+    """A new random id (a session's, a localization's): 24 URL-safe characters, never
+    starting with "-" (a command line would read it as an option: `semloc sessions show
+    MAP -x...`)."""
+    while (found := secrets.token_urlsafe(18)).startswith("-"):
+        pass
+    return found
