@@ -34,7 +34,7 @@ largest) and of them those the view could have told (`Told`: after a kidnap, onl
 object seen since stands where the claimed place has none of its kind); keyframes from the look-alike kidnap to the end of the claim (median, max: 0 = not
 claimed at the kidnap's keyframe) and to a right `localized` answer (median); moved objects
 found over the run (precision / recall, below); share of updates whose
-answer used negative evidence (`support.missing` given); update ms, first / last 100
+answer used negative evidence (`support.n_missing` given); update ms, first / last 100
 (median over seeds); memory growth (MB, largest).  Right: the pose at the robot within 0.5 m
 and 15 deg.
 
@@ -131,7 +131,7 @@ def one_run(task: tuple[str, str, bool, int, int]) -> dict:
         told.add(frame, result.pose if result.status == "localized" and not right[-1] else None)
         rss.append(rss_mb())
         support = getattr(result, "support", None)
-        negative += getattr(support, "missing", None) is not None
+        negative += getattr(support, "n_missing", None) is not None
         moved.add(frame, result, tracked and right[-1])
     found = summary(config, np.array(right), np.array(status), ms, rss, negative, moved)
     return {**found, "wrong_told": told.wrong}

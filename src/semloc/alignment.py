@@ -62,7 +62,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
 from semloc._alignment_fast import guided_passes, mutual_nearest
-from semloc.association import CandidateIndex
+from semloc.association import CandidateIndex, label_report
 from semloc.decision import (
     decide,
     distinct,
@@ -161,7 +161,10 @@ def align(
     (A id, B id) the correspondences, its status / confidence / reason as for `localize`."""
     if not isinstance(a, ObjectMap) or not isinstance(b, ObjectMap):
         raise TypeError("align needs two ObjectMaps")
-    return _Aligner(a, b, config, alignment or AlignmentConfig(), overrides).run()
+    aligner = _Aligner(a, b, config, alignment or AlignmentConfig(), overrides)
+    result = aligner.run()
+    result.read_labels = lambda: label_report(aligner.index, b)  # B's labels read in A's
+    return result
 
 
 class _Aligner:
@@ -172,6 +175,7 @@ class _Aligner:
         self.config, self.prior = probe.config, a  # each view's Localizer describes `a` itself
         self.a, self.b, self.alignment = probe.global_map, b, alignment
         index = CandidateIndex(self.a, self.config.association, probe.descriptor_gate)
+        self.index = index
         candidates = [index.candidates(obj) for obj in b]
         self.cand_b = np.repeat(np.arange(len(b)), [len(c) for c in candidates])
         self.cand_a = np.concatenate([*candidates, np.zeros(0, dtype=int)]).astype(int)

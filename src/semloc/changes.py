@@ -37,9 +37,10 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
 from scipy.spatial import cKDTree
 
+from semloc import schema
 from semloc.association import AssociationConfig, CandidateIndex
 from semloc.maps import MAX_ID_LENGTH, ObjectMap, SemanticObject
 
@@ -98,45 +99,30 @@ class Changes:
     evidence: dict[str, dict[str, int]] | None = None
     """Over a run (`RunChanges`): how many detections (new) or looks (missing) said so, by id."""
 
+    def to_model(self) -> schema.Changes:
+        moved = [schema.Moved(global_=m.global_id, local=m.local_id, offset_m=m.offset_m,
+                              evidence=m.evidence, last_seen=m.last_seen)
+                 for m in self.moved]  # fmt: skip
+        return schema.Changes(moved=moved, new=list(self.new), missing=list(self.missing),
+                              evidence=self.evidence)  # fmt: skip
+
+    @classmethod
+    def of_model(cls, m: schema.Changes) -> Changes:
+        moved = [Moved(x.global_, x.local, x.offset_m, x.evidence, x.last_seen) for x in m.moved]
+        return cls(moved, list(m.new), list(m.missing), evidence=m.evidence)
+
     def to_dict(self) -> dict[str, Any]:
-        document: dict[str, Any] = {
-            "moved": [_moved_entry(m) for m in self.moved],
-            "new": list(self.new),
-            "missing": list(self.missing),
-        }
-        if self.evidence is not None:
-            document["evidence"] = {k: dict(v) for k, v in self.evidence.items()}
-        return document
+        return self.to_model().model_dump(by_alias=True)
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> Changes:
         """The changes of a `to_dict` document (`ValueError` for one that is not)."""
         try:
-            moved = [Moved(str(m["global"]), str(m["local"]), float(m["offset_m"]),
-                           _count(m.get("evidence")), _count(m.get("last_seen")))
-                     for m in data.get("moved") or []]  # fmt: skip
-            evidence = data.get("evidence")
-            if evidence is not None:
-                evidence = {str(k): {str(i): int(n) for i, n in v.items()}
-                            for k, v in evidence.items()}  # fmt: skip
-            return cls(moved, [str(i) for i in data.get("new") or []],
-                       [str(i) for i in data.get("missing") or []], evidence=evidence)  # fmt: skip
-        except (KeyError, TypeError, ValueError, AttributeError) as exc:
-            raise ValueError(f"'changes' is not a changes object ({exc})") from None
-
-
-def _moved_entry(m: Moved) -> dict[str, Any]:
-    entry: dict[str, Any] = {"global": m.global_id, "local": m.local_id,
-                             "offset_m": round(m.offset_m, 6)}  # fmt: skip
-    if m.evidence is not None:
-        entry["evidence"] = m.evidence
-    if m.last_seen is not None:
-        entry["last_seen"] = m.last_seen
-    return entry
-
-
-def _count(value: Any) -> int | None:
-    return None if value is None else int(value)
+            return cls.of_model(schema.Changes.model_validate(data))
+        except ValidationError as exc:
+            raise ValueError(
+                f"'changes' is not a changes object ({schema.field_error(exc)})"
+            ) from None
 
 
 UNDECIDED_KEPT = 1000

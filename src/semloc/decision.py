@@ -294,9 +294,9 @@ absent objects loses against one that does not."""
 
 def missing_penalty(h: Hypothesis) -> float:
     """The evidence logit a hypothesis loses to the objects it expected and nobody saw."""
-    if h.missing is None or h.expected is None:
+    if h.n_missing is None or h.n_expected is None:
         return 0.0
-    return MISSING_LOGIT * max(0.0, h.missing - GONE_SHARE * h.expected)
+    return MISSING_LOGIT * max(0.0, h.n_missing - GONE_SHARE * h.n_expected)
 
 
 def rank(hypotheses: list[Hypothesis], rank_by: RankBy) -> list[Hypothesis]:

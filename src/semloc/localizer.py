@@ -538,7 +538,7 @@ class Localizer:
         hypothesis = followed
         hypothesis.confidence = track.current_confidence()
         if looked is not None:
-            hypothesis.missing, hypothesis.expected = looked
+            hypothesis.n_missing, hypothesis.n_expected = looked
         doubted = doubt is not None or track.doubted()
         self._add_step([hypothesis.score], end - start,
                        None if not answer else "ambiguous" if doubted else "localized")  # fmt: skip
@@ -746,6 +746,9 @@ class Localizer:
     def _result(self, status: Status, hypotheses: list[Hypothesis], reason: str, explain) -> Result:
         result = Result.of(status, hypotheses, self._steps, self._timing, reason, explain)
         result.support = self._support_of(hypotheses[0] if hypotheses else None)
+        result.prior = self._prior
+        index, labelled = self._candidates, self.window.objects  # (read when first asked)
+        result.read_labels = lambda: label_report(index, labelled)
         if status == "ambiguous":  # where to look next, computed when first read
             seen = self.window.objects
             labels = [self._map_label(o) for o in seen]
@@ -776,22 +779,24 @@ class Localizer:
         missing_ids = None
         if self._looks:
             # the looks the count was made on: while tracked, this update's (when it has one)
-            newest = self._track is not None and self._look is not None and best.missing is not None
+            newest = (
+                self._track is not None and self._look is not None and best.n_missing is not None
+            )
             shown, unseen = self._unseen(best.pose, None if newest else list(self._looks))
-            if best.missing is None:  # (weighed for the refined ones only)
-                best.missing, best.expected = len(unseen), len(shown)
+            if best.n_missing is None:  # (weighed for the refined ones only)
+                best.n_missing, best.n_expected = len(unseen), len(shown)
             map_ids = self.global_map.ids
             missing_ids = tuple(str(map_ids[i]) for i in unseen[: Support.MISSING_IDS_KEPT])
         return Support(
-            pairs=len(ids),
+            n_pairs=len(ids),
             seen=(min(keyframes), max(keyframes)),
             updates_ago=window.updates - min(a.update for a in arrivals),
             metres=window.travel - min(a.travel for a in arrivals),
             tracked=self._track is not None,
-            changed=counts.get("changed", 0),
-            contradicting=counts.get("contradicting", 0),
-            missing=best.missing,
-            expected=best.expected,
+            n_changed=counts.get("changed", 0),
+            n_contradicting=counts.get("contradicting", 0),
+            n_missing=best.n_missing,
+            n_expected=best.n_expected,
             missing_ids=missing_ids,
         )
 
@@ -1200,8 +1205,8 @@ class Localizer:
             method="" if estimate is None else estimate.method,
             features=features,
             rejected=[(str(ids[g]), local_objects[l].id) for g, l in verified.rejected],
-            missing=missing,
-            expected=expected,
+            n_missing=missing,
+            n_expected=expected,
         )
 
     def _semantic_weight(self, pairs: list[tuple[int, int]]) -> float:
@@ -1346,7 +1351,7 @@ def localize(
     localizer = Localizer(global_map, config, local_up=local_map.up, prior=prior, **overrides)
     keyframes = sorted(set(local_map.seen.tolist()))
     if not keyframes:
-        return Result(status="failed", pose=None, hypotheses=[], reason=EMPTY_LOCAL_MAP)
+        return Result("failed", None, [], reason=EMPTY_LOCAL_MAP, prior=prior)
     by_keyframe: dict[int, list[SemanticObject]] = {k: [] for k in keyframes}
     for obj in local_map:  # grouped once: a long replay must not rescan the map per keyframe
         by_keyframe[obj.seen].append(obj)

@@ -41,6 +41,8 @@ from typing import Any
 
 import numpy as np
 
+from semloc.maps import MAX_COORDINATE
+
 GATE_SLACK = 1.0
 """Metres added to the gate's reach, besides a quarter of each map object's diagonal."""
 
@@ -76,6 +78,8 @@ def _position(value: Any) -> np.ndarray:
         raise ValueError(f"prior: position must be [x, y, z], got shape {array.shape}")
     if not np.all(np.isfinite(array)):
         raise ValueError(f"prior: position must be finite, got {array.tolist()}")
+    if np.abs(array).max() > MAX_COORDINATE:
+        raise ValueError(f"prior: position beyond ±{MAX_COORDINATE:g} m (the input limit)")
     return array
 
 
@@ -107,6 +111,8 @@ class Prior:
             if isinstance(floor, (str, bytes)) or len(floor) != 2:
                 raise ValueError(f"prior: floor must be (z_min, z_max), got {floor!r}")
             band = (_finite(floor[0], "floor z_min"), _finite(floor[1], "floor z_max"))
+            if max(abs(band[0]), abs(band[1])) > MAX_COORDINATE:
+                raise ValueError(f"prior: floor beyond ±{MAX_COORDINATE:g} m (the input limit)")
             if band[0] > band[1]:
                 raise ValueError(f"prior: floor needs z_min <= z_max, got {band}")
         if heading is None and heading_tolerance is not None:

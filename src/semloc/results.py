@@ -1,28 +1,31 @@
 """What a localization returns: `Result` (status, pose, ranked `Hypothesis` list, `Step` records).
 
 Shared by the Localizer and every baseline, so that callers, the CLI, the evaluation and the
-JSON output see one model.  `Status` is the decision's vocabulary (see `decision.py`).  Results
-are written as JSON by `Result.to_json` and read back by `saved_result` (every field checked:
-the CLI's `view`, `export` and `update-map --result`); no file access here.
+JSON output see one model.  `Status` is the decision's vocabulary (see `decision.py`).  Their
+JSON is `semloc.schema`'s: written by `Result.to_dict` / `to_json`, read back by
+`Result.from_dict` and `saved_result` (the CLI's `view`, `export` and `update-map --result`),
+every field checked by the schema; no file access here.
 """
 
 from __future__ import annotations
 
 import json
-import reprlib
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import cached_property
-from typing import Any, ClassVar, Literal
+from typing import Any, ClassVar, TypeVar
 
 import numpy as np
+from pydantic import ValidationError
 
+from semloc import schema
+from semloc.association import LabelResolution
 from semloc.changes import Changes
 from semloc.maps import MAX_COORDINATE
+from semloc.priors import Prior
 from semloc.transforms import as_pose
 
-Status = Literal["localized", "ambiguous", "failed"]
-STATUSES: tuple[Status, ...] = ("localized", "ambiguous", "failed")
+Status = schema.Status
 
 
 @dataclass
@@ -42,31 +45,41 @@ class Hypothesis:
     features: dict[str, float] | None = None  # its inputs (semloc.decision.FEATURES)
     rejected: list[tuple[str, str]] = field(default_factory=list)  # pairs that disagreed
     outside_prior: bool | None = None  # its pose is outside the position prior (None: no prior)
-    missing: int | None = None  # map objects its pose puts in the recent looks that no
+    n_missing: int | None = None  # map objects its pose puts in the recent looks that no
     # detection accounts for (None: no coverage given)
-    expected: int | None = None  # map objects its pose puts in the recent looks
+    n_expected: int | None = None  # map objects its pose puts in the recent looks
+
+    def to_model(self) -> schema.Hypothesis:
+        return schema.Hypothesis(
+            rank=self.rank, score=self.score, pairs=_pairs_model(self.pairs), pose=self.pose,
+            fitness=self.fitness, rmse=self.rmse, residual=self.residual, method=self.method,
+            confidence=self.confidence, evidence=self.evidence, features=self.features,
+            rejected=_pairs_model(self.rejected), outside_prior=self.outside_prior,
+            n_missing=self.n_missing, n_expected=self.n_expected,
+        )  # fmt: skip
+
+    @classmethod
+    def of_model(cls, m: schema.Hypothesis) -> Hypothesis:
+        return cls(
+            m.rank, m.score, _pairs_of(m.pairs), _pose_of(m.pose), m.fitness, m.rmse,
+            m.residual, m.method, m.confidence, m.evidence, m.features, _pairs_of(m.rejected),
+            m.outside_prior, m.n_missing, m.n_expected,
+        )  # fmt: skip
 
     def to_dict(self) -> dict[str, Any]:
-        return (
-            {
-                "rank": self.rank,
-                "score": round(self.score, 6),
-                "pairs": [{"global": g, "local": l} for g, l in self.pairs],
-                "pose": None if self.pose is None else np.round(self.pose, 9).tolist(),
-                "fitness": None if self.fitness is None else round(self.fitness, 6),
-                "rmse": None if self.rmse is None else round(self.rmse, 6),
-                "residual": None if self.residual is None else round(self.residual, 6),
-                "method": self.method,
-                "confidence": None if self.confidence is None else round(self.confidence, 6),
-                "evidence": None if self.evidence is None else round(self.evidence, 6),
-                "features": None
-                if self.features is None
-                else {k: round(v, 6) for k, v in self.features.items()},
-                "rejected": [{"global": g, "local": l} for g, l in self.rejected],
-            }
-            | ({} if self.outside_prior is None else {"outside_prior": self.outside_prior})
-            | ({} if self.missing is None else {"missing": self.missing, "expected": self.expected})
-        )
+        return self.to_model().model_dump(by_alias=True)
+
+
+def _pairs_model(pairs: list[tuple[str, str]]) -> list[schema.Pair]:
+    return [schema.Pair(global_=g, local=l) for g, l in pairs]
+
+
+def _pairs_of(pairs: list[schema.Pair]) -> list[tuple[str, str]]:
+    return [(p.global_, p.local) for p in pairs]
+
+
+def _pose_of(rows: list[list[float]] | None) -> np.ndarray | None:
+    return None if rows is None else np.array(rows, dtype=float)
 
 
 @dataclass
@@ -84,15 +97,16 @@ class Step:
     ms: float
     status: Status | None = "failed"
 
+    def to_model(self) -> schema.Step:
+        return schema.Step(step=self.step, n_local=self.n_local, n_sets=self.n_sets,
+                           top_scores=list(self.top_scores), ms=self.ms, status=self.status)  # fmt: skip
+
+    @classmethod
+    def of_model(cls, m: schema.Step) -> Step:
+        return cls(m.step, m.n_local, m.n_sets, list(m.top_scores), m.ms, m.status)
+
     def to_dict(self) -> dict[str, Any]:
-        return {
-            "step": self.step,
-            "n_local": self.n_local,
-            "n_sets": self.n_sets,
-            "top_scores": [round(s, 6) for s in self.top_scores],
-            "ms": round(self.ms, 3),
-            "status": self.status,
-        }
+        return self.to_model().model_dump()
 
 
 @dataclass(frozen=True)
@@ -108,99 +122,71 @@ class Look:
     separates: list[int]
     gain: float
 
-    def to_dict(self) -> dict[str, Any]:
-        return {
-            "label": self.label,
-            "global_id": self.global_id,
-            "where": {str(rank): np.round(p, 6).tolist() for rank, p in self.where.items()},
-            "separates": list(self.separates),
-            "gain": round(self.gain, 6),
-        }
+    def to_model(self) -> schema.NextLook:
+        return schema.NextLook(
+            label=self.label, global_id=self.global_id,
+            where={str(rank): p for rank, p in self.where.items()},
+            separates=[int(r) for r in self.separates], gain=self.gain,
+        )  # fmt: skip
 
     @classmethod
-    def from_dict(cls, data: object, index: int = 0) -> Look:
-        """A suggestion of a result document; `ValueError` naming the field when malformed."""
-        try:
-            assert isinstance(data, dict) and isinstance(data["where"], dict)
-            where = {int(rank): as_point(p) for rank, p in data["where"].items()}
-            separates = [int(r) for r in data["separates"]]
-            assert isinstance(data["label"], str) and isinstance(data["global_id"], str)
-            gain = float(data["gain"])
-            assert np.isfinite(gain)
-        except (AssertionError, KeyError, TypeError, ValueError):
-            raise ValueError(f"'next_look[{index}]' is not a suggestion: {_brief(data)}") from None
-        return cls(data["label"], data["global_id"], where, separates, gain)
+    def of_model(cls, m: schema.NextLook) -> Look:
+        where = {int(rank): np.array(p, dtype=float) for rank, p in m.where.items()}
+        return cls(m.label, m.global_id, where, list(m.separates), m.gain)
 
-
-def as_point(value: object) -> np.ndarray:
-    """A finite [x, y, z] (`ValueError` otherwise)."""
-    point = np.asarray(value, dtype=float)
-    if point.shape != (3,) or not np.all(np.isfinite(point)):
-        raise ValueError("not a finite [x, y, z]")
-    return point
+    def to_dict(self) -> dict[str, Any]:
+        return self.to_model().model_dump()
 
 
 @dataclass(frozen=True)
 class Support:
-    """How recent the evidence of an answer's pose is: its local objects' pairs, the span of
-    their `seen` keyframes, how many updates and metres of odometry ago the oldest of them was
-    last detected (metres: 0 without robot positions), and whether the place is tracked."""
+    """How recent the evidence of an answer's pose is: its local objects' pairs (`n_pairs`),
+    the span of their `seen` keyframes, how many updates and metres of odometry ago the oldest
+    of them was last detected (metres: 0 without robot positions), and whether the place is
+    tracked."""
 
-    pairs: int
+    n_pairs: int
     seen: tuple[int, int]
     updates_ago: int
     metres: float
     tracked: bool = False
-    changed: int = 0
+    n_changed: int = 0
     """Objects judged since a tracked claim began that a plausible move explains (0 unless
     tracked)."""
-    contradicting: int = 0
+    n_contradicting: int = 0
     """Objects judged since a tracked claim began that contradict it (0 unless tracked)."""
-    missing: int | None = None
+    n_missing: int | None = None
     """Map objects the pose puts in the recent looks that no detection accounts for (None: no
     coverage given, so no negative evidence)."""
-    expected: int | None = None
+    n_expected: int | None = None
     """Map objects the pose puts in the recent looks (None: no coverage given)."""
     missing_ids: tuple[str, ...] | None = None
-    """The ids of the map objects counted in `missing`, as the answer's pose places the looks
-    (at most `MISSING_IDS_KEPT`, in the map's order; None: no coverage given)."""
+    """The ids of the map objects counted in `n_missing`, as the answer's pose places the
+    looks (at most `MISSING_IDS_KEPT`, in the map's order; None: no coverage given)."""
 
     MISSING_IDS_KEPT: ClassVar[int] = 50
-    """The most ids an answer lists (a look that misses more says so by `missing` alone)."""
+    """The most ids an answer lists (a look that misses more says so by `n_missing` alone)."""
 
-    def to_dict(self) -> dict[str, Any]:
-        return {
-            "pairs": self.pairs,
-            "seen": [int(k) for k in self.seen],
-            "updates_ago": int(self.updates_ago),
-            "metres": round(self.metres, 3),
-            "tracked": self.tracked,
-            "changed": self.changed,
-            "contradicting": self.contradicting,
-            "missing": self.missing,
-            "expected": self.expected,
-            "missing_ids": None if self.missing_ids is None else list(self.missing_ids),
-        }
+    def to_model(self) -> schema.Support:
+        return schema.Support(
+            n_pairs=self.n_pairs, seen=[int(k) for k in self.seen],
+            updates_ago=int(self.updates_ago), metres=self.metres, tracked=self.tracked,
+            n_changed=self.n_changed, n_contradicting=self.n_contradicting,
+            n_missing=self.n_missing, n_expected=self.n_expected,
+            missing_ids=None if self.missing_ids is None else list(self.missing_ids),
+        )  # fmt: skip
 
     @classmethod
-    def from_dict(cls, data: object) -> Support | None:
-        """The support of a result document (None when absent); `ValueError` when malformed."""
-        if data is None:
-            return None
-        try:
-            assert isinstance(data, dict)
-            seen = data["seen"]
-            missing, expected = data.get("missing"), data.get("expected")
-            ids = data.get("missing_ids")
-            assert ids is None or (isinstance(ids, list) and all(isinstance(i, str) for i in ids))
-            return cls(int(data["pairs"]), (int(seen[0]), int(seen[1])),
-                       int(data["updates_ago"]), float(data["metres"]), bool(data["tracked"]),
-                       int(data.get("changed", 0)), int(data.get("contradicting", 0)),
-                       None if missing is None else int(missing),
-                       None if expected is None else int(expected),
-                       None if ids is None else tuple(ids))  # fmt: skip
-        except (AssertionError, KeyError, IndexError, TypeError, ValueError):
-            raise ValueError(f"'support' is not a support record: {_brief(data)}") from None
+    def of_model(cls, m: schema.Support) -> Support:
+        ids = None if m.missing_ids is None else tuple(m.missing_ids)
+        return cls(m.n_pairs, (m.seen[0], m.seen[1]), m.updates_ago, m.metres, m.tracked,
+                   m.n_changed, m.n_contradicting, m.n_missing, m.n_expected, ids)  # fmt: skip
+
+    def to_dict(self) -> dict[str, Any]:
+        return self.to_model().model_dump()
+
+
+AnswerModel = TypeVar("AnswerModel", bound=schema.Answer)
 
 
 @dataclass
@@ -209,7 +195,8 @@ class Result:
 
     `reason` says why an answer is `ambiguous` or `failed` (empty when `localized`); the pose
     of an `ambiguous` result is the best candidate's, not a trusted answer: `pose_is_answer`
-    says which (the JSON carries it too)."""
+    says which (the JSON carries it too).  Its JSON is `semloc.schema.Answer` (`to_dict`,
+    `to_json`, `from_dict`)."""
 
     status: Status
     pose: np.ndarray | None
@@ -223,6 +210,12 @@ class Result:
     """How recent the evidence for the pose is (None without a pose)."""
     suggest: Callable[[], list[Look]] | None = field(default=None, repr=False, compare=False)
     """Computes `next_look` on first use (only an `ambiguous` answer has one)."""
+    read_labels: Callable[[], dict[str, LabelResolution]] | None = field(
+        default=None, repr=False, compare=False
+    )
+    """Computes `labels` on first use."""
+    prior: Prior | None = None
+    """The position prior the answer was made under (None: none)."""
 
     @classmethod
     def of(
@@ -252,6 +245,12 @@ class Result:
             return []
         return self.suggest()
 
+    @cached_property
+    def labels(self) -> dict[str, LabelResolution]:
+        """How each label of the local objects was read against the map's labels (sorted by
+        label; empty when nobody said)."""
+        return {} if self.read_labels is None else self.read_labels()
+
     @property
     def best(self) -> Hypothesis | None:
         return self.hypotheses[0] if self.hypotheses else None
@@ -266,50 +265,85 @@ class Result:
         """The calibrated probability that the best hypothesis is right (None without one)."""
         return None if self.best is None else self.best.confidence
 
-    @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> Result:
-        """A Result from its JSON document (`to_dict`, e.g. a `semloc serve` answer), the
-        inverse of `to_dict` up to its rounding; `ValueError` naming a field not as written."""
-        if not isinstance(data, dict):
-            raise ValueError("a result must be an object")
-        saved = saved_result(data)
-        raws = data.get("hypotheses") or []
-        hypotheses = [_hypothesis_from(raw, pose, pairs, i)
-                      for i, ((pose, pairs), raw) in enumerate(zip(saved.hypotheses, raws))]  # fmt: skip
-        try:
-            steps = [Step(**s) for s in data.get("steps") or []]
-        except TypeError as exc:
-            raise ValueError(f"'steps' are not steps ({exc})") from None
-        changes = Changes.from_dict(data.get("changes") or {})
-        looks = [Look.from_dict(x, i) for i, x in enumerate(_list_field(data.get("next_look"),
-                                                                         "next_look"))]  # fmt: skip
-        return cls(
-            saved.status or "failed", saved.pose, hypotheses, steps,
-            dict(data.get("timing_ms") or {}), str(data.get("reason") or ""),
-            explain=lambda: changes, support=Support.from_dict(data.get("support")),
-            suggest=lambda: looks,
+    def to_model(
+        self,
+        model: type[AnswerModel] = schema.Answer,  # type: ignore[assignment]
+        last_steps: int | None = None,
+        **fields: Any,
+    ) -> AnswerModel:
+        """The answer as `model` (`schema.Answer` or a writer's kind of it, whose own fields
+        are `fields`); `last_steps`: only that many of the latest steps (a stream writes each
+        update's step on its own line).  A ValidationError (a ValueError) for a non-finite
+        number."""
+        unknown = set(fields) - set(model.model_fields)
+        if unknown:
+            raise TypeError(f"{model.__name__} has no field {', '.join(sorted(unknown))}")
+        steps = (
+            self.steps if last_steps is None else self.steps[max(0, len(self.steps) - last_steps) :]
+        )
+        return model(
+            status=self.status, reason=self.reason, confidence=self.confidence,
+            pose_is_answer=self.pose_is_answer, pose=self.pose,
+            hypotheses=[h.to_model() for h in self.hypotheses],
+            steps=[s.to_model() for s in steps], timing_ms=dict(self.timing_ms),
+            changes=self.changes.to_model(),
+            support=None if self.support is None else self.support.to_model(),
+            next_look=[look.to_model() for look in self.next_look],
+            labels={label: schema.LabelMatch(resolved=found.resolved,
+                                             map_labels=list(found.map_labels))
+                    for label, found in self.labels.items()},
+            prior=None if self.prior is None else schema.Prior.model_validate(self.prior.to_dict()),
+            **fields,
         )  # fmt: skip
 
-    def to_json(self, **extra: Any) -> str:
-        """The JSON text of `to_dict()` (and `extra` keys), as every writer of a result writes
-        it: indented, NaN and infinities refused (`ValueError`)."""
-        return json.dumps({**self.to_dict(), **extra}, indent=1, allow_nan=False) + "\n"
+    def to_dict(self, model: type[schema.Answer] = schema.Answer, last_steps: int | None = None,
+                **fields: Any) -> dict[str, Any]:  # fmt: skip
+        """The answer's JSON document (see `to_model`)."""
+        return self.to_model(model, last_steps, **fields).model_dump(by_alias=True)
 
-    def to_dict(self) -> dict[str, Any]:
-        confidence = self.confidence
-        return {
-            "status": self.status,
-            "reason": self.reason,
-            "confidence": None if confidence is None else round(confidence, 6),
-            "pose_is_answer": self.pose_is_answer,
-            "pose": None if self.pose is None else np.round(self.pose, 9).tolist(),
-            "hypotheses": [h.to_dict() for h in self.hypotheses],
-            "steps": [s.to_dict() for s in self.steps],
-            "timing_ms": {k: round(v, 3) for k, v in self.timing_ms.items()},
-            "changes": self.changes.to_dict(),
-            "support": None if self.support is None else self.support.to_dict(),
-            "next_look": [look.to_dict() for look in self.next_look],
-        }
+    def to_json(self, model: type[schema.Answer] = schema.Answer, last_steps: int | None = None,
+                **fields: Any) -> str:  # fmt: skip
+        """The JSON text of `to_dict`, as every writer of a result writes it: indented, one
+        newline at the end."""
+        return answer_text(self.to_dict(model, last_steps, **fields))
+
+    @classmethod
+    def from_dict(cls, data: Any) -> Result:
+        """A Result from its JSON document (`to_dict`, e.g. a `semloc serve` answer), the
+        inverse of `to_dict` up to its rounding; `ValueError` naming a field not as written."""
+        return cls.of_model(parse_answer(data))
+
+    @classmethod
+    def of_model(cls, m: schema.Answer) -> Result:
+        changes = Changes.of_model(m.changes)
+        looks = [Look.of_model(look) for look in m.next_look]
+        labels = {label: LabelResolution(found.resolved, tuple(found.map_labels))
+                  for label, found in m.labels.items()}  # fmt: skip
+        return cls(
+            m.status, _pose_of(m.pose), [Hypothesis.of_model(h) for h in m.hypotheses],
+            [Step.of_model(s) for s in m.steps], dict(m.timing_ms), m.reason,
+            explain=lambda: changes,
+            support=None if m.support is None else Support.of_model(m.support),
+            suggest=lambda: looks, read_labels=lambda: labels,
+            prior=None if m.prior is None else m.prior.prior(),
+        )  # fmt: skip
+
+
+def parse_answer(data: Any, model: type[AnswerModel] = schema.Answer) -> AnswerModel:  # type: ignore[assignment]
+    """An answer document parsed as `model`; `ValueError` naming the first field not as
+    written."""
+    if not isinstance(data, dict):
+        raise ValueError("a result must be an object")
+    try:
+        return model.model_validate(data, context=schema.PARSING)
+    except ValidationError as exc:
+        raise ValueError(schema.field_error(exc)) from None
+
+
+def answer_text(document: dict[str, Any]) -> str:
+    """The text of an answer document: indented JSON, NaN and infinities refused
+    (`ValueError`), one newline at the end."""
+    return json.dumps(document, indent=1, allow_nan=False) + "\n"
 
 
 # Reading a saved result back ----------------------------------------------------------------
@@ -331,50 +365,21 @@ class SavedResult:
 
 
 def saved_result(data: dict[str, Any]) -> SavedResult:
-    """A parsed result document (or a ground-truth document, `T_global_local`), every field
-    checked: `ValueError` naming the field and what it must be."""
-    key = "pose" if "pose" in data else "T_global_local"
-    pose = None if data.get(key) is None else saved_pose(data[key], key)
-    status = data.get("status")
-    if status is not None and status not in STATUSES:
-        raise ValueError(f"'status' must be one of {', '.join(STATUSES)}, got {_brief(status)}")
-    hypotheses = _list_field(data.get("hypotheses"), "hypotheses")
+    """A result document (`schema.Answer` as `Result.to_json` writes it; an older or a shorter
+    one needs only `status`, and of each hypothesis its `pairs`), or a document of a pose
+    alone (no `status`: `pose`, or a ground truth's `T_global_local`), every field checked:
+    `ValueError` naming the field and what is wrong."""
+    if "status" not in data:
+        key = "pose" if "pose" in data else "T_global_local"
+        pose = data.get(key)
+        return SavedResult(None if pose is None else saved_pose(pose, key))
+    answer = parse_answer(data)
     return SavedResult(
-        pose,
-        status,
-        tuple(_hypothesis(h, i) for i, h in enumerate(hypotheses)),
-        _moved(data.get("changes")),
+        _pose_of(answer.pose),
+        answer.status,
+        tuple((_pose_of(h.pose), _pairs_of(h.pairs)) for h in answer.hypotheses),
+        tuple((m.global_, m.local) for m in answer.changes.moved),
     )
-
-
-def _hypothesis_from(
-    raw: dict[str, Any], pose: np.ndarray | None, pairs: list[tuple[str, str]], index: int
-) -> Hypothesis:
-    """A hypothesis of a result document (pose and pairs checked by `saved_result`)."""
-
-    def number(key: str) -> float | None:
-        value = raw.get(key)
-        if value is not None and (isinstance(value, bool) or not isinstance(value, (int, float))):
-            raise ValueError(f"'hypotheses[{index}].{key}' must be a number, got {_brief(value)}")
-        return None if value is None else float(value)
-
-    rejected = [(str(p.get("global")), str(p.get("local"))) for p in raw.get("rejected") or []
-                if isinstance(p, dict)]  # fmt: skip
-    features = raw.get("features")
-    outside = raw.get("outside_prior")
-    return Hypothesis(
-        rank=int(number("rank") or index + 1), score=number("score") or 0.0, pairs=pairs,
-        pose=pose, fitness=number("fitness"), rmse=number("rmse"), residual=number("residual"),
-        method=str(raw.get("method") or ""), confidence=number("confidence"),
-        evidence=number("evidence"), rejected=rejected,
-        features=dict(features) if isinstance(features, dict) else None,
-        outside_prior=outside if isinstance(outside, bool) else None,
-        missing=_count(number("missing")), expected=_count(number("expected")),
-    )  # fmt: skip
-
-
-def _count(value: float | None) -> int | None:
-    return None if value is None else int(value)
 
 
 def saved_pose(value: object, what: str = "pose") -> np.ndarray:
@@ -384,52 +389,3 @@ def saved_pose(value: object, what: str = "pose") -> np.ndarray:
     if np.abs(pose[:3, 3]).max() > MAX_COORDINATE:
         raise ValueError(f"{what} has a translation beyond ±{MAX_COORDINATE:g} m (the input limit)")
     return pose
-
-
-def _moved(changes: object) -> tuple[tuple[str, str], ...]:
-    """The (global id, local id) pairs of a result's `changes.moved` (none without changes)."""
-    if changes is None:
-        return ()
-    if not isinstance(changes, dict):
-        raise ValueError(f"'changes' must be an object, got {_brief(changes)}")
-    moved = []
-    for j, entry in enumerate(_list_field(changes.get("moved"), "changes.moved")):
-        ids = (entry.get("global"), entry.get("local")) if isinstance(entry, dict) else (None,)
-        if len(ids) != 2 or not all(
-            isinstance(i, (str, int)) and not isinstance(i, bool) for i in ids
-        ):
-            raise ValueError(f"'changes.moved[{j}]' must be {MOVED_SHAPE}, got {_brief(entry)}")
-        moved.append((str(ids[0]), str(ids[1])))
-    return tuple(moved)
-
-
-def _hypothesis(value: object, index: int) -> tuple[np.ndarray | None, list[tuple[str, str]]]:
-    where = f"hypotheses[{index}]"
-    if not isinstance(value, dict):
-        raise ValueError(f"'{where}' must be an object, got {_brief(value)}")
-    raw = value.get("pose")
-    pose = None if raw is None else saved_pose(raw, f"{where}.pose")
-    pairs = []
-    for j, pair in enumerate(_list_field(value.get("pairs"), f"{where}.pairs")):
-        ids = (pair.get("global"), pair.get("local")) if isinstance(pair, dict) else (None, None)
-        if not all(isinstance(i, (str, int)) and not isinstance(i, bool) for i in ids):
-            raise ValueError(f"'{where}.pairs[{j}]' must be {PAIR_SHAPE}, got {_brief(pair)}")
-        pairs.append((str(ids[0]), str(ids[1])))
-    return pose, pairs
-
-
-PAIR_SHAPE = '{"global": ID, "local": ID}'
-MOVED_SHAPE = '{"global": ID, "local": ID, "offset_m": NUMBER}'
-
-
-def _list_field(value: object, where: str) -> list:
-    """`value` if a list (None: empty), else one line naming the field."""
-    if value is None:
-        return []
-    if not isinstance(value, list):
-        raise ValueError(f"'{where}' must be a list, got {_brief(value)}")
-    return value
-
-
-def _brief(value: object) -> str:
-    return reprlib.repr(value)[:60]

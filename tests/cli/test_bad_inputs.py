@@ -65,7 +65,7 @@ def test_view_result_whose_pairs_is_a_number(tmp_path, good_map, capsys):
     result = {"status": "localized", "pose": IDENTITY, "hypotheses": [{"rank": 1, "pairs": 5}]}
     path = _write(tmp_path / "r.json", result)
     assert main(["view", str(good_map), "--result", str(path), "-o", str(tmp_path / "v.png")]) == 2
-    _one_error_line(capsys, "r.json", "'hypotheses[0].pairs' must be a list")
+    _one_error_line(capsys, "r.json", "'hypotheses[0].pairs' must be a valid list")
 
 
 def test_crop_negative_seed(tmp_path, good_map, capsys):
@@ -214,12 +214,15 @@ GOOD_RESULT = {
         ({"status": "maybe"}, "'status'"),
         ({"pose": "identity"}, "pose"),
         ({"pose": [[1, 0, 0, 1e300], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]}, "translation"),
-        ({"hypotheses": 5}, "'hypotheses' must be a list"),
-        ({"hypotheses": {"rank": 1}}, "'hypotheses' must be a list"),
+        ({"hypotheses": 5}, "'hypotheses' must be a valid list"),
+        ({"hypotheses": {"rank": 1}}, "'hypotheses' must be a valid list"),
         ({"hypotheses": [5]}, "'hypotheses[0]' must be an object"),
-        ({"hypotheses": [{"pairs": "o0-o1"}]}, "'hypotheses[0].pairs' must be a list"),
-        ({"hypotheses": [{"pairs": [["o0", "o1"]]}]}, "'hypotheses[0].pairs[0]'"),
-        ({"hypotheses": [{"pairs": [{"global": "o0"}]}]}, "'hypotheses[0].pairs[0]'"),
+        ({"hypotheses": [{"pairs": "o0-o1"}]}, "'hypotheses[0].pairs' must be a valid list"),
+        ({"hypotheses": [{"pairs": [["o0", "o1"]]}]}, "'hypotheses[0].pairs[0]' must be an object"),
+        (
+            {"hypotheses": [{"pairs": [{"global": "o0"}]}]},
+            "'hypotheses[0].pairs[0].local' is required",
+        ),
         ({"hypotheses": [{"pairs": [{"global": True, "local": "a"}]}]}, "pairs[0]"),
         ({"hypotheses": [{"pairs": [], "pose": 7}]}, "hypotheses[0].pose"),
     ],

@@ -784,7 +784,9 @@ def test_rank_places_orders_by_the_ranking_logit_less_the_missing_penalty():
     three objects nobody saw beyond the gone share: it ranks second."""
     model = hand_model()
     low = featured(1, 1.0, FEATURE_VALUES)
-    high = featured(2, 5.0, FEATURE_VALUES | {"pairs": 5.0}, ELSEWHERE, 10, missing=4, expected=4)
+    high = featured(
+        2, 5.0, FEATURE_VALUES | {"pairs": 5.0}, ELSEWHERE, 10, n_missing=4, n_expected=4
+    )
     kept = rank_places([high, low], "evidence", DecisionConfig(), model)
     assert kept == [low, high] and [h.rank for h in kept] == [1, 2]
 

@@ -238,7 +238,7 @@ def test_a_tracked_answer_says_how_recent_its_evidence_is(building):
     tracked = [r for status, _, r in answers if status == "localized" and r.support.tracked]
     assert tracked
     support = tracked[-1].support
-    assert support.pairs >= 3 and support.seen[0] <= support.seen[1] <= 39
+    assert support.n_pairs >= 3 and support.seen[0] <= support.seen[1] <= 39
     assert 0 <= support.metres <= 20.0 and support.updates_ago >= 0
     assert tracked[-1].to_dict()["support"]["tracked"] is True
 

@@ -11,7 +11,7 @@ import pytest
 from rich.console import Console
 from test_tracking_rules import ALL_AROUND, claimed, local, room
 
-from semloc import Localizer, ObjectMap
+from semloc import Localizer, ObjectMap, schema
 from semloc.cli.render import print_result
 from semloc.results import Result, Support
 
@@ -26,8 +26,8 @@ def test_a_search_names_the_map_objects_its_look_shows_that_were_not_detected(bu
     today = local(room(drop=(3, 8)))  # two of ten gone
     result = localizer.update(today, coverage=ALL_AROUND)
     assert result.status == "localized" and result.support is not None
-    assert result.support.missing == 2 and result.support.missing_ids == ("a3", "a8")
-    assert result.support.pairs == 8 and result.support.seen == (0, 0)  # the 8 detected
+    assert result.support.n_missing == 2 and result.support.missing_ids == ("a3", "a8")
+    assert result.support.n_pairs == 8 and result.support.seen == (0, 0)  # the 8 detected
 
 
 def test_a_tracked_claim_names_them_too_and_without_coverage_none(building):
@@ -35,26 +35,25 @@ def test_a_tracked_claim_names_them_too_and_without_coverage_none(building):
     assert localizer.update([]).support.missing_ids is None  # no coverage: no ids
     result = localizer.update(local(room(drop=(5,))), coverage=ALL_AROUND)
     assert result.status == "localized" and result.support.tracked
-    assert result.support.missing == 1 and result.support.missing_ids == ("a5",)
+    assert result.support.n_missing == 1 and result.support.missing_ids == ("a5",)
     everything = localizer.update(local(room()), coverage=ALL_AROUND)
-    assert everything.support.missing == 0 and everything.support.missing_ids == ()
+    assert everything.support.n_missing == 0 and everything.support.missing_ids == ()
 
 
-def test_the_ids_round_trip_through_the_json_and_the_service_model(building):
-    from semloc.serve.models import Support as SupportModel
-
+def test_the_ids_round_trip_through_the_json_and_the_answer_schema(building):
     localizer = Localizer(building, local_up=[0, 0, 1])
     result = localizer.update(local(room(drop=(3, 8))), coverage=ALL_AROUND)
     document = result.to_dict()
     assert document["support"]["missing_ids"] == ["a3", "a8"]
     assert Result.from_dict(document).support == result.support
-    assert SupportModel.model_validate(document["support"]).missing_ids == ["a3", "a8"]
+    assert schema.Support.model_validate(document["support"]).missing_ids == ["a3", "a8"]
     plain = Support(3, (0, 1), 0, 0.0)
-    assert plain.to_dict()["missing_ids"] is None and Support.from_dict(plain.to_dict()) == plain
+    assert plain.to_dict()["missing_ids"] is None
+    assert Support.of_model(schema.Support.model_validate(plain.to_dict())) == plain
     old = {k: v for k, v in plain.to_dict().items() if k != "missing_ids"}  # an older answer
-    assert Support.from_dict(old) == plain
-    with pytest.raises(ValueError, match="not a support record"):
-        Support.from_dict({**plain.to_dict(), "missing_ids": [1, 2]})
+    assert Support.of_model(schema.Support.model_validate(old)) == plain
+    with pytest.raises(ValueError, match="missing_ids"):
+        schema.Support.model_validate({**plain.to_dict(), "missing_ids": [[1], 2]})
 
 
 def test_the_cli_prints_the_support_line_with_what_was_missing(building):
@@ -63,8 +62,8 @@ def test_the_cli_prints_the_support_line_with_what_was_missing(building):
     out = io.StringIO()
     print_result(result, Console(file=out, width=120))
     [line] = [x for x in out.getvalue().splitlines() if x.startswith("support:")]
-    expected = result.support.expected
-    pairs = result.support.pairs
+    expected = result.support.n_expected
+    pairs = result.support.n_pairs
     assert line == f"support: {pairs} pairs; 2 of {expected} map objects in view missing: a3, a8"
     plain = Localizer(building, local_up=[0, 0, 1]).update(local(room()))
     out = io.StringIO()
@@ -95,5 +94,5 @@ def test_the_foxglove_view_draws_the_missing_map_objects(building):
         view.close()
     assert b"missing a3" in scene and b"missing a8" in scene
     assert b"missing" in empty and b"missing a" not in empty  # an empty entity replaces it
-    expected = result.support.expected
+    expected = result.support.n_expected
     assert f"; 2 of {expected} map objects in view missing".encode() in status

@@ -99,7 +99,7 @@ def test_suggestions_round_trip_through_json():
     back = Result.from_dict(document)
     assert [look.to_dict() for look in back.next_look] == document["next_look"]
     document["next_look"][0]["where"] = {"1": [0, "x", 0]}
-    with pytest.raises(ValueError, match=r"'next_look\[0\]' is not a suggestion"):
+    with pytest.raises(ValueError, match=r"'next_look\[0\].where.1\[1\]' must be a valid number"):
         Result.from_dict(document)
     assert isinstance(back.next_look[0], Look)
 

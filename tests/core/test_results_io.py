@@ -1,5 +1,6 @@
 """A Result is written as JSON by `Result.to_json` (one writer, NaN refused) and read back by
-`semloc.results.saved_result` (every field checked)."""
+`Result.from_dict` and `semloc.results.saved_result` (every field checked by the answer schema,
+a shorter or older document read too)."""
 
 from __future__ import annotations
 
@@ -39,17 +40,30 @@ def test_a_non_finite_number_is_not_written():
 
 @pytest.mark.parametrize(
     ("change", "message"),
-    [(lambda d: d.update(status="lost"), "'status' must be one of localized, ambiguous, failed"),
-     (lambda d: d["hypotheses"][1].update(pairs=[{"global": "g"}]), "'hypotheses[1].pairs[0]' must be"),
+    [(lambda d: d.update(status="lost"), "'status' must be 'localized', 'ambiguous' or 'failed'"),
+     (lambda d: d["hypotheses"][1].update(pairs=[{"global": "g"}]),
+      "'hypotheses[1].pairs[0].local' is required"),
      (lambda d: d.update(changes=[]), "'changes' must be an object"),
      (lambda d: d.update(pose=[[1, 0, 0, 2e6], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]),
-      "pose has a translation beyond")],
+      "'pose': the translation is beyond")],
 )  # fmt: skip
 def test_a_field_of_the_wrong_shape_is_named(change, message):
     document = json.loads(result().to_json())
     change(document)
     with pytest.raises(ValueError, match=message.replace("[", r"\[").replace("(", r"\(")):
         saved_result(document)
+
+
+def test_a_shorter_document_is_read_and_a_ground_truth_gives_a_pose():
+    short = {"status": "ambiguous", "hypotheses": [{"pairs": [{"global": 1, "local": "a"}]},
+                                                    {"pairs": []}]}  # fmt: skip
+    saved = saved_result(short)
+    assert saved.pose is None and saved.pairs == [("1", "a")] and saved.hypotheses[1] == (None, [])
+    assert [h.rank for h in Result.from_dict(short).hypotheses] == [1, 2]
+    truth = saved_result({"T_global_local": yaw_pose(0.2, [1, 0, 0]).tolist()})
+    np.testing.assert_allclose(truth.pose, yaw_pose(0.2, [1, 0, 0]))
+    with pytest.raises(ValueError, match="T_global_local"):
+        saved_result({"T_global_local": [[1, 0], [0, 1]]})
 
 
 def test_from_dict_is_the_inverse_of_to_dict():
@@ -69,16 +83,20 @@ def test_from_dict_is_the_inverse_of_to_dict():
 @pytest.mark.parametrize(
     ("change", "message"),
     [
-        ({"status": "maybe"}, "'status' must be one of"),
+        ({"status": "maybe"}, "'status' must be 'localized', 'ambiguous' or 'failed'"),
         (
-            {"hypotheses": [{"pairs": [], "score": "high"}]},
-            "'hypotheses[0].score' must be a number",
+            {"hypotheses": [{"rank": 1, "pairs": [], "pose": None, "score": "high"}]},
+            "'hypotheses[0].score' must be a valid number",
         ),
-        ({"changes": {"moved": [{"global": "g"}]}}, "'changes.moved[0]' must be"),
-        ({"changes": {"moved": [], "new": 3}}, "'changes' is not a changes object"),
-        ({"steps": [{"when": 1}]}, "'steps' are not steps"),
+        ({"changes": {"moved": [{"global": "g"}]}}, "'changes.moved[0].local' is required"),
+        ({"changes": {"moved": [], "new": 3}}, "'changes.new' must be a valid list"),
+        ({"steps": [{"when": 1}]}, "'steps[0].step' is required"),
+        ({"pose": [[1, 0, 0, 2e6], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]},
+         "'pose': the translation is beyond"),
+        ({"pose": [[2, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]},
+         "'pose': pose: the rotation part is not a proper rotation"),
     ],
-)
+)  # fmt: skip
 def test_from_dict_names_what_is_wrong(change, message):
     document = {**json.loads(result().to_json()), **change}
     with pytest.raises(ValueError, match=re.escape(message)):

@@ -84,8 +84,8 @@ def _answer(result) -> tuple:
         result.status,
         result.reason,
         None if result.pose is None else np.asarray(result.pose).tolist(),
-        [(h.pairs, h.missing, h.expected) for h in result.hypotheses],
-        None if support is None else (support.missing, support.expected, support.missing_ids),
+        [(h.pairs, h.n_missing, h.n_expected) for h in result.hypotheses],
+        None if support is None else (support.n_missing, support.n_expected, support.missing_ids),
     )
 
 

@@ -666,13 +666,13 @@ def test_the_prior_decides_among_places_whose_evidence_is_within_the_margin():
 def test_the_missing_penalty_forgives_the_gone_share():
     h = hypothesis(1, 0.0, None)
     assert missing_penalty(h) == 0.0
-    h.missing, h.expected = 2, 8
+    h.n_missing, h.n_expected = 2, 8
     assert missing_penalty(h) == 0.0  # 2 of 8 is the share an old map may lose
-    h.missing = 4
+    h.n_missing = 4
     assert missing_penalty(h) == pytest.approx(2.0)
-    h.missing = 1  # fewer than the share: no penalty, and no bonus either
+    h.n_missing = 1  # fewer than the share: no penalty, and no bonus either
     assert missing_penalty(h) == 0.0
-    h.missing, h.expected = 3, None  # a count without what was expected says nothing
+    h.n_missing, h.n_expected = 3, None  # a count without what was expected says nothing
     assert missing_penalty(h) == 0.0
 
 
@@ -783,9 +783,9 @@ def test_a_phantom_never_becomes_support():
 def test_coverage_is_optional_and_round_trips_in_the_state():
     building = ObjectMap(room(), up=[0, 0, 1])
     localizer = claimed(building)
-    assert localizer.update([]).support.missing is None  # no coverage: no negative evidence
+    assert localizer.update([]).support.n_missing is None  # no coverage: no negative evidence
     result = localizer.update(local(list(building)), coverage=ALL_AROUND)  # all it saw
-    assert result.support.missing == 0 and result.support.expected >= 6
+    assert result.support.n_missing == 0 and result.support.n_expected >= 6
     state = json.loads(json.dumps(localizer.state()))
     again = Localizer.restore(building, state, list(localizer.local_map), local_up=[0, 0, 1])
     assert again.state() == state
@@ -801,10 +801,10 @@ def test_the_support_of_an_unweighed_best_place_names_keyframes_not_map_objects(
     objects = local(list(building))
     localizer.update(objects[:5])
     best = localizer.update(objects, coverage=ALL_AROUND).best  # the look's every detection
-    unweighed = dataclasses.replace(best, missing=None, expected=None)
+    unweighed = dataclasses.replace(best, n_missing=None, n_expected=None)
     support = localizer._support_of(unweighed)
     assert support.seen == localizer._support_of(best).seen  # its detections' keyframes
-    assert support.missing == 0 and support.expected >= 6
+    assert support.n_missing == 0 and support.n_expected >= 6
 
 
 def test_gone_objects_within_the_tolerated_share_do_not_end_a_right_claim():
@@ -814,7 +814,7 @@ def test_gone_objects_within_the_tolerated_share_do_not_end_a_right_claim():
     for _ in range(3):
         result = localizer.update(today, coverage=ALL_AROUND)
         assert result.status == "localized"
-    assert result.support.missing == 2 and result.support.expected >= 8
+    assert result.support.n_missing == 2 and result.support.n_expected >= 8
 
 
 def lookalikes(extras: int = 2) -> ObjectMap:

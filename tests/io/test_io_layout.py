@@ -1,4 +1,4 @@
-"""`semloc.io` is split by concern (native map format, reading, output, answers, interrupts):
+"""`semloc.io` is split by concern (native map format, reading, output, interrupts):
 each name lives in its home module only, and `semloc.io` offers the package's own API."""
 
 from __future__ import annotations
@@ -16,7 +16,6 @@ PACKAGE_API = ["read_json", "load_map", "map_from_dict", "map_to_dict", "save_ma
 HOMES = {"reading": ["read_json", "read_regular", "parse_json", "npy_header", "read_npy",
                      "check_regular", "require_keys", "MAX_JSON_BYTES", "MAX_FILE_BYTES"],
          "output": ["write_files", "write_atomic", "staged_folder"],
-         "answers": ["answer_document", "answer_text"],
          "interrupts": ["Interrupted", "interrupts_raise", "interrupts_deferred",
                         "interrupts_wait", "signals_held", "children_spared",
                         "ignore_sigint"]}  # fmt: skip

@@ -121,6 +121,25 @@ def test_the_mcap_output_reads_back_with_its_topics_and_schemas(localized):
     )
 
 
+def test_every_line_and_status_is_the_one_answer_schema(localized):
+    """The `--jsonl` lines are `schema.BagLine`s and every `/semloc/status` a
+    `schema.StatusAnswer` (the localize JSON at its stamp, as the ROS 2 node publishes it)."""
+    from mcap.reader import make_reader
+
+    from semloc import schema
+
+    lines = _lines(localized / "out.jsonl")
+    assert [schema.problems(line, schema.BagLine) for line in lines] == [[]] * len(lines)
+    with open(localized / "out.mcap", "rb") as handle:
+        statuses = [json.loads(msgs.deserialize(m.data, s.name).data)
+                    for s, c, m in make_reader(handle).iter_messages(topics=["/semloc/status"])]  # fmt: skip
+    assert len(statuses) == len(lines)
+    assert [schema.problems(s, schema.StatusAnswer) for s in statuses] == [[]] * len(lines)
+    for status, line in zip(statuses, lines):
+        assert status["stamp"] == line["stamp"] and status["status"] == line["result"]["status"]
+        assert status["hypotheses"] == line["result"]["hypotheses"][:3]  # pairs: a list
+
+
 @pytest.mark.parametrize("storage", ["sqlite3", "mcap"])
 @pytest.mark.parametrize("points", [False, True])
 def test_bags_built_by_rosbags_localize(tmp_path, storage, points):
@@ -380,18 +399,20 @@ def test_camera_info_makes_each_update_say_what_the_camera_covered(walk, tmp_pat
                      "/camera_info", "--range", "6", "--jsonl", str(looks)) == 0  # fmt: skip
     results = [line["result"] for line in _lines(looks)]
     supported = [r["support"] for r in results if r["support"] is not None]
-    assert supported and all(s["expected"] is not None for s in supported)
-    assert any(s["expected"] > 0 for s in supported)
+    assert supported and all(s["n_expected"] is not None for s in supported)
+    assert any(s["n_expected"] > 0 for s in supported)
     best = [r["hypotheses"][0] for r in results if r["hypotheses"] and r["hypotheses"][0]["pose"]]
-    assert best and all("missing" in h and "expected" in h for h in best)
+    assert best and all("n_missing" in h and "n_expected" in h for h in best)
     assert results[-1]["status"] == "localized"
     last = results[-1]["support"]
-    assert len(last["missing_ids"]) == min(last["missing"], 50)
-    said = f"support: {last['pairs']} pairs; {last['missing']} of {last['expected']} map objects"
+    assert len(last["missing_ids"]) == min(last["n_missing"], 50)
+    said = (
+        f"support: {last['n_pairs']} pairs; {last['n_missing']} of {last['n_expected']} map objects"
+    )
     assert said in " ".join(capsys.readouterr().out.split())
     plain = [line["result"] for line in _lines(walk / "out.jsonl")] if (
         walk / "out.jsonl").exists() else []  # fmt: skip
-    assert all(r["support"] is None or r["support"]["missing"] is None for r in plain)
+    assert all(r["support"] is None or r["support"]["n_missing"] is None for r in plain)
 
 
 def test_a_camera_info_topic_of_another_type_ends_in_one_line(walk, tmp_path, capsys):

@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from semloc import schema
 from semloc.cli import main
 from semloc.io import load_map
 from semloc.ros import messages as msgs
@@ -138,6 +139,7 @@ def test_a_played_bag_gets_the_answers_of_bag_localize(walk, bag, points, jsonl,
         heard += [json.loads(s.data) for s in statuses.take(N=1000)]
         time.sleep(0.05)
     assert [h["status"] for h in heard] == [a.result.status for a in answers]
+    assert [schema.problems(h, schema.StatusAnswer) for h in heard] == [[]] * len(heard)
     assert [h["prior"] for h in heard] == [line["result"]["prior"] for line in expected]
     if bag == "estimate.mcap":  # no prior before the estimate, its prior after it
         assert counts["/initialpose"] == 1

@@ -83,7 +83,7 @@ def test_the_camera_s_look_from_camera_info_and_a_latched_tf_static(one_room, ca
         robot.detect(range(0, 3))
         wait_for(lambda: len(answers) == 1)
         assert looks == [None, None]  # no CameraInfo yet: no coverage
-        assert answers[-1].result.support is None or answers[-1].result.support.expected is None
+        assert answers[-1].result.support is None or answers[-1].result.support.n_expected is None
         info = publisher(robot.wire, "/camera_info", msgs.CAMERA_INFO)
         info.write(to_wire(camera_info("camera_optical"), msgs.CAMERA_INFO))
         wait_for(lambda: node.camera is not None)
@@ -102,7 +102,7 @@ def test_the_camera_s_look_from_camera_info_and_a_latched_tf_static(one_room, ca
     for look in covered:
         np.testing.assert_allclose(look.pose, T_ODOM_CAMERA @ T_CAMERA_OPTICAL, atol=1e-9)
         assert look.range_m == 7.0 and look.fov_deg == node.camera.fov_deg
-    assert [a.result.support is None or a.result.support.expected is not None
+    assert [a.result.support is None or a.result.support.n_expected is not None
             for a in answers[1:3]] == [True, True]  # fmt: skip
     assert looks[4:] == [None, None]  # a camera frame no static transform places
     why = "detection messages whose camera no static transform places (used without coverage)"
@@ -168,4 +168,4 @@ def test_a_played_bag_gets_the_answers_of_bag_localize_with_camera_info(walk, tm
         assert got_support == line["support"]
         if line["pose"] is not None:
             np.testing.assert_allclose(got.result.pose, line["pose"], atol=1e-6)
-    assert any(line["support"] and line["support"]["expected"] for line in expected)
+    assert any(line["support"] and line["support"]["n_expected"] for line in expected)

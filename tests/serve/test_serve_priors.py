@@ -279,7 +279,7 @@ def test_the_node_s_remote_localizer_sends_the_coverage(client, two_rooms):
         expected = reference.update(batch, coverage=coverage)
         assert got.status == expected.status
         assert got.support == expected.support
-        assert [(h.missing, h.expected) for h in got.hypotheses] == [
-            (h.missing, h.expected) for h in expected.hypotheses
+        assert [(h.n_missing, h.n_expected) for h in got.hypotheses] == [
+            (h.n_missing, h.n_expected) for h in expected.hypotheses
         ]
-    assert expected.hypotheses[0].expected is not None
+    assert expected.hypotheses[0].n_expected is not None

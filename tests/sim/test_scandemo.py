@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 from rich.console import Console
 
+from semloc import schema
 from semloc.eval.datasets import real_data_dir, real_sample
 from semloc.io import write_atomic
 from semloc.maps import MapError
@@ -36,7 +37,7 @@ def test_scan2cad_demo_localizes_against_the_cad_map(tmp_path):
     assert np.allclose(truth["T_global_local"], demo.sequence.T_global_local, atol=1e-6)
     assert truth["correspondences"]["cad"]
     result = json.loads((tmp_path / "result.json").read_text())
-    assert result["status"] == "localized"
+    assert result["status"] == "localized" and schema.problems(result) == []  # the one schema
     assert json.loads((tmp_path / "global.json").read_text())["name"] == "scene0470_00_cad"
 
 

@@ -178,10 +178,9 @@ def localize(
             if writer is None:
                 frames = Frames(map_frame, answer.odom_frame, answer.frame)
                 writer = AnswerTopics(sink, global_map, frames)
-            writer.write(answer.stamp, answer.result, answer.T_odom_sensor, stream.local_map(),
-                         answer.prior)  # fmt: skip
+            writer.write(answer.stamp, answer.result, answer.T_odom_sensor, stream.local_map())
             if jsonl is not None:
-                lines.append(json.dumps(answer_json(answer, stream), allow_nan=False) + "\n")
+                lines.append(json.dumps(answer_json(answer), allow_nan=False) + "\n")
             last = answer
     seconds = time.perf_counter() - start
     files = [] if jsonl is None else [(jsonl, "".join(lines))]

@@ -22,7 +22,7 @@ import typer
 from pydantic import ValidationError
 from rich.console import Console
 
-from semloc.association import DESCRIBERS, CandidateIndex, label_report
+from semloc.association import DESCRIBERS
 from semloc.cli import remote
 from semloc.cli.app import (
     app,
@@ -56,7 +56,6 @@ from semloc.cli.render import (
 from semloc.compiling import warm_up
 from semloc.eval.success import ground_truth_report
 from semloc.io import load_map, write_atomic
-from semloc.io.answers import answer_document, answer_text
 from semloc.localizer import LocalizerConfig
 from semloc.localizer import localize as run_localize
 
@@ -185,16 +184,11 @@ def localize(
     with replay_progress(err_console, local_objects) as progress:
         result = run_localize(global_objects, local_objects, cfg, progress=progress, prior=prior)
     report = None if truth is None else ground_truth_report(result.pose, result.hypotheses, truth)
-    labels = label_report(CandidateIndex(global_objects, cfg.association), local_objects)
+    labels = result.labels  # read by the Localizer's own candidate gate
     if len(global_objects):  # an empty map: the result's reason says so, once
         warn_unmatched(labels, err_console)
     if output_format is OutputFormat.json:
-        extra = {"warm_up_ms": round(warm.seconds * 1000, 3)}
-        if report is not None:
-            extra["ground_truth"] = report
-        if prior is not None:
-            extra["prior"] = prior.to_dict()
-        emit(answer_text(answer_document(result, labels, **extra)), output)
+        emit(result.to_json(warm_up_ms=warm.seconds * 1000, ground_truth=report), output)
         return
     target = console if output is None else Console(record=True, width=120, file=io.StringIO())
     print_result(result, target, warm)

@@ -11,14 +11,13 @@ moved on since the answer: 409).
 from __future__ import annotations
 
 import io
-import json
 from pathlib import Path
 from typing import Annotated
 
 import typer
 from rich.console import Console
 
-from semloc.association import LabelResolution
+from semloc import schema
 from semloc.cli.app import console, fail
 from semloc.cli.files import emit
 from semloc.cli.render import print_changes, print_ground_truth, print_labels, print_result
@@ -27,7 +26,7 @@ from semloc.eval.success import ground_truth_report
 from semloc.io import load_map, write_atomic, write_files
 from semloc.io.native import map_files
 from semloc.priors import Prior
-from semloc.results import Result
+from semloc.results import Result, answer_text, parse_answer
 
 ServerOption = Annotated[
     str | None,
@@ -86,19 +85,18 @@ def localize(
     answer."""
     client = connect(server, token)
     local = load_map(local_map)
-    answer = call(server, "localize", client.localize, map_id, local, prior)
-    result = Result.from_dict(answer)
+    served = _answer(server, call(server, "localize", client.localize, map_id, local, prior))
+    result = Result.of_model(served)
     report = None if truth is None else ground_truth_report(result.pose, result.hypotheses, truth)
     if as_json:
         if report is not None:
-            answer["ground_truth"] = report
-        text = json.dumps(answer, indent=1, allow_nan=False) + "\n"
-        emit(text, output)
+            served.ground_truth = schema.GroundTruth.model_validate(report)
+        emit(answer_text(served.model_dump(by_alias=True)), output)
         return
     target = console if output is None else Console(record=True, width=120, file=io.StringIO())
-    target.print(f"server {server}, map {map_id} version {answer.get('map_version')}")
+    target.print(f"server {server}, map {map_id} version {served.map_version}")
     print_result(result, target)
-    print_labels(_labels(answer), target)
+    print_labels(result.labels, target)
     if report is not None:
         print_ground_truth(report, target)
     if output is not None:
@@ -113,7 +111,8 @@ def update_map(
     client = connect(server, token)
     local = load_map(local_map)
     answer = call(server, "localize", client.localize, map_id, local)
-    status = answer.get("status")
+    served = _answer(server, answer)
+    status = served.status
     if not (status == "localized" or (accept_ambiguous and status == "ambiguous")):
         console.print(f"not localized (status {status}): no version written")
         raise typer.Exit(1)
@@ -123,10 +122,10 @@ def update_map(
     except ServerError as exc:
         if exc.status != 409:
             _refused(server, "the change report", exc)
-        console.print(f"the map moved on since version {answer.get('map_version')} and these "
+        console.print(f"the map moved on since version {served.map_version} and these "
                       f"changes no longer apply ({exc.detail}): no version written")  # fmt: skip
         raise typer.Exit(1) from None
-    print_changes(Result.from_dict(answer).changes, console)
+    print_changes(Result.of_model(served).changes, console)
     if not created.get("changed"):
         console.print(f"nothing changed: {map_id} stays at version {created['version']}")
         raise typer.Exit(1)
@@ -137,7 +136,10 @@ def update_map(
         console.print(f"wrote {output}")
 
 
-def _labels(answer: dict) -> dict[str, LabelResolution]:
-    labels = answer.get("labels") or {}
-    return {label: LabelResolution(str(found.get("resolved")), tuple(found.get("map_labels") or ()))
-            for label, found in labels.items() if isinstance(found, dict)}  # fmt: skip
+def _answer(server: str, answer: object) -> schema.LocalizeAnswer:
+    """A server's localization answer, parsed (one line and exit 2 for one that is not)."""
+    try:
+        return parse_answer(answer, schema.LocalizeAnswer)
+    except ValueError as exc:
+        fail(f"{server}: the answer is not a localization answer: {exc}")
+        raise  # unreachable: fail() raises

@@ -144,14 +144,14 @@ def support_line(result: Result) -> str:
     """`support: N pairs; M of E map objects in view missing: ids` when the updates said what
     the sensor covered (empty otherwise: without coverage there is no negative evidence)."""
     support = result.support
-    if support is None or support.expected is None or support.missing is None:
+    if support is None or support.n_expected is None or support.n_missing is None:
         return ""
-    line = (f"support: {support.pairs} pairs; {support.missing} of {support.expected} map "
+    line = (f"support: {support.n_pairs} pairs; {support.n_missing} of {support.n_expected} map "
             "objects in view missing")  # fmt: skip
     ids = list(support.missing_ids or ())
     if ids:
         line += ": " + ", ".join(for_rich(i, 24) for i in ids[:MISSING_SHOWN])
-        line += " …" if support.missing > MISSING_SHOWN else ""
+        line += " …" if support.n_missing > MISSING_SHOWN else ""
     return line
 
 

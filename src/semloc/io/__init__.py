@@ -1,9 +1,8 @@
 """Reading and writing maps: the native semloc format, and importers for public datasets.
 
 One module per concern: `native` (the map file), `reading` (guarded reading of input files:
-size limits, strict JSON, `.npy` headers), `output` (files written all or none), `answers`
-(the JSON document of a localization answer), `interrupts` (all handling of SIGINT and
-SIGTERM), `ply`, `labels`, `g2o`, `geometry`, and `importers/`.  The names below are the
+size limits, strict JSON, `.npy` headers), `output` (files written all or none),
+`interrupts` (all handling of SIGINT and SIGTERM), `ply`, `labels`, `g2o`, `geometry`, and `importers/`.  The names below are the
 package's own API.
 
 The dataset importers (`semloc.io.importers`, one registry; `load_scannet`, `load_scan2cad`,

@@ -231,8 +231,8 @@ class FoxgloveView:
             ranks = ", ".join(f"#{r}" for r in look.separates)
             text += f"; look at {look.label} {look.global_id} (tells {ranks})"
         support = result.support
-        if support is not None and support.expected is not None:
-            text += f"; {support.missing} of {support.expected} map objects in view missing"
+        if support is not None and support.n_expected is not None:
+            text += f"; {support.n_missing} of {support.n_expected} map objects in view missing"
         level = m.LogLevel.Info if result.status == "localized" else m.LogLevel.Warning
         return m.Log(level=level, name="semloc", message=text)
 

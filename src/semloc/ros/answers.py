@@ -7,10 +7,9 @@
   (`semloc.ros.frames.covariance`), when the answer is `localized`;
 - `/tf` (tf2_msgs/TFMessage): `map` -> odometry frame when localized, and the odometry frame
   -> the detections' frame at every answer;
-- `/semloc/status` (std_msgs/String): JSON `{"stamp", "status", "confidence", "reason",
-  "pose_is_answer", "n_local", "changes", "support", "next_look", "hypotheses", "prior"}` at every
-  answer (the best three hypotheses: rank, confidence, pairs and the position of the local
-  frame's origin; the prior in effect on the odometry frame's origin, null: none);
+- `/semloc/status` (std_msgs/String): the localize JSON at every answer with its `stamp` and
+  `n_local` (`semloc.schema.StatusAnswer`): its latest step only and its best three
+  hypotheses; its `prior` is the prior in effect on the odometry frame's origin (null: none);
 - `/semloc/map` (visualization_msgs/MarkerArray, once): the map's objects as label-coloured
   boxes with their labels;
 - `/semloc/matches` (MarkerArray, every answer): the best hypothesis's local objects placed in
@@ -30,10 +29,10 @@ from typing import Any
 
 import numpy as np
 
+from semloc import schema
 from semloc.maps import ObjectMap
 from semloc.pictures.colors import label_colors, rgb
 from semloc.pictures.looks import LOOK_RGB, look_arrows
-from semloc.priors import Prior
 from semloc.results import Result
 from semloc.ros import messages as msgs
 from semloc.ros.frames import covariance
@@ -72,11 +71,9 @@ class AnswerTopics:
         self._map_written = False
 
     def write(
-        self, stamp: int, result: Result, T_odom_sensor: np.ndarray, local: ObjectMap,
-        prior: Prior | None = None,
-    ) -> None:  # fmt: skip
-        """The messages of one answer at `stamp` (ns); `local`: the local objects so far;
-        `prior`: the prior in effect."""
+        self, stamp: int, result: Result, T_odom_sensor: np.ndarray, local: ObjectMap
+    ) -> None:
+        """The messages of one answer at `stamp` (ns); `local`: the local objects so far."""
         if not self._map_written:
             self.sink.write(MAP_TOPIC, msgs.MARKERS, stamp, self.map_markers(stamp))
             self._map_written = True
@@ -93,7 +90,7 @@ class AnswerTopics:
         if transforms:
             self.sink.write(TF_TOPIC, msgs.TF, stamp, msgs.new(msgs.TF, transforms=transforms))
         self.sink.write(STATUS_TOPIC, msgs.STRING, stamp, msgs.new(msgs.STRING,
-                        data=json.dumps(status(stamp, result, len(local), prior))))  # fmt: skip
+                        data=json.dumps(status(stamp, result, len(local)), allow_nan=False)))  # fmt: skip
         self.sink.write(
             MATCHES_TOPIC, msgs.MARKERS, stamp,
             self.match_markers(stamp, result, local, T_odom_sensor),
@@ -179,28 +176,10 @@ class AnswerTopics:
         return rgb255[0] / 255, rgb255[1] / 255, rgb255[2] / 255, alpha
 
 
-def status(stamp: int, result: Result, n_local: int, prior: Prior | None = None) -> dict[str, Any]:
-    """The JSON of `/semloc/status` for one answer under `prior` (the prior in effect on the
-    odometry frame's origin, `Prior.to_dict`; null: none)."""
-    confidence = result.confidence
-    return {
-        "stamp": stamp / 1e9,
-        "status": result.status,
-        "confidence": None if confidence is None else round(confidence, 6),
-        "reason": result.reason,
-        "pose_is_answer": result.pose_is_answer,
-        "n_local": n_local,
-        "changes": result.changes.to_dict(),
-        "support": None if result.support is None else result.support.to_dict(),
-        "next_look": [look.to_dict() for look in result.next_look],
-        "hypotheses": [
-            {
-                "rank": h.rank,
-                "confidence": None if h.confidence is None else round(h.confidence, 6),
-                "pairs": len(h.pairs),
-                "position": None if h.pose is None else np.round(h.pose[:3, 3], 6).tolist(),
-            }
-            for h in result.hypotheses[:TOP_HYPOTHESES]
-        ],
-        "prior": None if prior is None else prior.to_dict(),
-    }
+def status(stamp: int, result: Result, n_local: int) -> dict[str, Any]:
+    """The JSON of `/semloc/status` for one answer at `stamp` (ns): `schema.StatusAnswer`,
+    with the latest step and the best `TOP_HYPOTHESES` hypotheses only (a message at every
+    answer)."""
+    answer = result.to_model(schema.StatusAnswer, 1, stamp=stamp / 1e9, n_local=n_local)
+    answer.hypotheses = answer.hypotheses[:TOP_HYPOTHESES]
+    return answer.model_dump(by_alias=True)

@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from semloc.io.answers import answer_document
+from semloc import schema
 from semloc.priors import Prior
 from semloc.results import Result
 from semloc.ros.bag import MAX_GAP_S, BagError, Odometry, Run
@@ -116,11 +116,9 @@ def sensor_pose(run: Run, frame: DetectionFrame, odometry: Odometry) -> np.ndarr
     )
 
 
-def answer_json(answer: Answer, stream: StreamLocalizer) -> dict[str, Any]:
-    """One line of `--jsonl`: `{"stamp": seconds, "result": the localize JSON}`; its `steps`
-    hold this update's step only (the earlier ones are on the lines before), its `prior` is
-    the prior in effect (`Prior.to_dict`, null: none)."""
-    labels = stream.localizer.label_report()
-    prior = None if answer.prior is None else answer.prior.to_dict()
-    document = answer_document(answer.result, labels, 1, prior=prior)
-    return {"stamp": answer.stamp / 1e9, "result": document}
+def answer_json(answer: Answer) -> dict[str, Any]:
+    """One line of `--jsonl` (`schema.BagLine`): `{"stamp": seconds, "result": the localize
+    JSON}`; its `steps` hold this update's step only (the earlier ones are on the lines
+    before), its `prior` is the prior in effect (null: none)."""
+    line = schema.BagLine(stamp=answer.stamp / 1e9, result=answer.result.to_model(last_steps=1))
+    return line.model_dump(by_alias=True)

@@ -286,7 +286,7 @@ class LiveNode:
             frames = Frames(self.settings.map_frame, answer.odom_frame, answer.frame)
             self._topics = AnswerTopics(self.sink, self.global_map, frames)
         self._topics.write(answer.stamp, answer.result, answer.T_odom_sensor,
-                           self.stream.local_map(), answer.prior)  # fmt: skip
+                           self.stream.local_map())  # fmt: skip
         self.answers += 1
 
     def _add_odometry(self, message: Any) -> None:

@@ -72,9 +72,9 @@ class RemoteLocalizer:
             coverage=coverage,
         )
         self._prior_set, self._prior = False, None
-        echoed = answer.get("prior")
-        self._in_effect = None if echoed is None else Prior.from_dict(echoed)
-        return Result.from_dict(answer)
+        result = Result.from_dict(answer)
+        self._in_effect = result.prior  # the server's prior in effect, echoed
+        return result
 
     @property
     def local_map(self) -> ObjectMap:

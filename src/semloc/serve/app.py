@@ -182,7 +182,7 @@ def create_app(
         redoc_url=None,
         static_url=DOCS_STATIC,
         lifespan=lifespan,
-        separate_input_output_schemas=False,
+        separate_input_output_schemas=True,  # answers as written: what is always there is required
     )
     app.state.service, app.state.access, app.state.observer = service, access, observer
     app.add_middleware(ObserveMiddleware, observer=observer, access_log=access_log)

@@ -7,7 +7,9 @@ has refused NaN, duplicate keys and oversized input; a map's deeper rules (uniqu
 rotations, non-zero directions) are `semloc.io.map_from_dict`'s, which a JSON Schema cannot
 state and the descriptions do.  Answers allow extra keys (later versions may add some).
 
-The shapes follow docs/format.md (a semloc map) and the JSON of `semloc localize --format json`.
+The shapes follow docs/format.md (a semloc map); the answers of a localization are the one
+answer schema's models (`semloc.schema`: the JSON of `semloc localize --format json` and what
+the service adds), declared as they are written (what is always there is required).
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, model_validator
 
+from semloc import schema
 from semloc.coverage import Coverage
 from semloc.maps import (
     MAX_COORDINATE,
@@ -26,7 +29,6 @@ from semloc.maps import (
     MAX_OBJECTS,
     MAX_SEEN,
 )
-from semloc.priors import Prior
 
 SAFE_INTEGER = 2**53 - 1
 """Integers in requests stay within what every JSON reader holds exactly (I-JSON, RFC 7493)."""
@@ -49,21 +51,13 @@ def Integer(low: int, high: int) -> Any:  # noqa: N802 (a type)
     return Annotated[int, Field(ge=low, le=high), BeforeValidator(_integral)]
 
 
-Coordinate = Annotated[float, Field(ge=-MAX_COORDINATE, le=MAX_COORDINATE)]
-Vector3 = Annotated[list[Coordinate], Field(min_length=3, max_length=3)]
+Coordinate, Vector3 = schema.Coordinate, schema.Vector3
 Direction = Annotated[
     list[Coordinate],
     Field(min_length=3, max_length=3, description="A direction (3 numbers, not all zero)."),
 ]
 Unit = Annotated[float, Field(ge=-2.0, le=2.0)]
-Pose = Annotated[
-    list[Annotated[list[float], Field(min_length=4, max_length=4)]],
-    Field(
-        min_length=4,
-        max_length=4,
-        description="T_global_local, 4 rows of 4 numbers: p_global = R @ p_local + t.",
-    ),
-]
+Pose = schema.Matrix4
 MapId = Annotated[str, Field(min_length=1, max_length=MAX_ID_LENGTH, pattern=ID_PATTERN)]
 
 
@@ -133,28 +127,11 @@ class SemlocMap(_Request):
     )
 
 
-class PriorBody(_Request):
-    """A position prior (`semloc.Prior`, as `Prior.to_dict` writes it): the local frame's
-    origin lies within `radius` metres of `position` in the map's frame; optionally its height
-    within `floor` and its heading within `heading_tolerance` degrees of `heading`."""
+class PriorBody(schema.Prior):
+    """A position prior (`semloc.Prior`, as `Prior.to_dict` writes it), as a request takes it:
+    JSON types as they are."""
 
     model_config = ConfigDict(strict=True, extra="forbid")
-    position: Vector3 = Field(description="Where the local frame's origin lies (map frame, m).")
-    radius: float = Field(gt=0, description="Metres around `position`.")
-    floor: Annotated[list[Coordinate], Field(min_length=2, max_length=2)] | None = Field(
-        None, description="[z_min, z_max]: the origin's height band (map frame, z up)."
-    )
-    heading: float | None = Field(
-        None, description="Degrees: the local x axis about the map's z axis, from +x, CCW."
-    )
-    heading_tolerance: float | None = Field(
-        None, gt=0, le=180, description="Degrees around `heading` (default 30; needs a heading)."
-    )
-
-    @model_validator(mode="after")
-    def _a_prior(self) -> PriorBody:
-        Prior.from_dict(self.model_dump(exclude_none=True))  # its rules, in one place
-        return self
 
 
 class CoverageBody(_Request):
@@ -193,129 +170,12 @@ class VersionInfo(_Answer):
     source: str = Field(description='"upload" or "changes (from version N)".')
 
 
-# Answers of a localization ------------------------------------------------------------------
-class Pair(_Answer):
-    global_: str = Field(alias="global")
-    local: str
-
-
-class Hypothesis(_Answer):
-    rank: int
-    score: float
-    pairs: list[Pair]
-    pose: Pose | None
-    fitness: float | None = None
-    confidence: float | None = None
-    outside_prior: bool | None = Field(
-        None, description="Its pose lies outside the prior (only with a prior)."
-    )
-    missing: int | None = Field(
-        None,
-        description="Map objects its pose puts in the recent looks that no detection accounts "
-        "for (only with coverage).",
-    )
-    expected: int | None = Field(
-        None, description="Map objects its pose puts in the recent looks (only with coverage)."
-    )
-
-
-class Step(_Answer):
-    step: int
-    n_local: int
-    n_sets: int
-    top_scores: list[float]
-    ms: float
-
-
-class Moved(_Answer):
-    global_: str = Field(alias="global")
-    local: str
-    offset_m: float
-    evidence: int | None = Field(None, description="Detections that saw it moved (a run).")
-    last_seen: int | None = Field(None, description="The `seen` of the latest of them (a run).")
-
-
-class Changes(_Answer):
-    moved: list[Moved]
-    new: list[str] = Field(description="Local ids.")
-    missing: list[str] = Field(description="Global ids.")
-    evidence: dict[str, dict[str, int]] | None = Field(
-        None,
-        description="Over a run: detections (new) and looks (missing) that said so, by id.",
-    )
-
-
-class LabelMatch(_Answer):
-    resolved: str
-    map_labels: list[str]
-
-
-class Support(_Answer):
-    """How recent the evidence for the pose is."""
-
-    pairs: int
-    seen: list[int] = Field(description="The span of `seen` of its local objects.")
-    updates_ago: int = Field(description="Updates since its oldest object was detected.")
-    metres: float = Field(description="Metres of travel since then (0 without positions).")
-    tracked: bool = Field(description="The place was found earlier and is followed since.")
-    changed: int = Field(0, description="Objects of the tracked claim a plausible move explains.")
-    contradicting: int = Field(0, description="Objects that contradict the tracked claim.")
-    missing: int | None = Field(
-        None,
-        description="Map objects the pose puts in the recent looks that no detection accounts "
-        "for (null: no coverage given, no negative evidence).",
-    )
-    expected: int | None = Field(
-        None, description="Map objects the pose puts in the recent looks (null: no coverage)."
-    )
-    missing_ids: list[str] | None = Field(
-        None,
-        description="The ids of the map objects counted in `missing`, as the answer's pose "
-        "places the looks (at most 50, in the map's order; null: no coverage).",
-    )
-
-
-class NextLook(_Answer):
-    """Where to look to tell the top hypotheses of an ambiguous answer apart."""
-
-    label: str
-    global_id: str
-    where: dict[str, list[float]] = Field(
-        description="Rank -> [x, y, z]: where the map object lies in the local frame if that "
-        "hypothesis is right."
-    )
-    separates: list[int] = Field(description="The ranks a look at their spot tells apart.")
-    gain: float = Field(description="Expected reduction of the ambiguity (bits).")
-
-
-class Answer(_Answer):
-    """The JSON of `semloc localize --format json` with the map version it used."""
-
-    status: Literal["localized", "ambiguous", "failed"]
-    reason: str
-    confidence: float | None
-    pose: Pose | None
-    hypotheses: list[Hypothesis]
-    steps: list[Step]
-    timing_ms: dict[str, float]
-    changes: Changes
-    support: Support | None = None
-    next_look: list[NextLook] = Field(
-        default_factory=list, description="Where to look next (only an ambiguous answer)."
-    )
-    labels: dict[str, LabelMatch]
-    map_version: int
-    prior: PriorBody | None = Field(description="The position prior applied (null: none).")
-
-
-class LocalizeAnswer(Answer):
-    localization_id: str = Field(description="Names the local objects kept for a change report.")
-
-
-class SessionAnswer(Answer):
-    session_id: str
-    update: int = Field(ge=1, description="This update's number in the session.")
-    stamp: float = Field(description="The update's stamp, echoed.")
+# Answers of a localization: the one answer schema (semloc.schema) -------------------------
+Pair, Hypothesis, Step, Moved, Changes = (schema.Pair, schema.Hypothesis, schema.Step,
+                                          schema.Moved, schema.Changes)  # fmt: skip
+LabelMatch, Support, NextLook, Answer = (schema.LabelMatch, schema.Support, schema.NextLook,
+                                         schema.ServiceAnswer)  # fmt: skip
+LocalizeAnswer, SessionAnswer = schema.LocalizeAnswer, schema.SessionAnswer
 
 
 # Sessions -----------------------------------------------------------------------------------

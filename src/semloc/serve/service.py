@@ -40,8 +40,9 @@ from dataclasses import dataclass, field
 from typing import Any, Literal
 
 import numpy as np
+from pydantic import TypeAdapter, ValidationError
 
-from semloc.association import CandidateIndex, label_report
+from semloc import schema
 from semloc.changes import (
     Changes,
     ReportConflict,
@@ -52,7 +53,6 @@ from semloc.changes import (
 )
 from semloc.coverage import Coverage
 from semloc.io import map_from_dict, map_to_dict
-from semloc.io.answers import answer_document
 from semloc.localizer import Localizer, LocalizerConfig, localize
 from semloc.maps import MapError, ObjectMap
 from semloc.priors import Prior
@@ -247,7 +247,7 @@ class _LiveSession:
     meta: SessionMeta
     applied: int = 0
     lock: threading.Lock = field(default_factory=threading.Lock)
-    answers: dict[int, tuple[Result, Prior | None]] = field(default_factory=dict)  # + its prior
+    answers: dict[int, Result] = field(default_factory=dict)
     seq_of: dict[str, int] = field(default_factory=dict)  # object id -> batch of its version
     saved: int = 0  # the batch after which the store has its state
 
@@ -342,9 +342,8 @@ class Service:
         version, global_map = self.object_map(map_id)
         local = parse_map(document)
         result = localize(global_map, local, self.config, prior=prior)
-        labels = label_report(CandidateIndex(global_map, self.config.association), local)
-        document = answer_document(result, labels, map_version=version, prior=_prior_json(prior))
-        document["localization_id"] = new_id()
+        document = result.to_dict(schema.LocalizeAnswer, map_version=version,
+                                  localization_id=new_id())  # fmt: skip
         kept = {"local": map_to_dict(local), "answer": _answer_record(document)}
         self.store.put_localization(document["localization_id"], map_id, kept)
         return document
@@ -438,20 +437,17 @@ class Service:
             raise not_found(f"session {session_id!r}")
         live = self._live_session(meta)
         update = _Update(seq, objects, position, sets_prior, prior, coverage)
-        result, in_effect = self._advance(session_id, live, update)
-        document = self._session_answer(result, in_effect, live.localizer, meta, stamp, seq)
+        result = self._advance(session_id, live, update)
+        document = self._session_answer(result, meta, stamp, seq)
         self.store.set_last(session_id, _summary(document), key, document)
         return document
 
     @staticmethod
     def _session_answer(
-        result: Result, prior: Prior | None, localizer: Localizer, meta: SessionMeta,
-        stamp: float, seq: int,
-    ) -> dict[str, Any]:  # fmt: skip
-        document = answer_document(result, localizer.label_report(), map_version=meta.map_version,
-                                   stamp=stamp, prior=_prior_json(prior))  # fmt: skip
-        document["session_id"], document["update"] = meta.session_id, seq
-        return document
+        result: Result, meta: SessionMeta, stamp: float, seq: int
+    ) -> dict[str, Any]:
+        return result.to_dict(schema.SessionAnswer, map_version=meta.map_version, stamp=stamp,
+                              session_id=meta.session_id, update=seq)  # fmt: skip
 
     def _answered(self, meta: SessionMeta, remembered: Remembered) -> dict[str, Any]:
         """The answer to a session update sent again: the stored one, or (when the first
@@ -469,8 +465,7 @@ class Service:
             stamp = batch.stamp
         if result is None:
             raise not_found(f"session {meta.session_id!r}")
-        prior = live.localizer.prior
-        return self._session_answer(result, prior, live.localizer, meta, stamp, remembered.ref)
+        return self._session_answer(result, meta, float(stamp), remembered.ref)
 
     def _live_session(self, meta: SessionMeta) -> _LiveSession:
         session_id = meta.session_id
@@ -513,11 +508,9 @@ class Service:
                 return live
         raise Conflict("session busy", "its kept state changed while it was read; retry")
 
-    def _advance(
-        self, session_id: str, live: _LiveSession, update: _Update
-    ) -> tuple[Result, Prior | None]:
+    def _advance(self, session_id: str, live: _LiveSession, update: _Update) -> Result:
         """Apply the batches up to `update` not yet applied here, in order (those of other
-        workers read from the store); the answer after `update` and the prior it had.  The
+        workers read from the store); the answer after `update`.  The
         state after them is kept in the store, with the batches its window needs."""
         seq = update.seq
         with live.lock:
@@ -529,7 +522,7 @@ class Service:
                 for batch in pending:
                     result = batch.apply(live.localizer)
                     live.applied = batch.seq
-                    live.answers[batch.seq] = (result, live.localizer.prior)
+                    live.answers[batch.seq] = result
                     live.seq_of.update((o.id, batch.seq) for o in batch.objects)
                 self._keep_state(session_id, live)
             answer = live.answers.pop(seq, None)
@@ -739,12 +732,17 @@ def _reported_answer(body: dict) -> tuple[np.ndarray, list[tuple[str, str]]]:
     except (ValueError, TypeError) as exc:
         raise Invalid("invalid change report", str(exc)) from None
     hypotheses = body.get("hypotheses") or []
-    pairs: list[tuple[str, str]] = []
-    if isinstance(hypotheses, list) and hypotheses and isinstance(hypotheses[0], dict):
-        for pair in hypotheses[0].get("pairs") or []:
-            if isinstance(pair, dict) and isinstance(pair.get("global"), (str, int)):
-                pairs.append((str(pair["global"]), str(pair.get("local"))))
-    return pose, pairs
+    best = hypotheses[0] if isinstance(hypotheses, list) and hypotheses else {}
+    try:
+        pairs = _PAIRS.validate_python((best.get("pairs") or []) if isinstance(best, dict) else [])
+    except ValidationError as exc:
+        detail = schema.field_error(exc, "hypotheses[0].pairs")
+        raise Invalid("invalid change report", detail) from None
+    return pose, [(p.global_, p.local) for p in pairs]
+
+
+_PAIRS = TypeAdapter(list[schema.Pair])
+"""A reported answer's pairs (`schema.Pair`: ids, integers taken as their strings)."""
 
 
 RUN_CHANGES = "run_changes"
