@@ -36,17 +36,12 @@ search's cost grows with the local objects; tracking costs a lookup per new obje
 * **Contradiction.**  The evidence against an update is its contradicting and its changed
   objects (a change is no support: a wrong place explains detections by "moves" as readily
   as a right one) and its missing ones beyond the tolerated share; for it, its supporting
-  objects (re-detections at half).  An update whose evidence against is at least
-  `contradiction` and more than twice the evidence for it, or the last
-  `CONTRADICTION_UPDATES` updates together holding at least `contradiction` + 1 against and
-  more than twice as much as for, end the claim at once (`ambiguous`, reason
-  `"contradicted"`): the robot was carried elsewhere, its odometry jumped, or the place was a
-  wrong one.  One moved chair among agreeing objects does not.  The search starts again from
-  the objects of the updates that contradict: of the newest alone when its objects against
-  are unusual for the run (below: in a clean run two objects that do not fit are news, and
-  the updates before show the place the robot left), else of the last
-  `CONTRADICTION_UPDATES` (in a run where a fifth of the map moved they are common, the
-  claim more often right than not, and the search finds it again sooner from more objects).  Over the whole claim, the objects judged since it began must stay at least half
+  objects (re-detections at half).  An update whose evidence against is at least `contradiction` and
+  more than twice the evidence for it, or the last `CONTRADICTION_UPDATES` updates together
+  holding at least `contradiction` + 1 against and more than twice as much as for, end the
+  claim at once (`ambiguous`, reason `"contradicted"`): the robot was carried elsewhere, its
+  odometry jumped, or the place was a wrong one.  One moved chair among agreeing objects does
+  not.  Over the whole claim, the objects judged since it began must stay at least half
   supporting (`min_support_share`, once `min_judged` are judged): a wrong place that a few
   lucky objects keep alive update by update loses it there.
 * **Unusual against this run.**  An old map and an erring detector make some objects judged
@@ -59,10 +54,9 @@ search's cost grows with the local objects; tracking costs a lookup per new obje
 * **Doubt.**  Short of that, when the newest `DOUBT_OBJECTS` judged objects (whatever the
   updates they came in) hold at least two against, more than the run's share makes likely at
   `DOUBT`, the claim is doubted: the answer is `ambiguous` until newer objects support the
-  place again or the evidence ends the claim.
-  A robot carried off sees a few objects that happen to fit, then a few that do not, then
-  nothing for a while: a claim is an action's licence, and it is not given while the newest
-  evidence speaks against it.
+  place again or the evidence ends the claim.  A robot carried off sees a few objects that
+  happen to fit, then a few that do not, then nothing for a while: a claim is an action's
+  licence, and it is not given while the newest evidence speaks against it.
 * **Confidence.**  The claim's confidence moves with its evidence: the search's confidence
   (as a logit, at most `CONFIDENCE_CAP`) plus a log-likelihood ratio per judged object
   (`EVIDENCE_LOGITS`: supporting, changed, contradicting, missing).
@@ -432,8 +426,8 @@ class Track:
             self.rate.add(*self._recent[0])
         self._recent.append(new)
         least = self.config.contradiction
-        if recent_contradiction([verdict], least) and self.rate.unusual(*new):
-            return 1  # (news for this run: the updates before show the place it left)
+        if recent_contradiction([verdict], least):
+            return 1
         if recent_contradiction(self._verdicts, least):
             return len(self._verdicts)
         counts = self.counts()

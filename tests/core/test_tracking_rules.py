@@ -454,20 +454,6 @@ def test_a_claim_is_doubted_when_its_newest_objects_hold_an_unlikely_share_again
     assert calm.contradicted(view) == 0 and not calm.doubted()
 
 
-def test_an_update_against_the_place_restarts_a_clean_run_from_it_and_a_hard_run_from_three():
-    """Two new objects against and none for end a claim by the newest update alone.  Unusual
-    at a 5 % share (tail 0.0025 < `UNUSUAL`): the search restarts from that update; at 37.5 %
-    (0.14) from the latest `CONTRADICTION_UPDATES` updates."""
-    calm = [Verdict([(10, "a")], []), Verdict([(11, "b")], [])]
-    view = Verdict([], ["x", "y"])
-    assert recent_contradiction([view], least=2)
-    assert not recent_contradiction([*calm, view][:2], least=2)
-    for share, restart in [(0.05, 1), (0.375, CONTRADICTION_UPDATES)]:
-        claim = track(rate=at_share(share))
-        assert [claim.contradicted(v) for v in calm] == [0, 0]
-        assert claim.contradicted(view) == restart, share
-
-
 def test_a_doubt_weighs_the_newest_judged_objects_across_updates():
     """Updates without new objects change nothing (a robot carried off sees nothing for a
     while: no news); a doubt lifts once `DOUBT_OBJECTS` - 1 newer objects support the place
