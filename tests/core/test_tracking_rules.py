@@ -845,13 +845,20 @@ def test_a_kidnap_into_a_copy_is_caught_by_two_of_its_own_objects_without_covera
     assert kidnapped(None, extras=1) == ["ambiguous"] * 3
 
 
-def test_a_copy_leading_by_one_object_makes_the_answer_ambiguous_with_the_copy_listed():
+def room_claimed() -> tuple[ObjectMap, Localizer, list, list]:
+    """The room claimed in a building with its copy (that holds a tv too): the building, the
+    Localizer, the room's local objects and the copy's as seen from the same spot."""
     building = lookalikes(extras=1)
     localizer = Localizer(building, local_up=[0, 0, 1])
     room_objects = local([o for o in building if o.id.startswith("a")])
     localizer.update(room_objects[:5])
     assert localizer.update(room_objects[5:]).status == "localized"
     there = local([o for o in building if o.id.startswith("b")], ids="k", shift=30.0)
+    return building, localizer, room_objects, there
+
+
+def test_a_copy_leading_by_one_object_makes_the_answer_ambiguous_with_the_copy_listed():
+    building, localizer, room_objects, there = room_claimed()
     doubted = localizer.update(there[0::3])
     assert doubted.status == "ambiguous" and doubted.reason == TWIN_DOUBTED
     assert localizer.tracking  # weighed on, not ended
@@ -865,12 +872,7 @@ def test_a_copy_leading_by_one_object_makes_the_answer_ambiguous_with_the_copy_l
 def test_a_doubt_lasts_while_nothing_tells_the_place_from_its_copy():
     """Updates of objects both rooms hold say nothing of which one the robot is in: the tv
     keeps the copy ahead however many of them follow (nothing seen is no news)."""
-    building = lookalikes(extras=1)
-    localizer = Localizer(building, local_up=[0, 0, 1])
-    room_objects = local([o for o in building if o.id.startswith("a")])
-    localizer.update(room_objects[:5])
-    localizer.update(room_objects[5:])
-    there = local([o for o in building if o.id.startswith("b")], ids="k", shift=30.0)
+    building, localizer, room_objects, there = room_claimed()
     assert localizer.update(there[0::3]).reason == TWIN_DOUBTED
     both_hold = [o for o in there if o.id != "kb10"]
     for _ in range(2 * TWIN_UPDATES):
@@ -879,12 +881,7 @@ def test_a_doubt_lasts_while_nothing_tells_the_place_from_its_copy():
 
 def test_a_restored_localizer_reads_the_older_state_of_every_updates_objects():
     """A state written before only the telling updates were kept (one list per update)."""
-    building = lookalikes(extras=1)
-    one = Localizer(building, local_up=[0, 0, 1])
-    room_objects = local([o for o in building if o.id.startswith("a")])
-    one.update(room_objects[:5])
-    one.update(room_objects[5:])
-    there = local([o for o in building if o.id.startswith("b")], ids="k", shift=30.0)
+    building, one, _, there = room_claimed()
     one.update(there[0::3])
     state = json.loads(json.dumps(one.state()))
     state["twins"]["fits"] = [None, [[]], [["+local kb10"]]]
@@ -895,11 +892,7 @@ def test_a_restored_localizer_reads_the_older_state_of_every_updates_objects():
 
 def test_the_place_seen_again_lifts_the_doubt():
     """Once an object only the room holds is seen, the copy no longer leads."""
-    building = lookalikes(extras=1)
-    localizer = Localizer(building, local_up=[0, 0, 1])
-    room_objects = local([o for o in building if o.id.startswith("a")])
-    localizer.update(room_objects[:5])
-    localizer.update(room_objects[5:])
+    building, localizer, room_objects, _ = room_claimed()
     tv = local([o for o in building if o.id == "b10"], ids="k", shift=30.0)
     assert localizer.update(tv).status == "ambiguous"  # a tv where the room has none
     only_the_room = [o for o in room_objects if o.id in {"la1", "la3"}]  # the copy lacks them
