@@ -45,6 +45,17 @@ class Hypothesis:
     missing: int | None = None  # map objects its pose puts in the recent looks that no
     # detection accounts for (None: no coverage given)
     expected: int | None = None  # map objects its pose puts in the recent looks
+    refined: bool = True  # False: its pose is the closed form's (or search's), not robust ICP's
+    _refiner: Callable[[Hypothesis], None] | None = field(default=None, repr=False, compare=False)
+
+    def refine(self) -> Hypothesis:
+        """Refine the pose of an unrefined hypothesis now (robust ICP, as the best one's):
+        pose, fitness, rmse, residual, method, features and evidence are updated in place, its
+        rank and confidence are not (they were weighed against the others); itself returned.
+        A hypothesis that cannot be refined (refined already, read from JSON) is unchanged."""
+        if not self.refined and self._refiner is not None:
+            self._refiner(self)
+        return self
 
     def to_dict(self) -> dict[str, Any]:
         return (
@@ -66,6 +77,7 @@ class Hypothesis:
             }
             | ({} if self.outside_prior is None else {"outside_prior": self.outside_prior})
             | ({} if self.missing is None else {"missing": self.missing, "expected": self.expected})
+            | ({} if self.refined else {"refined": False})
         )
 
 
@@ -370,6 +382,7 @@ def _hypothesis_from(
         features=dict(features) if isinstance(features, dict) else None,
         outside_prior=outside if isinstance(outside, bool) else None,
         missing=_count(number("missing")), expected=_count(number("expected")),
+        refined=raw.get("refined") is not False,
     )  # fmt: skip
 
 
