@@ -539,3 +539,81 @@ def _different(best: Hypothesis, other: Hypothesis, max_overlap: float) -> bool:
     return is_rival(best.pairs, other.pairs, max_overlap) and is_rival(
         other.pairs, best.pairs, max_overlap
     )
+
+
+def verdict_refinements(
+    hypotheses: Sequence[Hypothesis],
+    pending: Sequence[Hypothesis],
+    config: DecisionConfig,
+    model: ConfidenceModel,
+) -> list[Hypothesis]:
+    """Those of the `pending` hypotheses (not yet refined: their features are bounds) whose
+    refinement could change the verdict that `rank_places(hypotheses, "evidence", ...)` and
+    `decide` reach: which place is best and the status.  The best place first, alone.
+
+    Robust ICP only raises the fitness (to at most 1) and adds negative evidence (`missing`);
+    the centre residual may fall to 0.  So a pending hypothesis cannot change the verdict
+    when (1) even so it ranks below the best; (2) the best's confidence stays on the same
+    side of `min_confidence` whether its rivals (each pending one at its bound) are as strong
+    as they can be or absent; (3) when the best could be claimed, no hypothesis could stop
+    the claim by the dominance rule (a rival of the best with as many pairs whose residual is
+    not clearly larger, or pending): otherwise each pending rival of the best is refined, as
+    its residual counts there and its pose decides which same-place duplicates are listed.
+    (Copies of the best, `semloc.twins`, are weighed against refined rivals: the Localizer
+    refines all pending hypotheses before it weighs them.)"""
+    if not hypotheses:
+        return []
+    keys = [_ranking_key(h, model) for h in hypotheses]
+    best = hypotheses[keys.index(min(keys))]  # (`rank_places`'s first: a stable sort's)
+    if _among(best, pending):
+        return [best]
+    if best.features is None:
+        return []
+    key = model.ranking(best.features) - missing_penalty(best)
+    key -= RESIDUAL_RANK * (best.residual or 0.0) + _KEY_EPS
+    evidence, overlap = model.evidence(best.features) - missing_penalty(best), config.rival_overlap
+    strongest = max(
+        (_evidence_bound(o, pending, model) for o in hypotheses
+         if o is not best and o.features is not None and is_rival(best.pairs, o.pairs, overlap)),
+        default=None,
+    )  # fmt: skip
+    claimable = model.confidence(evidence, None) >= config.min_confidence
+    unsure = claimable != (model.confidence(evidence, strongest) >= config.min_confidence)
+    contested = claimable and any(
+        o is not best and _different(best, o, overlap) and len(o.pairs) >= len(best.pairs)
+        and (_among(o, pending) or not _dominates(best, o, "residual", config))
+        for o in hypotheses
+    )  # fmt: skip
+    return [
+        h for h in pending
+        if h.features is not None and (
+            model.ranking(_optimistic(h.features)) >= key
+            or (unsure and is_rival(best.pairs, h.pairs, overlap))
+            or (contested and _different(best, h, overlap))
+        )
+    ]  # fmt: skip
+
+
+def _ranking_key(h: Hypothesis, model: ConfidenceModel) -> tuple[float, float]:
+    """`RANKINGS["evidence"]` of `h` as `rank_places` sets its evidence (the ranking logit)."""
+    if h.features is None:
+        return _INF, -h.score
+    logit = model.ranking(h.features) - missing_penalty(h)
+    return -round(logit - RESIDUAL_RANK * (h.residual or 0), 6), -h.score
+
+
+def _evidence_bound(h: Hypothesis, pending: Sequence[Hypothesis], model: ConfidenceModel) -> float:
+    """The evidence of `h`, or the most it can have after refinement when it is pending."""
+    assert h.features is not None
+    if _among(h, pending):
+        return model.evidence(_optimistic(h.features))
+    return model.evidence(h.features) - missing_penalty(h)
+
+
+_KEY_EPS = 1e-6
+"""Ranking keys are compared rounded (`RANKINGS`): a bound this close counts as a tie."""
+
+
+def _optimistic(features: dict[str, float]) -> dict[str, float]:
+    """The features at their best after refinement: every point fits, the centres exactly."""
+    return {**features, "fitness": 1.0, "residual": 0.0}

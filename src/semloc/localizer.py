@@ -4,10 +4,14 @@
 re-detected (same id = updated), grows the association sets, turns the best of them into
 distinct pose hypotheses and decides (`decision.py`).  Each screened set is verified first
 (`verification.consensus`: the pairs that disagree with the pose the others agree on are
-rejected); only the chosen hypotheses get the full pose recovery (global search, robust ICP),
-after which their evidence is measured, they are ranked by it, same-place duplicates are
-merged and a calibrated confidence is attached.  `update(objects, answer=False)` only grows
-the association sets, for callers that read the answer later (a replay reads only its last one).
+rejected); only the chosen hypotheses get a pose recovery (closed form, or a global search
+where the centres leave the rotation free), after which their evidence is measured, they are
+ranked by it, same-place duplicates are merged and a calibrated confidence is attached.
+Robust ICP refines the best and only those of the `refine_top` first whose refinement could
+change the verdict (`decision.verdict_refinements`); the others keep their closed-form
+pose, marked `refined: false`, and are refined on demand (`Hypothesis.refine`).
+`update(objects, answer=False)` only grows the association sets, for callers that read the
+answer later (a replay reads only its last one).
 
 Streaming: the poses of the last answer are kept per association set (keyed by its pairs and
 whether it was refined).  A set that is unchanged at the next answer reuses its estimate; a set
@@ -68,17 +72,26 @@ from semloc.decision import (
     decide,
     distinct,
     local_anchor,
+    missing_penalty,
     new_regions,
     prior_first,
     rank_places,
     same_place,
     score_confidence,
     shipped_model,
+    verdict_refinements,
 )
 from semloc.maps import MapError, ObjectMap, SemanticObject, unit_vector
 from semloc.next_look import NextLookConfig, next_look
 from semloc.places import PlaceIndex, RetrievalConfig, place_index
-from semloc.pose import PoseConfig, PoseEstimate, cached_cloud, estimate_pose
+from semloc.pose import (
+    PoseConfig,
+    PoseEstimate,
+    PoseRecovery,
+    cached_cloud,
+    estimate_pose,
+    recover_pose,
+)
 from semloc.priors import GATE_SLACK, OUTSIDE_PRIOR, Prior, checked_prior
 from semloc.results import Hypothesis, Result, Status, Step, Support
 from semloc.semantics import pair_weight
@@ -150,8 +163,9 @@ class LocalizerConfig(BaseModel):
     refine_top: int = Field(
         3,
         ge=0,
-        description="How many of the best hypotheses get robust ICP (the rest: closed "
-        "form or search, with fitness).",
+        description="How many of the best hypotheses may get robust ICP: the best one and "
+        "those whose refinement could change the verdict (the rest: closed form or search, "
+        "with fitness; `Hypothesis.refine` on demand).",
     )
     rank_by: RankBy = Field(
         "evidence",
@@ -222,7 +236,6 @@ class Localizer:
         self.local_up = None if local_up is None else unit_vector(local_up, "local_up")
         self.descriptor_gate = config.association.gate(self._describer)
         self._candidates = CandidateIndex(global_map, config.association, self.descriptor_gate)
-        self._pose_unrefined = config.pose.model_copy(update={"refine": False})
         self.window = LocalWindow(config.window)
         self._track: Track | None = None
         self._allowance: np.ndarray | None = None  # per map object, for tracking checks
@@ -956,9 +969,10 @@ class Localizer:
         chosen = [screened[i] for i in picked[: cfg.top_k]]
         previous, self._poses = self._poses, {}
         hypotheses = [
-            self._hypothesis(rank, c, local_xyz, previous) for rank, c in enumerate(chosen, 1)
+            self._hypothesis(rank, c, local_xyz, previous, lazy=True)
+            for rank, c in enumerate(chosen, 1)
         ]
-        ranked = rank_places(hypotheses, cfg.rank_by, cfg.decision, shipped_model(), anchor)
+        ranked = self._lazily_ranked(hypotheses, anchor)
         twins_, listed = self._twins(ranked, local_xyz, previous, anchor)
         twinned: list[Hypothesis] = []
         if twins_ or listed:  # copies of the best place, listed by the sets or not, weighed
@@ -1162,24 +1176,52 @@ class Localizer:
         )  # fmt: skip
 
     def _hypothesis(
-        self, rank: int, verified: Verified, local_xyz: np.ndarray, previous: dict
-    ) -> Hypothesis:
-        """Full pose recovery of a verified set's inlier pairs, and its evidence."""
+        self, rank: int, verified: Verified, local_xyz: np.ndarray, previous: dict,
+        lazy: bool = False,
+    ) -> Hypothesis:  # fmt: skip
+        """A verified set's inlier pairs with their pose and evidence: refined (robust ICP)
+        when among the `refine_top` first, unless `lazy` (then when `Hypothesis.refine` asks);
+        the others keep the closed form's (or search's) pose unless asked."""
         local_objects = list(self._local.values())
         globals_ = [self.global_map[g] for g, _ in verified.pairs]
         locals_ = [local_objects[l] for _, l in verified.pairs]
         l_xyz = np.array([o.position for o in locals_])
         g_xyz = np.array([o.position for o in globals_])
-        matched = (l_xyz, g_xyz, locals_, globals_)
-        refine = rank <= self.config.refine_top
-        estimate = self._recover(verified.pairs, refine, previous, matched)
+        ids = self.global_map.ids
+        hypothesis = Hypothesis(
+            rank=rank,
+            score=verified.score,
+            pairs=[(g.id, l.id) for g, l in zip(globals_, locals_)],
+            pose=None,
+            rejected=[(str(ids[g]), local_objects[l].id) for g, l in verified.rejected],
+        )
+        recovery = _Recovery(self, verified.pairs, previous, (l_xyz, g_xyz, locals_, globals_))
+
+        def refine(h: Hypothesis) -> None:
+            self._posed(h, verified, recovery, local_xyz, True)
+            if h.features is not None:
+                h.evidence = shipped_model().evidence(h.features) - missing_penalty(h)
+
+        self._posed(hypothesis, verified, recovery, local_xyz, rank <= self.config.refine_top
+                    and not lazy)  # fmt: skip
+        if not hypothesis.refined:
+            hypothesis._refiner = refine
+        return hypothesis
+
+    def _posed(
+        self, h: Hypothesis, verified: Verified, recovery: _Recovery, local_xyz: np.ndarray,
+        refine: bool,
+    ) -> None:  # fmt: skip
+        """`h` given the recovered pose of its pairs (refined or not) and its evidence."""
+        l_xyz, g_xyz = recovery.matched[:2]
+        estimate = recovery.estimate(refine)
         residual, features = verified.residual, None
         tolerance = self.config.verification.inlier_tolerance
         if estimate is not None:
             residual = centre_residual(estimate.T, l_xyz, g_xyz)
             if refine and residual > tolerance >= verified.residual:
                 # ICP on points that do not fit dragged the pose off the agreeing centres
-                estimate = self._recover(verified.pairs, False, previous, matched)
+                estimate = recovery.estimate(False)
                 assert estimate is not None  # the closed form was determined before
                 residual = centre_residual(estimate.T, l_xyz, g_xyz)
         pose = None if estimate is None else estimate.T
@@ -1189,25 +1231,51 @@ class Localizer:
                 verified.support, verified.conflicts, len(local_xyz),
                 self._semantic_weight(verified.pairs),
             ).features()  # fmt: skip
-        ids = self.global_map.ids
         missing = expected = None
         if pose is not None and self._looks and refine:  # (the places that decide)
             seen, unseen = self._unseen(pose, list(self._looks))
             missing, expected = len(unseen), len(seen)
-        return Hypothesis(
-            rank=rank,
-            score=verified.score,
-            pairs=[(g.id, l.id) for g, l in zip(globals_, locals_)],
-            pose=pose,
-            fitness=None if estimate is None else estimate.fitness,
-            rmse=None if estimate is None else estimate.rmse,
-            residual=None if pose is None else residual,
-            method="" if estimate is None else estimate.method,
-            features=features,
-            rejected=[(str(ids[g]), local_objects[l].id) for g, l in verified.rejected],
-            n_missing=missing,
-            n_expected=expected,
-        )
+        h.pose, h.residual, h.features = pose, None if pose is None else residual, features
+        h.fitness = None if estimate is None else estimate.fitness
+        h.rmse = None if estimate is None else estimate.rmse
+        h.method = "" if estimate is None else estimate.method
+        h.n_missing, h.n_expected, h.refined = missing, expected, refine or pose is None
+
+    def _lazily_ranked(
+        self, hypotheses: list[Hypothesis], anchor: np.ndarray | None
+    ) -> list[Hypothesis]:
+        """`rank_places` of the hypotheses, the first `refine_top` refined (robust ICP) only
+        as far as the verdict needs: the best place and the rivals that could change which
+        place is best or the status (`decision.verdict_refinements`); the others keep their
+        closed-form pose (`refined: false`, `Hypothesis.refine` on demand).  Without the
+        bounds that proof needs (a prior, a ranking other than the evidence's), all of them."""
+        cfg = self.config
+        pending = [h for h in hypotheses[: cfg.refine_top] if not h.refined]
+        model = shipped_model()
+        while pending:
+            todo = pending
+            if self._prior is None and cfg.rank_by == "evidence":
+                todo = verdict_refinements(hypotheses, pending, cfg.decision, model)
+            if not todo:
+                break
+            for h in todo:
+                h.refine()
+            pending = [h for h in pending if not h.refined]
+        ranked = rank_places(hypotheses, cfg.rank_by, cfg.decision, model, anchor)
+        if pending and self._has_copies(ranked[0]):  # a copy may outrank the best: its
+            for h in pending:  # rivals and which places are listed are the pending ones too
+                h.refine()
+            ranked = rank_places(hypotheses, cfg.rank_by, cfg.decision, model, anchor)
+        return ranked
+
+    def _has_copies(self, best: Hypothesis) -> bool:
+        """Whether `_twins` weighs copies of `best` (a claimable place with copies)."""
+        if best.pose is None or best.confidence is None or self.global_map.up is None:
+            return False
+        if best.confidence < self.config.decision.min_confidence:
+            return False
+        members = np.array([self.global_map.index_of(g) for g, _ in best.pairs])
+        return bool(self._twin_motions_of(members))
 
     def _semantic_weight(self, pairs: list[tuple[int, int]]) -> float:
         """The summed evidence weight (`semantics.pair_weight`) of (global, local) index pairs."""
@@ -1223,33 +1291,50 @@ class Localizer:
         """How each label of the local objects so far was read against the map's labels."""
         return label_report(self._candidates, self.window.objects)
 
-    def _recover(
-        self, pairs: list[tuple[int, int]], refine: bool, previous: dict, matched: tuple
-    ) -> PoseEstimate | None:
-        """The set's pose: reused when the previous answer recovered it for the same pairs
-        (same object versions), else recovered, warm-started from the pose of the largest
-        subset of its pairs that the previous answer recovered (refined ones first)."""
-        key: _PoseKey = (refine, frozenset(pairs))
-        if key in previous:
-            estimate = previous[key]
-        else:
-            l_xyz, g_xyz, locals_, globals_ = matched
-            pose_cfg = self.config.pose if refine else self._pose_unrefined
-            estimate = estimate_pose(
-                l_xyz,
-                g_xyz,
-                [cached_cloud(o, pose_cfg) for o in locals_],
-                [cached_cloud(o, pose_cfg) for o in globals_],
-                self.local_up,
-                self.global_map.up,
-                pose_cfg,
-                init=_warm_start(key[1], previous),
-            )
-        self._poses[key] = estimate
-        return estimate
-
 
 _PoseKey = tuple[bool, frozenset[tuple[int, int]]]  # (refined, pairs)
+
+
+class _Recovery:
+    """The pose of one set's pairs, refined or not, for the Localizer's current answer:
+    reused when the previous answer recovered it for the same pairs (same object versions),
+    else recovered once (`semloc.pose.recover_pose`), warm-started from the pose of the
+    largest subset of its pairs that the previous answer recovered (refined ones first),
+    and refined (robust ICP) only when asked.  Each estimate given is kept for the next
+    answer (`Localizer._poses` of this answer: a re-detection since drops them)."""
+
+    def __init__(
+        self, localizer: Localizer, pairs: list[tuple[int, int]], previous: dict, matched: tuple
+    ) -> None:
+        self.localizer, self.previous, self.matched = localizer, previous, matched
+        self.kept = localizer._poses  # this answer's (a refinement asked later lands there)
+        self.pairs = frozenset(pairs)
+        self._recovery: PoseRecovery | None = None
+        self._recovered = False
+
+    def estimate(self, refine: bool) -> PoseEstimate | None:
+        key: _PoseKey = (refine, self.pairs)
+        if key in self.previous:
+            estimate = self.previous[key]
+        else:
+            recovery = self._recover()
+            cfg = self.localizer.config.pose
+            estimate = None if recovery is None else recovery.estimate(refine and cfg.refine)
+        self.kept[key] = estimate
+        return estimate
+
+    def _recover(self) -> PoseRecovery | None:
+        if not self._recovered:
+            l_xyz, g_xyz, locals_, globals_ = self.matched
+            localizer = self.localizer
+            cfg = localizer.config.pose
+            self._recovery = recover_pose(
+                l_xyz, g_xyz, [cached_cloud(o, cfg) for o in locals_],
+                [cached_cloud(o, cfg) for o in globals_], localizer.local_up,
+                localizer.global_map.up, cfg, init=_warm_start(self.pairs, self.previous),
+            )  # fmt: skip
+            self._recovered = True
+        return self._recovery
 
 
 def _checked_objects(objects: Any) -> list[SemanticObject]:

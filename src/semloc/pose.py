@@ -63,8 +63,10 @@ __all__ = [
     "align_positions",
     "align_positions_batch",
     "cached_cloud",
+    "PoseRecovery",
     "estimate_pose",
     "prepare_cloud",
+    "recover_pose",
 ]
 
 _CENTRE_INLIER = 0.5  # m: centre-based fitness threshold (no points)
@@ -589,6 +591,59 @@ def estimate_pose(
     3) robust ICP (4-DoF-constrained in 4-DoF mode) when `refine` and points exist, kept only if
     it does not lower fitness.  Returns None when under-determined and no points exist.
     """
+    recovery = recover_pose(
+        local_positions, global_positions, local_points, global_points, up_local, up_global,
+        config, init,
+    )  # fmt: skip
+    return None if recovery is None else recovery.estimate(refine=(config or PoseConfig()).refine)
+
+
+class PoseRecovery:
+    """A pose recovery stopped before robust ICP: the scored candidates (closed form, search
+    or warm start) of one problem.  `estimate(refine=False)` is the best of them as they are,
+    `estimate(refine=True)` the best after ICP from each (computed once), as `estimate_pose`
+    returns them: a caller that may not need the refinement asks for it later, without
+    repeating the closed form, the rotation search or the scoring."""
+
+    def __init__(self, scored: list[_Scored], full: _Pairs | None, ups, cfg: PoseConfig) -> None:
+        self._scored, self._full, self._ups, self._cfg = scored, full, ups, cfg
+        self._refined: PoseEstimate | None = None
+
+    @property
+    def refinable(self) -> bool:
+        """Whether ICP would run (points on both sides and iterations allowed)."""
+        return self._full is not None and self._cfg.icp_iterations > 0
+
+    def estimate(self, refine: bool = False) -> PoseEstimate:
+        if not (refine and self.refinable):
+            return self._best(self._scored)
+        if self._refined is None:
+            assert self._full is not None
+            coarse = self._full.thinned(min(_COARSE_POINTS, self._cfg.local_points))
+            axis = None if self._ups is None else self._ups[1]
+            self._refined = self._best(
+                [_refined(s, self._full, coarse, axis, self._cfg) for s in self._scored]
+            )
+        return self._refined
+
+    def _best(self, scored: list[_Scored]) -> PoseEstimate:
+        best = max(scored, key=lambda s: (s.fitness, -s.rmse))
+        T = best.T if self._ups is None or self._full is None else _upright(best.T, *self._ups)
+        return PoseEstimate(T, best.fitness, best.rmse, best.method)
+
+
+def recover_pose(
+    local_positions: np.ndarray,
+    global_positions: np.ndarray,
+    local_points: Sequence[np.ndarray | ObjectCloud | None] | None,
+    global_points: Sequence[np.ndarray | ObjectCloud | None] | None,
+    up_local: np.ndarray | None = None,
+    up_global: np.ndarray | None = None,
+    config: PoseConfig | None = None,
+    init: np.ndarray | None = None,
+) -> PoseRecovery | None:
+    """`estimate_pose` up to robust ICP (same arguments): the scored candidates, refined when
+    asked (`PoseRecovery.estimate`); None when under-determined and no points exist."""
     cfg = config or PoseConfig()
     src_c, dst_c = _pairs(local_positions, global_positions)
     pairs = _cloud_pairs(local_points, global_points, len(src_c), cfg)
@@ -600,12 +655,20 @@ def estimate_pose(
     if closed is not None:
         candidates, method = [closed], f"closed-form-{tag}"
     elif not pairs:
-        return None if init is None else _centre_estimate(init, src_c, dst_c, f"warm-{tag}")
+        if init is None:
+            return None
+        return PoseRecovery([_centre_scored(init, src_c, dst_c, f"warm-{tag}")], None, ups, cfg)
     else:
         candidates, method = _search(src_c, dst_c, pairs, ups, cfg), f"search-{tag}"
     if not pairs:
-        return _centre_estimate(candidates[0], src_c, dst_c, method)
-    return _best_refined(candidates, method, init, pairs, ups, cfg, tag)
+        return PoseRecovery([_centre_scored(candidates[0], src_c, dst_c, method)], None, ups, cfg)
+    full = _Pairs(pairs, cfg.local_points)
+    scored = [_scored(T, method, full, cfg) for T in candidates]
+    if init is not None:
+        warm = _scored(init, f"warm-{tag}", full, cfg)
+        if warm.score > max(s.score for s in scored):
+            scored = [warm]
+    return PoseRecovery(scored, full, ups, cfg)
 
 
 def _closed_form(src, dst, ups, tol: float) -> np.ndarray | None:
@@ -616,8 +679,9 @@ def _closed_form(src, dst, ups, tol: float) -> np.ndarray | None:
     return T[0] if spread[0] > tol else None
 
 
-def _centre_estimate(T, src_c, dst_c, method: str) -> PoseEstimate:
-    return PoseEstimate(T, *_centre_fitness(T, src_c, dst_c), method)
+def _centre_scored(T, src_c, dst_c, method: str) -> _Scored:
+    """A pose scored by its centres alone (no points: nothing to refine)."""
+    return _Scored(*_centre_fitness(T, src_c, dst_c), 0.0, T, method)
 
 
 class _Scored(NamedTuple):
@@ -632,24 +696,6 @@ class _Scored(NamedTuple):
 
 def _scored(T: np.ndarray, method: str, pairs: _Pairs, cfg: PoseConfig) -> _Scored:
     return _Scored(*_point_fitness(T, pairs, cfg.fitness_radius), T, method)
-
-
-def _best_refined(candidates, method, init, pairs, ups, cfg: PoseConfig, tag: str):
-    """Best candidate by (fitness, -rmse), each refined by ICP when that does not lower its
-    fitness; a warm start `init` replaces the candidates when its smooth score is higher."""
-    full = _Pairs(pairs, cfg.local_points)
-    scored = [_scored(T, method, full, cfg) for T in candidates]
-    if init is not None:
-        warm = _scored(init, f"warm-{tag}", full, cfg)
-        if warm.score > max(s.score for s in scored):
-            scored = [warm]
-    if cfg.refine and cfg.icp_iterations > 0:
-        coarse = full.thinned(min(_COARSE_POINTS, cfg.local_points))
-        axis = None if ups is None else ups[1]
-        scored = [_refined(s, full, coarse, axis, cfg) for s in scored]
-    best = max(scored, key=lambda s: (s.fitness, -s.rmse))
-    T = best.T if ups is None else _upright(best.T, *ups)
-    return PoseEstimate(T, best.fitness, best.rmse, best.method)
 
 
 def _refined(start: _Scored, full: _Pairs, coarse: _Pairs, axis, cfg: PoseConfig) -> _Scored:

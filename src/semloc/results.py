@@ -48,6 +48,17 @@ class Hypothesis:
     n_missing: int | None = None  # map objects its pose puts in the recent looks that no
     # detection accounts for (None: no coverage given)
     n_expected: int | None = None  # map objects its pose puts in the recent looks
+    refined: bool = True  # False: its pose is the closed form's (or search's), not robust ICP's
+    _refiner: Callable[[Hypothesis], None] | None = field(default=None, repr=False, compare=False)
+
+    def refine(self) -> Hypothesis:
+        """Refine the pose of an unrefined hypothesis now (robust ICP, as the best one's):
+        pose, fitness, rmse, residual, method, features and evidence are updated in place, its
+        rank and confidence are not (they were weighed against the others); itself returned.
+        A hypothesis that cannot be refined (refined already, read from JSON) is unchanged."""
+        if not self.refined and self._refiner is not None:
+            self._refiner(self)
+        return self
 
     def to_model(self) -> schema.Hypothesis:
         return schema.Hypothesis(
@@ -56,6 +67,7 @@ class Hypothesis:
             confidence=self.confidence, evidence=self.evidence, features=self.features,
             rejected=_pairs_model(self.rejected), outside_prior=self.outside_prior,
             n_missing=self.n_missing, n_expected=self.n_expected,
+            refined=None if self.refined else False,
         )  # fmt: skip
 
     @classmethod
@@ -63,7 +75,7 @@ class Hypothesis:
         return cls(
             m.rank, m.score, _pairs_of(m.pairs), _pose_of(m.pose), m.fitness, m.rmse,
             m.residual, m.method, m.confidence, m.evidence, m.features, _pairs_of(m.rejected),
-            m.outside_prior, m.n_missing, m.n_expected,
+            m.outside_prior, m.n_missing, m.n_expected, m.refined is not False,
         )  # fmt: skip
 
     def to_dict(self) -> dict[str, Any]:

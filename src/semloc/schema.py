@@ -155,7 +155,7 @@ class Pair(Part):
 class Hypothesis(Omitting):
     """One candidate answer: an association set and the pose it implies."""
 
-    OMITTED_IF_NONE = frozenset({"outside_prior", "n_missing", "n_expected"})
+    OMITTED_IF_NONE = frozenset({"outside_prior", "n_missing", "n_expected", "refined"})
     rank: int = Field(1, ge=1, description="1 for the best (read: its place when absent).")
     score: Rounded6 = Field(0.0, description="The association set's clustering score.")
     pairs: list[Pair]
@@ -186,6 +186,11 @@ class Hypothesis(Omitting):
     )
     n_expected: int | None = Field(
         None, description="Map objects its pose puts in the recent looks (only with coverage)."
+    )
+    refined: Literal[False] | None = Field(
+        None,
+        description="false: its pose is the closed form's, not refined by robust ICP (it could "
+        "not change the verdict; `Hypothesis.refine()` refines it on demand); absent: refined.",
     )
 
 

@@ -272,19 +272,22 @@ def room_with_points() -> ObjectMap:
 
 
 class _Spy:
-    """Counts `estimate_pose` calls of the Localizer and records their warm starts."""
+    """Counts the pose recoveries of the Localizer (`recover_pose` of the search,
+    `estimate_pose` of a tracked place) and records their warm starts."""
 
     def __init__(self, monkeypatch):
         import semloc.localizer as module
 
         self.inits: list[np.ndarray | None] = []
-        real = module.estimate_pose
+        for name in ("recover_pose", "estimate_pose"):
+            monkeypatch.setattr(module, name, self._spying(getattr(module, name)))
 
+    def _spying(self, real):
         def spy(*args, init=None, **kwargs):
             self.inits.append(init)
             return real(*args, init=init, **kwargs)
 
-        monkeypatch.setattr(module, "estimate_pose", spy)
+        return spy
 
 
 def test_unchanged_sets_reuse_their_pose(room_with_points, monkeypatch):
