@@ -112,8 +112,8 @@ from semloc.twins import (
     ANCHORS,
     MIN_TWIN_PAIRS,
     copy_holds,
-    copy_leads,
     label_codes,
+    twin_lead,
     twin_pairs,
     twins,
 )
@@ -1110,14 +1110,10 @@ class Localizer:
 
     def _copy_lead(self) -> tuple[int, int, int]:
         """The kept evidence's lead of the best copy over the tracked place, how many of the
-        latest updates it spans, and that copy's index (`semloc.twins.copy_leads`)."""
-        if not self._twin_fits:
-            return 0, 0, 0
-        leads = copy_leads([told for _, told in self._twin_fits])
-        best = max(range(len(leads)), key=lambda i: leads[i], default=0)
-        lead, kept = leads[best] if leads else (0, 0)
+        latest updates it spans, and that copy's index (`semloc.twins.twin_lead`)."""
+        lead, kept, best = twin_lead([told for _, told in self._twin_fits])
         if lead <= 0:
-            return 0, 0, best
+            return 0, 0, 0
         return lead, self.window.updates - self._twin_fits[-kept][0] + 1, best
 
     def _carry_fits(self, old: list[np.ndarray], new: list[np.ndarray], at: np.ndarray) -> None:

@@ -205,10 +205,13 @@ def copy_holds(
     return bool((gaps <= allowance[near]).any())
 
 
-def twin_lead(updates: Sequence[list[list[str]] | None]) -> tuple[int, int]:
-    """By how many objects the latest updates tell the best copy rather than the place, and
-    over how many updates (`copy_leads`, the best copy's; (0, 0) when none leads)."""
-    return max(copy_leads(updates), default=(0, 0))
+def twin_lead(updates: Sequence[list[list[str]] | None]) -> tuple[int, int, int]:
+    """By how many objects the latest updates tell the best copy rather than the place, over
+    how many updates (the fewest among equal leads), and that copy's index (`copy_leads`;
+    (0, 0, 0) when none leads)."""
+    leads = copy_leads(updates)
+    best = max(range(len(leads)), key=lambda i: (leads[i][0], -leads[i][1]), default=0)
+    return (*leads[best], best) if leads and leads[best][0] > 0 else (0, 0, 0)
 
 
 def copy_leads(updates: Sequence[list[list[str]] | None]) -> list[tuple[int, int]]:

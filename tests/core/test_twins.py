@@ -146,12 +146,12 @@ def test_told_apart_needs_two_objects_the_copy_lacks_and_none_it_adds():
 @pytest.mark.parametrize(
     ("updates", "lead"),
     [
-        ([[["+local a", "+local b"]]], (2, 1)),
-        ([[["+local a"]], [["+local a"]]], (1, 1)),  # a re-detection is the same object
-        ([[["-map x"]], [["+map x"]]], (1, 1)),  # seen, then missing: its newest evidence
-        ([[["+map x"]], [["-map x"]]], (0, 0)),  # missing, then seen at its place
-        ([[["+local a"]], None, [["+local b"]]], (2, 3)),  # an update not weighed
-        ([[["+local a", "+local b", "-map y"]]], (1, 1)),
+        ([[["+local a", "+local b"]]], (2, 1, 0)),
+        ([[["+local a"]], [["+local a"]]], (1, 1, 0)),  # a re-detection is the same object
+        ([[["-map x"]], [["+map x"]]], (1, 1, 0)),  # seen, then missing: its newest evidence
+        ([[["+map x"]], [["-map x"]]], (0, 0, 0)),  # missing, then seen at its place
+        ([[["+local a"]], None, [["+local b"]]], (2, 3, 0)),  # an update not weighed
+        ([[["+local a", "+local b", "-map y"]]], (1, 1, 0)),
     ],
 )
 def test_twin_lead_counts_each_object_once_by_its_newest_evidence(updates, lead):
@@ -163,14 +163,15 @@ def test_twin_lead_weighs_only_the_updates_since_the_robot_was_carried_off():
     the newest two updates (the older ones are the place the robot left)."""
     before = [["-map x", "-map y", "-map z"]]
     since = [[["+local a"]], [["+local b"]]]
-    assert twin_lead([before, *since]) == (2, 2)
-    assert twin_lead([before, [["+local a", "-map w"]]]) == (0, 0)
+    assert twin_lead([before, *since]) == (2, 2, 0)
+    assert twin_lead([before, [["+local a", "-map w"]]]) == (0, 0, 0)
 
 
 def test_twin_lead_takes_the_best_copy():
     updates = [[["+local a"], ["+local a", "+local b", "+map x"]]]
-    assert twin_lead(updates) == (3, 1)
-    assert twin_lead([]) == (0, 0) and twin_lead([None]) == (0, 0)
+    assert twin_lead(updates) == (3, 1, 1)
+    assert twin_lead([[["+local a"], []], [[], ["+local b"]]]) == (1, 1, 1)  # the fewest updates
+    assert twin_lead([]) == (0, 0, 0) and twin_lead([None]) == (0, 0, 0)
 
 
 @pytest.mark.parametrize(("kinds", "x", "held"), [([0], 0.5, True), ([0], 0.51, False),
