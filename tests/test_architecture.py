@@ -29,7 +29,8 @@ CORE = {"maps", "pointsets", "transforms", "association", "clustering", "pose", 
         "confidence_model", "_clustering_fast", "_verification_fast", "_decision_fast",
         "_alignment_fast", "alignment", "changes", "window", "tracking",
         "semantics", "compiling", "priors", "places", "_places_fast", "next_look",
-        "coverage", "twins", "schema"}  # fmt: skip
+        "coverage", "twins", "schema", "map_context", "sightings", "search",
+        "copy_watch", "settings"}  # fmt: skip
 LIBRARY = {"core", "descriptors", "frontend", "io", "pictures", "baselines", "sim", "eval"}
 """The layers below the adapters and the applications."""
 LAYERS: dict[str, set[str]] = {

@@ -34,7 +34,7 @@ from __future__ import annotations
 from collections import deque
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
@@ -43,6 +43,9 @@ from scipy.spatial import cKDTree
 from semloc import schema
 from semloc.association import AssociationConfig, CandidateIndex
 from semloc.maps import MAX_ID_LENGTH, ObjectMap, SemanticObject
+
+if TYPE_CHECKING:
+    from semloc.tracking import Verdict
 
 POINTS_PER_OBJECT = 48
 """Observed surfaces are sampled to about this many points per local object: the radii asked
@@ -202,6 +205,28 @@ class RunChanges:
         for g in map(int, indices):
             if g not in self.matched:
                 self.missing[g] = self.missing.get(g, 0) + 1
+
+    def observe_update(
+        self, verdict: Verdict, objects: list[SemanticObject], candidates: Mapping[str, np.ndarray],
+        unseen: np.ndarray, pose: np.ndarray, positions: np.ndarray,
+    ) -> None:  # fmt: skip
+        """What one update's objects said of a tracked claim at `pose` (`verdict`: tracking's
+        judgement for the report), and the map objects its look missed (`unseen`)."""
+        by_id = {o.id: o for o in objects}
+        R, t = pose[:3, :3], pose[:3, 3]
+        for g, object_id in verdict.supported:
+            self.observe_matched(g, object_id)
+        for g, object_id in verdict.changed:
+            obj = by_id[object_id]
+            sources = verdict.sources.get(object_id, [g])
+            gaps = np.linalg.norm(positions[sources] - (R @ obj.position + t), axis=1)
+            self.observe_undecided(object_id, dict(zip(sources, gaps.tolist())), obj.seen)
+        for obj in objects:
+            if not len(candidates[obj.id]):
+                self.observe_new(obj.id, obj.seen, unknown_label=True)
+            elif obj.id in verdict.contradicting:
+                self.observe_new(obj.id, obj.seen)
+        self.observe_missing(unseen.tolist())
 
     def observe_matched(self, g: int, local_id: str) -> None:
         g = int(g)

@@ -10,6 +10,7 @@ every field checked by the schema; no file access here.
 from __future__ import annotations
 
 import json
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import cached_property
@@ -98,7 +99,7 @@ def _pose_of(rows: list[list[float]] | None) -> np.ndarray | None:
 class Step:
     """What one update did: local objects so far, sets in the pool, top scores, time.
 
-    `status` is None for an update that only grew the association sets (`answer=False`); its
+    `status` is None for an update that only grew the association sets (`Localizer.add`); its
     `top_scores` are then those of the best association sets rather than of the hypotheses.
     """
 
@@ -119,6 +120,40 @@ class Step:
 
     def to_dict(self) -> dict[str, Any]:
         return self.to_model().model_dump()
+
+
+class UpdateLog:
+    """The latest updates' `Step`s (at most `kept`) and the run's summed time per stage
+    (ms), as answers carry them."""
+
+    STAGES: ClassVar[tuple[str, ...]] = ("association", "clustering", "pose")
+
+    def __init__(self, kept: int) -> None:
+        self.steps: deque[Step] = deque(maxlen=kept)
+        self.n_steps = 0
+        self.timing = dict.fromkeys((*self.STAGES, "total"), 0.0)
+
+    def add(self, scores: list[float], seconds: float, status: Status | None, n_local: int,
+            n_sets: int) -> None:  # fmt: skip
+        """One update's step: its answer's (or best sets') scores, time, status, sizes."""
+        self.steps.append(Step(self.n_steps, n_local, n_sets, sorted(scores, reverse=True),
+                               seconds * 1e3, status))  # fmt: skip
+        self.n_steps += 1
+
+    def spent(self, association: float, clustering: float, pose: float) -> None:
+        """Seconds one update spent per stage."""
+        for key, seconds in zip(self.STAGES, (association, clustering, pose)):
+            self.timing[key] += seconds * 1e3
+        self.timing["total"] += (association + clustering + pose) * 1e3
+
+    def state(self) -> dict[str, Any]:
+        return {"steps": [s.to_dict() for s in self.steps], "n_steps": self.n_steps,
+                "timing": dict(self.timing)}  # fmt: skip
+
+    def restore(self, state: dict[str, Any]) -> None:
+        self.steps.extend(Step(**s) for s in state["steps"])
+        self.n_steps = int(state["n_steps"])
+        self.timing.update({k: float(v) for k, v in state["timing"].items()})
 
 
 @dataclass(frozen=True)

@@ -74,16 +74,25 @@ import math
 from collections import OrderedDict, deque
 from collections.abc import Callable, Collection, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
+from semloc.coverage import GONE_SHARE
 from semloc.maps import ObjectMap, SemanticObject
+from semloc.pose import cached_cloud, estimate_pose
+from semloc.results import Hypothesis
+from semloc.transforms import centre_residual
+
+if TYPE_CHECKING:
+    from semloc.sightings import Sightings
 
 CONTRADICTION_UPDATES = 3
 """How many of the latest updates are weighed together for a contradiction."""
 
+DOUBTED = "the newest objects speak against the tracked place"
+"""The reason of a tracked place's answer doubted by its newest objects (`Track.doubted`)."""
 CONTRADICTED = "contradicted"
 """The reason of the answer whose new objects ended a claim."""
 
@@ -530,9 +539,86 @@ class Track:
         track._newest.extend(bool(a) for a in state.get("newest", []))
         return track
 
+    def check(
+        self, sightings: Sightings, objects: list[SemanticObject]
+    ) -> tuple[Verdict, np.ndarray, int | None]:
+        """What the update's objects say of the place (Check; `check`), with Missing when the
+        update says what the sensor covered: the verdict, the map objects the look expected
+        that nothing accounts for, and how many it expected (None: no coverage given)."""
+        context = sightings.context
+        verdict = check(
+            self.pose, objects, sightings.candidates(objects), context.map.positions,
+            context.allowances, self.config.move_m, self.pairs, context.parts,
+        )  # fmt: skip
+        if sightings.look is None:
+            return verdict, np.zeros(0, dtype=int), None
+        expected, unseen = sightings.unseen(self.pose)
+        excess = max(0.0, len(unseen) - GONE_SHARE * len(expected))
+        verdict = Verdict(verdict.supported, verdict.contradicting, verdict.changed,
+                          verdict.repeated, excess)  # fmt: skip
+        return verdict, unseen, len(expected)
+
     def newest(self, n: int) -> list[tuple[int, str]]:
         """The newest `n` supporting pairs (global index, local id), oldest first."""
         return [(g, l) for l, g in list(self.pairs.items())[-n:]]
+
+    def follow(
+        self, sightings: Sightings, min_pairs: int, local_up: np.ndarray | None, prior: bool
+    ) -> Hypothesis | None:
+        """The place refitted to its newest supporting pairs (Follow), as the answer's one
+        hypothesis (`prior`: whether a prior is in effect, which the place lies within); None
+        when the claim lapses (Lapse: fewer than `min_pairs` pairs in the window, none of
+        them detected within `stale_m`) or the pose no longer fits its newest pairs."""
+        if len(self.pairs) < min_pairs or sightings.stale(list(self.pairs), self.config.stale_m):
+            return None
+        pairs = self.newest(self.config.track_pairs)
+        global_map, cfg = sightings.context.map, sightings.context.config.pose
+        locals_ = [sightings.found[l][0] for _, l in pairs]
+        globals_ = [global_map[g] for g, _ in pairs]
+        l_xyz = np.array([o.position for o in locals_])
+        g_xyz = np.array([o.position for o in globals_])
+        estimate = estimate_pose(
+            l_xyz, g_xyz, [cached_cloud(o, cfg) for o in locals_],
+            [cached_cloud(o, cfg) for o in globals_], local_up, global_map.up, cfg,
+            init=self.pose,
+        )  # fmt: skip
+        if estimate is None:
+            return None
+        residual = centre_residual(estimate.T, l_xyz, g_xyz)
+        if residual > self.config.track_tolerance:
+            return None
+        self.pose = estimate.T
+        return Hypothesis(
+            rank=1,
+            score=self.score,
+            pairs=[(g.id, l.id) for g, l in zip(globals_, locals_)],
+            pose=estimate.T,
+            fitness=estimate.fitness,
+            rmse=estimate.rmse,
+            residual=residual,
+            method=f"tracked/{estimate.method}",
+            confidence=self.confidence,
+            outside_prior=False if prior else None,
+        )
+
+    def judged_one_to_one(
+        self, sightings: Sightings, objects: list[SemanticObject], verdict: Verdict,
+        matched: Collection[int],
+    ) -> Verdict:  # fmt: skip
+        """This update's objects judged for the run's change report (`one_to_one`): against
+        the claim's pairs of other local objects (before this update's replace them) and the
+        map objects the run saw at their place (`matched`); its contradicting objects are the
+        check's."""
+        context, found = sightings.context, sightings.found
+        R, t = self.pose[:3, :3], self.pose[:3, 3]
+        now = {o.id for o in objects}
+        held = {g: R @ found[l][0].position + t
+                for l, g in self.pairs.items() if l not in now and l in found}  # fmt: skip
+        judged = one_to_one(self.pose, objects, sightings.candidates(objects),
+                            context.map.positions, context.allowances, self.config.move_m, held,
+                            matched, context.parts)  # fmt: skip
+        return Verdict(judged.supported, verdict.contradicting, judged.changed,
+                       sources=judged.sources)  # fmt: skip
 
 
 def _logit(probability: float | None, cap: float) -> float:

@@ -165,7 +165,7 @@ class LocalWindow:
             raise ValueError("the window's objects are not those of its state")
         for object_id in order:
             window._objects[object_id] = by_id[object_id]
-            window._arrival[object_id] = arrivals[object_id]
+        window._arrival = arrivals  # (in the state's order: `since` lists ids in it)
         return window
 
     def since(self, update: int) -> list[str]:

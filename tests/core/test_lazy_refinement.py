@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import semloc
-import semloc.localizer as localizer_module
+import semloc.search as search_module
 from semloc.decision import shipped_model
 from semloc.sim.layouts import layout, observe
 
@@ -18,7 +18,7 @@ BUILDINGS = {seed: layout(60, seed=seed, points_per_object=120) for seed in rang
 def _fully_refined(monkeypatch: pytest.MonkeyPatch) -> None:
     """Every hypothesis among the `refine_top` first refined, as before lazy refinement."""
     monkeypatch.setattr(
-        localizer_module, "verdict_refinements", lambda ranked, pending, *args: list(pending)
+        search_module, "verdict_refinements", lambda ranked, pending, *args: list(pending)
     )
 
 

@@ -147,10 +147,10 @@ def test_descriptor_gate_removes_candidates():
     local = local_view(room, ["c1", "c2", "c3"], yaw_pose(1.0, [0, 0, 0]))
     loc = Localizer(room, LocalizerConfig(delta=0.5, track=False), local_up=local.up)
     loc.update(list(local))
-    assert loc._clustering.n_candidates == 3  # descriptors leave one candidate each
+    assert loc._search.clustering.n_candidates == 3  # descriptors leave one candidate each
     ungated = Localizer(room, LocalizerConfig(association={"use_descriptors": False}, track=False))
     ungated.update(list(local))
-    assert ungated._clustering.n_candidates == 18
+    assert ungated._search.clustering.n_candidates == 18
 
 
 def test_flat_and_nested_config():
@@ -276,10 +276,11 @@ class _Spy:
     `estimate_pose` of a tracked place) and records their warm starts."""
 
     def __init__(self, monkeypatch):
-        import semloc.localizer as module
+        import semloc.search as search
+        import semloc.tracking as tracking
 
         self.inits: list[np.ndarray | None] = []
-        for name in ("recover_pose", "estimate_pose"):
+        for module, name in ((search, "recover_pose"), (tracking, "estimate_pose")):
             monkeypatch.setattr(module, name, self._spying(getattr(module, name)))
 
     def _spying(self, real):
@@ -379,7 +380,7 @@ def _verified_alone(localizer: Localizer, pairs: tuple, local_xyz: np.ndarray) -
     first, inliers, rejected = split(np.array(pairs).reshape(-1, 2))
     if first.pose is None:
         return inliers, rejected, None, first.residual, 0, 0
-    grown, added, conflicts = localizer._support.extend(first.pose, local_xyz, inliers)
+    grown, added, conflicts = localizer._search.support.extend(first.pose, local_xyz, inliers)
     if added:
         again, agreed, disagreed = split(np.array(grown))
         if again.pose is not None:
@@ -401,7 +402,7 @@ def _assert_verified_as_alone(localizer: Localizer, sets: list) -> list[tuple]:
         np.array([aset.score for aset in sets]),
     )
     for aset, got, (pairs, rejected, pose, residual, support, conflicts) in zip(
-        sets, localizer._verified_all(rows, xyz), alone, strict=True
+        sets, localizer._search.verified_all(rows, xyz), alone, strict=True
     ):
         assert (got.score, got.pairs, got.rejected, got.support, got.conflicts) == (
             aset.score, pairs, rejected, support, conflicts,
@@ -418,8 +419,8 @@ def test_screened_sets_verified_together_as_each_alone(building, seed):
     noisy views with wrong labels and a spurious object."""
     view = observe(building, 7, seed, spurious=1, wrong_label_rate=0.2, position_noise=0.15)
     localizer = Localizer(building, local_up=view.local_map.up)
-    localizer.update(view.local_map, answer=False)
-    sets = localizer._clustering.top(60, min_size=2, largest_first=True)
+    localizer.add(view.local_map)
+    sets = localizer._search.clustering.top(60, min_size=2, largest_first=True)
     alone = _assert_verified_as_alone(localizer, sets)
     assert len(sets) > 10 and any(a[1] for a in alone) and any(a[4] for a in alone)
 
@@ -448,14 +449,14 @@ def test_any_sets_verified_together_as_each_alone():
         local = [SemanticObject(f"l{k}", f"c{labels[g]}", p) for k, (g, p) in enumerate(zip(true, l_xyz))]  # fmt: skip
         # one minimal sample per set (two seeds in three): poor poses, so the grown pairs are often split again
         localizer = Localizer(world, local_up=[0, 0, 1], max_samples=1 if seed % 3 else 200)
-        localizer.update(local, answer=False)
+        localizer.add(local)
         sets = []
         for _ in range(25):
             size = int(rng.integers(2, 8))
             chosen = [0, 1] if size == 2 and rng.random() < 0.3 else rng.choice(7, size, False)
             pairs, used = [], set()
             for l in chosen:
-                options = [g for g in localizer._candidates_of[int(l)] if g not in used]
+                options = [g for g in localizer._search.candidates_of[int(l)] if g not in used]
                 g = int(true[l]) if rng.random() < 0.7 and true[l] not in used else None
                 g = g if g is not None else (int(rng.choice(options)) if options else None)
                 if g is not None:

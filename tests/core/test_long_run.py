@@ -284,4 +284,4 @@ def test_an_update_larger_than_the_window_keeps_its_newest_objects(building):
     result = localizer.update(objects)
     assert [o.id for o in localizer.local_map] == [f"l{k}" for k in range(14, 20)]
     assert result.status in ("localized", "ambiguous", "failed")
-    assert set(localizer._found) == {f"l{k}" for k in range(14, 20)}
+    assert set(localizer._sightings.found) == {f"l{k}" for k in range(14, 20)}

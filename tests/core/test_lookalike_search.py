@@ -168,9 +168,9 @@ def test_updates_whose_objects_all_wait_do_not_age_the_sets():
     localizer = Localizer(_table_lamp_and_chairs(), config, local_up=[0, 0, 1])
     first = [SemanticObject("l0", "table", [0.0, 0.0, 0.5]),
              SemanticObject("l1", "lamp", [2.0, 0.5, 0.5])]  # fmt: skip
-    localizer.update(first, answer=False)
+    localizer.add(first)
     sets = localizer.n_sets
     assert sets >= 12  # (one per copy at least)
     for k in range(config.clustering.expiry_updates + 2):
-        localizer.update([SemanticObject(f"c{k}", "chair", [0.6 * k, 2.0, 0.5])], answer=False)
+        localizer.add([SemanticObject(f"c{k}", "chair", [0.6 * k, 2.0, 0.5])])
         assert localizer.n_sets == sets

@@ -50,7 +50,7 @@ def test_the_true_candidates_are_always_retrieved(seed, size, noise, yaw):
     view = _view(world, near, pose, noise, seed)
     index = PlaceIndex(world, RetrievalConfig(above=0))
     localizer = Localizer(world, RETRIEVE_ALL)
-    found = [localizer._candidates.candidates(o) for o in view]
+    found = [localizer._context.candidates.candidates(o) for o in view]
     cfg = localizer.config.clustering
     support = index.support(view.positions, found, MergeCriterion.of(cfg))
     for true, kept in zip(near, index.kept(support, found)):
@@ -60,7 +60,7 @@ def test_the_true_candidates_are_always_retrieved(seed, size, noise, yaw):
 def test_small_maps_are_not_retrieved_and_answer_as_before():
     world = tiled(room(20), 2, 2, seed=1)
     view = _view(world, range(6), yaw_pose(0.4, [1.0, 2.0, 0.0]), 0.0, 0)
-    assert Localizer(world)._places is None  # below `above` (3000 objects)
+    assert Localizer(world)._context.places is None  # below `above` (3000 objects)
     plain = semloc.localize(world, view, config=LocalizerConfig(retrieval={"above": None}))
     default = semloc.localize(world, view)
     assert plain.status == default.status == "localized"
@@ -95,8 +95,8 @@ def test_retrieval_finds_the_one_room_that_holds_the_view():
     assert rotation < 1.0 and translation < 0.1
     localizer = Localizer(world, RETRIEVE_ALL, local_up=[0, 0, 1])
     localizer.update(list(view))
-    kept = sum(len(k) for k in localizer._retrieved.values())
-    every = sum(len(localizer._found[o.id][1]) for o in view)
+    kept = sum(len(k) for k in localizer._search.retrieved.values())
+    every = sum(len(localizer._sightings.found[o.id][1]) for o in view)
     assert kept < 0.7 * every  # the clustering saw a part of the candidates
 
 

@@ -232,7 +232,7 @@ def test_the_localizers_gate_allows_the_slack_and_a_quarter_of_each_objects_diag
     world = ObjectMap(chairs, up=[0, 0, 1])
     localizer = Localizer(world, local_up=[0, 0, 1], prior=Prior(position=[0, 0, 0], radius=2))
     seen = semloc.SemanticObject("l", "chair", [0.0, 4.0, 0.0])
-    assert localizer._prior_gated(seen, np.arange(3)).tolist() == [0, 2]
+    assert localizer._search.prior_gated(seen, np.arange(3)).tolist() == [0, 2]
 
 
 @pytest.fixture(scope="module")
@@ -351,12 +351,12 @@ def test_the_gate_narrows_the_candidates_in_a_large_map(two_rooms):
     world, view = two_rooms
     free = Localizer(world, local_up=[0, 0, 1])
     near = Localizer(world, local_up=[0, 0, 1], prior=Prior(position=[0.5, 0.5, 0], radius=1))
-    free.update(list(view), answer=False)
-    near.update(list(view), answer=False)
+    free.add(list(view))
+    near.add(list(view))
     assert near.n_sets < free.n_sets
-    gated = [near._gated(o, near._found[o.id][1]) for o in view]
+    gated = [near._search.gated(o, near._sightings.found[o.id][1]) for o in view]
     assert all(world[int(g)].id.startswith("a") for found in gated for g in found)
-    assert sum(map(len, gated)) < sum(len(free._found[o.id][1]) for o in view)
+    assert sum(map(len, gated)) < sum(len(free._sightings.found[o.id][1]) for o in view)
 
 
 # ------------------------------------------------------------------ set_prior and tracking

@@ -11,6 +11,7 @@ import pytest
 
 from semloc import Localizer, LocalizerConfig
 from semloc.coverage import Accounting, Looks, expected_unseen
+from semloc.sightings import Sightings
 from semloc.sim.layouts import layout
 from semloc.sim.longwalk import LongWalk, WalkConfig, World, tiled
 
@@ -55,23 +56,19 @@ def test_one_accounting_for_the_windows_of_several_looks_equals_each_measured_al
 
 
 def _unseen_look_by_look(self, pose, looks=None):
-    """`Localizer._unseen` as computed before its work was shared: each look alone."""
+    """`Sightings.unseen` as computed before its work was shared: each look alone."""
     if looks is None:
-        looks = [(self.window.updates, self._look)]
-    if self._map_tree is None:
-        from scipy.spatial import cKDTree
-
-        self._map_tree = cKDTree(self.global_map.positions)
-        self._diagonals = np.linalg.norm(self.global_map.sizes, axis=1)
-    settings = Looks(move_m=self.config.tracking.move_m)
+        looks = [(self.window.updates, self.look)]
+    context = self.context
+    settings = Looks(move_m=context.config.tracking.move_m)
     expected, unseen = set(), set()
     for update, look in looks:
         origin = pose[:3, :3] @ look.origin + pose[:3, 3]
-        near = np.array(self._map_tree.query_ball_point(origin, look.range_m + 0.5), dtype=int)
-        local = [(self._found[i][0].position, self._found[i][1]) for i in self.window.since(update)]
+        near = np.array(context.tree.query_ball_point(origin, look.range_m + 0.5), dtype=int)
+        local = [(self.found[i][0].position, self.found[i][1]) for i in self.window.since(update)]
         seen, absent = expected_unseen(
-            pose, [look], self.global_map.positions, self._diagonals, local,
-            self._allowances(), settings, near,
+            pose, [look], context.map.positions, context.diagonals, local,
+            context.allowances, settings, near,
         )  # fmt: skip
         expected.update(seen.tolist())
         unseen.update(absent.tolist())
@@ -108,7 +105,7 @@ def test_a_hard_walk_with_coverage_answers_as_with_each_look_weighed_alone(monke
             )
         answer = fast.update(frame.objects, position=frame.T_odom_robot, coverage=frame.coverage)
         with monkeypatch.context() as patch:
-            patch.setattr(Localizer, "_unseen", _unseen_look_by_look)
+            patch.setattr(Sightings, "unseen", _unseen_look_by_look)
             reference = full.update(
                 frame.objects, position=frame.T_odom_robot, coverage=frame.coverage
             )

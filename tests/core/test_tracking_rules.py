@@ -15,15 +15,17 @@ from scipy.stats import binom
 
 from semloc import Coverage, Localizer, ObjectMap, Prior, SemanticObject
 from semloc.changes import RunChanges
+from semloc.copy_watch import TWIN_DOUBTED, TWIN_UPDATES
 from semloc.decision import RIVAL_LOGIT_GAP, missing_penalty, prior_first
-from semloc.localizer import DOUBTED, NEWEST_CONTRADICT, STALE, TWIN_DOUBTED, TWIN_UPDATES
 from semloc.results import Hypothesis
+from semloc.search import NEWEST_CONTRADICT, STALE
 from semloc.tracking import (
     CONFIDENCE_CAP,
     CONTRADICTED,
     CONTRADICTION_UPDATES,
     DOUBT,
     DOUBT_OBJECTS,
+    DOUBTED,
     EVIDENCE_LOGITS,
     PRIOR_AGAINST,
     PRIOR_WEIGHT,
@@ -788,8 +790,9 @@ def test_the_support_of_an_unweighed_best_place_names_keyframes_not_map_objects(
     localizer.update(objects[:5])
     best = localizer.update(objects, coverage=ALL_AROUND).best  # the look's every detection
     unweighed = dataclasses.replace(best, n_missing=None, n_expected=None)
-    support = localizer._support_of(unweighed)
-    assert support.seen == localizer._support_of(best).seen  # its detections' keyframes
+    support_of = localizer._sightings.support_of
+    support = support_of(unweighed, None)
+    assert support.seen == support_of(best, None).seen  # its detections' keyframes
     assert support.n_missing == 0 and support.n_expected >= 6
 
 
@@ -886,7 +889,7 @@ def test_a_restored_localizer_reads_the_older_state_of_every_updates_objects():
     state = json.loads(json.dumps(one.state()))
     state["twins"]["fits"] = [None, [[]], [["+local kb10"]]]
     other = Localizer.restore(building, state, list(one.local_map), local_up=[0, 0, 1])
-    assert list(other._twin_fits) == [(3, [["+local kb10"]])]
+    assert list(other._copies.fits) == [(3, [["+local kb10"]])]
     assert other.update(there[1::3]).reason == TWIN_DOUBTED
 
 

@@ -197,7 +197,7 @@ def test_localizer_descriptor_gate(kind):
     )
     assert all(o.descriptor is not None for o in loc.global_map)
     loc.update(local)
-    assert loc._candidates.candidates(loc.local_map[0]).tolist() == [1]
+    assert loc._context.candidates.candidates(loc.local_map[0]).tolist() == [1]
 
 
 def test_cli_descriptors_eval_small(tmp_path):

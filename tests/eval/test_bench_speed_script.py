@@ -19,8 +19,8 @@ def test_profile_lists_the_kernels_per_localization():
     names = [row.split(" | ")[0] for row in rows]
     assert any("merges_of_frontier" in name for name in names)
     calls = {row.split(" | ")[0]: float(row.split(" | ")[1]) for row in rows}
-    update = next(name for name in calls if "localizer.py" in name and "(update)" in name)
-    assert calls[update] == 4.0  # one update per observed object
+    update = next(name for name in calls if "localizer.py" in name and "(_update)" in name)
+    assert calls[update] == 4.0  # one update per observed object (`add` or `update`)
 
 
 @pytest.mark.slow

@@ -36,8 +36,12 @@ class Relocalizer(Protocol):
 
     global_map: ObjectMap
 
-    def update(self, objects: Iterable[SemanticObject], answer: bool = True) -> Result | None:
-        """Add new or re-detected local objects; the current answer (None if not asked)."""
+    def add(self, objects: Iterable[SemanticObject]) -> None:
+        """Add new or re-detected local objects without an answer."""
+        ...
+
+    def update(self, objects: Iterable[SemanticObject]) -> Result:
+        """Add new or re-detected local objects; the current answer."""
         ...
 
 
@@ -124,6 +128,10 @@ class ObjectBaseline:
     @property
     def local_map(self) -> ObjectMap:
         return ObjectMap(self._local.values(), up=self.local_up, name="local")
+
+    def add(self, objects: Iterable[SemanticObject] | ObjectMap) -> None:
+        """Remember new or re-detected local objects (the answer is recomputed when asked)."""
+        self.update(objects, answer=False)
 
     def update(
         self, objects: Iterable[SemanticObject] | ObjectMap, answer: bool = True

@@ -74,7 +74,7 @@ def collect(config: BenchConfig, first_answer: int = 0) -> list[Sample]:
                 for kf in replay.keyframes:
                     if kf.index not in targets:
                         if kf.objects:
-                            localizer.update(kf.objects, answer=False)
+                            localizer.add(kf.objects)
                         continue
                     result = localizer.update(kf.objects)
                     samples += samples_of(result, replay.T_global_local, answer, kind)

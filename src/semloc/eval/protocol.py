@@ -6,8 +6,8 @@ method relocalizes against each global map kind: first as soon as more than 2 lo
 are seen (offset 0), again after +15 and +30 keyframes.  Success: 15 deg / 0.5 m.
 
 Every method receives every keyframe's new or re-detected objects, and is asked for an answer
-(`update(objects)`) only at the evaluation keyframes; in between `update(objects,
-answer=False)` only grows the Localizer's association sets (the baselines, which recompute
+(`update(objects)`) only at the evaluation keyframes; in between `add(objects)` only grows
+the Localizer's association sets (the baselines, which recompute
 everything from the local map, just remember the objects).  `ms` is the wall time of the
 update at the evaluation keyframe.
 
@@ -217,7 +217,7 @@ def run_attempts(seq, attempt: Attempt) -> tuple[list[dict], list[dict]]:
     for kf in replay.keyframes:
         if kf.index not in targets:
             if kf.objects:
-                method.update(kf.objects, answer=False)
+                method.add(kf.objects)
             continue
         tick = time.perf_counter()
         result = method.update(kf.objects)

@@ -1,0 +1,143 @@
+"""The Localizer composes parts that each own their state: what was seen (`Sightings`), the
+search (`Search`) and the tracked place (`Track`).  `add` feeds without answering and
+`update` always answers; the deprecated `update(..., answer=False)` still works, as `add`; a
+search stands on its own; a state round trip keeps everything but the search's sets, which
+regrow from the window."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from semloc import Localizer, LocalizerConfig, ObjectMap, Result, SemanticObject
+from semloc.map_context import MapContext
+from semloc.search import Search
+from semloc.sightings import Sightings
+from semloc.sim.layouts import layout
+from semloc.sim.longwalk import LongWalk, WalkConfig, World, tiled
+from semloc.transforms import yaw_pose
+
+UP = [0, 0, 1]
+
+
+@pytest.fixture(scope="module")
+def hard_walk():
+    """A building of three look-alike rooms and a walk through an old map with a detector's
+    errors, a kidnap and a carry into a copy, the sensor's coverage given."""
+    building = tiled(layout(40, seed=3, points_per_object=60), 3, 1, keep=0.7, seed=3)
+    world = World(moved=0.2, gone=0.1, phantoms=0.3, split=0.05, merged=0.05)
+    config = WalkConfig(keyframes=80, kidnap_at=30, lookalike_at=55, world=world,
+                        wrong_label_rate=0.1, points_per_object=60)  # fmt: skip
+    walk = list(LongWalk(building, replace(config, redetections=config.max_visible), seed=3))
+    return building, walk
+
+
+def _answer(result: Result) -> str:
+    """The answer's JSON without its timing (which differs from run to run)."""
+    document = result.to_dict()
+    document.pop("timing_ms", None)
+    for step in document["steps"]:
+        step.pop("ms")
+    return json.dumps(document, sort_keys=True)
+
+
+def _state(localizer: Localizer) -> str:
+    state = localizer.state()
+    state.pop("timing")
+    for step in state["steps"]:
+        step.pop("ms")
+    return json.dumps(state, sort_keys=True)
+
+
+def test_add_then_update_answers_as_the_deprecated_update_without_an_answer(hard_walk):
+    building, walk = hard_walk
+    new, old = (Localizer(building, LocalizerConfig(), local_up=UP) for _ in range(2))
+    statuses = set()
+    for k, frame in enumerate(walk):
+        given = {"position": frame.T_odom_robot, "coverage": frame.coverage}
+        if k % 3 == 1:  # answers read at two updates in three
+            assert new.add(frame.objects, **given) is None
+            with pytest.warns(DeprecationWarning, match="Localizer.add"):
+                assert old.update(frame.objects, answer=False, **given) is None
+        else:
+            answer = new.update(frame.objects, **given)
+            assert isinstance(answer, Result)
+            assert _answer(answer) == _answer(old.update(frame.objects, **given))
+            statuses.add(answer.status)
+        assert _state(new) == _state(old)
+    assert {"localized", "ambiguous"} <= statuses  # (the walk reaches both)
+
+
+def test_update_answers_at_every_update_while_tracking_and_searching(hard_walk):
+    building, walk = hard_walk
+    localizer = Localizer(building, LocalizerConfig(), local_up=UP)
+    tracked = []
+    for frame in walk:
+        followed = localizer.tracking
+        answer = localizer.update(frame.objects, position=frame.T_odom_robot,
+                                  coverage=frame.coverage)  # fmt: skip
+        assert isinstance(answer, Result) and answer.steps[-1].status == answer.status
+        tracked.append(localizer.tracking)
+        if localizer.tracking:  # the search is let go while a place is tracked
+            assert localizer.n_sets == 0
+            assert answer.support.tracked == followed  # (the search's answer starts it)
+    assert any(tracked) and not all(tracked)
+
+
+def test_a_restored_localizer_answers_as_one_whose_search_regrows_from_its_window(hard_walk):
+    """A state round trip keeps the window, its looks, the tracked place and its copies, the
+    run's changes and rates; the search's sets regrow from the window, as the Localizer's own
+    do when its search is renewed (here by setting its prior again)."""
+    building, walk = hard_walk
+    kept, restored, statuses = Localizer(building, LocalizerConfig(), local_up=UP), None, set()
+    for k, frame in enumerate(walk):
+        if k in (20, 40, 65):
+            state = json.loads(json.dumps(kept.state()))
+            restored = Localizer.restore(building, state, kept.window.objects, local_up=UP)
+            assert _state(restored) == _state(kept)
+            kept.set_prior(kept.prior)  # the search regrows from the window, as restored's
+        given = {"position": frame.T_odom_robot, "coverage": frame.coverage}
+        answer = kept.update(frame.objects, **given)
+        if restored is not None:
+            assert _answer(restored.update(frame.objects, **given)) == _answer(answer)
+            statuses.add((answer.status, kept.tracking))
+    assert {("localized", True), ("ambiguous", False)} <= statuses
+
+
+def test_a_search_on_its_own_answers_as_the_localizer_that_holds_it():
+    building = layout(60, seed=4)
+    T = yaw_pose(0.7, [1.5, -2.0, 0.0])
+    inverse = np.linalg.inv(T)
+    view = [building[i].transformed(inverse).replace(id=f"l{i}", seen=0) for i in range(8, 15)]
+    config = LocalizerConfig(track=False)
+    context = MapContext(building, config, None)
+    sightings = Sightings(context, config.window)
+    search = Search(context, sightings, None, np.asarray(building.up))
+    objects, _ = sightings.add(view, None, None)
+    search.cluster(search.associate(objects))
+    hypotheses = search.hypotheses()
+    status, _ = search.decide(hypotheses)
+    answer = Localizer(building, config, local_up=building.up).update(view)
+    assert status == answer.status == "localized"
+    assert [h.pairs for h in hypotheses[: config.top_k]] == [h.pairs for h in answer.hypotheses]
+    np.testing.assert_allclose(hypotheses[0].pose, T, atol=1e-6)
+
+
+def test_a_renewed_search_keeps_its_map_prior_and_retrieval_and_nothing_else():
+    building = ObjectMap([SemanticObject(f"c{k}", "chair", [k, 0.0, 0.5]) for k in range(5)],
+                         up=UP)  # fmt: skip
+    config = LocalizerConfig()
+    context = MapContext(building, config, None)
+    sightings = Sightings(context, config.window)
+    search = Search(context, sightings, None, np.asarray(UP), retrieved={"x": np.arange(2)})
+    objects, _ = sightings.add(list(building), None, None)
+    search.cluster(search.associate(objects))
+    search.stale, search.cut = True, (True, 3)
+    renewed = search.renewed()
+    assert search.n_sets > 0 and renewed.n_sets == 0 and not renewed.local
+    assert renewed.context is context and renewed.sightings is sightings
+    assert renewed.retrieved is search.retrieved and renewed.prior is None
+    assert not renewed.stale and renewed.cut == (False, 0) and renewed.poses == {}
