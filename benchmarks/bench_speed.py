@@ -33,7 +33,8 @@ how time and memory grow with the buildings' size: the slope of a log-log fit.
 scored and solved, the solver built before the clock starts; one thread, OMP_NUM_THREADS=1)
 over semloc's candidate associations (`CandidateIndex`), as `bench_clipper.py` runs it, where a
 view has at most `--clipper-max-nodes` of them (its graph is dense: `-` beyond); the tables
-gain its median ms, success and the ratio semloc ÷ CLIPPER (median over the cases).
+gain its median ms (CPU ms, as semloc's), success and the ratio semloc ÷ CLIPPER (median over
+the cases); the peak MB then includes CLIPPER's graph.
 
 `--against TREE` instead times this checkout against another one (e.g. a `git worktree` of the
 commit before a change) map by map, the two in turn for `--rounds` rounds, and prints the
