@@ -2,6 +2,7 @@
 
     PYTHONPATH=src python benchmarks/bench_speed.py [--quick] [--sizes 300 1000 3000 10000 20000]
         [--views 3 5 8] [--trials 5] [--markdown TABLE.md] [--against TREE [--rounds 3]]
+        [--clipper CLIPPER/build/bindings/python]
 
 Maps: the real samples (ScanNet scene0000_00 via `load_scannet`, Replica office4 via
 `load_replica`; found by `semloc.io.datasets.real_data_dir()`, rows skipped with a note when
@@ -27,10 +28,19 @@ a label-constrained RANSAC on centres on the same cases (2 same-label pairs per 
 centre; its per-map label trees built inside its timing), as the ratio semloc / RANSAC.  Last,
 how time and memory grow with the buildings' size: the slope of a log-log fit.
 
+`--clipper PATH` (a CLIPPER build's `bindings/python` folder; how to build it: see
+`bench_clipper.py`) adds the real CLIPPER on the same cases: its core (consistency graph
+scored and solved, the solver built before the clock starts; one thread, OMP_NUM_THREADS=1)
+over semloc's candidate associations (`CandidateIndex`), as `bench_clipper.py` runs it, where a
+view has at most `--clipper-max-nodes` of them (its graph is dense: `-` beyond); the tables
+gain its median ms (CPU ms, as semloc's), success and the ratio semloc ÷ CLIPPER (median over
+the cases); the peak MB then includes CLIPPER's graph.
+
 `--against TREE` instead times this checkout against another one (e.g. a `git worktree` of the
 commit before a change) map by map, the two in turn for `--rounds` rounds, and prints the
 median of the rounds' ratios: on a shared machine two runs at once slow each other down
-unevenly, and a single run of each is within the noise.
+unevenly, and a single run of each is within the noise.  With `--clipper`, each checkout's
+ratio to CLIPPER too (each measured in its own processes).
 
 `--profile MAP` instead prints where the time of 4 x `--trials` localizations of the largest
 view size goes on one map (cProfile, own CPU ms per localization by function; each compiled
@@ -63,6 +73,7 @@ import numpy as np  # noqa: E402
 from scipy.spatial import cKDTree  # noqa: E402
 
 import semloc.localizer as localizer_module  # noqa: E402
+from semloc.association import AssociationConfig, CandidateIndex  # noqa: E402
 from semloc.eval.datasets import real_data_dir  # noqa: E402
 from semloc.eval.success import is_success  # noqa: E402
 from semloc.io.importers.replica import load_replica  # noqa: E402
@@ -72,11 +83,23 @@ from semloc.maps import ObjectMap  # noqa: E402
 from semloc.sim.crop import crop_with_truth  # noqa: E402
 from semloc.sim.layouts import layout  # noqa: E402
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_clipper import (  # noqa: E402
+    candidate_pairs,
+    clipper_core,
+    clipper_solver,
+    columns,
+    load_clipper,
+    omp_note,
+    pose_of,
+)
+
 POINTS_PER_OBJECT = 320  # about half of them face a viewpoint
 FULL = {"sizes": [300, 1000, 3000, 10000, 20000], "views": [3, 5, 8], "trials": 5}
 QUICK = {"sizes": [300, 3000], "views": [8], "trials": 3}
 INLIER_M = 0.5
 RANSAC_HYPOTHESES = 500
+CLIPPER_MAX_NODES = 3000  # views with more candidate associations are left out (dense graph)
 
 
 @dataclass
@@ -90,6 +113,8 @@ class Case:
     success: bool
     ransac_ms: float
     ransac_success: bool
+    clipper_ms: float | None = None  # CLIPPER's score + solve (None: not run)
+    clipper_success: bool | None = None
 
 
 @dataclass
@@ -180,8 +205,52 @@ def _yaw_poses(l1, l2, g1, g2) -> np.ndarray:
 
 
 # ---------------------------------------------------------------------------------------------
+# The real CLIPPER (--clipper)
+class Clipper:
+    """CLIPPER's core on one map: score + solve over semloc's candidate associations (the
+    index built once), as `bench_clipper.py` runs it; views with more than `max_nodes`
+    candidates are left out."""
+
+    def __init__(self, module, global_map: ObjectMap, max_nodes: int) -> None:
+        self.module, self.global_map, self.max_nodes = module, global_map, max_nodes
+        self.index = CandidateIndex(global_map, AssociationConfig())
+
+    def run(self, local: ObjectMap, truth: np.ndarray) -> tuple[float | None, bool | None]:
+        """CPU ms of score + solve (the solver built before), and whether the closed-form
+        pose of its associations succeeds; (None, None) over `max_nodes` candidates."""
+        pairs = candidate_pairs(local, self.index)
+        if len(pairs) > self.max_nodes:
+            return None, None
+        solver = clipper_solver(self.module)
+        local_xyz, global_xyz = columns(local), columns(self.global_map)
+        tick = time.process_time()
+        selected = clipper_core(solver, local_xyz, global_xyz, pairs)
+        ms = (time.process_time() - tick) * 1e3
+        pose = pose_of(self.global_map, local, selected)
+        return ms, pose is not None and bool(is_success(pose, truth))
+
+
+def clipper_for(path: str | None, global_map: ObjectMap, max_nodes: int) -> Clipper | None:
+    """A `Clipper` on `global_map` from the build at `path` (None without a path)."""
+    if path is None:
+        return None
+    module, why = load_clipper(Path(path))
+    if module is None:
+        raise SystemExit(why)
+    return Clipper(module, global_map, max_nodes)
+
+
+# ---------------------------------------------------------------------------------------------
 # One map (in its own process)
-def measure_map(name: str, view_sizes: list[int], trials: int, seed: int, points: int):
+def measure_map(
+    name: str,
+    view_sizes: list[int],
+    trials: int,
+    seed: int,
+    points: int,
+    clipper_path: str | None = None,
+    clipper_max_nodes: int = CLIPPER_MAX_NODES,
+):
     global_map = load_map(name, points)
     if global_map is None:
         return []
@@ -189,14 +258,19 @@ def measure_map(name: str, view_sizes: list[int], trials: int, seed: int, points
     tick = time.process_time()
     Localizer(global_map).prepare()  # each object's cloud and KD-tree, once per map
     prepare_ms = (time.process_time() - tick) * 1e3
-    for local, _ in views(global_map, max(view_sizes), 1, seed + 1000):
+    clipper = clipper_for(clipper_path, global_map, clipper_max_nodes)
+    for local, truth in views(global_map, max(view_sizes), 1, seed + 1000):
         localize(global_map, local)  # warm-up: loads the compiled code, first-call costs
+        if clipper is not None:  # and CLIPPER's (its OpenMP threads started)
+            clipper.run(local, truth.T_global_local)
     rows = []
     for view in view_sizes:
         row = Row(name, len(global_map), view, prepare_ms=prepare_ms)
         stream = view == max(view_sizes)
         for case, (local, truth) in enumerate(views(global_map, view, trials, seed + view)):
-            row.cases.append(measure_case(global_map, local, truth.T_global_local, case, stream))
+            row.cases.append(
+                measure_case(global_map, local, truth.T_global_local, case, stream, clipper)
+            )
         rows.append(row)
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024  # kB on Linux
     for row in rows:
@@ -211,7 +285,12 @@ class _ProcessClock:
 
 
 def measure_case(
-    global_map: ObjectMap, local: ObjectMap, truth: np.ndarray, seed: int, stream: bool
+    global_map: ObjectMap,
+    local: ObjectMap,
+    truth: np.ndarray,
+    seed: int,
+    stream: bool,
+    clipper: Clipper | None = None,
 ) -> Case:
     wall, cpu = time.perf_counter(), time.process_time()
     result = localize(global_map, local)
@@ -227,6 +306,7 @@ def measure_case(
     ransac_cpu = time.process_time()
     pose = ransac(global_map, local, seed)
     ransac_cpu = time.process_time() - ransac_cpu
+    clipper_ms, clipper_success = clipper.run(local, truth) if clipper else (None, None)
     return Case(
         ms=cpu * 1e3,
         wall_ms=wall * 1e3,
@@ -235,6 +315,8 @@ def measure_case(
         success=result.pose is not None and bool(is_success(result.pose, truth)),
         ransac_ms=ransac_cpu * 1e3,
         ransac_success=pose is not None and bool(is_success(pose, truth)),
+        clipper_ms=clipper_ms,
+        clipper_success=clipper_success,
     )
 
 
@@ -278,6 +360,9 @@ def run_child(name: str, args: argparse.Namespace, src: str | None = None) -> li
     command = [sys.executable, __file__, "--worker", name, "--trials", str(args.trials)]
     command += ["--views", *map(str, args.views), "--seed", str(args.seed)]
     command += ["--points", str(args.points)]
+    if getattr(args, "clipper", None):
+        command += ["--clipper", str(args.clipper), "--clipper-max-nodes"]
+        command += [str(args.clipper_max_nodes)]
     if args.cpu >= 0 and hasattr(os, "sched_setaffinity"):
         command = ["taskset", "-c", str(args.cpu), *command]
     env = None
@@ -300,13 +385,15 @@ def compare(names: list[str], args: argparse.Namespace) -> str:
     (two runs at once, one per core, slow each other down unevenly); per round the median ms
     of a localization and of a streaming update, and the median of the rounds' ratios."""
     other = str(Path(args.against).resolve() / "src")
+    with_clipper = bool(getattr(args, "clipper", None))
     lines = [
         f"`bench_speed.py --against {args.against}` ({args.rounds} rounds, {args.trials} "
         "localizations per map and view in each; CPU ms, one core)",
         "",
         "| map | view | localization ms, this (per round) | other | this ÷ other | "
-        "streaming update ms, this | other | this ÷ other |",
-        "|---|---:|---|---|---:|---|---|---:|",
+        "streaming update ms, this | other | this ÷ other |"
+        + (" ÷ CLIPPER, this | ÷ CLIPPER, other |" if with_clipper else ""),
+        "|---|---:|---|---|---:|---|---|---:|" + ("---:|---:|" if with_clipper else ""),
     ]
     for name in names:
         rounds = [(run_child(name, args), run_child(name, args, other)) for _ in range(args.rounds)]
@@ -323,6 +410,11 @@ def compare(names: list[str], args: argparse.Namespace) -> str:
                 ratio = float(np.median(np.array(mine) / np.array(theirs)))
                 cells += [" / ".join(f"{x:.1f}" for x in mine),
                           " / ".join(f"{x:.1f}" for x in theirs), f"{ratio:.2f}"]  # fmt: skip
+            if with_clipper:  # each checkout's ratio to CLIPPER: the median of its rounds'
+                for side in (0, 1):
+                    ratios = [_clipper_ratio(r[side][v].cases) for r in rounds]
+                    kept = [x for x in ratios if x is not None]
+                    cells.append(f"{np.median(kept):.1f}" if kept else "-")
             lines.append(f"| {name} | " + " | ".join(cells) + " |")
         print(f"done {name}", file=sys.stderr)
     return "\n".join(lines)
@@ -339,13 +431,36 @@ def _fmt(values: list[float]) -> str:
     return f"{median:.1f} / {p90:.1f} / {most:.1f}"
 
 
-def speed_table(rows: list[Row]) -> str:
+def _clipper_ratio(cases: list[Case]) -> float | None:
+    """Median over the cases CLIPPER ran on of semloc's time ÷ CLIPPER's score + solve."""
+    ratios = [c.ms / c.clipper_ms for c in cases if c.clipper_ms]
+    return float(np.median(ratios)) if ratios else None
+
+
+def _clipper_cells(cases: list[Case]) -> str:
+    """CLIPPER's median ms, semloc's time ÷ it, and its success (over the cases it ran on)."""
+    ran = [c for c in cases if c.clipper_ms is not None]
+    if not ran:
+        return " - | - | - |"
+    ratio = _clipper_ratio(ran)
+    count = "" if len(ran) == len(cases) else f" ({len(ran)} of {len(cases)})"
+    return (
+        f" {np.median([c.clipper_ms for c in ran]):.3f} | {ratio:.1f} | "
+        f"{_rate([bool(c.clipper_success) for c in ran])}{count} |"
+    )
+
+
+def speed_table(rows: list[Row], with_clipper: bool = False) -> str:
     lines = [
         "| map | objects | map prepared once, ms | view | localization ms (median / p90 / max) | "
         "wall median | "
         "update ms (median / p90 / max) | peak MB | success | RANSAC ms | time ÷ RANSAC | "
-        "RANSAC success |",
-        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+        "RANSAC success |"
+        + (
+            " CLIPPER score + solve ms | time ÷ CLIPPER | CLIPPER success |" if with_clipper else ""
+        ),
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
+        + ("---:|---:|---:|" if with_clipper else ""),
     ]
     for row in rows:
         ms = [c.ms for c in row.cases]
@@ -359,6 +474,7 @@ def speed_table(rows: list[Row]) -> str:
             f"{row.peak_mb:.0f} | {_rate([c.success for c in row.cases])} | "
             f"{np.median(ransac_ms):.1f} | {ratio:.1f} | "
             f"{_rate([c.ransac_success for c in row.cases])} |"
+            + (_clipper_cells(row.cases) if with_clipper else "")
         )
     return "\n".join(lines)
 
@@ -422,6 +538,15 @@ def main(argv: list[str] | None = None) -> int:
         "the two in turn map by map",
     )
     parser.add_argument("--rounds", type=int, default=3, help="rounds of --against")
+    parser.add_argument(
+        "--clipper", metavar="PATH", help="also the real CLIPPER: its build's bindings/python"
+    )
+    parser.add_argument(
+        "--clipper-max-nodes",
+        type=int,
+        default=CLIPPER_MAX_NODES,
+        help="CLIPPER runs on views with at most this many candidate associations",
+    )
     parser.add_argument("--worker", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     preset = QUICK if args.quick else FULL
@@ -432,10 +557,19 @@ def main(argv: list[str] | None = None) -> int:
         print(profile_map(args.profile, max(args.views), 4 * args.trials, args.seed, args.points))
         return 0
     if args.worker:
-        rows = measure_map(args.worker, args.views, args.trials, args.seed, args.points)
+        rows = measure_map(
+            args.worker, args.views, args.trials, args.seed, args.points,
+            args.clipper, args.clipper_max_nodes,
+        )  # fmt: skip
         print(json.dumps([asdict(row) for row in rows]))
         return 0
     start = time.perf_counter()
+    print(omp_note())
+    if args.clipper:  # checked here, before the children try it
+        module, why = load_clipper(Path(args.clipper))
+        print(f"CLIPPER: {why}" if module is None else f"CLIPPER: {module.__file__}")
+        if module is None:
+            return 2
     rows, notes = [], []
     real = [] if args.no_real else ["scannet", "replica"]
     if args.against:
@@ -454,7 +588,7 @@ def main(argv: list[str] | None = None) -> int:
     report = "\n\n".join(
         [
             f"`{command.strip()}` (CPU ms, one core; peak MB: resident memory of the process)",
-            speed_table(rows),
+            speed_table(rows, bool(args.clipper)),
             "Time by stage (median over the cases, summed over the updates of a localization)",
             stage_table(rows),
             "Growth with the building's size (log-log slope; 1 = linear)",
