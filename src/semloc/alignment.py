@@ -360,7 +360,7 @@ class _Aligner:
         residual = centre_residual(pose, self.b_xyz[pairs[:, 1]], self.a_xyz[pairs[:, 0]])
         features = None
         if seed.features is not None:  # the agreeing pairs count as the pairs
-            features = {**seed.features, "pairs": score, "residual": residual, "support": 0.0}
+            features = {**seed.features, "n_pairs": score, "residual": residual, "n_support": 0.0}
         return Hypothesis(
             rank=0,
             score=score,
@@ -438,7 +438,7 @@ class _Aligner:
                     h.pose, self._rows(h.pairs), self.alignment.precise_fit_radius
                 )
                 if h.features is not None:
-                    h.features = {**h.features, "pairs": h.score}
+                    h.features = {**h.features, "n_pairs": h.score}
         ordered = sorted(grown, key=lambda h: (-h.score, h.residual or 0.0))
         anchor = local_anchor(self.b_xyz)
         places = ((h.pairs, h.pose) for h in ordered)

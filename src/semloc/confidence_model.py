@@ -6,11 +6,11 @@ Written by `benchmarks/calibrate_confidence.py --write`; data, not I/O: the core
 SHIPPED = {
     "evidence_bias": -5.2765101659708264,
     "evidence_weights": {
-        "pairs": 0.37295305325728206,
+        "n_pairs": 0.37295305325728206,
         "rejected_share": -1.4234049022916215,
         "residual": -3.3320379089120675,
         "fitness": 3.564411085154988,
-        "support": -0.21759803693132487,
+        "n_support": -0.21759803693132487,
         "conflict_share": -2.95333044354862,
     },
     "confidence_bias": -0.9059459588805732,
@@ -19,11 +19,11 @@ SHIPPED = {
     "confidence_gap": 2.2397793120114975,
     "ranking_bias": -5.561483183480298,
     "ranking_weights": {
-        "pairs": 0.661672824486766,
+        "n_pairs": 0.661672824486766,
         "rejected_share": -1.3638612935690333,
         "residual": -0.09819050035223457,
         "fitness": 3.5512003363244395,
-        "support": -0.1658809568671077,
+        "n_support": -0.1658809568671077,
         "conflict_share": -2.580520296410085,
     },
     "min_confidence": 0.8389101439863255,

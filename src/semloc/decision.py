@@ -53,11 +53,14 @@ RankBy = Literal["evidence", "residual", "score", "fitness"]
 Place = tuple[Collection, np.ndarray | None]  # (pairs, pose) of a candidate answer
 
 
-FEATURES = ("pairs", "rejected_share", "residual", "fitness", "support", "conflict_share")
-SIGNS = {"pairs": 1, "rejected_share": -1, "residual": -1, "fitness": 1, "support": 0,
+FEATURES = (
+    "n_pairs", "rejected_share", "residual", "fitness", "n_support", "conflict_share",
+)  # fmt: skip
+SIGNS = {"n_pairs": 1, "rejected_share": -1, "residual": -1, "fitness": 1, "n_support": 0,
          "conflict_share": -1}  # fmt: skip
 """The direction in which each feature may move the evidence (the fit is constrained to it; 0:
-free — `support` counts pairs that are also in `pairs`, found by the pose, not the clustering)."""
+free — `n_support` counts pairs that are also in `n_pairs`, found by the pose, not the
+clustering)."""
 MODEL_MODULE = Path(__file__).with_name("confidence_model.py")
 """Where `benchmarks/calibrate_confidence.py --write` puts a refitted model."""
 

@@ -319,16 +319,16 @@ class Evidence:
     weight: float | None = None  # the inlier pairs' summed semantic weight (None: all 1)
 
     def features(self) -> dict[str, float]:
-        """The named features of the confidence model (`semloc.decision.FEATURES`); `pairs`
+        """The named features of the confidence model (`semloc.decision.FEATURES`); `n_pairs`
         counts each pair by its semantic weight (`semloc.semantics.pair_weight`): an exact
         match outweighs a parent class, which outweighs a confusable one."""
         pairs = self.pairs if self.weight is None else min(self.weight, self.pairs)
         return {
-            "pairs": float(min(pairs, 12)),
+            "n_pairs": float(min(pairs, 12)),
             "rejected_share": self.rejected / max(self.pairs + self.rejected, 1),
             "residual": float(min(self.residual, 1.0)),
             "fitness": float(self.fitness),
-            "support": float(min(self.support, 12)),
+            "n_support": float(min(self.support, 12)),
             "conflict_share": self.conflicts / max(self.n_local, 1),
         }
 

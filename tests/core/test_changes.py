@@ -164,7 +164,7 @@ def test_three_matched_objects_beat_two_matched_and_two_moved():
     ]
     assert np.allclose(best.pose, T, atol=0.05)
     assert sorted(other.pairs) == [("b_chair", "l_chair"), ("b_table", "l_table")]
-    assert other.features["support"] == 0
+    assert other.features["n_support"] == 0
     assert result.changes.new == ["l_bin"] and result.changes.moved == []
 
 

@@ -714,26 +714,26 @@ def test_a_variant_does_not_lower_the_confidence_a_rival_does():
     that share less than `rival_overlap` of its pairs; a variant (sharing more) is the same
     answer and leaves its confidence as without a rival."""
     model = shipped_model()
-    features = {"pairs": 6.0, "rejected_share": 0.0, "residual": 0.05, "fitness": 0.9,
-                "support": 6.0, "conflict_share": 0.0}  # fmt: skip
+    features = {"n_pairs": 6.0, "rejected_share": 0.0, "residual": 0.05, "fitness": 0.9,
+                "n_support": 6.0, "conflict_share": 0.0}  # fmt: skip
     assert set(features) == set(FEATURES)
     best = Hypothesis(1, 1.0, pairs(4), HERE, features=features)
     variant = Hypothesis(2, 1.0, shared(best.pairs, 4, 2), ELSEWHERE,
-                         features=features | {"pairs": 9.0})  # fmt: skip
+                         features=features | {"n_pairs": 9.0})  # fmt: skip
     score_confidence([best, variant], model, 0.5)
     assert best.confidence == model.confidence(best.evidence, None)
     other = Hypothesis(2, 1.0, shared(best.pairs, 4, 1), ELSEWHERE,
-                       features=features | {"pairs": 9.0})  # fmt: skip
+                       features=features | {"n_pairs": 9.0})  # fmt: skip
     score_confidence([best, other], model, 0.5)
     assert best.confidence == model.confidence(best.evidence, other.evidence)
     assert best.confidence < model.confidence(best.evidence, None)
 
 
 # the confidence model, ranking and the search's cut ----------------------------------------
-WEIGHTS = {"pairs": 0.5, "rejected_share": -1.0, "residual": -2.0, "fitness": 1.0, "support": 0.25,
+WEIGHTS = {"n_pairs": 0.5, "rejected_share": -1.0, "residual": -2.0, "fitness": 1.0, "n_support": 0.25,
            "conflict_share": -1.5}  # fmt: skip
-FEATURE_VALUES = {"pairs": 4.0, "rejected_share": 0.1, "residual": 0.2, "fitness": 0.8,
-                  "support": 2.0, "conflict_share": 0.3}  # fmt: skip
+FEATURE_VALUES = {"n_pairs": 4.0, "rejected_share": 0.1, "residual": 0.2, "fitness": 0.8,
+                  "n_support": 2.0, "conflict_share": 0.3}  # fmt: skip
 
 
 def hand_model(**fields) -> ConfidenceModel:
@@ -785,7 +785,7 @@ def test_rank_places_orders_by_the_ranking_logit_less_the_missing_penalty():
     model = hand_model()
     low = featured(1, 1.0, FEATURE_VALUES)
     high = featured(
-        2, 5.0, FEATURE_VALUES | {"pairs": 5.0}, ELSEWHERE, 10, n_missing=4, n_expected=4
+        2, 5.0, FEATURE_VALUES | {"n_pairs": 5.0}, ELSEWHERE, 10, n_missing=4, n_expected=4
     )
     kept = rank_places([high, low], "evidence", DecisionConfig(), model)
     assert kept == [low, high] and [h.rank for h in kept] == [1, 2]

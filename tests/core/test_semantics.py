@@ -155,7 +155,7 @@ def test_exact_pairs_weigh_more_than_parent_pairs():
     coarse = semloc.localize(
         room, _view(room, {"armchair": "chair", "coffee table": "table"}, T)
     ).best
-    assert exact.features["pairs"] > coarse.features["pairs"]
+    assert exact.features["n_pairs"] > coarse.features["n_pairs"]
 
 
 def test_label_map_wins_over_the_taxonomy():

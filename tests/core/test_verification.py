@@ -169,7 +169,7 @@ def test_guided_matching_adds_objects_that_land_on_a_candidate():
 
 # 2. two sets converging to one place -------------------------------------------------------
 def _hyp(ids, pose, score=1.0, **features) -> Hypothesis:
-    base = dict(pairs=4.0, rejected_share=0.0, residual=0.05, fitness=0.9, support=0.0,
+    base = dict(n_pairs=4.0, rejected_share=0.0, residual=0.05, fitness=0.9, n_support=0.0,
                 conflict_share=0.0)  # fmt: skip
     return Hypothesis(rank=0, score=score, pairs=ids, pose=pose, fitness=features.get(
         "fitness", base["fitness"]), residual=0.05, features=base | features)  # fmt: skip
@@ -225,9 +225,9 @@ def test_duplicates_are_counted_where_the_local_objects_are():
 # 3. better fitness, equal pairs ------------------------------------------------------------
 def test_the_right_place_with_better_fitness_is_ranked_first():
     wrong = _hyp([("g0", "l0"), ("g1", "l1"), ("g2", "l2")], yaw_pose(1.0), score=9.0,
-                 pairs=3.0, fitness=0.84)  # fmt: skip
+                 n_pairs=3.0, fitness=0.84)  # fmt: skip
     right = _hyp([("g3", "l0"), ("g4", "l1"), ("g5", "l2")], yaw_pose(-1.0, [2, 0, 0]),
-                 score=5.0, pairs=3.0, fitness=1.0)  # fmt: skip
+                 score=5.0, n_pairs=3.0, fitness=1.0)  # fmt: skip
     ranked = rank_places([wrong, right], "evidence", DecisionConfig(), shipped_model())
     assert ranked[0] is right
     assert ranked[0].confidence > ranked[1].confidence
@@ -235,8 +235,8 @@ def test_the_right_place_with_better_fitness_is_ranked_first():
 
 
 # confidence --------------------------------------------------------------------------------
-FEATURE_RANGES = {"pairs": (2, 12), "rejected_share": (0, 0.6), "residual": (0, 0.5),
-                  "fitness": (0, 1), "support": (0, 6), "conflict_share": (0, 0.6)}  # fmt: skip
+FEATURE_RANGES = {"n_pairs": (2, 12), "rejected_share": (0, 0.6), "residual": (0, 0.5),
+                  "fitness": (0, 1), "n_support": (0, 6), "conflict_share": (0, 0.6)}  # fmt: skip
 
 
 @settings(max_examples=60, deadline=None)
@@ -260,8 +260,8 @@ def test_confidence_is_monotone_in_the_evidence(values, feature, step, rival):
 
 def test_a_lone_weak_hypothesis_is_not_made_sure_by_having_no_rival():
     model = shipped_model()
-    weak = {"pairs": 3.0, "rejected_share": 0.0, "residual": 0.04, "fitness": 0.42,
-            "support": 0.0, "conflict_share": 0.0}  # fmt: skip
+    weak = {"n_pairs": 3.0, "rejected_share": 0.0, "residual": 0.04, "fitness": 0.42,
+            "n_support": 0.0, "conflict_share": 0.0}  # fmt: skip
     evidence = model.evidence(weak)
     assert model.confidence(evidence, None) < model.min_confidence
     assert model.confidence(evidence, NO_RIVAL - 5.0) == model.confidence(evidence, None)
@@ -271,9 +271,9 @@ def test_hypotheses_are_ranked_by_the_ranking_logit_and_scored_by_the_evidence()
     by_fitness = dict.fromkeys(FEATURES, 0.0) | {"fitness": 10.0}
     model = shipped_model().model_copy(update={"ranking_bias": 0.0, "ranking_weights": by_fitness})
     many = _hyp([("g0", "l0"), ("g1", "l1"), ("g2", "l2"), ("g3", "l3"), ("g4", "l4")],
-                yaw_pose(0.0), pairs=5.0, fitness=0.6)  # fmt: skip
+                yaw_pose(0.0), n_pairs=5.0, fitness=0.6)  # fmt: skip
     fitting = _hyp([("g5", "l0"), ("g6", "l1"), ("g7", "l2")], yaw_pose(2.0, [3, 0, 0]),
-                   pairs=3.0, fitness=0.95)  # fmt: skip
+                   n_pairs=3.0, fitness=0.95)  # fmt: skip
     assert rank_places([many, fitting], "evidence", DecisionConfig(), model)[0] is fitting
     assert fitting.evidence == pytest.approx(model.evidence(fitting.features))
     assert rank_places([many, fitting], "evidence", DecisionConfig(), shipped_model())[0] is many
@@ -315,7 +315,7 @@ def test_is_rival_counts_the_shared_share_of_the_first_pairs():
 def test_evidence_features_are_bounded():
     f = Evidence(30, 2, 5.0, 0.5, 40, 3, 40).features()
     assert set(f) == set(FEATURES)
-    assert f["pairs"] == 12 and f["support"] == 12 and f["residual"] == 1.0
+    assert f["n_pairs"] == 12 and f["n_support"] == 12 and f["residual"] == 1.0
     assert f["rejected_share"] == pytest.approx(2 / 32)
 
 

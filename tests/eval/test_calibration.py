@@ -16,19 +16,19 @@ from semloc.eval.calibration import (
     operating_point,
 )
 
-SURE = {"pairs": 8.0, "rejected_share": 0.0, "residual": 0.05, "fitness": 0.95, "support": 0.0,
+SURE = {"n_pairs": 8.0, "rejected_share": 0.0, "residual": 0.05, "fitness": 0.95, "n_support": 0.0,
         "conflict_share": 0.0}  # fmt: skip
-WEAK = SURE | {"pairs": 3.0, "fitness": 0.4, "conflict_share": 0.3}
+WEAK = SURE | {"n_pairs": 3.0, "fitness": 0.4, "conflict_share": 0.3}
 
 
 def _answers(kind: str, rights: list[bool], features: dict, first: int) -> list[Sample]:
-    return [Sample(first + i, kind, 1, int(features["pairs"]), features["fitness"], features, ok)
+    return [Sample(first + i, kind, 1, int(features["n_pairs"]), features["fitness"], features, ok)
             for i, ok in enumerate(rights)]  # fmt: skip
 
 
 def test_the_operating_point_holds_on_every_kind():
     model = shipped_model()
-    middle = SURE | {"pairs": 4.0, "fitness": 0.7}
+    middle = SURE | {"n_pairs": 4.0, "fitness": 0.7}
     conf = {name: model.confidence(model.evidence(f), None)
             for name, f in (("sure", SURE), ("middle", middle), ("weak", WEAK))}  # fmt: skip
     assert conf["sure"] > conf["middle"] > conf["weak"]
@@ -43,14 +43,16 @@ def test_the_ranking_logit_is_fitted_on_its_kinds_alone():
     rng = np.random.default_rng(0)
     samples = []
     for i in range(300):  # kind "r": fitness decides; kind "o": pairs decide
-        f = {k: float(rng.uniform(0, 1)) for k in FEATURES} | {"pairs": float(rng.integers(2, 9))}
-        samples.append(Sample(i, "r", 1, int(f["pairs"]), f["fitness"], f, f["fitness"] > 0.5))
+        f = {k: float(rng.uniform(0, 1)) for k in FEATURES} | {"n_pairs": float(rng.integers(2, 9))}
+        samples.append(Sample(i, "r", 1, int(f["n_pairs"]), f["fitness"], f, f["fitness"] > 0.5))
         g = dict(f)
-        samples.append(Sample(1000 + i, "o", 1, int(g["pairs"]), g["fitness"], g, g["pairs"] > 5))
+        samples.append(
+            Sample(1000 + i, "o", 1, int(g["n_pairs"]), g["fitness"], g, g["n_pairs"] > 5)
+        )
     model = fit(samples, ranking=["r"])
     assert model.ranking_weights is not None
-    assert model.ranking_weights["fitness"] > 5 * abs(model.ranking_weights["pairs"])
-    assert model.evidence_weights["pairs"] > 0.5
+    assert model.ranking_weights["fitness"] > 5 * abs(model.ranking_weights["n_pairs"])
+    assert model.evidence_weights["n_pairs"] > 0.5
     assert model.ranking(samples[0].features) != model.evidence(samples[0].features)
 
 
@@ -81,7 +83,7 @@ def test_only_real_rivals_enter_the_fit():
 
 def test_the_best_operating_point_is_the_threshold_with_the_most_right_claims():
     model = shipped_model()
-    middle = SURE | {"pairs": 4.0, "fitness": 0.7}
+    middle = SURE | {"n_pairs": 4.0, "fitness": 0.7}
     conf = {name: model.confidence(model.evidence(f), None)
             for name, f in (("sure", SURE), ("middle", middle), ("weak", WEAK))}  # fmt: skip
     samples = (_answers("a", [True] * 98, SURE, 0) + _answers("a", [False], middle, 100)
