@@ -41,7 +41,12 @@ def test_every_session_answer_is_exactly_a_session_answer(serve, building):
             assert schema.problems(served, schema.SessionAnswer) == [], k
         served = session.update(list(local), stamp=20.0, coverage=ALL_AROUND)  # every object
         assert schema.problems(served, schema.SessionAnswer) == []
+        (listed,) = client.sessions("office")
     assert served["support"]["n_expected"] is not None  # (with coverage)
+    last = listed["last"]  # the latest answer in short, its best pairs in the answer's form
+    assert last["status"] == served["status"] and last["stamp"] == 20.0
+    assert last["pose"] == served["pose"] and last["update"] == served["update"]
+    assert last["hypotheses"] == [{"pairs": served["hypotheses"][0]["pairs"]}]
 
 
 def test_the_openapi_answers_are_the_schemas_models(serve):
@@ -54,6 +59,10 @@ def test_the_openapi_answers_are_the_schemas_models(serve):
         assert components[name]["required"] == declared["required"], name
     assert "n_pairs" in components["Support"]["required"]
     assert "outside_prior" not in components["Hypothesis"]["required"]  # (only with a prior)
+    last = components["SessionInfo"]["properties"]["last"]["anyOf"][0]["$ref"]
+    assert last.endswith("/LastAnswer")  # (a session's latest answer, typed)
+    assert set(components["LastAnswer"]["required"]) == {"status", "pose", "map_version",
+                                                         "hypotheses"}  # fmt: skip
 
 
 def test_localize_on_a_server_writes_a_localize_answer(serve, building, tmp_path):

@@ -219,16 +219,34 @@ class SessionUpdate(_Request):
     )
 
 
+class BestPairs(_Answer):
+    """The best hypothesis of an answer, by its pairs."""
+
+    pairs: list[schema.Pair]
+
+
+class LastAnswer(_Answer):
+    """What a session's latest answer said, in short."""
+
+    status: schema.Status
+    pose: Pose | None
+    map_version: int
+    hypotheses: list[BestPairs] = Field(description="The best hypothesis (none: no hypothesis).")
+    confidence: float | None = None
+    stamp: float | None = None
+    update: int | None = None
+    run_changes: schema.Changes | None = Field(
+        None, description="While the session tracks its place: the run's change report."
+    )
+
+
 class SessionInfo(_Answer):
     session_id: str | None = Field(description="Only for the caller's own sessions.")
     mine: bool
     map_version: int
     up: list[float] | None
     idle_s: float
-    last: dict[str, Any] | None = Field(
-        description="Status, pose and stamp of its latest answer (and, while it tracks its "
-        "place, `run_changes`: the run's change report)."
-    )
+    last: LastAnswer | None = Field(description="Its latest answer, in short (none yet: null).")
 
 
 # Change reports -----------------------------------------------------------------------------
