@@ -2,14 +2,22 @@
 
 The map is fixed for a Localizer's life, so everything read off it alone is computed when
 first needed and kept: the candidate index (labels through the taxonomy, the descriptor gate),
-place retrieval for large maps (`semloc.places`), a KD-tree of the positions, per object the
-tolerances tracking and the prior's gate allow and half its footprint (a detector's split), the
-labels as integers, and the map's copies of the places lately asked about (`semloc.twins`).
+place retrieval for large maps (`semloc.places`), a KD-tree of the positions (and one per
+label), per object the tolerances tracking and the prior's gate allow and half its footprint
+(a detector's split), the labels as integers, and the map's copies of the places lately asked
+about (`semloc.twins`).  What depends on the map alone (and a setting) is shared by every
+Localizer of one map object while it lives, as its point clouds, candidate similarities and
+place index are: a localization on a large map does not rebuild it.  The copies asked about
+stay the Localizer's own (which places it asked about is its history).
 """
 
 from __future__ import annotations
 
+import threading
+import weakref
+from collections.abc import Callable
 from functools import cached_property
+from typing import Any, TypeVar
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -22,12 +30,27 @@ from semloc.pose import cached_cloud
 from semloc.priors import GATE_SLACK
 from semloc.settings import LocalizerConfig
 from semloc.tracking import allowances, footprints
-from semloc.twins import ANCHORS, label_codes, twins
+from semloc.twins import ANCHORS, TwinIndex, label_codes, twins
 
 TWINS_WEIGHED = 4
 """The copies of a place weighed: those that hold most of its objects."""
 TWINS_KEPT = 64
 """The twins (`semloc.twins`) of this many latest places are kept, not looked up again."""
+
+_SHARED: weakref.WeakKeyDictionary[ObjectMap, dict[tuple, Any]] = weakref.WeakKeyDictionary()
+_SHARED_LOCK = threading.RLock()  # (a service's sessions of one map run in several threads;
+# reentrant: one fact may be made from another)
+T = TypeVar("T")
+
+
+def shared(global_map: ObjectMap, key: tuple, make: Callable[[], T]) -> T:
+    """What `make()` derives from `global_map` alone (`key` names it), made once per map
+    object and shared while the map lives."""
+    with _SHARED_LOCK:
+        facts = _SHARED.setdefault(global_map, {})
+        if key not in facts:
+            facts[key] = make()
+        return facts[key]
 
 
 class MapContext:
@@ -72,33 +95,49 @@ class MapContext:
     @cached_property
     def tree(self) -> cKDTree:
         """A KD-tree of the map's positions (looks, twins)."""
-        return cKDTree(self.map.positions)
+        return shared(self.map, ("tree",), lambda: cKDTree(self.map.positions))
 
     @cached_property
     def diagonals(self) -> np.ndarray:
         """Each map object's box diagonal (NaN without a box)."""
-        return np.linalg.norm(self.map.sizes, axis=1)
+        return self._array(("diagonals",), lambda: np.linalg.norm(self.map.sizes, axis=1))
 
     @cached_property
     def allowances(self) -> np.ndarray:
         """Per map object, how far from where a pose puts a detection it may lie (tracking)."""
-        return allowances(self.map, self.config.tracking.track_tolerance)
+        tolerance = self.config.tracking.track_tolerance
+        return self._array(("allowances", tolerance), lambda: allowances(self.map, tolerance))
 
     @cached_property
     def parts(self) -> np.ndarray:
         """How near (m) to a detection of a map object another one is a part of it (a
         detector's split): half the object's footprint (`tracking.footprints`)."""
-        return 0.5 * footprints(self.map)
+        return self._array(("parts",), lambda: 0.5 * footprints(self.map))
 
     @cached_property
     def gate_slack(self) -> np.ndarray:
         """Per map object, how far its centre may lie from a detection's (the prior's gate)."""
-        return allowances(self.map, GATE_SLACK)
+        return self._array(("gate_slack", GATE_SLACK), lambda: allowances(self.map, GATE_SLACK))
 
     @cached_property
     def codes(self) -> np.ndarray:
         """The map's labels as integers (twins)."""
-        return label_codes(self.map.labels)
+        return self._array(("codes",), lambda: label_codes(self.map.labels))
+
+    @cached_property
+    def twin_index(self) -> TwinIndex:
+        """Per label, the map objects of it and their KD-tree (twins)."""
+        return shared(self.map, ("labelled",), lambda: TwinIndex(self.map.positions, self.codes))
+
+    def _array(self, key: tuple, make: Callable[[], np.ndarray]) -> np.ndarray:
+        """A shared array (`shared`), read-only: one Localizer must not change another's."""
+
+        def frozen() -> np.ndarray:
+            array = make()
+            array.flags.writeable = False
+            return array
+
+        return shared(self.map, key, frozen)
 
     def copies_of(self, members: np.ndarray, anchors: int = ANCHORS) -> list[np.ndarray]:
         """The twins of the map objects `members` (`semloc.twins`, through `anchors` anchor
@@ -118,6 +157,6 @@ class MapContext:
             self._twin_motions[key] = [] if up is None else twins(
                 self.map.positions, self.codes, up, members,
                 self.config.verification.inlier_tolerance, tree=self.tree, apart=PLACE_APART,
-                most=TWINS_WEIGHED, anchors=anchors,
+                most=TWINS_WEIGHED, anchors=anchors, labelled=self.twin_index,
             )  # fmt: skip
         return self._twin_motions[key]

@@ -26,6 +26,7 @@ and ends it when a twin leads by more.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from itertools import chain
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -57,32 +58,53 @@ def twins(
     anchors: int = ANCHORS,
     apart: float = 4.0,
     most: int = 8,
+    labelled: TwinIndex | None = None,
 ) -> list[np.ndarray]:
     """The 4x4 motions S (map to map) that put the map objects `members` on copies of
-    themselves elsewhere in the map, most objects placed first (see the module docstring)."""
+    themselves elsewhere in the map, most objects placed first (see the module docstring).
+    `tree` (of `positions`) and `labelled` (`TwinIndex` of them) may be given, built once per
+    map."""
     members = np.unique(np.asarray(members, dtype=np.int64))
     if len(members) < MIN_TWIN_PAIRS:
         return []
     tree = cKDTree(positions) if tree is None else tree
+    labelled = TwinIndex(positions, codes) if labelled is None else labelled
     up = np.asarray(up, dtype=float) / np.linalg.norm(up)
     need = max(MIN_TWIN_PAIRS, int(np.ceil(min_share * len(members))))
-    found: list[tuple[int, np.ndarray]] = []
+    counts, motions = [np.zeros(0, dtype=np.int64)], [np.zeros((0, 4, 4))]
     for a, b in _anchor_pairs(positions, codes, members, up, anchors):
-        motions = _motions(positions, codes, up, a, b, tolerance, tree)
-        placed = _placed(motions, positions, codes, members, tolerance, tree)
-        found += [(int(n), S) for n, S in zip(placed, motions) if n >= need]
+        found = _motions(positions, codes, up, a, b, tolerance, labelled)
+        placed = _placed(found, positions, codes, members, tolerance, tree)
+        counts.append(placed[placed >= need])
+        motions.append(found[placed >= need])
+    order = np.argsort(-np.concatenate(counts), kind="stable")  # most objects placed first
+    S = np.concatenate(motions)[order]
     centroid = positions[members].mean(axis=0)
-    kept: list[tuple[int, np.ndarray]] = []
-    for placed, S in sorted(found, key=lambda f: -f[0]):
+    moved = S[:, :3, :3] @ centroid + S[:, :3, 3]
+    # (closer: the place itself, or its own repeated objects, e.g. a row of chairs)
+    away = np.linalg.norm(moved - centroid, axis=1) >= apart
+    kept: list[int] = []
+    for i in np.flatnonzero(away):
         if len(kept) == most:
             break
-        moved = S[:3, :3] @ centroid + S[:3, 3]
-        if np.linalg.norm(moved - centroid) < apart:
-            continue  # the place itself, or its own repeated objects (a row of chairs)
-        if all(np.linalg.norm(moved - (T[:3, :3] @ centroid + T[:3, 3])) >= apart
-               for _, T in kept):  # fmt: skip
-            kept.append((placed, S))
-    return [S for _, S in kept]
+        if all(np.linalg.norm(moved[i] - moved[j]) >= apart for j in kept):
+            kept.append(int(i))
+    return [S[i] for i in kept]
+
+
+class TwinIndex:
+    """Per label code, the map's objects of it and a KD-tree of their positions, each built
+    when first asked (the twins' search matches anchor pairs label by label)."""
+
+    def __init__(self, positions: np.ndarray, codes: np.ndarray) -> None:
+        self.positions, self.codes = positions, codes
+        self._of: dict[int, tuple[np.ndarray, cKDTree]] = {}
+
+    def __call__(self, code: int) -> tuple[np.ndarray, cKDTree]:
+        if code not in self._of:
+            indices = np.flatnonzero(self.codes == code)
+            self._of[code] = (indices, cKDTree(self.positions[indices]))
+        return self._of[code]
 
 
 def _anchor_pairs(
@@ -114,16 +136,16 @@ SPAN = 2.0
 
 def _motions(
     positions: np.ndarray, codes: np.ndarray, up: np.ndarray, a: int, b: int,
-    tolerance: float, tree: cKDTree,
+    tolerance: float, labelled: TwinIndex,
 ) -> np.ndarray:  # fmt: skip
     """Every yaw-and-translation motion (M, 4, 4) taking (a, b) onto a map pair of the same
     labels at the same distance (within `tolerance`) and height difference."""
     offset = positions[b] - positions[a]
     distance, height = np.linalg.norm(offset), offset @ up
-    others, labelled_b = np.flatnonzero(codes == codes[a]), np.flatnonzero(codes == codes[b])
-    reach = cKDTree(positions[labelled_b]).query_ball_point(positions[others], distance + tolerance)
-    a2 = np.repeat(others, [len(r) for r in reach])
-    b2 = labelled_b[np.concatenate([np.asarray(r, dtype=np.int64) for r in reach])]
+    others, (labelled_b, tree_b) = labelled(int(codes[a]))[0], labelled(int(codes[b]))
+    reach = tree_b.query_ball_point(positions[others], distance + tolerance)
+    a2 = np.repeat(others, np.fromiter(map(len, reach), np.int64, len(reach)))
+    b2 = labelled_b[np.fromiter(chain.from_iterable(reach), np.int64, len(a2))]
     keep = b2 != a2
     a2, b2 = a2[keep], b2[keep]
     offsets = positions[b2] - positions[a2]

@@ -141,3 +141,18 @@ def test_a_renewed_search_keeps_its_map_prior_and_retrieval_and_nothing_else():
     assert renewed.context is context and renewed.sightings is sightings
     assert renewed.retrieved is search.retrieved and renewed.prior is None
     assert not renewed.stale and renewed.cut == (False, 0) and renewed.poses == {}
+
+
+def test_what_is_read_off_a_map_is_shared_by_its_localizers_and_read_only():
+    building = layout(60, seed=4)
+    one, two = (MapContext(building, LocalizerConfig(), None) for _ in range(2))
+    assert one.tree is two.tree and one.twin_index is two.twin_index and one.codes is two.codes
+    assert one.allowances is two.allowances and one.parts is two.parts
+    with pytest.raises(ValueError, match="read-only"):
+        one.parts[0] = 1.0  # (one Localizer must not change another's)
+    looser = MapContext(building, LocalizerConfig(track_tolerance=0.9), None)
+    assert looser.allowances is not one.allowances and looser.tree is one.tree
+    assert (looser.allowances > one.allowances).all()
+    again = MapContext(building.with_objects(list(building)), LocalizerConfig(), None)
+    assert again.tree is not one.tree  # (another map object: its own)
+    np.testing.assert_array_equal(again.allowances, one.allowances)

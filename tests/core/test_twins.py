@@ -12,6 +12,7 @@ from scipy.spatial import cKDTree
 from semloc import Localizer, LocalizerConfig, ObjectMap, SemanticObject
 from semloc.transforms import yaw_pose
 from semloc.twins import (
+    TwinIndex,
     _anchor_pairs,
     _motions,
     copy_holds,
@@ -211,7 +212,7 @@ def test_an_anchor_pair_matches_map_pairs_at_its_distance_and_height_within_the_
     0.25 m of the anchor pair's (1.75 m apart, or 0.25 m higher, exactly: kept)."""
     positions = np.array([[0.0, 0, 0], [2.0, 0, 0], [8.0, 0, 0], [b2[0], 0, b2[1]]])
     codes = np.array([0, 1, 0, 1], dtype=np.int64)
-    motions = _motions(positions, codes, UP, 0, 1, 0.25, cKDTree(positions))
+    motions = _motions(positions, codes, UP, 0, 1, 0.25, TwinIndex(positions, codes))
     moves = sorted(round(float(S[0, 3]), 6) for S in motions)
     assert moves == ([0.0, 8.0] if kept else [0.0])
 
