@@ -239,6 +239,13 @@ def test_a_sure_best_with_a_rival_whose_centres_fit_nearly_as_well_is_ambiguous(
     )
 
 
+def test_a_rival_whose_centres_fit_exactly_is_named_with_its_residual_of_zero():
+    config = DecisionConfig()
+    best = sure(config, residual=0.0)
+    status, reason = decide([best, rival(best)], config, "evidence")
+    assert status == "ambiguous" and reason.endswith(f"({len(best.pairs)} pairs, residual 0.00 m)")
+
+
 @pytest.mark.parametrize("config", CONFIGS, ids=IDS)
 def test_the_confidence_paths_rival_rule_is_judged_by_pairs_then_residual(config):
     best = sure(config, residual=0.1)
@@ -765,6 +772,16 @@ def test_the_confidence_is_the_logistic_of_evidence_rival_and_gap(evidence, riva
     gap = min(evidence - r, 4.0)
     logit = 0.1 + 0.7 * evidence - 1.3 * sigmoid(r) + 0.4 * gap
     assert hand_model().confidence(evidence, rival) == pytest.approx(sigmoid(logit))
+
+
+def test_the_confidence_bottoms_out_at_a_logit_of_minus_fifty():
+    """Evidence far below any real answer's neither overflows nor goes below the confidence
+    of a logit of -50 (nor above that of +50)."""
+    model = hand_model(confidence_evidence=1.0, confidence_bias=0.0, confidence_rival=0.0,
+                       confidence_gap=0.0)  # fmt: skip
+    assert math.isclose(model.confidence(-1000.0, None), 1 / (1 + math.exp(50.0)), rel_tol=1e-9)
+    assert math.isclose(model.confidence(-49.0, None), 1 / (1 + math.exp(49.0)), rel_tol=1e-9)
+    assert model.confidence(1000.0, None) == 1.0
 
 
 def test_local_anchor_is_the_centroid_of_the_local_objects():
