@@ -24,7 +24,9 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from semloc.decision import (
+    _KEY_EPS,
     FEATURES,
+    RESIDUAL_RANK,
     RIVAL_LOGIT_GAP,
     SEARCH_CUT,
     ConfidenceModel,
@@ -44,6 +46,7 @@ from semloc.decision import (
     same_place_index,
     score_confidence,
     shipped_model,
+    verdict_refinements,
 )
 from semloc.results import Hypothesis
 from semloc.transforms import pose_error, yaw_pose
@@ -234,6 +237,13 @@ def test_a_sure_best_with_a_rival_whose_centres_fit_nearly_as_well_is_ambiguous(
         "localized",
         "",
     )
+
+
+def test_a_rival_whose_centres_fit_exactly_is_named_with_its_residual_of_zero():
+    config = DecisionConfig()
+    best = sure(config, residual=0.0)
+    status, reason = decide([best, rival(best)], config, "evidence")
+    assert status == "ambiguous" and reason.endswith(f"({len(best.pairs)} pairs, residual 0.00 m)")
 
 
 @pytest.mark.parametrize("config", CONFIGS, ids=IDS)
@@ -764,6 +774,16 @@ def test_the_confidence_is_the_logistic_of_evidence_rival_and_gap(evidence, riva
     assert hand_model().confidence(evidence, rival) == pytest.approx(sigmoid(logit))
 
 
+def test_the_confidence_bottoms_out_at_a_logit_of_minus_fifty():
+    """Evidence far below any real answer's neither overflows nor goes below the confidence
+    of a logit of -50 (nor above that of +50)."""
+    model = hand_model(confidence_evidence=1.0, confidence_bias=0.0, confidence_rival=0.0,
+                       confidence_gap=0.0)  # fmt: skip
+    assert math.isclose(model.confidence(-1000.0, None), 1 / (1 + math.exp(50.0)), rel_tol=1e-9)
+    assert math.isclose(model.confidence(-49.0, None), 1 / (1 + math.exp(49.0)), rel_tol=1e-9)
+    assert model.confidence(1000.0, None) == 1.0
+
+
 def test_local_anchor_is_the_centroid_of_the_local_objects():
     assert local_anchor(np.array([[0.0, 0, 0], [2.0, 4, 6]])) == pytest.approx([1.0, 2.0, 3.0])
     assert local_anchor(np.zeros((0, 3))) is None
@@ -848,3 +868,188 @@ def test_a_cut_search_says_so_first(reason):
         "hypotheses, and the right one may be among them"
     )
     assert decision.reason == (why if not reason else f"{why}; {reason}")
+
+
+# lazy refinement: which pending hypotheses could change the verdict --------------------------
+PLAIN = {"pairs": 1.0, "rejected_share": 0.0, "residual": -2.0, "fitness": 1.0, "support": 0.0,
+         "conflict_share": 0.0}  # fmt: skip
+"""A model whose evidence (and ranking) is pairs + fitness - 2 residual: exact in binary."""
+
+
+def gap_model(min_gap: float = 1.0) -> ConfidenceModel:
+    """Evidence `PLAIN`; confidence the logistic of the gap to the strongest rival (4 without
+    one), claimable from a gap of `min_gap`."""
+    return ConfidenceModel(evidence_bias=0.0, evidence_weights=PLAIN, confidence_bias=0.0,
+                           confidence_evidence=0.0, confidence_rival=0.0, confidence_gap=1.0,
+                           min_confidence=sigmoid(min_gap))  # fmt: skip
+
+
+def plain(n_pairs: float, fitness: float = 1.0, residual: float = 0.0) -> dict[str, float]:
+    return {"pairs": n_pairs, "rejected_share": 0.0, "residual": residual, "fitness": fitness,
+            "support": 0.0, "conflict_share": 0.0}  # fmt: skip
+
+
+def place(features: dict | None, n: int = 4, start: int = 0, score: float = 1.0,
+          **fields) -> Hypothesis:  # fmt: skip
+    return Hypothesis(1, score, pairs(n, start), HERE, features=features, **fields)
+
+
+def refinements(hypotheses, pending, min_gap: float = 1.0, **config):
+    """`verdict_refinements` under `gap_model(min_gap)` (its `min_confidence` the config's),
+    as indices into `hypotheses`."""
+    model = gap_model(min_gap)
+    config = DecisionConfig(**({"min_confidence": model.min_confidence} | config))
+    found = verdict_refinements(hypotheses, pending, config, model)
+    return [next(i for i, h in enumerate(hypotheses) if h is f) for f in found]
+
+
+def test_no_hypotheses_need_no_refinement():
+    assert verdict_refinements([], [], DecisionConfig(), gap_model()) == []
+
+
+def test_a_pending_best_is_refined_first_and_alone():
+    best, other = place(plain(5.0), score=2.0), place(plain(5.0), start=10)
+    assert refinements([other, best], [other, best]) == [1]  # equal keys: the higher score
+    assert refinements([best, other], [other]) == [1]  # refined best: the rival's turn
+
+
+def test_without_features_the_best_by_score_decides_and_nothing_is_refined():
+    """Hypotheses without features (a baseline's) rank last; the best by score among them is
+    refined only when pending."""
+    low, high = place(None, score=1.0), place(None, start=10, score=2.0)
+    assert refinements([low, high], [low]) == []
+    assert refinements([low, high], [low, high]) == [1]
+    featured_ = place(plain(1.0, fitness=0.0), start=20)  # any features rank before none
+    assert refinements([high, featured_], [high, featured_]) == [1]
+
+
+@pytest.mark.parametrize(
+    ("n_pairs", "refined"),
+    [(2.0, True), (2.0 - 0.5e-6, True), (2.0 - 2e-6, False), (1.0, False)],
+)
+def test_a_pending_place_is_refined_when_at_its_best_it_could_outrank_the_best(n_pairs, refined):
+    """The best ranks 4 + 1 - 4 x its 0.25 m residual = 4; a pending place at its best (ICP
+    giving fitness 1, residual 0) ranks `n_pairs` + 1 + 1: from 4, less the ranking's rounding
+    (`_KEY_EPS`: 1e-6), it could outrank the best.  No claim is possible (`min_confidence`
+    1), so only the ranking decides."""
+    best = place(plain(4.0), residual=0.25)
+    pending = place(plain(n_pairs + 1.0, fitness=0.5, residual=0.5), start=10)
+    assert refinements([best, pending], [pending], min_gap=math.inf) == ([1] if refined else [])
+
+
+def test_a_pending_place_whose_best_case_ties_the_best_exactly_is_refined():
+    """The best's bar computed as `verdict_refinements` does (its ranking less 4 x its 0.25 m
+    residual and `_KEY_EPS`), and a pending place that reaches it exactly at its best."""
+    bar = 5.0 - (RESIDUAL_RANK * 0.25 + _KEY_EPS)
+    assert (bar - 1.0) + 1.0 == bar  # (the model's sum: pairs + fitness 1, exactly)
+    best = place(plain(4.0), residual=0.25)
+    tie = place(plain(bar - 1.0, fitness=0.0), start=10)
+    assert refinements([best, tie], [tie], min_gap=math.inf) == [1]
+
+
+@pytest.mark.parametrize(
+    ("first", "second", "best"),
+    [
+        ((3.25, None, 1.0), (3.0, None, 2.0), 0),  # the higher ranking logit
+        ((3.0000004, None, 1.0), (3.0, None, 2.0), 1),  # equal to 6 decimals: the score
+        ((3.0, 0.125, 2.0), (2.75, None, 1.0), 1),  # 4 logits per metre of residual
+    ],
+)
+def test_the_best_to_refine_is_the_one_rank_places_puts_first(first, second, best):
+    """(ranking logit, residual, score) of two pending places: the one refined first is the
+    best by `RANKINGS["evidence"]`: the ranking logit less 4 x the residual (None: 0), rounded
+    to 6 decimals, then the score."""
+    places = [place(plain(logit - 1.0), start=10 * i, score=score, residual=residual)
+              for i, (logit, residual, score) in enumerate([first, second])]  # fmt: skip
+    assert refinements(places, places, min_gap=math.inf) == [best]
+
+
+def test_the_bests_missing_objects_lower_the_bar_for_its_rivals():
+    """As above, a pending place ranking 1.5 now and 3.5 at best: short of the best's 4, but
+    not of 4 less the best's missing penalty (4 expected, 3 missing: 2 beyond the gone share),
+    though the best still ranks first (at 2)."""
+    pending = place(plain(2.5, fitness=0.0, residual=0.5), start=10)
+    clean = place(plain(4.0), residual=0.25)
+    missing = place(plain(4.0), residual=0.25, n_missing=3, n_expected=4)
+    assert refinements([clean, pending], [pending], min_gap=math.inf) == []
+    assert refinements([missing, pending], [pending], min_gap=math.inf) == [1]
+
+
+@pytest.mark.parametrize(("rival_pairs", "refined"), [(1.0, False), (1.0 + 2**-20, True)])
+def test_a_pending_rival_is_refined_when_at_its_best_it_could_deny_a_claim(rival_pairs, refined):
+    """The best's evidence is 3 (4 pairs, fitness 0, residual 0) and a claim needs a gap of
+    1: a pending rival of three pairs that reaches 2 after ICP leaves the claim standing; a
+    hair more could deny it.  It cannot outrank the best, nor contest it (fewer pairs)."""
+    best = place(plain(3.0, fitness=0.0))
+    rival = Hypothesis(2, 1.0, pairs(3, 10), ELSEWHERE, features=plain(rival_pairs, 0.5, 1.0))
+    assert refinements([best, rival], [rival]) == ([1] if refined else [])
+
+
+def test_a_refined_rival_that_denies_the_claim_makes_every_pending_rival_count():
+    """A refined rival at evidence 2.5 already denies the claim (gap 0.5) while the best
+    alone could claim: the verdict hangs on the rivals, and a pending one is refined however
+    weak; a pending variant of the best (sharing its pairs) is no rival and is not, nor is a
+    place without features (a baseline's).  With four of four expected objects missing (3
+    beyond the gone share) the refined rival's evidence is -0.5: the claim stands."""
+    best = place(plain(3.0, fitness=0.0))
+    strong = Hypothesis(2, 1.0, pairs(3, 10), ELSEWHERE, features=plain(1.5, 1.0))
+    weak = Hypothesis(3, 1.0, pairs(3, 20), ELSEWHERE, features=plain(-5.0, 0.0, 0.0))
+    variant = Hypothesis(4, 1.0, shared(best.pairs, 3, 3), ELSEWHERE, features=plain(-5.0, 0.0))
+    baseline = Hypothesis(5, 9.0, pairs(3, 30), ELSEWHERE)
+    hypotheses = [best, strong, weak, variant, baseline]
+    assert refinements(hypotheses, [weak, variant, baseline]) == [2]
+    strong.n_missing, strong.n_expected = 4, 4
+    assert refinements(hypotheses, [weak, variant, baseline]) == []
+
+
+def test_the_bests_missing_objects_count_against_its_claim():
+    """The best's evidence 3, less 1 for its missing objects (two of four expected): 2.  A
+    pending rival reaching 1.5 would leave a gap of 0.5, short of the 1 a claim needs: it is
+    refined; without the missing objects the gap would be 1.5 and it would not be."""
+    rival = Hypothesis(2, 1.0, pairs(3, 10), ELSEWHERE, features=plain(0.5, 0.5, 1.0))
+    missing = place(plain(3.0, fitness=0.0), n_missing=2, n_expected=4)
+    assert refinements([missing, rival], [rival]) == [1]
+    assert refinements([place(plain(3.0, fitness=0.0)), rival], [rival]) == []
+
+
+def test_a_best_that_cannot_be_claimed_either_way_refines_no_rival():
+    """A claim needs a gap of 5, more than the 4 a lone best counts: no rival changes that,
+    and no other place contests a claim that cannot be made, however large."""
+    best = place(plain(3.0, fitness=0.0))
+    rival = Hypothesis(2, 1.0, pairs(3, 10), ELSEWHERE, features=plain(1.5, 1.0))
+    large = Hypothesis(3, 1.0, pairs(4, 20), ELSEWHERE, features=plain(-5.0, 0.0))
+    assert refinements([best, rival, large], [rival, large], min_gap=5.0) == []
+
+
+def test_a_best_exactly_at_the_operating_point_can_be_claimed():
+    """A claim needs a gap of 4, the most a lone best counts: a best alone is claimable
+    exactly at `min_confidence`; a weak pending rival (gap still 4) that is smaller cannot
+    deny or contest it, and is not refined; a pending place as large as the best contests
+    the claim, and both are."""
+    best = place(plain(3.0, fitness=0.0))
+    weak = Hypothesis(2, 1.0, pairs(3, 10), ELSEWHERE, features=plain(-5.0, 0.0))
+    assert refinements([best, weak], [weak], min_gap=4.0) == []
+    large = Hypothesis(3, 1.0, pairs(4, 20), ELSEWHERE, features=plain(-5.0, 0.0))
+    assert refinements([best, weak, large], [weak, large], min_gap=4.0) == [1, 2]
+
+
+@pytest.mark.parametrize(("n", "refined"), [(4, True), (3, False)])
+def test_a_pending_place_with_as_many_pairs_as_a_claimable_best_is_refined(n, refined):
+    """A claimable best of four pairs: a pending other place as large might win the
+    dominance rule (its residual is not final), a smaller one cannot."""
+    best = place(plain(3.0, fitness=0.0))
+    other = Hypothesis(2, 1.0, pairs(n, 10), ELSEWHERE, features=plain(-5.0, 0.0))
+    assert refinements([best, other], [other]) == ([1] if refined else [])
+
+
+@pytest.mark.parametrize(("residual", "contested"), [(0.5, True), (0.5 + 2**-20, False)])
+def test_a_refined_place_that_the_best_does_not_dominate_contests_the_claim(residual, contested):
+    """A refined other place as large as the claimable best (residuals 0.25 and `residual`):
+    not clearly worse by the residual rule (more than 1.5 x 0.25 + 0.125 = 0.5), it contests
+    the claim, and every pending other place is refined, even a small one."""
+    best = place(plain(3.0, fitness=0.0), residual=0.25)
+    other = Hypothesis(2, 1.0, pairs(4, 10), ELSEWHERE, features=plain(-5.0, 0.0),
+                       residual=residual)  # fmt: skip
+    small = Hypothesis(3, 1.0, pairs(2, 20), ELSEWHERE, features=plain(-5.0, 0.0))
+    found = refinements([best, other, small], [small], residual_floor=0.125)
+    assert found == ([2] if contested else [])

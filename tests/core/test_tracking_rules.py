@@ -99,6 +99,41 @@ def test_one_map_object_supports_one_object_of_an_update_the_nearest(second, par
     assert judgement == ({} if verdict is None else {"b": verdict})
 
 
+@pytest.mark.parametrize(("x", "found"), [(0.5, None), (0.51, ("changed", 1))])
+def test_check_a_part_lies_within_the_allowance_of_the_chair_another_object_took(x, found):
+    """Object "a" takes chair 0; "b" lies well within half the chair's footprint of it:
+    exactly at chair 0's allowance (0.5 m) it is a part of "a" and says nothing, just beyond
+    it is judged on the free chair 1 (moved)."""
+    chairs = np.array([[0.0, 0, 0], [2.0, 0, 0], [20.0, 0, 0]])
+    objects = [at(0.25, i="a"), at(x, i="b")]
+    candidates = {"a": np.array([0, 1]), "b": np.array([0, 1])}
+    verdict = check(np.eye(4), objects, candidates, chairs, ALLOWANCE, 3.0, part_m=np.full(3, 0.5))
+    assert verdict.supported == [(0, "a")] and verdict.contradicting == []
+    assert verdict.changed == ([] if found is None else [(1, "b")])
+
+
+@pytest.mark.parametrize(("part_m", "found"), [(0.25, ("changed", 1)), (0.2501, None)])
+def test_check_a_part_lies_closer_than_part_m_to_the_object_that_took_the_chair(part_m, found):
+    """Object "b" lies 0.25 m from "a", which took chair 0: exactly `part_m` away it is another
+    chair (moved from chair 1), just within it a part of "a" (a detector's split)."""
+    chairs = np.array([[0.0, 0, 0], [2.0, 0, 0], [20.0, 0, 0]])
+    objects = [at(0.125, i="a"), at(0.375, i="b")]
+    candidates = {"a": np.array([0, 1]), "b": np.array([0, 1])}
+    parts = np.full(3, part_m)
+    verdict = check(np.eye(4), objects, candidates, chairs, ALLOWANCE, 3.0, part_m=parts)
+    assert verdict.supported == [(0, "a")] and verdict.contradicting == []
+    assert verdict.changed == ([] if found is None else [(1, "b")])
+
+
+@pytest.mark.parametrize("order", [[0, 1], [1, 0]])
+def test_a_changed_object_is_changed_from_its_nearest_candidate_whatever_their_order(order):
+    """An object 0.8 m from chair 0 and 1.2 m from chair 1 (both beyond the allowance) moved
+    from chair 0, however its candidates are listed."""
+    chairs = np.array([[0.0, 0, 0], [2.0, 0, 0], [20.0, 0, 0]])
+    verdict = check(np.eye(4), [at(0.8)], {"l": np.array(order)}, chairs, ALLOWANCE, 3.0)
+    assert verdict.changed == [(0, "l")] and verdict.supported == []
+
+
 def test_an_object_whose_only_chair_another_took_contradicts_beyond_the_move_distance():
     objects = [at(0.1, i="a"), at(0.4, i="b")]
     candidates = {"a": np.array([0]), "b": np.array([0])}
@@ -284,6 +319,21 @@ def test_a_footprint_is_the_widest_extent_across_up_of_the_box_else_of_the_point
     assert footprints(lying) == pytest.approx([np.hypot(0.8, 2.0)])
 
 
+def test_each_box_has_its_own_footprint_and_a_tilted_box_its_widest_extent_across_up():
+    """Two upright boxes of different sizes keep their own footprints; a unit cube tilted by
+    45 degrees about x spans 1 m along x and its face diagonal (1.41 m) along y: its footprint
+    is the diagonal of those, the square root of 3, though most of its corners lie nearer."""
+    c, s = np.cos(np.pi / 4), np.sin(np.pi / 4)
+    tilt = np.array([[1.0, 0, 0], [0, c, -s], [0, s, c]])
+    objects = [
+        SemanticObject("big", "bed", [0, 0, 0], size=[0.6, 0.8, 2.0]),
+        SemanticObject("small", "bed", [0, 0, 0], size=[0.3, 0.4, 1.0]),
+        SemanticObject("tilted", "box", [0, 0, 0], size=[1.0, 1.0, 1.0], rotation=tilt),
+    ]
+    found = footprints(ObjectMap(objects, up=[0, 0, 1]))
+    assert found == pytest.approx([1.0, 0.5, math.sqrt(3)])
+
+
 def test_a_chair_seen_at_its_place_before_is_no_source_but_may_be_seen_there_again():
     assert judged([at(1.0)], {}, settled=(0,)) == {"l": ("changed", 1)}
     assert judged([at(0.51)], {}, settled=(0,)) == {"l": ("changed", 1)}
@@ -440,6 +490,16 @@ def test_new_objects_are_unusual_just_below_the_share_where_the_tail_is_unusual(
     assert not rate(border * (1 + 1e-6)).unusual(against, judged)
 
 
+@pytest.mark.parametrize(("against", "judged", "tail"), [(2, 2, 0.25), (3, 3, 0.125), (2, 3, 0.5)])
+def test_a_tail_exactly_at_the_level_is_not_unusual(against, judged, tail):
+    """At a run share of one half (15 of 20 judged, with the prior's 5 of 20) the binomial
+    tails are exact in binary: a tail equal to the level is not unusual, one just below is."""
+    rate = AgainstRate(15, 20)
+    assert rate.share == 0.5
+    assert not rate.unusual(against, judged, level=tail)
+    assert rate.unusual(against, judged, level=tail * (1 + 1e-9))
+
+
 def at_share(share: float) -> AgainstRate:
     """A run that judged 1000 objects at `share` against its claims (the prior included)."""
     return AgainstRate(share * (1000 + PRIOR_WEIGHT) - PRIOR_WEIGHT * PRIOR_AGAINST, 1000)
@@ -572,6 +632,30 @@ def test_each_kind_of_judged_object_moves_the_confidence_by_its_logit():
     assert all(logits[k] < 0 for k in ("changed", "contradicting", "missing"))
 
 
+def test_the_claims_confidence_bottoms_out_at_a_logit_of_minus_fifty():
+    """Evidence against far beyond any real run's (a logit of -80, then -8000) neither
+    overflows nor goes below the confidence of a logit of -50."""
+    floor = 1 / (1 + math.exp(50.0))
+    claim = track(confidence=0.5)  # logit 0
+    claim.contradicted(Verdict([], [], [], 0, 100.0))  # 100 missing: -80
+    assert math.isclose(claim.current_confidence(), floor, rel_tol=1e-9)
+    claim.contradicted(Verdict([], [], [], 0, 10_000.0))
+    assert math.isclose(claim.current_confidence(), floor, rel_tol=1e-9)
+    near = track(confidence=0.5)
+    near.contradicted(Verdict([], [], [], 0, 61.25))  # -49: above the floor
+    assert math.isclose(near.current_confidence(), 1 / (1 + math.exp(49.0)), rel_tol=1e-9)
+
+
+def test_a_restored_tracks_pose_is_float_whatever_the_numbers_it_was_written_with():
+    """A state written by hand or by another tool may hold the pose as integers (JSON's 1 for
+    1.0): the restored pose is a float array all the same (it warm-starts the refit)."""
+    ids = [f"g{i}" for i in range(20)]
+    state = json.loads(json.dumps(track().state(ids)))
+    state["pose"] = [[int(v) for v in row] for row in state["pose"]]
+    pose = Track.restored(state, ids.index, TrackingConfig()).pose
+    assert pose.dtype == np.float64 and np.array_equal(pose, np.eye(4))
+
+
 def test_a_track_round_trips_through_its_state_and_reads_an_old_one():
     ids = [f"g{i}" for i in range(20)]
     claim = track()
@@ -582,13 +666,13 @@ def test_a_track_round_trips_through_its_state_and_reads_an_old_one():
     again = Track.restored(state, ids.index, TrackingConfig())
     assert again.state(ids) == state and again.counts() == claim.counts()
     old = {**state, "verdicts": [v[:2] for v in state["verdicts"]]}
-    for key in ("judged", "missing", "recent"):
+    for key in ("judged", "missing", "recent", "newest"):
         old.pop(key)
     restored = Track.restored(old, ids.index, TrackingConfig())
-    assert restored.counts()["supported"] == 0
+    assert restored.counts()["supported"] == 0 and not restored.doubted()
     upgraded = restored.state(ids)  # an old verdict: no change, no repeat, nothing missing
     assert upgraded["verdicts"] == [[*v, [], 0, 0.0] for v in old["verdicts"]]
-    assert upgraded["missing"] == 0.0 and upgraded["recent"] == []
+    assert upgraded["missing"] == 0.0 and upgraded["recent"] == [] and upgraded["newest"] == []
 
 
 def test_a_restored_track_shares_the_runs_against_rate():

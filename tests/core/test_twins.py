@@ -15,7 +15,9 @@ from semloc.twins import (
     TwinIndex,
     _anchor_pairs,
     _motions,
+    _placed,
     copy_holds,
+    copy_leads,
     label_codes,
     twin_lead,
     twin_pairs,
@@ -175,6 +177,21 @@ def test_twin_lead_takes_the_best_copy():
     assert twin_lead([]) == (0, 0, 0) and twin_lead([None]) == (0, 0, 0)
 
 
+def test_twin_lead_takes_the_best_copy_wherever_it_is_listed():
+    assert twin_lead([[["+local a", "+local b"], ["+local a"]]]) == (2, 1, 0)
+    assert twin_lead([[["+local a"], ["+local a", "+local b"], []]]) == (2, 1, 1)
+
+
+def test_copy_leads_lists_each_copys_lead_and_none_without_copies():
+    """Per copy of the newest update: its lead and over how many updates; a copy the place
+    leads, or one nothing tells apart, leads by nothing over no update."""
+    updates = [[["+local a"], ["-map x"], []], [["+local b"], ["+map y"], []]]
+    assert copy_leads(updates) == [(2, 2), (1, 1), (0, 0)]
+    assert copy_leads([[["-map x"]]]) == [(0, 0)]
+    assert copy_leads([]) == [] and copy_leads([None]) == []
+    assert copy_leads([[["+local a"]], None]) == []  # the newest update weighs no copy
+
+
 @pytest.mark.parametrize(("kinds", "x", "held"), [([0], 0.5, True), ([0], 0.51, False),
                                                   ([1], 0.0, False), ([1, 0], 0.0, True)])  # fmt: skip
 def test_copy_holds_a_map_object_of_the_kinds_within_its_allowance(kinds, x, held):
@@ -186,6 +203,17 @@ def test_copy_holds_a_map_object_of_the_kinds_within_its_allowance(kinds, x, hel
     at = np.array([x, 0.0, 0.0])
     found = copy_holds(S, at, np.array(kinds), positions, codes, allowance, cKDTree(positions))
     assert found is held
+
+
+def test_copy_holds_weighs_each_map_object_by_its_own_gap():
+    """Two chairs 0.4 m either side of where the copy puts the point, each within its own
+    allowance (0.5 m): the copy holds a chair there."""
+    positions = np.array([[0.0, 0, 0], [9.6, 0, 0], [10.4, 0, 0]])
+    codes, allowance = np.array([0, 0, 0]), np.full(3, 0.5)
+    S = np.eye(4)
+    S[0, 3] = 10.0
+    tree = cKDTree(positions)
+    assert copy_holds(S, np.zeros(3), np.array([0]), positions, codes, allowance, tree)
 
 
 def test_twin_pairs_take_the_nearest_object_of_the_label_each_once():
@@ -228,6 +256,24 @@ def test_anchor_pairs_take_the_rarest_labels_each_with_its_rarest_farthest_partn
     assert _anchor_pairs(positions, codes, np.arange(5), UP, 5) == [(0, 1), (1, 4), (2, 3)]
 
 
+def test_an_anchor_without_a_partner_is_passed_over_and_the_next_ones_are_tried():
+    """Members 0 (label A) and 1 (B) are the rarest, 2 and 3 (C) commoner.  Member 0 pairs
+    with 2, the only one at least `SPAN` across from it; member 1 then finds no unused partner
+    but 3, right above it (nothing across); member 2 still pairs, with 1."""
+    place = [[0.0, 0, 0], [1.0, 0, 0], [5.0, 0, 0], [1.0, 0, 3]]
+    others = [[100.0, 0, 0], [101.0, 0, 0], [105.0, 0, 0]]  # one more A, B and C elsewhere
+    positions = np.array(place + others)
+    codes = np.array([0, 1, 2, 2, 0, 1, 2])
+    assert _anchor_pairs(positions, codes, np.arange(4), UP, 3) == [(0, 2), (2, 1)]
+
+
+def test_no_motion_places_nothing():
+    positions = np.array([[0.0, 0, 0], [1.0, 0, 0], [2.0, 0, 0]])
+    placed = _placed(np.zeros((0, 4, 4)), positions, np.zeros(3, dtype=np.int64),
+                     np.arange(3), 0.3, cKDTree(positions))  # fmt: skip
+    assert placed.shape == (0,) and placed.dtype.kind == "i"
+
+
 def test_a_copy_found_by_one_anchor_pair_is_kept_whatever_the_next_pairs_find():
     """The place above, its copy 100 m off without member 3: the pairs (0, 1) and (1, 4) find
     the copy, the last pair (2, 3) only the place itself."""
@@ -238,6 +284,49 @@ def test_a_copy_found_by_one_anchor_pair_is_kept_whatever_the_next_pairs_find():
     found = twins(positions, codes, UP, np.arange(5), 0.3)
     assert len(found) == 1
     np.testing.assert_allclose(found[0], yaw_pose(0.0, [100.0, 0.0, 0.0]), atol=1e-9)
+
+
+@pytest.mark.parametrize(("anchors", "found"), [(2, 0), (3, 1)])
+def test_only_the_given_number_of_anchor_pairs_is_tried(anchors, found):
+    """The place above; its copy 100 m off holds every label, but its table (member 1) stands
+    1.5 m off its place: the pairs (0, 1) and (1, 4) do not match there, the third pair
+    (2, 3) does.  Two anchor pairs miss the copy, three find it."""
+    place = [[0.0, 0, 0], [3.0, 0, 0], [1.0, 0, 0], [1.8, 0, 5], [-1.0, 0, 0]]
+    copy = [[100 + x, y + (1.5 if k == 1 else 0.0), z] for k, (x, y, z) in enumerate(place)]
+    positions = np.array(place + copy)
+    codes = np.array([0, 1, 2, 2, 2] * 2)
+    assert len(twins(positions, codes, UP, np.arange(5), 0.3, anchors=anchors)) == found
+
+
+def test_anchors_of_equally_rare_labels_follow_the_members_order():
+    """Sixteen members of sixteen labels, the odd ones held twice by the map, the even ones
+    three times: the anchors are the first odd members, in the members' order (a stable sort:
+    the same anchors, and the same twins, on every machine)."""
+    grid = np.array([[1.5 * (i % 4), 1.5 * (i // 4), 0.0] for i in range(16)])
+    extra = [i for i in range(16) for _ in range(1 if i % 2 else 2)]
+    positions = np.vstack([grid, grid[extra] + [100.0, 0.0, 0.0]])
+    codes = np.concatenate([np.arange(16), extra])
+    pairs = _anchor_pairs(positions, codes, np.arange(16), UP, 3)
+    assert [a for a, _ in pairs] == [1, 3, 5]
+
+
+class _CountingTree(cKDTree):
+    """A k-d tree that counts its nearest-neighbour queries."""
+
+    queries = 0
+
+    def query(self, *args, **kwargs):
+        self.queries += 1
+        return super().query(*args, **kwargs)
+
+
+def test_the_twins_search_queries_the_tree_it_is_given():
+    """A caller's tree of the map's positions is used, not built again (the map's tree is
+    built once per map)."""
+    m = building([yaw_pose(np.pi / 2, [30.0, 5.0, 0.0])])
+    tree = _CountingTree(m.positions)
+    found = twins(m.positions, label_codes(m.labels), UP, np.arange(len(ROOM)), 0.3, tree=tree)
+    assert len(found) == 1 and tree.queries > 0
 
 
 def _turned_building(up: np.ndarray, S: np.ndarray) -> tuple[ObjectMap, np.ndarray]:
