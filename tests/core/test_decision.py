@@ -871,8 +871,8 @@ def test_a_cut_search_says_so_first(reason):
 
 
 # lazy refinement: which pending hypotheses could change the verdict --------------------------
-PLAIN = {"pairs": 1.0, "rejected_share": 0.0, "residual": -2.0, "fitness": 1.0, "support": 0.0,
-         "conflict_share": 0.0}  # fmt: skip
+PLAIN = {"n_pairs": 1.0, "rejected_share": 0.0, "residual": -2.0, "fitness": 1.0,
+         "n_support": 0.0, "conflict_share": 0.0}  # fmt: skip
 """A model whose evidence (and ranking) is pairs + fitness - 2 residual: exact in binary."""
 
 
@@ -885,8 +885,8 @@ def gap_model(min_gap: float = 1.0) -> ConfidenceModel:
 
 
 def plain(n_pairs: float, fitness: float = 1.0, residual: float = 0.0) -> dict[str, float]:
-    return {"pairs": n_pairs, "rejected_share": 0.0, "residual": residual, "fitness": fitness,
-            "support": 0.0, "conflict_share": 0.0}  # fmt: skip
+    return {"n_pairs": n_pairs, "rejected_share": 0.0, "residual": residual, "fitness": fitness,
+            "n_support": 0.0, "conflict_share": 0.0}  # fmt: skip
 
 
 def place(features: dict | None, n: int = 4, start: int = 0, score: float = 1.0,
