@@ -95,11 +95,9 @@ class Search:
             encoded_ids=global_map.encoded_ids,
             sweep_order=global_map.sweep_order,
         )
-        self.local: dict[str, SemanticObject] = {}
+        self.local: dict[str, SemanticObject] = {}  # in the order of their local indices
         self.local_index: dict[str, int] = {}
-        self.candidates_of: dict[int, np.ndarray] = {}  # local index -> global indices
         self.gated_of: dict[int, int] = {}  # local index -> candidates kept by the prior
-        self.similarity_of: dict[int, np.ndarray] = {}  # local index -> their similarity
         self.support = MapSupport(
             [], global_map.positions, config.verification, axis=global_map.sweep_order.axis
         )
@@ -142,8 +140,7 @@ class Search:
                 kept = self.poses.items()
                 self.poses = {k: v for k, v in kept if all(l != index for _, l in k[1])}
             self.local[obj.id] = obj
-            _, found, self.similarity_of[index] = self.sightings.found[obj.id]
-            self.candidates_of[index] = found
+            found = self.sightings.found[obj.id][1]
             self.support.assign(index, found)
             detections[index] = self.gated(obj, found)
             self.gated_of[index] = len(detections[index])
@@ -160,6 +157,10 @@ class Search:
                 list(self.local),
                 detections,
             )
+
+    def candidates(self, local_index: int) -> np.ndarray:
+        """The map objects (ascending) the local object of `local_index` may be."""
+        return self.sightings.found[list(self.local)[local_index]][1]
 
     def gated(self, obj: SemanticObject, found: np.ndarray) -> np.ndarray:
         """The candidates the clustering gets: those the prior lets `obj` be, in the places
@@ -212,12 +213,12 @@ class Search:
 
     def why_no_sets(self) -> str:
         """Why no association set has 2 pairs: too few objects, or too few with candidates."""
-        matched = sum(len(c) > 0 for c in self.candidates_of.values())
+        found = self.sightings.found
+        matched = sum(len(found[i][1]) > 0 for i in self.local)
         if len(self.context.map) == 0:
             return "the global map has no objects"
         if len(self.local) < 2:
             return f"too few local objects: {len(self.local)} seen, 2 needed"
-        found = self.sightings.found
         waiting = [  # retrieval left them nothing, though the prior (if any) left some
             i for i, k in self.retrieved.items()
             if len(k) == 0 and len(self.prior_gated(*found[i][:2]))
@@ -302,7 +303,7 @@ class Search:
                 listed.append(place)  # (weighed already)
                 continue
             moved = twin_pairs(S, pairs, positions, context.codes, tolerance, context.tree)
-            moved = [(g, l) for g, l in moved if g in self.candidates_of[l]]
+            moved = [(g, l) for g, l in moved if g in self.candidates(l)]
             if len(moved) >= MIN_TWIN_PAIRS:
                 sets.append(moved)
         if not sets:
@@ -451,12 +452,12 @@ class Search:
 
     def _semantic_weight(self, pairs: list[tuple[int, int]]) -> float:
         """The summed evidence weight (`semantics.pair_weight`) of (global, local) index pairs."""
-        total = 0.0
+        total, ids = 0.0, list(self.local)
         for g, l in pairs:
-            candidates = self.candidates_of.get(l, np.zeros(0, dtype=int))
+            _, candidates, similarity = self.sightings.found[ids[l]]
             at = int(np.searchsorted(candidates, g))
             found = at < len(candidates) and candidates[at] == g
-            total += float(pair_weight(self.similarity_of[l][at])) if found else 1.0
+            total += float(pair_weight(similarity[at])) if found else 1.0
         return total
 
 

@@ -456,7 +456,7 @@ def test_any_sets_verified_together_as_each_alone():
             chosen = [0, 1] if size == 2 and rng.random() < 0.3 else rng.choice(7, size, False)
             pairs, used = [], set()
             for l in chosen:
-                options = [g for g in localizer._search.candidates_of[int(l)] if g not in used]
+                options = [g for g in localizer._search.candidates(int(l)) if g not in used]
                 g = int(true[l]) if rng.random() < 0.7 and true[l] not in used else None
                 g = g if g is not None else (int(rng.choice(options)) if options else None)
                 if g is not None:
