@@ -1127,3 +1127,24 @@ def test_a_restored_watch_looks_its_copies_up_through_the_tracked_places_anchor_
     watch.restore({"members": [f"a{i}" for i in range(10)], "fits": []}, 4)
     (found,) = watch.copies[1]
     np.testing.assert_allclose(found[:3, 3], [30.0, 0, 0], atol=0.1)
+
+
+def test_a_track_whose_refit_misses_its_pairs_by_exactly_the_tolerance_is_followed():
+    """The refit's residual over its newest pairs may reach `track_tolerance`; just past it
+    the pose no longer fits them and the claim is not renewed."""
+    building = ObjectMap(room(), up=[0, 0, 1])
+    localizer = claimed(building)
+    track, sightings = localizer._track, localizer._sightings
+    rng = np.random.default_rng(7)  # the pairs' objects a little off: a residual to meet
+    noisy = [o.replace(position=o.position + [*rng.normal(0, 0.05, 2), 0])
+             for o in local(room())]  # fmt: skip
+    sightings.register(noisy)
+    pose = track.pose.copy()
+    residual = track.follow(sightings, 3, np.array([0, 0, 1.0]), False).residual
+    assert residual > 0.01
+    for tolerance, followed in [(residual, True), (np.nextafter(residual, 0), False)]:
+        track.pose, track.config = (
+            pose,
+            track.config.model_copy(update={"track_tolerance": tolerance}),
+        )
+        assert (track.follow(sightings, 3, np.array([0, 0, 1.0]), False) is not None) == followed
