@@ -15,8 +15,8 @@ from scipy.stats import binom
 
 from semloc import Coverage, Localizer, ObjectMap, Prior, SemanticObject
 from semloc.changes import RunChanges
-from semloc.copy_watch import TWIN_DOUBTED, TWIN_UPDATES
-from semloc.decision import RIVAL_LOGIT_GAP, missing_penalty, prior_first
+from semloc.copy_watch import TWIN_DOUBTED, TWIN_UPDATES, CopyWatch
+from semloc.decision import PLACE_APART, RIVAL_LOGIT_GAP, missing_penalty, prior_first
 from semloc.results import Hypothesis
 from semloc.search import NEWEST_CONTRADICT, STALE
 from semloc.tracking import (
@@ -39,6 +39,7 @@ from semloc.tracking import (
     one_to_one,
     recent_contradiction,
 )
+from semloc.twins import ANCHORS
 
 GLOBALS = np.array([[0.0, 0, 0], [10.0, 0, 0], [20.0, 0, 0]])
 ALLOWANCE = np.array([0.5, 0.5, 0.5])
@@ -952,6 +953,7 @@ def test_a_copy_leading_by_one_object_makes_the_answer_ambiguous_with_the_copy_l
     place, copy = doubted.hypotheses
     assert {g[0] for g, _ in place.pairs} == {"a"} and place.confidence <= 0.5
     assert copy.method == "copy" and copy.pairs and {g[0] for g, _ in copy.pairs} == {"b"}
+    assert copy.rank == 2 and copy.score == len(copy.pairs)  # the place's rival, by its pairs
     assert {l for _, l in copy.pairs} <= {l for _, l in place.pairs}
     np.testing.assert_allclose(copy.pose[:3, 3] - place.pose[:3, 3], [30.0, 0.0, 0.0], atol=0.2)
 
@@ -1082,3 +1084,67 @@ def test_a_restored_localizer_counts_a_copys_objects_as_the_uninterrupted_one():
     assert other.tracking
     ended = [one.update(there[1::3]), other.update(there[1::3])]
     assert [r.reason for r in ended] == [CONTRADICTED] * 2 and not one.tracking
+
+
+def motion(x: float, yaw: float = 0.0) -> np.ndarray:
+    """A map motion: a turn by `yaw` about up, then `x` m along x."""
+    S = np.eye(4)
+    S[:2, :2] = [[math.cos(yaw), -math.sin(yaw)], [math.sin(yaw), math.cos(yaw)]]
+    S[0, 3] = x
+    return S
+
+
+def test_kept_evidence_follows_a_copy_that_puts_the_robot_less_than_place_apart_away():
+    """Walked on, the copies are looked up again: a new copy is the old one when it puts the
+    robot less than `PLACE_APART` from where the old one did (it keeps its evidence); exactly
+    that far, it is another copy and starts with none (an update left with none is dropped)."""
+    at = np.array([1.0, 2.0, 0.0])
+    old = motion(30.0, yaw=0.5)
+    where = old[:3, :3] @ at + old[:3, 3]
+    near, far = motion(0.0), motion(0.0)
+    near[:3, 3] = where - at - [PLACE_APART - 1e-6, 0, 0]  # puts the robot just inside
+    far[:3, 3] = where - at + [0, PLACE_APART, 0]  # exactly PLACE_APART away
+    watch = CopyWatch(None, 12)  # (carrying the evidence reads no map)
+    watch.fits.extend([(3, [["+local k1"]]), (5, [["-map a2"]])])
+    watch._carry_fits([old], [far, near], at)
+    assert list(watch.fits) == [(3, [[], ["+local k1"]]), (5, [[], ["-map a2"]])]
+    watch._carry_fits([far, near], [far], at)
+    assert list(watch.fits) == []
+
+
+def test_a_restored_watch_looks_its_copies_up_through_the_tracked_places_anchor_pairs():
+    """A copy lacking the objects of the first `ANCHORS` anchor pairs (their labels held once
+    more, far off) is found only through more pairs: a restored watch finds it as the watch
+    of a tracked place does (`TRACK_ANCHORS`)."""
+    copy = [o for o in room(offset=30.0, prefix="b") if int(o.id[1:]) >= 3]
+    far_off = [SemanticObject(f"c{i}", LABELS[i], [100.0 + 10 * i, 0, 0.5], size=[0.5, 0.5, 1])
+               for i in range(3)]  # fmt: skip
+    building = ObjectMap([*room(), *copy, *far_off], up=[0, 0, 1])
+    context = Localizer(building, local_up=[0, 0, 1])._context
+    members = np.array([building.index_of(f"a{i}") for i in range(10)])
+    assert context.copies_of(members, ANCHORS) == []  # (the premise)
+    watch = CopyWatch(context, 12)
+    watch.restore({"members": [f"a{i}" for i in range(10)], "fits": []}, 4)
+    (found,) = watch.copies[1]
+    np.testing.assert_allclose(found[:3, 3], [30.0, 0, 0], atol=0.1)
+
+
+def test_a_track_whose_refit_misses_its_pairs_by_exactly_the_tolerance_is_followed():
+    """The refit's residual over its newest pairs may reach `track_tolerance`; just past it
+    the pose no longer fits them and the claim is not renewed."""
+    building = ObjectMap(room(), up=[0, 0, 1])
+    localizer = claimed(building)
+    track, sightings = localizer._track, localizer._sightings
+    rng = np.random.default_rng(7)  # the pairs' objects a little off: a residual to meet
+    noisy = [o.replace(position=o.position + [*rng.normal(0, 0.05, 2), 0])
+             for o in local(room())]  # fmt: skip
+    sightings.register(noisy)
+    pose = track.pose.copy()
+    residual = track.follow(sightings, 3, np.array([0, 0, 1.0]), False).residual
+    assert residual > 0.01
+    for tolerance, followed in [(residual, True), (np.nextafter(residual, 0), False)]:
+        track.pose, track.config = (
+            pose,
+            track.config.model_copy(update={"track_tolerance": tolerance}),
+        )
+        assert (track.follow(sightings, 3, np.array([0, 0, 1.0]), False) is not None) == followed
