@@ -127,7 +127,7 @@ class MapContext:
     @cached_property
     def twin_index(self) -> TwinIndex:
         """Per label, the map objects of it and their KD-tree (twins)."""
-        return shared(self.map, ("labelled",), lambda: TwinIndex(self.map.positions, self.codes))
+        return shared(self.map, ("twin_index",), lambda: TwinIndex(self.map.positions, self.codes))
 
     def _array(self, key: tuple, make: Callable[[], np.ndarray]) -> np.ndarray:
         """A shared array (`shared`), read-only: one Localizer must not change another's."""
@@ -157,6 +157,6 @@ class MapContext:
             self._twin_motions[key] = [] if up is None else twins(
                 self.map.positions, self.codes, up, members,
                 self.config.verification.inlier_tolerance, tree=self.tree, apart=PLACE_APART,
-                most=TWINS_WEIGHED, anchors=anchors, labelled=self.twin_index,
+                most=TWINS_WEIGHED, anchors=anchors, index=self.twin_index,
             )  # fmt: skip
         return self._twin_motions[key]

@@ -58,22 +58,22 @@ def twins(
     anchors: int = ANCHORS,
     apart: float = 4.0,
     most: int = 8,
-    labelled: TwinIndex | None = None,
+    index: TwinIndex | None = None,
 ) -> list[np.ndarray]:
     """The 4x4 motions S (map to map) that put the map objects `members` on copies of
     themselves elsewhere in the map, most objects placed first (see the module docstring).
-    `tree` (of `positions`) and `labelled` (`TwinIndex` of them) may be given, built once per
+    `tree` (of `positions`) and `index` (their `TwinIndex`) may be given, built once per
     map."""
     members = np.unique(np.asarray(members, dtype=np.int64))
     if len(members) < MIN_TWIN_PAIRS:
         return []
     tree = cKDTree(positions) if tree is None else tree
-    labelled = TwinIndex(positions, codes) if labelled is None else labelled
+    index = TwinIndex(positions, codes) if index is None else index
     up = np.asarray(up, dtype=float) / np.linalg.norm(up)
     need = max(MIN_TWIN_PAIRS, int(np.ceil(min_share * len(members))))
     counts, motions = [np.zeros(0, dtype=np.int64)], [np.zeros((0, 4, 4))]
     for a, b in _anchor_pairs(positions, codes, members, up, anchors):
-        found = _motions(positions, codes, up, a, b, tolerance, labelled)
+        found = _motions(positions, codes, up, a, b, tolerance, index)
         placed = _placed(found, positions, codes, members, tolerance, tree)
         counts.append(placed[placed >= need])
         motions.append(found[placed >= need])
@@ -136,13 +136,13 @@ SPAN = 2.0
 
 def _motions(
     positions: np.ndarray, codes: np.ndarray, up: np.ndarray, a: int, b: int,
-    tolerance: float, labelled: TwinIndex,
+    tolerance: float, index: TwinIndex,
 ) -> np.ndarray:  # fmt: skip
     """Every yaw-and-translation motion (M, 4, 4) taking (a, b) onto a map pair of the same
     labels at the same distance (within `tolerance`) and height difference."""
     offset = positions[b] - positions[a]
     distance, height = np.linalg.norm(offset), offset @ up
-    others, (labelled_b, tree_b) = labelled(int(codes[a]))[0], labelled(int(codes[b]))
+    others, (labelled_b, tree_b) = index(int(codes[a]))[0], index(int(codes[b]))
     reach = tree_b.query_ball_point(positions[others], distance + tolerance)
     a2 = np.repeat(others, np.fromiter(map(len, reach), np.int64, len(reach)))
     b2 = labelled_b[np.fromiter(chain.from_iterable(reach), np.int64, len(a2))]
