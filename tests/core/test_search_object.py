@@ -156,3 +156,42 @@ def test_what_is_read_off_a_map_is_shared_by_its_localizers_and_read_only():
     again = MapContext(building.with_objects(list(building)), LocalizerConfig(), None)
     assert again.tree is not one.tree  # (another map object: its own)
     np.testing.assert_array_equal(again.allowances, one.allowances)
+
+
+def chairs_seen(*travel: float) -> Sightings:
+    """A row of five chairs, one seen at each update, the robot at `travel` m along x."""
+    building = ObjectMap([SemanticObject(f"c{k}", "chair", [k, 0.0, 0.5]) for k in range(5)],
+                         up=UP)  # fmt: skip
+    config = LocalizerConfig()
+    sightings = Sightings(MapContext(building, config, None), config.window)
+    for k, x in enumerate(travel):
+        sightings.add([building[k].replace(id=f"l{k}")], np.array([x, 0.0, 0.0]), None)
+    return sightings
+
+
+@pytest.mark.parametrize(("walked", "stale"), [(2.0, False), (np.nextafter(2.0, 3), True)])
+def test_a_claim_is_stale_only_past_stale_m_beyond_its_latest_detection(walked, stale):
+    """Stale: none of the objects detected within `stale_m` m of travel, judged on the newest
+    of their detections; exactly `stale_m` away is not stale yet."""
+    sightings = chairs_seen(0.0, 1.0, 1.0 + walked)  # l0 at 0 m, l1 at 1 m, l2 at 1 + walked
+    assert sightings.stale(["l0", "l1"], 2.0) == stale
+    assert sightings.stale(["l1", "l0"], 2.0) == stale  # (whatever their order)
+    assert not sightings.stale(["l0", "l1"], None)  # no distance: never stale
+    assert not sightings.stale(["l2"], 0.0)  # detected now
+
+
+def test_a_claim_on_no_object_in_the_window_is_stale():
+    sightings = chairs_seen(0.0, 1.0)
+    assert sightings.stale(["gone"], 100.0) and sightings.stale([], 100.0)
+    assert not sightings.stale(["gone", "l1"], 100.0)  # (an object left counts)
+    assert not sightings.stale(["gone"], None)
+
+
+@pytest.mark.parametrize("updates", [1, 2, 3])
+def test_keep_latest_keeps_the_objects_of_exactly_the_latest_updates(updates):
+    sightings = chairs_seen(0.0, 1.0, 2.0, 3.0)
+    sightings._unseen_of = {"cached": (np.zeros(0), np.zeros(0))}
+    sightings.keep_latest(updates)
+    kept = [f"l{k}" for k in range(4 - updates, 4)]
+    assert [o.id for o in sightings.window.objects] == kept
+    assert sorted(sightings.found) == kept and sightings._unseen_of == {}
