@@ -12,8 +12,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from semloc import Localizer, LocalizerConfig, ObjectMap, Result, SemanticObject
+from semloc import Coverage, Localizer, LocalizerConfig, ObjectMap, Result, SemanticObject
 from semloc.map_context import MapContext
+from semloc.results import Hypothesis
 from semloc.search import Search
 from semloc.sightings import Sightings
 from semloc.sim.layouts import layout
@@ -156,3 +157,105 @@ def test_what_is_read_off_a_map_is_shared_by_its_localizers_and_read_only():
     again = MapContext(building.with_objects(list(building)), LocalizerConfig(), None)
     assert again.tree is not one.tree  # (another map object: its own)
     np.testing.assert_array_equal(again.allowances, one.allowances)
+
+
+def chairs_seen(*travel: float) -> Sightings:
+    """A row of five chairs, one seen at each update, the robot at `travel` m along x."""
+    building = ObjectMap([SemanticObject(f"c{k}", "chair", [k, 0.0, 0.5]) for k in range(5)],
+                         up=UP)  # fmt: skip
+    config = LocalizerConfig()
+    sightings = Sightings(MapContext(building, config, None), config.window)
+    for k, x in enumerate(travel):
+        sightings.add([building[k].replace(id=f"l{k}")], np.array([x, 0.0, 0.0]), None)
+    return sightings
+
+
+@pytest.mark.parametrize(("walked", "stale"), [(2.0, False), (np.nextafter(2.0, 3), True)])
+def test_a_claim_is_stale_only_past_stale_m_beyond_its_latest_detection(walked, stale):
+    """Stale: none of the objects detected within `stale_m` m of travel, judged on the newest
+    of their detections; exactly `stale_m` away is not stale yet."""
+    sightings = chairs_seen(0.0, 1.0, 1.0 + walked)  # l0 at 0 m, l1 at 1 m, l2 at 1 + walked
+    assert sightings.stale(["l0", "l1"], 2.0) == stale
+    assert sightings.stale(["l1", "l0"], 2.0) == stale  # (whatever their order)
+    assert not sightings.stale(["l0", "l1"], None)  # no distance: never stale
+    assert not sightings.stale(["l2"], 0.0)  # detected now
+
+
+def test_a_claim_on_no_object_in_the_window_is_stale():
+    sightings = chairs_seen(0.0, 1.0)
+    assert sightings.stale(["gone"], 100.0) and sightings.stale([], 100.0)
+    assert not sightings.stale(["gone", "l1"], 100.0)  # (an object left counts)
+    assert not sightings.stale(["gone"], None)
+
+
+@pytest.mark.parametrize("updates", [1, 2, 3])
+def test_keep_latest_keeps_the_objects_of_exactly_the_latest_updates(updates):
+    sightings = chairs_seen(0.0, 1.0, 2.0, 3.0)
+    sightings._unseen_of = {"cached": (np.zeros(0), np.zeros(0))}
+    sightings.keep_latest(updates)
+    kept = [f"l{k}" for k in range(4 - updates, 4)]
+    assert [o.id for o in sightings.window.objects] == kept
+    assert sorted(sightings.found) == kept and sightings._unseen_of == {}
+
+
+def ring_seen(*looks: Coverage) -> Sightings:
+    """53 chairs on a ring of 8 m about the robot, the first of them detected (as `l0`,
+    keyframe 7) at the first update; each update with one of `looks`, nothing new after."""
+    angles = np.arange(53) * 2 * np.pi / 53
+    building = ObjectMap([SemanticObject(f"c{k:02d}", "chair", [8 * np.cos(a), 8 * np.sin(a), 0.5])
+                          for k, a in enumerate(angles)], up=UP)  # fmt: skip
+    config = LocalizerConfig()
+    sightings = Sightings(MapContext(building, config, None), config.window)
+    sightings.add([building[0].replace(id="l0", seen=7)], np.zeros(3), looks[0])
+    for look in looks[1:]:
+        sightings.add([], np.zeros(3), look)
+    return sightings
+
+
+def best_of(pairs: list[tuple[str, str]], **given) -> Hypothesis:
+    return Hypothesis(rank=1, score=1.0, pairs=pairs, **{"pose": np.eye(4), **given})
+
+
+def test_the_support_names_the_first_missing_ids_kept_of_the_map_objects_missing():
+    """52 of the 53 chairs the look expects are missing: the best place's support names the
+    first `MISSING_IDS_KEPT` (50) in the map's order, and counts them all."""
+    sightings = ring_seen(Coverage(np.eye(4), 12.0))
+    best = best_of([("c00", "l0"), ("c01", "gone")])  # (a pair that left the window: none)
+    support = sightings.support_of(best, None)
+    assert support.n_missing == best.n_missing == 52 and support.n_expected == 53
+    assert support.missing_ids == tuple(f"c{k:02d}" for k in range(1, 51))
+    assert support.n_pairs == 1 and support.seen == (7, 7) and not support.tracked
+
+
+def test_a_tracked_support_is_of_this_updates_look_when_its_missing_ones_are_weighed():
+    """Tracked, with this update's look (expecting nothing) and the best place weighed: the
+    look names no missing object; untracked or unweighed, the support takes every look kept."""
+    everything, nothing = Coverage(np.eye(4), 12.0), Coverage(np.eye(4), 0.1)
+    sightings = ring_seen(everything, nothing)
+    weighed = best_of([("c00", "l0")], n_missing=5, n_expected=9)
+    tracked = sightings.support_of(weighed, {"changed": 2, "contradicting": 3})
+    assert tracked.missing_ids == () and (tracked.n_missing, tracked.n_expected) == (5, 9)
+    assert tracked.tracked and (tracked.n_changed, tracked.n_contradicting) == (2, 3)
+    untracked = sightings.support_of(weighed, None)
+    assert len(untracked.missing_ids) == 50
+    assert (untracked.n_missing, untracked.n_expected) == (5, 9)
+    assert (untracked.n_changed, untracked.n_contradicting) == (0, 0)
+    unweighed = sightings.support_of(best_of([("c00", "l0")]), {})
+    assert (unweighed.n_missing, unweighed.n_expected) == (52, 53) and unweighed.tracked
+    sightings.add([], np.zeros(3), None)  # an update without a look: every look kept
+    assert len(sightings.support_of(weighed, {}).missing_ids) == 50
+
+
+def test_the_support_dates_its_evidence_by_its_oldest_detection():
+    """How many updates and metres ago the oldest of the best place's detections was, and
+    the keyframes of its detections; no support without a pose or a pair in the window."""
+    sightings = chairs_seen(0.0, 1.0, 2.0, 3.5)
+    objects = {o.id: o for o in sightings.window.objects}
+    sightings.register([objects["l1"].replace(seen=11), objects["l2"].replace(seen=12)])
+    support = sightings.support_of(best_of([("c2", "l2"), ("c1", "l1")]), None)
+    assert (support.n_pairs, support.seen) == (2, (11, 12))
+    assert (support.updates_ago, support.metres) == (2, 2.5)
+    assert support.n_missing is None and support.missing_ids is None  # (no look given)
+    assert sightings.support_of(None, None) is None
+    assert sightings.support_of(best_of([("c2", "l2")], pose=None), None) is None
+    assert sightings.support_of(best_of([("c9", "gone")]), None) is None

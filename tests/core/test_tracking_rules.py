@@ -17,6 +17,7 @@ from semloc import Coverage, Localizer, ObjectMap, Prior, SemanticObject
 from semloc.changes import RunChanges
 from semloc.copy_watch import TWIN_DOUBTED, TWIN_UPDATES, CopyWatch
 from semloc.decision import PLACE_APART, RIVAL_LOGIT_GAP, missing_penalty, prior_first
+from semloc.pose import _CLOUDS
 from semloc.results import Hypothesis
 from semloc.search import NEWEST_CONTRADICT, STALE
 from semloc.tracking import (
@@ -1148,3 +1149,56 @@ def test_a_track_whose_refit_misses_its_pairs_by_exactly_the_tolerance_is_follow
             track.config.model_copy(update={"track_tolerance": tolerance}),
         )
         assert (track.follow(sightings, 3, np.array([0, 0, 1.0]), False) is not None) == followed
+
+
+@pytest.mark.parametrize(("drop", "missing"), [((3, 8), 0.0), ((1, 3, 8), 1.0)])
+def test_a_tracks_check_counts_the_missing_objects_beyond_the_gone_share(drop, missing):
+    """Of the eight map objects the look expects, two gone are exactly the share an old map
+    loses (`GONE_SHARE`): none counts against the place; a third gone counts as one."""
+    localizer = claimed(ObjectMap(room(), up=[0, 0, 1]))
+    track, sightings = localizer._track, localizer._sightings
+    objects = local(room(drop=drop))
+    sightings.add(objects, None, ALL_AROUND)
+    verdict, unseen, expected = track.check(sightings, objects)
+    assert expected == 8 and len(unseen) == len(drop) and verdict.missing == missing
+    assert verdict.repeated == 10 - len(drop)  # each re-detection of a pair is a repeat
+
+
+def test_a_tracks_check_reads_a_split_detection_as_a_part_and_a_redetection_as_a_repeat():
+    """Without a look, nothing is missing (no map object expected); a second detection by a
+    paired object's chair, within its part distance, says nothing against the place."""
+    localizer = claimed(ObjectMap(room(), up=[0, 0, 1]))
+    track, sightings = localizer._track, localizer._sightings
+    lamp = local(room())[2]
+    split = lamp.replace(id="lsplit", position=lamp.position + [0.1, 0, 0])
+    sightings.add([lamp, split], None, None)
+    verdict, unseen, expected = track.check(sightings, [lamp, split])
+    assert verdict.supported == [(2, "la2")] and verdict.repeated == 1
+    assert verdict.contradicting == [] and verdict.changed == [] and verdict.missing == 0.0
+    assert expected is None and len(unseen) == 0 and unseen.dtype.kind == "i"  # (indices)
+
+
+@pytest.mark.parametrize(
+    ("pose", "method"),
+    [({}, "tracked/closed-form-4dof+icp"), ({"refine": False}, "tracked/closed-form-4dof"),
+     ({"icp_max_points": 50}, "tracked/closed-form-4dof+icp")],
+)  # fmt: skip
+def test_a_track_is_refitted_on_its_objects_points_with_the_localizers_pose_settings(pose, method):
+    """Follow refits the place on its pairs' object points (ICP after the closed form unless
+    `refine` is off), each side's points prepared with the Localizer's pose settings."""
+    rng = np.random.default_rng(1)
+    objects = [o.replace(points=o.position + rng.uniform(-0.25, 0.25, (300, 3))) for o in room()]
+    building = ObjectMap(objects, up=[0, 0, 1])
+    localizer = Localizer(building, local_up=[0, 0, 1], pose=pose)
+    localizer.update(local(objects)[:5])
+    assert localizer.update(local(objects)[5:]).status == "localized"
+    track, sightings = localizer._track, localizer._sightings
+    followed = track.follow(sightings, 3, np.array([0, 0, 1.0]), False)
+    assert followed.method == method and followed.fitness == 1.0 and followed.rmse < 1e-6
+    assert followed.confidence == track.confidence is not None  # (the claim's, as found)
+    assert followed.rank == 1 and followed.outside_prior is None  # (no prior in effect)
+    assert track.follow(sightings, 3, np.array([0, 0, 1.0]), True).outside_prior is False
+    cfg = localizer.config.pose
+    for g, l in followed.pairs:
+        for obj in (sightings.found[l][0], building[building.index_of(g)]):
+            assert list(_CLOUDS[obj]) == [(cfg.icp_voxel, cfg.icp_max_points, cfg.seed)]
