@@ -296,6 +296,7 @@ class Search:
         pairs = [(context.map.index_of(g), self.local_index[l]) for g, l in best.pairs]
         members = np.array([g for g, _ in pairs])
         sets, listed = [], []
+        candidates = [self.sightings.found[i][1] for i in self.local]  # by local index
         for S in context.copies_of(members):
             place: tuple[list, np.ndarray] = ([], S @ best.pose)
             if any(same_place(place, (h.pairs, h.pose), self.config.decision, anchor)
@@ -303,7 +304,7 @@ class Search:
                 listed.append(place)  # (weighed already)
                 continue
             moved = twin_pairs(S, pairs, positions, context.codes, tolerance, context.tree)
-            moved = [(g, l) for g, l in moved if g in self.candidates(l)]
+            moved = [(g, l) for g, l in moved if g in candidates[l]]
             if len(moved) >= MIN_TWIN_PAIRS:
                 sets.append(moved)
         if not sets:
