@@ -3,6 +3,8 @@ ranking logit is fitted apart, and the collectors label hypotheses against the t
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -11,10 +13,14 @@ from semloc.eval.calibration import (
     Sample,
     best_operating_point,
     collect_observations,
+    collect_walk,
     confidences,
     fit,
+    is_right,
     operating_point,
 )
+from semloc.sim.layouts import layout
+from semloc.sim.longwalk import LongWalk, WalkConfig, World, tiled
 
 SURE = {"n_pairs": 8.0, "rejected_share": 0.0, "residual": 0.05, "fitness": 0.95, "n_support": 0.0,
         "conflict_share": 0.0}  # fmt: skip
@@ -94,3 +100,45 @@ def test_the_best_operating_point_is_the_threshold_with_the_most_right_claims():
     # at 99.5 % the wrong claim cannot be passed: the sure answers alone
     threshold, coverage = best_operating_point(samples, model, 0.995)
     assert threshold == pytest.approx(conf["sure"]) and coverage == pytest.approx(98 / 119)
+
+
+def test_a_hypothesis_off_far_from_the_origin_is_judged_at_the_robot():
+    truth, pose = np.eye(4), np.eye(4)
+    angle = np.radians(2.0)  # 2 deg about the origin: 3.5 m off at a robot 100 m away
+    pose[:2, :2] = [[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]]
+    assert is_right(pose, truth)
+    assert is_right(pose, truth, at=np.array([5.0, 0.0, 0.0]))
+    assert not is_right(pose, truth, at=np.array([100.0, 0.0, 0.0]))
+
+
+def test_held_answers_and_negative_evidence_enter_as_the_decision_has_them():
+    model = shipped_model()
+    middle = SURE | {"n_pairs": 4.0, "fitness": 0.7}
+    sure = _answers("a", [True] * 40, SURE, 0)
+    wrong = _answers("a", [False] * 2, middle, 100)
+    held = [replace(s, held=True) for s in wrong]
+    assert operating_point(sure + wrong, model, 0.99) > operating_point(sure + held, model, 0.99)
+    (lost,) = confidences([replace(sure[0], missing=2.0)], model)
+    assert lost == pytest.approx(model.confidence(model.evidence(SURE) - 2.0, None))
+
+
+def test_walk_attempts_are_the_searchs_answers_on_an_old_map_with_an_erring_detector():
+    world = World(moved=0.3, gone=0.1, phantoms=0.5)
+    global_map = tiled(layout(60, seed=3, points_per_object=40), 2, 1, seed=3)
+    config = WalkConfig(keyframes=40, points_per_object=40, wrong_label_rate=0.2, world=world,
+                        kidnap_at=20, redetections=10)  # fmt: skip
+    walk = LongWalk(global_map, config, seed=5)
+    frames = list(walk)
+    assert np.any(walk.offsets != 0) and not walk.present.all()  # the map is old
+    sent = [(o.label, g) for f in frames for o in f.objects if (g := f.truth[o.id]) is not None]
+    assert any(label != global_map.labels[g] for label, g in sent)  # mislabelled detections
+    assert any(g is None for f in frames for g in f.truth.values())  # phantoms
+    samples = collect_walk(global_map, config, seed=5, kind="walk", every=4, first_answer=7)
+    assert {s.map_kind for s in samples} == {"walk"}
+    assert {s.answer for s in samples} <= set(range(7, 17))  # keyframes 0, 4, ..., 36
+    assert any(s.right for s in samples) and any(not s.right for s in samples)
+    assert all(s.confidence is not None for s in samples)
+    # the calibration's confidences are those the answers reported (negative evidence and
+    # copies told apart included; a hypothesis refined late may differ a little)
+    reported = [s.confidence for s in samples]
+    assert confidences(samples, shipped_model()) == pytest.approx(reported, abs=0.05)

@@ -26,18 +26,27 @@ from semloc.decision import (
     GAP_CAP,
     NO_RIVAL,
     RESIDUAL_RANK,
+    SEARCH_CUT,
     SIGNS,
     ConfidenceModel,
     DecisionConfig,
+    decide,
     is_rival,
+    missing_penalty,
+    shipped_model,
+    told_apart,
 )
 from semloc.eval.protocol import BenchConfig, _targets, simulate, start_keyframes
-from semloc.eval.success import is_success
+from semloc.eval.success import ROTATION_TOLERANCE_DEG, TRANSLATION_TOLERANCE_M, is_success
 from semloc.eval.variants import OBJECT_COUNTS, VARIANTS, make_case
 from semloc.localizer import Localizer, localize
 from semloc.maps import ObjectMap
-from semloc.results import Result
+from semloc.results import Hypothesis, Result
+from semloc.search import NEWEST_CONTRADICT, STALE
+from semloc.settings import LocalizerConfig
 from semloc.sim.layouts import layout, observe
+from semloc.sim.longwalk import LongWalk, WalkConfig
+from semloc.transforms import pose_error
 
 LAYOUT_COUNTS = (3, 4, 5, 6, 8)
 LAYOUT_POINTS = 80
@@ -57,6 +66,11 @@ class Sample:
     right: bool
     matches: frozenset[tuple[str, str]] = frozenset()  # its pairs (global id, local id)
     objects: int = 0  # local objects of the answer
+    status: str = ""  # of its answer
+    confidence: float | None = None  # as the answer reported it
+    missing: float = 0.0  # the evidence it lost to objects it expected in view that nobody saw
+    apart: frozenset[int] = frozenset()  # ranks of copies the view told apart: not its rivals
+    held: bool = False  # its answer is kept from a claim by more than the confidence
 
 
 def collect(config: BenchConfig, first_answer: int = 0) -> list[Sample]:
@@ -82,8 +96,12 @@ def collect(config: BenchConfig, first_answer: int = 0) -> list[Sample]:
     return samples
 
 
-def samples_of(result: Result, truth: np.ndarray, answer: int, kind: str) -> list[Sample]:
-    """The hypotheses of one answer that carry features, labelled against `truth`."""
+def samples_of(
+    result: Result, truth: np.ndarray, answer: int, kind: str, at: np.ndarray | None = None
+) -> list[Sample]:
+    """The hypotheses of one answer that carry features, labelled against `truth` (with `at`,
+    a point of the local frame: the translation is judged there, e.g. at the robot)."""
+    held = _held(result)
     return [
         Sample(
             answer,
@@ -92,13 +110,59 @@ def samples_of(result: Result, truth: np.ndarray, answer: int, kind: str) -> lis
             len(h.pairs),
             h.fitness or 0.0,
             h.features,
-            is_success(h.pose, truth),
+            is_right(h.pose, truth, at),
             frozenset(h.pairs),
             result.steps[-1].n_local if result.steps else 0,
+            result.status,
+            h.confidence,
+            missing_penalty(h),
+            _told_apart(h, result.hypotheses),
+            held,
         )  # fmt: skip
         for h in result.hypotheses
         if h.features is not None
     ]
+
+
+def _held(result: Result) -> bool:
+    """Whether more than the confidence keeps the answer's best hypothesis from a claim at
+    any operating point: too few pairs, a low fitness or a rival that fits the centres nearly
+    as well (`decision.decide`), a cut search, the newest objects or stale evidence."""
+    if not result.hypotheses or result.reason.startswith((SEARCH_CUT, NEWEST_CONTRADICT, STALE)):
+        return True
+    return decide(result.hypotheses, DecisionConfig(min_confidence=0.0), "evidence").status != (
+        "localized"
+    )
+
+
+def _told_apart(h: Hypothesis, hypotheses: Sequence[Hypothesis]) -> frozenset[int]:
+    """The ranks of the rivals that `h`'s reported confidence did not count: copies of a
+    place that the view told apart from it (`decision.score_confidence`'s twins; the answer
+    does not say which places were weighed as copies), found as the fewest of the strongest
+    told-apart rivals whose leaving out reproduces the reported confidence."""
+    if h.evidence is None or h.confidence is None:
+        return frozenset()
+    model, overlap = shipped_model(), DecisionConfig(min_confidence=0.5).rival_overlap
+    rivals = [o for o in hypotheses if o is not h and o.evidence is not None
+              and o.features is not None and is_rival(h.pairs, o.pairs, overlap)]  # fmt: skip
+    apart = sorted((o for o in rivals if told_apart(h, o)), key=lambda o: -(o.evidence or 0.0))
+    for n in range(len(apart) + 1):
+        out = {id(o) for o in apart[:n]}
+        rest = [o.evidence for o in rivals if id(o) not in out and o.evidence is not None]
+        if abs(model.confidence(h.evidence, max(rest, default=None)) - h.confidence) < 1e-9:
+            return frozenset(o.rank for o in apart[:n])
+    return frozenset()
+
+
+def is_right(pose: np.ndarray | None, truth: np.ndarray, at: np.ndarray | None = None) -> bool:
+    """The paper's success (`eval.success.is_success`); with `at`, the translation is judged
+    at that point of the local frame (far from the origin a small rotation moves it a lot)."""
+    if at is None or pose is None:
+        return is_success(pose, truth)
+    point = np.append(np.asarray(at, dtype=float), 1.0)
+    rotation, _ = pose_error(pose, truth)
+    off = float(np.linalg.norm((pose - truth) @ point))
+    return rotation < ROTATION_TOLERANCE_DEG and off < TRANSLATION_TOLERANCE_M
 
 
 def collect_layouts(
@@ -163,6 +227,31 @@ def collect_observations(
                 result = localize(full, obs.local_map)
                 samples += samples_of(result, obs.T_global_local, answer, "observed")
                 answer += 1
+    return samples
+
+
+def collect_walk(
+    global_map: ObjectMap, config: WalkConfig, seed: int, kind: str, every: int = 5,
+    first_answer: int = 0,
+) -> list[Sample]:  # fmt: skip
+    """The search's answers along a long walk through `global_map` (`semloc.sim.longwalk`:
+    an old map, an erring detector, kidnaps into look-alike copies, as `config` has them),
+    with tracking off so that every answer is the search's; each `every`-th keyframe answers
+    (the others are added), with the sensor's coverage.  Hypotheses are judged at the robot."""
+    walk = LongWalk(global_map, config, seed=seed)
+    localizer = Localizer(global_map, LocalizerConfig(tracking={"track": False}),
+                          local_up=[0, 0, 1])  # fmt: skip
+    samples: list[Sample] = []
+    answer = first_answer
+    for frame in walk:
+        if frame.index % every:
+            localizer.add(frame.objects, position=frame.T_odom_robot, coverage=frame.coverage)
+            continue
+        result = localizer.update(frame.objects, position=frame.T_odom_robot,
+                                  coverage=frame.coverage)  # fmt: skip
+        samples += samples_of(result, frame.T_global_local, answer, kind,
+                              at=frame.T_odom_robot[:3, 3])  # fmt: skip
+        answer += 1
     return samples
 
 
@@ -248,7 +337,7 @@ def _evidence_and_rival(samples: list[Sample], model: ConfidenceModel):
     """Per sample: its evidence, the rival share and the capped evidence gap to the best
     rival place of its answer (`decision.is_rival`, as `decision.score_confidence` and
     `ConfidenceModel.confidence` compute them)."""
-    evidence = np.array([model.evidence(s.features) for s in samples])
+    evidence = np.array([model.evidence(s.features) - s.missing for s in samples])
     answers = np.array([s.answer for s in samples])
     strongest = np.full(len(samples), NO_RIVAL)
     overlap = DecisionConfig(min_confidence=0.5).rival_overlap
@@ -256,7 +345,8 @@ def _evidence_and_rival(samples: list[Sample], model: ConfidenceModel):
         rows = np.flatnonzero(answers == a)
         for i in rows:
             others = [evidence[j] for j in rows if j != i
-                      and is_rival(samples[i].matches, samples[j].matches, overlap)]  # fmt: skip
+                      and is_rival(samples[i].matches, samples[j].matches, overlap)
+                      and samples[j].rank not in samples[i].apart]  # fmt: skip
             if others:
                 strongest[i] = max(max(others), NO_RIVAL)
     rival = 1.0 / (1.0 + np.exp(-strongest))
@@ -276,7 +366,7 @@ def best_of_answers(samples: list[Sample], model: ConfidenceModel) -> list[tuple
     conf = confidences(samples, model)
     best: dict[int, tuple[float, Sample, float]] = {}
     for s, c in zip(samples, conf):
-        e = model.ranking(s.features) - RESIDUAL_RANK * s.features["residual"]
+        e = model.ranking(s.features) - s.missing - RESIDUAL_RANK * s.features["residual"]
         if s.answer not in best or e > best[s.answer][0]:
             best[s.answer] = (e, s, float(c))
     return [(s, c) for _, s, c in best.values()]
@@ -284,9 +374,9 @@ def best_of_answers(samples: list[Sample], model: ConfidenceModel) -> list[tuple
 
 def _claimable(sample: Sample) -> bool:
     """Whether the decision's gates let a best hypothesis be claimed (>= min_pairs, >=
-    min_fitness), its confidence aside."""
+    min_fitness, not `held`), its confidence aside."""
     gate = DecisionConfig(min_confidence=0.5)
-    return sample.pairs >= gate.min_pairs and sample.fitness >= gate.min_fitness
+    return sample.pairs >= gate.min_pairs and sample.fitness >= gate.min_fitness and not sample.held
 
 
 def _ranked_claims(samples: list[Sample], model: ConfidenceModel) -> list[tuple[float, bool]]:
