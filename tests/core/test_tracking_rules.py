@@ -610,48 +610,6 @@ def test_a_suspicion_lifts_once_its_objects_are_likelier_at_a_right_place_than_a
         assert not claim.doubted()
 
 
-def test_a_fresh_claim_ends_by_one_update_or_by_the_latest_three_together():
-    """Neither the share rules nor the run's share decide here (3 and 2 judged, fresh run):
-    two against and nothing for in one update end it with that update; one against in each of
-    three updates end it with the three."""
-    one = track()
-    assert one.contradicted(Verdict([(20, "s"), (21, "t"), (22, "u")], [])) == 0
-    assert one.contradicted(Verdict([], ["x", "y"])) == 1
-    three = track()
-    assert [three.contradicted(Verdict([], [f"x{k}"])) for k in range(3)] == [0, 0, 3]
-
-
-def test_a_suspicion_at_a_share_near_a_wrong_places_weighs_it_as_half_that():
-    """At a run share of 60 % (capped at 0.375 for the weights: a share near a wrong place's
-    would make every object against a claim weigh almost nothing), one supporting object
-    (+0.92) does not outweigh two against (-1.39); uncapped it would (+0.47 against -0.45)."""
-    claim = track(rate=at_share(0.6))
-    claim.contradicted(Verdict([], ["x", "y"]))
-    assert claim.suspect is not None
-    claim.contradicted(Verdict([(20, "s")], []))
-    assert claim.suspect is not None
-    claim.contradicted(Verdict([(21, "t")], []))
-    assert claim.suspect is None
-
-
-def test_missing_objects_count_as_judged_against_in_a_suspicion_and_a_short_claim():
-    """A look missing 1.5 objects beyond the tolerated share raises a suspicion of two
-    detections against and two missing (4 of 4).  A claim of 3 supporting objects, 6 against
-    and 1.4 missing since it began is short of half (3 < 5.2) and holds 7 of 10 against (the
-    missing rounded): at a run share of 30 % a tail of 0.011, doubted (< `DOUBT`) and not
-    ended (>= `UNUSUAL`), where 5 of 10 would not be doubted and 7 of 8 would end it."""
-    claim = track(rate=at_share(0.4))
-    claim.contradicted(Verdict([], ["x", "y"], [], 0, 1.5))
-    assert claim.suspect == Suspicion(4, 4, 1, 0.0, 3.5)
-    assert UNUSUAL < binom.sf(6, 10, 0.3) < DOUBT < binom.sf(4, 10, 0.3)
-    assert binom.sf(6, 8, 0.3) < UNUSUAL
-    lost = track(rate=at_share(0.3), min_judged=8)
-    lost.missing = 1.4  # (earlier looks')
-    updates = [Verdict([(20 + k, f"s{k}")], [f"x{k}", f"y{k}"]) for k in range(3)]
-    assert [lost.contradicted(v) for v in updates] == [0, 0, 0]
-    assert lost.short and lost.doubted()
-
-
 def test_a_suspicion_ends_the_claim_once_its_objects_are_unusual_at_the_runs_share():
     """At 40 %: 2 of 2, then 3 of 4, 5 of 6 (tails 0.16, 0.18, 0.041), then 7 of 8 (0.0085 <
     `UNUSUAL`): the claim ends with the four updates since the suspicion began, though the
