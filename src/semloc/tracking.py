@@ -51,17 +51,18 @@ search's cost grows with the local objects; tracking costs a lookup per new obje
   as many objects of its own as its prior is worth (`AgainstRate.shown`), evidence that meets
   those counts but is not unusual at the run's share (`UNUSUAL`, the test below) *suspects*
   the claim instead: the answer is `ambiguous` (reason `DOUBTED`), the place is still checked
-  and followed, and the objects judged since the suspicion began are weighed together.  Once
+  and followed, and the objects judged since the suspicion began are weighed together: once
   they are unusual at the run's share the claim ends (`"contradicted"`, the search restarting
-  from the updates since the suspicion began); once they are likelier at a right place of
-  this run than at a wrong one (`AgainstRate.favours_place`: each supporting object weighs
-  log((1 - p) / 0.25), each one against log(p / 0.75), p the run's share) it is lifted: at a
-  share of 40 %, two supporting objects outweigh the two that raised it; at 10 %, four.  A
-  claim short of its supporting share ends only when its judged objects are unusual at the
-  run's share; short of it and unusual at `DOUBT`, it is doubted until they are not.  A robot
-  carried off gets no claim at the first contradicting update either way.  The run's share
-  learns from a claim's updates once they have left the latest `CONTRADICTION_UPDATES` and no
-  suspicion hangs over them: a suspected claim that ends never teaches it.
+  from the updates since the suspicion began); once the objects since the suspicion began
+  are likelier at a right place of this run than at a wrong one (`AgainstRate.favours_place`:
+  each supporting object weighs log((1 - p) / 0.25), each one against log(p / 0.75), p the
+  run's share), it is lifted: at a share of 40 %, two supporting objects outweigh the two
+  that raised it; at 10 %, four.  A claim short of its supporting share
+  ends only when its judged objects are unusual at the run's share; short of it and unusual
+  at `DOUBT`, it is doubted until they are not.  A robot carried off thus gets no claim at the first contradicting update
+  either way.  The run's share learns from a claim's updates once they have left the latest
+  `CONTRADICTION_UPDATES` and no suspicion hangs over them: a suspected claim that ends never
+  teaches it.
 * **Unusual against this run.**  An old map and an erring detector make some objects judged
   against a right place (changed or contradicting): few in a clean world, a quarter or more
   in a hard one.  The run keeps that share over its tracked claims (`AgainstRate`, from a
@@ -500,8 +501,8 @@ class Track:
         claim's judged objects lost their supporting share."""
         self._verdicts.append(verdict)
         new = self._judge(verdict)
-        if len(self._recent) == self._recent.maxlen and self._recent[0][1]:
-            self._held.append(self._recent[0])  # (the test's own updates stay out)
+        if len(self._recent) == self._recent.maxlen:  # (the test's own updates stay out)
+            self._held.append(self._recent[0])
         self._recent.append(new)
         least = self.config.contradiction
         if recent_contradiction([verdict], least):
