@@ -54,10 +54,7 @@ search's cost grows with the local objects; tracking costs a lookup per new obje
   and followed, and the objects judged since the suspicion began are weighed together: once
   they are unusual at the run's share the claim ends (`"contradicted"`, the search restarting
   from the updates since the suspicion began); once the objects since the suspicion began
-  are likelier at a right place of this run than at a wrong one (`AgainstRate.favours_place`:
-  each supporting object weighs log((1 - p) / 0.25), each one against log(p / 0.75), p the
-  run's share), it is lifted: at a share of 40 %, two supporting objects outweigh the two
-  that raised it; at 10 %, four.  A claim short of its supporting share
+  support the place more than they speak against it (in the counts above), it is lifted.  A claim short of its supporting share
   ends only when its judged objects are unusual at the run's share; short of it and unusual
   at `DOUBT`, it is doubted until they are not.  A robot carried off thus gets no claim at the first contradicting update
   either way.  The run's share learns from a claim's updates once they have left the latest
@@ -121,13 +118,13 @@ an old map seen by an erring detector has about 65 % of its objects supporting, 
 and 20 % contradicting; a wrong place about 25 / 25 / 50 %."""
 PRIOR_AGAINST = 0.25
 """The share of new objects judged against a right place before the run has shown its own."""
-WRONG_AGAINST = 0.75
-"""The share of new objects judged against a wrong place (`EVIDENCE_LOGITS`)."""
 PRIOR_WEIGHT = 20.0
 """How many judged objects the prior share is worth."""
 UNUSUAL = 0.01
 """How unlikely, under the run's share, the latest updates' objects against a claim must be to
 end it."""
+MOST_UNUSUAL = 64
+"""The most objects against a claim `AgainstRate.least_unusual` asks for."""
 DOUBT_OBJECTS = 6
 """The newest judged objects weighed for a doubt (`Track.doubted`), across updates: a robot
 carried off may see nothing for several updates, and nothing seen is no news."""
@@ -414,12 +411,15 @@ class AgainstRate:
         """Whether the run has judged as many objects of its own as its prior is worth."""
         return self.judged >= PRIOR_WEIGHT
 
-    def favours_place(self, towards: float, against: float) -> bool:
-        """Whether objects `towards` and `against` a claim are likelier at a right place of
-        this run (its share against) than at a wrong one (`WRONG_AGAINST`)."""
-        p = min(self.share, 0.5 * WRONG_AGAINST)  # (a share near a wrong place's tells nothing)
-        right = towards * math.log((1 - p) / (1 - WRONG_AGAINST))
-        return right + against * math.log(p / WRONG_AGAINST) > 0
+    def least_unusual(self, least: int) -> int:
+        """How many objects against a claim, with none for it, this run must see to find them
+        unusual (`UNUSUAL`), at least `least` (and `least` until the run has `shown` its share)."""
+        if not self.shown:
+            return least
+        k = least
+        while not self.unusual(k, k) and k < MOST_UNUSUAL:
+            k += 1
+        return k
 
     def unusual(self, against: int, judged: int, level: float = UNUSUAL) -> bool:
         """Whether `against` of `judged` new objects is unlikely at this run's share (at
@@ -435,29 +435,27 @@ class AgainstRate:
 @dataclass(frozen=True)
 class Suspicion:
     """Since a claim was suspected: its new objects judged against it and in all (missing
-    objects count as judged against), the updates they came in, and the evidence for and
-    against it (`Verdict.towards`, `Verdict.against`, summed)."""
+    objects count as judged against), the updates they came in, and the evidence for it less
+    the evidence against it (`Verdict.towards` - `Verdict.against`, summed)."""
 
     against: int
     judged: int
     updates: int
-    towards_sum: float
-    against_sum: float
+    balance: float
 
     @classmethod
     def of(cls, new: Sequence[tuple[int, int]], verdicts: Sequence[Verdict]) -> Suspicion:
         """The suspicion raised by updates of `verdicts`, with (against, judged) `new`
         objects."""
         lost = round(sum(v.missing for v in verdicts))
-        return cls(sum(a for a, _ in new) + lost, sum(n for _, n in new) + lost, len(verdicts),
-                   sum(v.towards for v in verdicts), sum(v.against for v in verdicts))  # fmt: skip
+        return cls(sum(a for a, _ in new) + lost, sum(n for _, n in new) + lost,
+                   len(verdicts), sum(v.towards - v.against for v in verdicts))  # fmt: skip
 
     def then(self, new: tuple[int, int], verdict: Verdict) -> Suspicion:
         """This suspicion after one more update."""
         more = Suspicion.of([new], [verdict])
         return Suspicion(self.against + more.against, self.judged + more.judged,
-                         self.updates + 1, self.towards_sum + more.towards_sum,
-                         self.against_sum + more.against_sum)  # fmt: skip
+                         self.updates + 1, self.balance + more.balance)  # fmt: skip
 
     @property
     def evidence(self) -> tuple[int, int]:
@@ -513,8 +511,7 @@ class Track:
             self.suspect = self.suspect.then(new, verdict)
             if self.rate.unusual(*self.suspect.evidence):
                 return self.suspect.updates
-            if not firing and self.rate.favours_place(self.suspect.towards_sum,
-                                                      self.suspect.against_sum):  # fmt: skip
+            if not firing and self.suspect.balance > 0:
                 self.suspect = None
         elif firing:
             suspicion = Suspicion.of(list(self._recent)[-firing:],
@@ -646,9 +643,8 @@ class Track:
         track._recent.extend((int(a), int(n)) for a, n in state.get("recent", []))
         track._newest.extend(bool(a) for a in state.get("newest", []))
         if (suspect := state.get("suspect")) is not None:
-            against, judged, updates, towards_sum, against_sum = suspect
-            track.suspect = Suspicion(int(against), int(judged), int(updates),
-                                      float(towards_sum), float(against_sum))  # fmt: skip
+            against, judged, updates, balance = suspect
+            track.suspect = Suspicion(int(against), int(judged), int(updates), float(balance))
         track._held = [(int(a), int(n)) for a, n in state.get("held", [])]
         track.short = bool(state.get("short", False))
         return track
