@@ -13,10 +13,7 @@ when the robot walked on (the claim's newest pairs changed) and an update has ob
 the place or missing from its look, or a copy leads; the kept evidence follows the same copies.
 
 The Localizer doubts the claim while a copy leads (`TWIN_DOUBTED`) and ends it when a copy
-leads by `TWIN_KIDNAP` objects, or, in a run whose share of objects against its right claims
-(`semloc.tracking.AgainstRate`) makes that many common, by as many as that share makes
-unusual (`AgainstRate.least_unusual`): where a third of the objects are moved, gone or
-mislabelled, the tracked place's own changes tell for a copy as often as a carry does.
+leads by `TWIN_KIDNAP` objects.
 """
 
 from __future__ import annotations

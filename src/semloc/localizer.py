@@ -282,7 +282,7 @@ class Localizer:
             lead, updates, copy = self._copies.weigh(
                 self.window.updates, track, verdict, objects, candidates, unseen
             )
-            against = updates if lead >= track.rate.least_unusual(TWIN_KIDNAP) else 0
+            against = updates if lead >= TWIN_KIDNAP else 0
         if against:  # a fresh window of the contradicting updates' objects, searched
             self._end_track()
             sightings.keep_latest(against)

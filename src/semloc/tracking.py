@@ -44,22 +44,6 @@ search's cost grows with the local objects; tracking costs a lookup per new obje
   not.  Over the whole claim, the objects judged since it began must stay at least half
   supporting (`min_support_share`, once `min_judged` are judged): a wrong place that a few
   lucky objects keep alive update by update loses it there.
-* **Contradiction in a run that has shown its changes.**  Those counts are what a right place
-  of a clean world never shows.  In an old map seen by an erring detector, a third of the new
-  objects may be judged against a right place, and two of two in one update is common: ended
-  there, a right claim would restart the search from two objects.  So once the run has judged
-  as many objects of its own as its prior is worth (`AgainstRate.shown`), evidence that meets
-  those counts but is not unusual at the run's share (`UNUSUAL`, the test below) *suspects*
-  the claim instead: the answer is `ambiguous` (reason `DOUBTED`), the place is still checked
-  and followed, and the objects judged since the suspicion began are weighed together: once
-  they are unusual at the run's share the claim ends (`"contradicted"`, the search restarting
-  from the updates since the suspicion began); once the objects since the suspicion began
-  support the place more than they speak against it (in the counts above), it is lifted.  A claim short of its supporting share
-  ends only when its judged objects are unusual at the run's share; short of it and unusual
-  at `DOUBT`, it is doubted until they are not.  A robot carried off thus gets no claim at the first contradicting update
-  either way.  The run's share learns from a claim's updates once they have left the latest
-  `CONTRADICTION_UPDATES` and no suspicion hangs over them: a suspected claim that ends never
-  teaches it.
 * **Unusual against this run.**  An old map and an erring detector make some objects judged
   against a right place (changed or contradicting): few in a clean world, a quarter or more
   in a hard one.  The run keeps that share over its tracked claims (`AgainstRate`, from a
@@ -89,7 +73,7 @@ from __future__ import annotations
 import math
 from collections import OrderedDict, deque
 from collections.abc import Callable, Collection, Iterable, Mapping, Sequence
-from dataclasses import astuple, dataclass, field
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -123,8 +107,6 @@ PRIOR_WEIGHT = 20.0
 UNUSUAL = 0.01
 """How unlikely, under the run's share, the latest updates' objects against a claim must be to
 end it."""
-MOST_UNUSUAL = 64
-"""The most objects against a claim `AgainstRate.least_unusual` asks for."""
 DOUBT_OBJECTS = 6
 """The newest judged objects weighed for a doubt (`Track.doubted`), across updates: a robot
 carried off may see nothing for several updates, and nothing seen is no news."""
@@ -406,21 +388,6 @@ class AgainstRate:
     def share(self) -> float:
         return (self.against + PRIOR_WEIGHT * PRIOR_AGAINST) / (self.judged + PRIOR_WEIGHT)
 
-    @property
-    def shown(self) -> bool:
-        """Whether the run has judged as many objects of its own as its prior is worth."""
-        return self.judged >= PRIOR_WEIGHT
-
-    def least_unusual(self, least: int) -> int:
-        """How many objects against a claim, with none for it, this run must see to find them
-        unusual (`UNUSUAL`), at least `least` (and `least` until the run has `shown` its share)."""
-        if not self.shown:
-            return least
-        k = least
-        while not self.unusual(k, k) and k < MOST_UNUSUAL:
-            k += 1
-        return k
-
     def unusual(self, against: int, judged: int, level: float = UNUSUAL) -> bool:
         """Whether `against` of `judged` new objects is unlikely at this run's share (at
         least two, one-sided binomial test at `level`)."""
@@ -430,36 +397,6 @@ class AgainstRate:
         tail = sum(math.comb(judged, k) * p**k * (1 - p) ** (judged - k)
                    for k in range(against, judged + 1))  # fmt: skip
         return tail < level
-
-
-@dataclass(frozen=True)
-class Suspicion:
-    """Since a claim was suspected: its new objects judged against it and in all (missing
-    objects count as judged against), the updates they came in, and the evidence for it less
-    the evidence against it (`Verdict.towards` - `Verdict.against`, summed)."""
-
-    against: int
-    judged: int
-    updates: int
-    balance: float
-
-    @classmethod
-    def of(cls, new: Sequence[tuple[int, int]], verdicts: Sequence[Verdict]) -> Suspicion:
-        """The suspicion raised by updates of `verdicts`, with (against, judged) `new`
-        objects."""
-        lost = round(sum(v.missing for v in verdicts))
-        return cls(sum(a for a, _ in new) + lost, sum(n for _, n in new) + lost,
-                   len(verdicts), sum(v.towards - v.against for v in verdicts))  # fmt: skip
-
-    def then(self, new: tuple[int, int], verdict: Verdict) -> Suspicion:
-        """This suspicion after one more update."""
-        more = Suspicion.of([new], [verdict])
-        return Suspicion(self.against + more.against, self.judged + more.judged,
-                         self.updates + 1, self.balance + more.balance)  # fmt: skip
-
-    @property
-    def evidence(self) -> tuple[int, int]:
-        return self.against, self.judged
 
 
 class Track:
@@ -486,68 +423,31 @@ class Track:
         self._newest: deque[bool] = deque(maxlen=DOUBT_OBJECTS)  # judged against, newest last
         self.judged: dict[str, str] = {}  # local id -> its latest verdict since the claim began
         self.missing = 0.0  # missing objects beyond the tolerated share, since the claim began
-        self.suspect: Suspicion | None = None  # evidence since the claim was suspected
-        self._held: list[tuple[int, int]] = []  # older updates' new objects, for the run's
-        # share once no suspicion hangs over them
-        self.short = False  # short of its supporting share, unusually but not beyond belief
         self.base = _logit(confidence, CONFIDENCE_CAP)
         self.accept(Verdict(list(pairs), []))
 
     def contradicted(self, verdict: Verdict) -> int:
         """How many of the latest updates (this one included) contradict the place: 0 when
-        they do not (the claim may be suspected or doubted: `doubted`); 1 also when the
-        claim's judged objects lost their supporting share."""
+        they do not; 1 also when the claim's judged objects lost their supporting share."""
         self._verdicts.append(verdict)
         new = self._judge(verdict)
         if len(self._recent) == self._recent.maxlen:  # (the test's own updates stay out)
-            self._held.append(self._recent[0])
+            self.rate.add(*self._recent[0])
         self._recent.append(new)
         least = self.config.contradiction
         if recent_contradiction([verdict], least):
-            firing = 1
-        else:
-            firing = len(self._verdicts) if recent_contradiction(self._verdicts, least) else 0
-        if self.suspect is not None:
-            self.suspect = self.suspect.then(new, verdict)
-            if self.rate.unusual(*self.suspect.evidence):
-                return self.suspect.updates
-            if not firing and self.suspect.balance > 0:
-                self.suspect = None
-        elif firing:
-            suspicion = Suspicion.of(list(self._recent)[-firing:],
-                                     list(self._verdicts)[-firing:])  # fmt: skip
-            if not self._common(*suspicion.evidence):
-                return firing
-            self.suspect = suspicion
-        if self._short_of_support():
+            return 1
+        if recent_contradiction(self._verdicts, least):
+            return len(self._verdicts)
+        counts = self.counts()
+        judged = counts["supported"] + counts["changed"] + counts["contradicting"] + self.missing
+        if judged >= self.config.min_judged and counts["supported"] < (
+            self.config.min_support_share * judged
+        ):
             return 1
         if self.rate.unusual(*map(sum, zip(*self._recent))):
             return len(self._recent)
-        if self.suspect is None:  # the run learns from a claim's updates once they stand
-            for against, judged in self._held:
-                self.rate.add(against, judged)
-            self._held.clear()
         return 0
-
-    def _common(self, against: int, judged: int) -> bool:
-        """Whether `against` of `judged` objects is common in this run (see the module
-        docstring: contradiction in a run that has shown its changes)."""
-        return self.rate.shown and not self.rate.unusual(against, judged)
-
-    def _short_of_support(self) -> bool:
-        """Whether the claim's judged objects lost their supporting share beyond what the
-        run's share makes common (then it ends); short of it, and unusual at `DOUBT`, it is
-        doubted (`short`)."""
-        counts = self.counts()
-        supported, against = counts["supported"], counts["changed"] + counts["contradicting"]
-        judged = supported + against + self.missing
-        short = judged >= self.config.min_judged and (
-            supported < self.config.min_support_share * judged
-        )
-        lost = round(self.missing)
-        evidence = (against + lost, supported + against + lost)
-        self.short = short and self.rate.unusual(*evidence, DOUBT)
-        return short and not self._common(*evidence)
 
     def _judge(self, verdict: Verdict) -> tuple[int, int]:
         """Record the verdict's judgements (latest wins); how many of them are new or changed
@@ -564,8 +464,6 @@ class Track:
     def doubted(self) -> bool:
         """Whether the newest judged objects speak against the place beyond this run's share
         (at `DOUBT`; see the module docstring)."""
-        if self.suspect is not None or self.short:
-            return True
         return self.rate.unusual(sum(self._newest), len(self._newest), DOUBT)
 
     def counts(self) -> dict[str, int]:
@@ -615,9 +513,6 @@ class Track:
             "missing": self.missing,
             "recent": [list(r) for r in self._recent],
             "newest": [int(a) for a in self._newest],
-            "suspect": None if self.suspect is None else list(astuple(self.suspect)),
-            "held": [list(h) for h in self._held],
-            "short": self.short,
         }
 
     @classmethod
@@ -642,11 +537,6 @@ class Track:
         track.missing = float(state.get("missing", 0.0))
         track._recent.extend((int(a), int(n)) for a, n in state.get("recent", []))
         track._newest.extend(bool(a) for a in state.get("newest", []))
-        if (suspect := state.get("suspect")) is not None:
-            against, judged, updates, balance = suspect
-            track.suspect = Suspicion(int(against), int(judged), int(updates), float(balance))
-        track._held = [(int(a), int(n)) for a, n in state.get("held", [])]
-        track.short = bool(state.get("short", False))
         return track
 
     def check(

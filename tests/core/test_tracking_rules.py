@@ -15,7 +15,7 @@ from scipy.stats import binom
 
 from semloc import Coverage, Localizer, ObjectMap, Prior, SemanticObject
 from semloc.changes import RunChanges
-from semloc.copy_watch import TWIN_DOUBTED, TWIN_KIDNAP, TWIN_UPDATES, CopyWatch
+from semloc.copy_watch import TWIN_DOUBTED, TWIN_UPDATES, CopyWatch
 from semloc.decision import PLACE_APART, RIVAL_LOGIT_GAP, missing_penalty, prior_first
 from semloc.pose import _CLOUDS
 from semloc.results import Hypothesis
@@ -28,12 +28,10 @@ from semloc.tracking import (
     DOUBT_OBJECTS,
     DOUBTED,
     EVIDENCE_LOGITS,
-    MOST_UNUSUAL,
     PRIOR_AGAINST,
     PRIOR_WEIGHT,
     UNUSUAL,
     AgainstRate,
-    Suspicion,
     Track,
     TrackingConfig,
     Verdict,
@@ -581,89 +579,6 @@ def test_a_clean_run_ends_a_claim_whose_new_objects_turn_against_it_as_its_place
     assert not any(recent_contradiction([v], least=2) for v in updates)
 
 
-def test_a_run_that_has_shown_its_changes_suspects_a_claim_where_a_clean_one_ends_it():
-    """Two of two new objects against: the contract's contradiction, ending a claim at once in
-    a fresh run (its share not yet shown: one object short of `PRIOR_WEIGHT`) and in a clean
-    one (2 %); where a third of the objects turn against right claims (40 %: a tail of 0.16)
-    the claim is suspected: not ended, doubted."""
-    against = Verdict([], ["x", "y"])
-    fresh = track(rate=AgainstRate(8, PRIOR_WEIGHT - 1))
-    assert not fresh.rate.shown and fresh.contradicted(against) == 1
-    assert track(rate=at_share(0.02)).contradicted(against) == 1
-    changing = track(rate=AgainstRate(8, PRIOR_WEIGHT))
-    assert changing.rate.shown and changing.rate.share == pytest.approx(0.325)
-    assert changing.contradicted(against) == 0
-    assert changing.suspect == Suspicion(2, 2, 1, -2.0) and changing.doubted()
-
-
-def test_a_suspicion_lifts_once_the_place_has_more_for_it_than_against_it_since():
-    """Two against raise it; one for and one against leave it (-2); two for and one against
-    (-1) neither, nor one more for (as much for as against): the objects since must outweigh
-    what raised it; one more for lifts it."""
-    claim = track(rate=at_share(0.4))
-    claim.contradicted(Verdict([], ["x", "y"]))
-    claim.contradicted(Verdict([(20, "s")], ["z"]))
-    assert claim.suspect == Suspicion(3, 4, 2, -2.0) and claim.doubted()
-    assert claim.contradicted(Verdict([(21, "t"), (22, "u")], ["w"])) == 0
-    assert claim.suspect == Suspicion(4, 7, 3, -1.0) and claim.doubted()
-    assert claim.contradicted(Verdict([(23, "v")], [])) == 0
-    assert claim.suspect == Suspicion(4, 8, 4, 0.0) and claim.doubted()
-    assert claim.contradicted(Verdict([(24, "q")], [])) == 0
-    assert claim.suspect is None and not claim.doubted()
-
-
-def test_the_runs_share_learns_a_suspected_claims_updates_only_once_it_stands():
-    """Older updates under a suspicion wait: the claim may end, and a wrong place must not
-    teach the run its share; lifted, they count."""
-    rate = AgainstRate(8, PRIOR_WEIGHT)
-    claim = track(rate=rate)
-    claim.contradicted(Verdict([], ["x", "y"]))
-    for _ in range(CONTRADICTION_UPDATES):
-        claim.contradicted(Verdict([], []))
-    assert claim.suspect is not None and (rate.against, rate.judged) == (8, PRIOR_WEIGHT)
-    claim.contradicted(Verdict([(20, "s"), (21, "t"), (22, "u")], []))
-    assert claim.suspect is None and (rate.against, rate.judged) == (10, PRIOR_WEIGHT + 2)
-
-
-def test_a_claim_short_of_support_is_doubted_in_a_changing_run_and_ends_in_a_fresh_one():
-    """Three updates of one supporting and two contradicting objects: no update contradicts
-    the place by itself (2 is not more than twice 1), nor do the three together (6 and 3),
-    but 3 of 9 support it, short of half.  A fresh run ends the claim there; at a run share of
-    30 % (6 of 9 against: a tail of 0.025, between `UNUSUAL` and `DOUBT`) it is doubted; at
-    40 % (0.099) it holds."""
-    assert UNUSUAL < binom.sf(5, 9, 0.3) < DOUBT < binom.sf(5, 9, 0.4)
-    updates = [Verdict([(20 + k, f"s{k}")], [f"x{k}", f"y{k}"]) for k in range(3)]
-    fresh, changing, hard = track(), track(rate=at_share(0.3)), track(rate=at_share(0.4))
-    assert [fresh.contradicted(v) for v in updates] == [0, 0, 1]
-    assert [changing.contradicted(v) for v in updates] == [0, 0, 0]
-    assert changing.short and changing.doubted() and changing.suspect is None
-    assert [hard.contradicted(v) for v in updates] == [0, 0, 0] and not hard.doubted()
-    again = Track.restored(json.loads(json.dumps(changing.state([f"g{i}" for i in range(40)]))),
-                           lambda g: int(g[1:]), TrackingConfig(), at_share(0.3))  # fmt: skip
-    assert again.short and again.doubted()
-
-
-def test_the_objects_a_run_must_see_against_a_claim_to_find_them_unusual():
-    """What a copy's lead must reach to end a claim (`copy_watch`): `TWIN_KIDNAP` in a fresh
-    or clean run; at a run share of 40 %, six (0.4^5 = 0.0102 is not below `UNUSUAL`)."""
-    assert AgainstRate().least_unusual(TWIN_KIDNAP) == TWIN_KIDNAP == 2
-    assert at_share(0.05).least_unusual(2) == 2
-    assert 0.4**5 > UNUSUAL > 0.4**6 and at_share(0.4).least_unusual(2) == 6
-    assert at_share(0.4).least_unusual(7) == 7
-    assert AgainstRate(10**6, 10**6).least_unusual(2) == MOST_UNUSUAL
-
-
-def test_a_suspected_claim_round_trips_through_its_state():
-    ids = [f"g{i}" for i in range(40)]
-    claim = track(rate=at_share(0.4))
-    claim.contradicted(Verdict([], ["x", "y"]))
-    state = json.loads(json.dumps(claim.state(ids)))
-    again = Track.restored(state, ids.index, TrackingConfig(), at_share(0.4))
-    assert again.suspect == claim.suspect == Suspicion(2, 2, 1, -2.0) and again.doubted()
-    older = {k: v for k, v in state.items() if k not in ("suspect", "short")}
-    assert Track.restored(older, ids.index, TrackingConfig()).suspect is None
-
-
 def test_the_runs_share_learns_from_a_claims_older_updates_only():
     rate = AgainstRate()
     claim = track(rate=rate)
@@ -753,14 +668,13 @@ def test_a_track_round_trips_through_its_state_and_reads_an_old_one():
     again = Track.restored(state, ids.index, TrackingConfig())
     assert again.state(ids) == state and again.counts() == claim.counts()
     old = {**state, "verdicts": [v[:2] for v in state["verdicts"]]}
-    for key in ("judged", "missing", "recent", "newest", "suspect", "held", "short"):
+    for key in ("judged", "missing", "recent", "newest"):
         old.pop(key)
     restored = Track.restored(old, ids.index, TrackingConfig())
     assert restored.counts()["supported"] == 0 and not restored.doubted()
     upgraded = restored.state(ids)  # an old verdict: no change, no repeat, nothing missing
     assert upgraded["verdicts"] == [[*v, [], 0, 0.0] for v in old["verdicts"]]
     assert upgraded["missing"] == 0.0 and upgraded["recent"] == [] and upgraded["newest"] == []
-    assert upgraded["suspect"] is None and upgraded["held"] == [] and not upgraded["short"]
 
 
 def test_a_restored_track_shares_the_runs_against_rate():
@@ -881,25 +795,6 @@ def test_a_claim_whose_newest_objects_speak_against_it_is_doubted_then_claimed_a
     assert doubted.status == "ambiguous" and doubted.reason == DOUBTED
     assert localizer.tracking and doubted.best.confidence <= 0.5
     again = localizer.update(local(room(), ids="m")[:5])  # the room's objects, seen anew
-    assert again.status == "localized" and np.allclose(again.pose, np.eye(4), atol=0.05)
-
-
-def test_two_strays_end_a_fresh_runs_claim_and_suspect_one_in_a_run_of_many_changes():
-    """Two chairs where the room has none, nothing for it: the contract's contradiction in a
-    fresh run (ended at once, a fresh window); in a run whose right claims saw 40 % of their
-    objects against them, a suspicion (`ambiguous`, still tracked) that the room's next
-    objects lift."""
-    building = ObjectMap(room(), up=[0, 0, 1])
-    strays = [SemanticObject(f"s{i}", "chair", [20.0 + 5 * i, 20.0, 0.5]) for i in range(2)]
-    fresh = claimed(building)
-    ended = fresh.update(strays)
-    assert ended.status == "ambiguous" and ended.reason == CONTRADICTED and not fresh.tracking
-    changing = claimed(building)
-    changing._against.against, changing._against.judged = 400.0, 1000.0  # the run's share
-    suspected = changing.update(strays)
-    assert suspected.status == "ambiguous" and suspected.reason == DOUBTED
-    assert changing.tracking and suspected.best.confidence <= 0.5
-    again = changing.update(local(room(), ids="m")[:3])  # the room's objects, seen anew
     assert again.status == "localized" and np.allclose(again.pose, np.eye(4), atol=0.05)
 
 
