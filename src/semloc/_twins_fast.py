@@ -41,26 +41,32 @@ HIT, MISS, UNSURE = 1, 0, 2
 
 
 @njit(cache=True, nogil=True)
-def placed(rotations, shifts, at, member_codes, order, need, tolerance, nearest, positions,
+def placed(p, p2, sin, cos, K, KK, at, member_codes, order, need, tolerance, nearest, positions,
            codes, origin, size, dims, starts, objects):  # fmt: skip
     """counts[m]: how many members (at `at[k]`, of label `member_codes[k]`, looked at in
-    `order`) motion m (`rotations[m]`, `shifts[m]`) puts within `tolerance` of a map object of
-    their label among their `nearest` nearest (a member left unsure counts); a count under
-    `need` may be short.  unsure[m, k]: member k of motion m left for an exact look-up."""
-    n_motions, n_members = len(rotations), len(at)
+    `order`) motion m (the rotation I + sin[m] K + (1 - cos[m]) KK, taking `p` onto `p2[m]`:
+    `twins.YawMotions`) puts within `tolerance` of a map object of their label among their
+    `nearest` nearest (a member left unsure counts); a count under `need` may be short.
+    unsure[m, k]: member k of motion m left for an exact look-up."""
+    n_motions, n_members = len(p2), len(at)
     counts = np.zeros(n_motions, np.int64)
     unsure = np.zeros((n_motions, n_members), np.bool_)
     gaps, same = np.empty(len(positions)), np.empty(len(positions), np.bool_)
-    point = np.empty(3)
+    R, t, point = np.empty((3, 3)), np.empty(3), np.empty(3)
     for m in range(n_motions):
+        for i in range(3):
+            for j in range(3):
+                R[i, j] = (i == j) + sin[m] * K[i, j] + (1 - cos[m]) * KK[i, j]
+        for i in range(3):
+            t[i] = p2[m, i] - R[i, 0] * p[0] - R[i, 1] * p[1] - R[i, 2] * p[2]
         for s in range(n_members):
             if counts[m] + n_members - s < need:
                 break
             k = order[s]
             for axis in range(3):
-                point[axis] = shifts[m, axis]
+                point[axis] = t[axis]
                 for j in range(3):
-                    point[axis] += rotations[m, axis, j] * at[k, j]
+                    point[axis] += R[axis, j] * at[k, j]
             found = _near(point, member_codes[k], tolerance, nearest, positions, codes, origin,
                           size, dims, starts, objects, gaps, same)  # fmt: skip
             counts[m] += found != MISS

@@ -74,9 +74,9 @@ def twins(
     counts, motions = [np.zeros(0, dtype=np.int64)], [np.zeros((0, 4, 4))]
     for a, b in _anchor_pairs(positions, codes, members, up, anchors):
         found = _motions(positions, codes, up, a, b, tolerance, index)
-        placed = _placed(found, positions, codes, members, tolerance, index, need, tree)
+        placed = _placed(found, positions, codes, members, tolerance, index, need, tree, (a, b))
         counts.append(placed[placed >= need])
-        motions.append(found[placed >= need])
+        motions.append(found.matrices(placed >= need))
     order = np.argsort(-np.concatenate(counts), kind="stable")  # most objects placed first
     S = np.concatenate(motions)[order]
     centroid = positions[members].mean(axis=0)
@@ -150,9 +150,9 @@ refuses, never refuse what the exact test passes (rounding of the two distances 
 def _motions(
     positions: np.ndarray, codes: np.ndarray, up: np.ndarray, a: int, b: int,
     tolerance: float, index: TwinIndex,
-) -> np.ndarray:  # fmt: skip
-    """Every yaw-and-translation motion (M, 4, 4) taking (a, b) onto a map pair of the same
-    labels at the same distance (within `tolerance`) and height difference."""
+) -> YawMotions:  # fmt: skip
+    """Every yaw-and-translation motion taking (a, b) onto a map pair of the same labels at
+    the same distance (within `tolerance`) and height difference."""
     offset = positions[b] - positions[a]
     distance, height = np.linalg.norm(offset), offset @ up
     (labelled_a, tree_a), (labelled_b, tree_b) = index(int(codes[a])), index(int(codes[b]))
@@ -168,23 +168,33 @@ def _motions(
         & (np.abs(offsets @ up - height) <= tolerance)
     )
     keep = keep[np.lexsort((b2[keep], a2[keep]))]  # (the motions' order: by a2, then b2)
-    return _yaw_motions(positions[a], offset, positions[a2[keep]], offsets[keep], up)
+    return YawMotions(positions[a], offset, positions[a2[keep]], offsets[keep], up)
 
 
-def _yaw_motions(
-    p: np.ndarray, v: np.ndarray, p2: np.ndarray, v2: np.ndarray, up: np.ndarray
-) -> np.ndarray:
-    """The rotations about `up` taking v's horizontal part onto each v2's, with p onto each
-    p2 (M, 4, 4)."""
-    h = v - (v @ up) * up
-    h2 = v2 - np.outer(v2 @ up, up)
-    angles = np.arctan2(np.cross(h, h2) @ up, h2 @ h)
-    K = np.array([[0, -up[2], up[1]], [up[2], 0, -up[0]], [-up[1], up[0], 0]])
-    sin, cos = np.sin(angles)[:, None, None], np.cos(angles)[:, None, None]
-    R = np.eye(3) + sin * K + (1 - cos) * (K @ K)
-    S = np.tile(np.eye(4), (len(angles), 1, 1))
-    S[:, :3, :3], S[:, :3, 3] = R, p2 - R @ p
-    return S
+class YawMotions:
+    """Rotations about `up` taking v's horizontal part onto each v2's (M), with p onto each
+    p2: their sines, cosines, `K` (the cross-product matrix of `up`) and `KK` (K²)."""
+
+    def __init__(
+        self, p: np.ndarray, v: np.ndarray, p2: np.ndarray, v2: np.ndarray, up: np.ndarray
+    ) -> None:
+        h = v - (v @ up) * up
+        h2 = v2 - np.outer(v2 @ up, up)
+        angles = np.arctan2(np.cross(h, h2) @ up, h2 @ h)
+        self.p, self.p2, self.sin, self.cos = p, p2, np.sin(angles), np.cos(angles)
+        self.K = np.array([[0, -up[2], up[1]], [up[2], 0, -up[0]], [-up[1], up[0], 0]])
+        self.KK = self.K @ self.K
+
+    def __len__(self) -> int:
+        return len(self.p2)
+
+    def matrices(self, which: np.ndarray | slice = slice(None)) -> np.ndarray:
+        """The motions `which` (an index of them) as 4x4 matrices (m, 4, 4)."""
+        sin, cos = self.sin[which][:, None, None], self.cos[which][:, None, None]
+        R = np.eye(3) + sin * self.K + (1 - cos) * self.KK
+        S = np.tile(np.eye(4), (len(R), 1, 1))
+        S[:, :3, :3], S[:, :3, 3] = R, self.p2[which] - R @ self.p
+        return S
 
 
 NEAREST = 4
@@ -192,27 +202,31 @@ NEAREST = 4
 
 
 def _placed(
-    S: np.ndarray, positions: np.ndarray, codes: np.ndarray, members: np.ndarray,
+    S: YawMotions, positions: np.ndarray, codes: np.ndarray, members: np.ndarray,
     tolerance: float, index: TwinIndex, need: int = 0, tree: cKDTree | None = None,
+    anchors: tuple[int, ...] = (),
 ) -> np.ndarray:  # fmt: skip
-    """For each motion of S (M, 4, 4): how many `members` it puts within `tolerance` of a map
-    object of their label (among their `NEAREST` nearest); a count under `need` may be short
-    (the motion is given up once the members left cannot bring it to `need`).  The map is
+    """For each motion of S: how many `members` it puts within `tolerance` of a map object of
+    their label (among their `NEAREST` nearest); a count under `need` may be short (the
+    motion is given up once the members left cannot bring it to `need`).  The map is
     looked up in `index`'s grid; where the grid cannot tell (`_twins_fast`), in `tree` (of
-    `positions`; built when needed and not given)."""
+    `positions`; built when needed and not given).  `anchors`: the members of the pair the
+    motions were found from."""
     if not len(S):
         return np.zeros(0, dtype=np.int64)
     grid = index.grid(tolerance)
-    order = np.argsort(index.counts[codes[members]], kind="stable")  # (rarest labels first:
-    # a motion that is no copy misses those soonest)
+    # rarest labels first (a motion that is no copy misses those soonest), the anchor pair's
+    # members last (each motion puts them on its own pair: they seldom miss)
+    order = np.lexsort((index.counts[codes[members]], np.isin(members, anchors)))
     counts, unsure = placed(
-        np.ascontiguousarray(S[:, :3, :3]), np.ascontiguousarray(S[:, :3, 3]),
-        positions[members], codes[members], order, need, tolerance, NEAREST, positions, codes,
-        grid.origin, grid.size, grid.dims, grid.starts, grid.objects,
+        S.p, S.p2, S.sin, S.cos, S.K, S.KK, positions[members], codes[members], order, need,
+        tolerance, NEAREST, positions, codes, grid.origin, grid.size, grid.dims, grid.starts,
+        grid.objects,
     )  # fmt: skip
     if not unsure.any():
         return counts
     m, k = np.nonzero(unsure)  # (counted as placed: looked up exactly here)
+    S = S.matrices()
     moved = np.einsum("mij,kj->mki", S[:, :3, :3], positions[members]) + S[:, None, :3, 3]
     tree = cKDTree(positions) if tree is None else tree
     gaps, near = tree.query(moved[m, k], k=NEAREST, distance_upper_bound=tolerance)

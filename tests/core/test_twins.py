@@ -14,6 +14,7 @@ from semloc.transforms import yaw_pose
 from semloc.twins import (
     NEAREST,
     TwinIndex,
+    YawMotions,
     _anchor_pairs,
     _motions,
     _placed,
@@ -241,7 +242,7 @@ def test_an_anchor_pair_matches_map_pairs_at_its_distance_and_height_within_the_
     0.25 m of the anchor pair's (1.75 m apart, or 0.25 m higher, exactly: kept)."""
     positions = np.array([[0.0, 0, 0], [2.0, 0, 0], [8.0, 0, 0], [b2[0], 0, b2[1]]])
     codes = np.array([0, 1, 0, 1], dtype=np.int64)
-    motions = _motions(positions, codes, UP, 0, 1, 0.25, TwinIndex(positions, codes))
+    motions = _motions(positions, codes, UP, 0, 1, 0.25, TwinIndex(positions, codes)).matrices()
     moves = sorted(round(float(S[0, 3]), 6) for S in motions)
     assert moves == ([0.0, 8.0] if kept else [0.0])
 
@@ -271,8 +272,8 @@ def test_an_anchor_without_a_partner_is_passed_over_and_the_next_ones_are_tried(
 def test_no_motion_places_nothing():
     positions = np.array([[0.0, 0, 0], [1.0, 0, 0], [2.0, 0, 0]])
     codes = np.zeros(3, dtype=np.int64)
-    placed = _placed(np.zeros((0, 4, 4)), positions, codes, np.arange(3), 0.3,
-                     TwinIndex(positions, codes))  # fmt: skip
+    none = YawMotions(positions[0], positions[1], np.zeros((0, 3)), np.zeros((0, 3)), UP)
+    placed = _placed(none, positions, codes, np.arange(3), 0.3, TwinIndex(positions, codes))
     assert placed.shape == (0,) and placed.dtype.kind == "i"
 
 
@@ -359,12 +360,12 @@ def test_the_grids_count_of_placed_members_is_the_kd_trees(seed, need, tolerance
     positions = np.vstack([positions, positions[doubled]])
     codes = rng.integers(0, 3, size=len(positions))
     members = rng.choice(len(positions), size=int(rng.integers(1, 9)), replace=False)
-    onto = rng.integers(0, len(positions), size=40)
-    S = np.array([yaw_pose(yaw, p - q) for yaw, p, q in zip(
-        np.concatenate([np.zeros(20), rng.uniform(-np.pi, np.pi, 20)]),
-        positions[onto], positions[members[0]] + rng.normal(0.0, [[0.0]] * 20 + [[1.0]] * 20, (40, 3)),
-    )])  # fmt: skip
-    plain = _placed_plainly(S, positions, codes, members, tolerance)
+    onto = positions[rng.integers(0, len(positions), size=40)]
+    onto[20:] += rng.normal(0.0, 1.0, (20, 3))
+    yaws = np.concatenate([np.zeros(20), rng.uniform(-np.pi, np.pi, 20)])
+    turned = np.column_stack([np.cos(yaws), np.sin(yaws), np.zeros(40)])
+    S = YawMotions(positions[members[0]], np.array([1.0, 0, 0]), onto, turned, UP)
+    plain = _placed_plainly(S.matrices(), positions, codes, members, tolerance)
     fast = _placed(S, positions, codes, members, tolerance, TwinIndex(positions, codes), need)
     reached = plain >= need
     np.testing.assert_array_equal(fast[reached], plain[reached])
