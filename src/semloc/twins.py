@@ -143,8 +143,8 @@ def _anchor_pairs(
 SPAN = 2.0
 """An anchor pair's members lie at least this far apart (m) when the place allows."""
 LOOSE = 1 + 1e-9
-"""A quick test's distance bound over the exact one's: it may pass what the exact test then
-refuses, never refuse what the exact test passes (rounding of the two distances aside)."""
+"""A quick test's bound over the exact one's: it may pass what the exact test then refuses,
+and never refuses what the exact test passes, whatever the rounding of the two distances."""
 
 
 def _motions(
@@ -156,10 +156,11 @@ def _motions(
     offset = positions[b] - positions[a]
     distance, height = np.linalg.norm(offset), offset @ up
     (labelled_a, tree_a), (labelled_b, tree_b) = index(int(codes[a])), index(int(codes[b]))
-    # (a loose ball first: the distance test below is the one that counts)
+    # the map pairs about `distance` apart, loosely: the tests below decide
     near = tree_a.sparse_distance_matrix(
         tree_b, (distance + tolerance) * LOOSE, output_type="ndarray"
     )
+    near = near[np.abs(near["v"] - distance) <= tolerance * LOOSE]
     a2, b2 = labelled_a[near["i"]], labelled_b[near["j"]]
     offsets = positions[b2] - positions[a2]
     keep = np.flatnonzero(
