@@ -28,7 +28,7 @@ CORE = {"maps", "pointsets", "transforms", "association", "clustering", "pose", 
         "registration", "closed_form", "digests", "verification", "results", "decision", "localizer",
         "confidence_model", "_clustering_fast", "_verification_fast", "_decision_fast",
         "_alignment_fast", "alignment", "changes", "window", "tracking",
-        "semantics", "compiling", "priors", "places", "_places_fast", "next_look",
+        "semantics", "compiling", "priors", "places", "_places_fast", "_twins_fast", "next_look",
         "coverage", "twins", "schema", "map_context", "sightings", "search",
         "copy_watch", "settings"}  # fmt: skip
 LIBRARY = {"core", "descriptors", "frontend", "io", "pictures", "baselines", "sim", "eval"}

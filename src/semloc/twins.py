@@ -26,10 +26,11 @@ and ends it when a twin leads by more.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from itertools import chain
 
 import numpy as np
 from scipy.spatial import cKDTree
+
+from semloc._twins_fast import Grid, placed
 
 MIN_TWIN_PAIRS = 3
 """A twin places at least this many of the objects (fewer fix no pose)."""
@@ -62,21 +63,20 @@ def twins(
 ) -> list[np.ndarray]:
     """The 4x4 motions S (map to map) that put the map objects `members` on copies of
     themselves elsewhere in the map, most objects placed first (see the module docstring).
-    `tree` (of `positions`) and `index` (their `TwinIndex`) may be given, built once per
-    map."""
+    `tree` (of `positions`: the look-ups `index`'s grid cannot tell) and `index` (their
+    `TwinIndex`) may be given, built once per map."""
     members = np.unique(np.asarray(members, dtype=np.int64))
     if len(members) < MIN_TWIN_PAIRS:
         return []
-    tree = cKDTree(positions) if tree is None else tree
     index = TwinIndex(positions, codes) if index is None else index
     up = np.asarray(up, dtype=float) / np.linalg.norm(up)
     need = max(MIN_TWIN_PAIRS, int(np.ceil(min_share * len(members))))
     counts, motions = [np.zeros(0, dtype=np.int64)], [np.zeros((0, 4, 4))]
     for a, b in _anchor_pairs(positions, codes, members, up, anchors):
         found = _motions(positions, codes, up, a, b, tolerance, index)
-        placed = _placed(found, positions, codes, members, tolerance, tree)
+        placed = _placed(found, positions, codes, members, tolerance, index, need, tree, (a, b))
         counts.append(placed[placed >= need])
-        motions.append(found[placed >= need])
+        motions.append(found.matrices(placed >= need))
     order = np.argsort(-np.concatenate(counts), kind="stable")  # most objects placed first
     S = np.concatenate(motions)[order]
     centroid = positions[members].mean(axis=0)
@@ -94,10 +94,14 @@ def twins(
 
 class TwinIndex:
     """Per label code, the map's objects of it and a KD-tree of their positions, each built
-    when first asked (the twins' search matches anchor pairs label by label)."""
+    when first asked (the twins' search matches anchor pairs label by label); how many
+    objects each label has; all the objects in a grid per reach (`grid`: the count of what a
+    motion places looks them up)."""
 
     def __init__(self, positions: np.ndarray, codes: np.ndarray) -> None:
         self.positions, self.codes = positions, codes
+        self.counts = np.bincount(codes)
+        self._grids: dict[float, Grid] = {}
         self._of: dict[int, tuple[np.ndarray, cKDTree]] = {}
 
     def __call__(self, code: int) -> tuple[np.ndarray, cKDTree]:
@@ -105,6 +109,12 @@ class TwinIndex:
             indices = np.flatnonzero(self.codes == code)
             self._of[code] = (indices, cKDTree(self.positions[indices]))
         return self._of[code]
+
+    def grid(self, reach: float) -> Grid:
+        """All the map's objects in a grid of cells at least `reach` m wide."""
+        if reach not in self._grids:
+            self._grids[reach] = Grid(self.positions, reach)
+        return self._grids[reach]
 
 
 def _anchor_pairs(
@@ -132,43 +142,60 @@ def _anchor_pairs(
 
 SPAN = 2.0
 """An anchor pair's members lie at least this far apart (m) when the place allows."""
+LOOSE = 1 + 1e-9
+"""A quick test's bound over the exact one's: it may pass what the exact test then refuses,
+and never refuses what the exact test passes, whatever the rounding of the two distances."""
 
 
 def _motions(
     positions: np.ndarray, codes: np.ndarray, up: np.ndarray, a: int, b: int,
     tolerance: float, index: TwinIndex,
-) -> np.ndarray:  # fmt: skip
-    """Every yaw-and-translation motion (M, 4, 4) taking (a, b) onto a map pair of the same
-    labels at the same distance (within `tolerance`) and height difference."""
+) -> YawMotions:  # fmt: skip
+    """Every yaw-and-translation motion taking (a, b) onto a map pair of the same labels at
+    the same distance (within `tolerance`) and height difference."""
     offset = positions[b] - positions[a]
     distance, height = np.linalg.norm(offset), offset @ up
-    others, (labelled_b, tree_b) = index(int(codes[a]))[0], index(int(codes[b]))
-    reach = tree_b.query_ball_point(positions[others], distance + tolerance)
-    a2 = np.repeat(others, np.fromiter(map(len, reach), np.int64, len(reach)))
-    b2 = labelled_b[np.fromiter(chain.from_iterable(reach), np.int64, len(a2))]
-    keep = b2 != a2
-    a2, b2 = a2[keep], b2[keep]
-    offsets = positions[b2] - positions[a2]
-    keep = (np.abs(np.linalg.norm(offsets, axis=1) - distance) <= tolerance) & (
-        np.abs(offsets @ up - height) <= tolerance
+    (labelled_a, tree_a), (labelled_b, tree_b) = index(int(codes[a])), index(int(codes[b]))
+    # the map pairs about `distance` apart, loosely: the tests below decide
+    near = tree_a.sparse_distance_matrix(
+        tree_b, (distance + tolerance) * LOOSE, output_type="ndarray"
     )
-    return _yaw_motions(positions[a], offset, positions[a2[keep]], offsets[keep], up)
+    near = near[np.abs(near["v"] - distance) <= tolerance * LOOSE]
+    a2, b2 = labelled_a[near["i"]], labelled_b[near["j"]]
+    offsets = positions[b2] - positions[a2]
+    keep = np.flatnonzero(
+        (b2 != a2)
+        & (np.abs(np.linalg.norm(offsets, axis=1) - distance) <= tolerance)
+        & (np.abs(offsets @ up - height) <= tolerance)
+    )
+    keep = keep[np.lexsort((b2[keep], a2[keep]))]  # (the motions' order: by a2, then b2)
+    return YawMotions(positions[a], offset, positions[a2[keep]], offsets[keep], up)
 
 
-def _yaw_motions(
-    p: np.ndarray, v: np.ndarray, p2: np.ndarray, v2: np.ndarray, up: np.ndarray
-) -> np.ndarray:
-    """The rotations about `up` taking v's horizontal part onto each v2's, with p onto each
-    p2 (M, 4, 4)."""
-    h = v - (v @ up) * up
-    h2 = v2 - np.outer(v2 @ up, up)
-    angles = np.arctan2(np.cross(h, h2) @ up, h2 @ h)
-    K = np.array([[0, -up[2], up[1]], [up[2], 0, -up[0]], [-up[1], up[0], 0]])
-    sin, cos = np.sin(angles)[:, None, None], np.cos(angles)[:, None, None]
-    R = np.eye(3) + sin * K + (1 - cos) * (K @ K)
-    S = np.tile(np.eye(4), (len(angles), 1, 1))
-    S[:, :3, :3], S[:, :3, 3] = R, p2 - R @ p
-    return S
+class YawMotions:
+    """Rotations about `up` taking v's horizontal part onto each v2's (M), with p onto each
+    p2: their sines, cosines, `K` (the cross-product matrix of `up`) and `KK` (K²)."""
+
+    def __init__(
+        self, p: np.ndarray, v: np.ndarray, p2: np.ndarray, v2: np.ndarray, up: np.ndarray
+    ) -> None:
+        h = v - (v @ up) * up
+        h2 = v2 - np.outer(v2 @ up, up)
+        angles = np.arctan2(np.cross(h, h2) @ up, h2 @ h)
+        self.p, self.p2, self.sin, self.cos = p, p2, np.sin(angles), np.cos(angles)
+        self.K = np.array([[0, -up[2], up[1]], [up[2], 0, -up[0]], [-up[1], up[0], 0]])
+        self.KK = self.K @ self.K
+
+    def __len__(self) -> int:
+        return len(self.p2)
+
+    def matrices(self, which: np.ndarray | slice = slice(None)) -> np.ndarray:
+        """The motions `which` (an index of them) as 4x4 matrices (m, 4, 4)."""
+        sin, cos = self.sin[which][:, None, None], self.cos[which][:, None, None]
+        R = np.eye(3) + sin * self.K + (1 - cos) * self.KK
+        S = np.tile(np.eye(4), (len(R), 1, 1))
+        S[:, :3, :3], S[:, :3, 3] = R, self.p2[which] - R @ self.p
+        return S
 
 
 NEAREST = 4
@@ -176,19 +203,37 @@ NEAREST = 4
 
 
 def _placed(
-    S: np.ndarray, positions: np.ndarray, codes: np.ndarray, members: np.ndarray,
-    tolerance: float, tree: cKDTree,
+    S: YawMotions, positions: np.ndarray, codes: np.ndarray, members: np.ndarray,
+    tolerance: float, index: TwinIndex, need: int = 0, tree: cKDTree | None = None,
+    anchors: tuple[int, ...] = (),
 ) -> np.ndarray:  # fmt: skip
-    """For each motion of S (M, 4, 4): how many `members` it puts within `tolerance` of a map
-    object of their label (among their `NEAREST` nearest)."""
+    """For each motion of S: how many `members` it puts within `tolerance` of a map object of
+    their label (among their `NEAREST` nearest); a count under `need` may be short (the
+    motion is given up once the members left cannot bring it to `need`).  The map is
+    looked up in `index`'s grid; where the grid cannot tell (`_twins_fast`), in `tree` (of
+    `positions`; built when needed and not given).  `anchors`: the members of the pair the
+    motions were found from."""
     if not len(S):
-        return np.zeros(0, dtype=int)
+        return np.zeros(0, dtype=np.int64)
+    grid = index.grid(tolerance)
+    # rarest labels first (a motion that is no copy misses those soonest), the anchor pair's
+    # members last (each motion puts them on its own pair: they seldom miss)
+    order = np.lexsort((index.counts[codes[members]], np.isin(members, anchors)))
+    counts, unsure = placed(
+        S.p, S.p2, S.sin, S.cos, S.K, S.KK, positions[members], codes[members], order, need,
+        tolerance, NEAREST, positions, codes, grid.origin, grid.size, grid.dims, grid.starts,
+        grid.objects,
+    )  # fmt: skip
+    if not unsure.any():
+        return counts
+    m, k = np.nonzero(unsure)  # (counted as placed: looked up exactly here)
+    S = S.matrices()
     moved = np.einsum("mij,kj->mki", S[:, :3, :3], positions[members]) + S[:, None, :3, 3]
-    gaps, near = tree.query(moved.reshape(-1, 3), k=NEAREST, distance_upper_bound=tolerance)
-    found = np.isfinite(gaps)
-    labels = np.where(found, codes[np.minimum(near, len(codes) - 1)], -1)
-    hit = (labels == np.tile(codes[members], len(S))[:, None]).any(axis=1)
-    return hit.reshape(len(S), len(members)).sum(axis=1)
+    tree = cKDTree(positions) if tree is None else tree
+    gaps, near = tree.query(moved[m, k], k=NEAREST, distance_upper_bound=tolerance)
+    labels = np.where(np.isfinite(gaps), codes[np.minimum(near, len(codes) - 1)], -1)
+    np.subtract.at(counts, m, ~(labels == codes[members][k, None]).any(axis=1))
+    return counts
 
 
 def twin_pairs(

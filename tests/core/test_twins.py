@@ -12,7 +12,9 @@ from scipy.spatial import cKDTree
 from semloc import Localizer, LocalizerConfig, ObjectMap, SemanticObject
 from semloc.transforms import yaw_pose
 from semloc.twins import (
+    NEAREST,
     TwinIndex,
+    YawMotions,
     _anchor_pairs,
     _motions,
     _placed,
@@ -240,7 +242,7 @@ def test_an_anchor_pair_matches_map_pairs_at_its_distance_and_height_within_the_
     0.25 m of the anchor pair's (1.75 m apart, or 0.25 m higher, exactly: kept)."""
     positions = np.array([[0.0, 0, 0], [2.0, 0, 0], [8.0, 0, 0], [b2[0], 0, b2[1]]])
     codes = np.array([0, 1, 0, 1], dtype=np.int64)
-    motions = _motions(positions, codes, UP, 0, 1, 0.25, TwinIndex(positions, codes))
+    motions = _motions(positions, codes, UP, 0, 1, 0.25, TwinIndex(positions, codes)).matrices()
     moves = sorted(round(float(S[0, 3]), 6) for S in motions)
     assert moves == ([0.0, 8.0] if kept else [0.0])
 
@@ -269,8 +271,9 @@ def test_an_anchor_without_a_partner_is_passed_over_and_the_next_ones_are_tried(
 
 def test_no_motion_places_nothing():
     positions = np.array([[0.0, 0, 0], [1.0, 0, 0], [2.0, 0, 0]])
-    placed = _placed(np.zeros((0, 4, 4)), positions, np.zeros(3, dtype=np.int64),
-                     np.arange(3), 0.3, cKDTree(positions))  # fmt: skip
+    codes = np.zeros(3, dtype=np.int64)
+    none = YawMotions(positions[0], positions[1], np.zeros((0, 3)), np.zeros((0, 3)), UP)
+    placed = _placed(none, positions, codes, np.arange(3), 0.3, TwinIndex(positions, codes))
     assert placed.shape == (0,) and placed.dtype.kind == "i"
 
 
@@ -322,11 +325,51 @@ class _CountingTree(cKDTree):
 
 def test_the_twins_search_queries_the_tree_it_is_given():
     """A caller's tree of the map's positions is used, not built again (the map's tree is
-    built once per map)."""
+    built once per map), for what the grid cannot tell: here half the copy's objects have
+    `NEAREST` objects of another label at their very spot (which are the nearest?)."""
     m = building([yaw_pose(np.pi / 2, [30.0, 5.0, 0.0])])
-    tree = _CountingTree(m.positions)
-    found = twins(m.positions, label_codes(m.labels), UP, np.arange(len(ROOM)), 0.3, tree=tree)
+    crowded = np.repeat(np.arange(len(ROOM), len(ROOM) + 3), NEAREST)
+    positions = np.vstack([m.positions, m.positions[crowded]])
+    codes = np.concatenate([label_codes(m.labels), np.full(len(crowded), 99)])
+    tree = _CountingTree(positions)
+    found = twins(positions, codes, UP, np.arange(len(ROOM)), 0.3, tree=tree)
     assert len(found) == 1 and tree.queries > 0
+
+
+def _placed_plainly(S, positions, codes, members, tolerance):
+    """`_placed`'s count by a KD-tree query of every member of every motion."""
+    moved = np.einsum("mij,kj->mki", S[:, :3, :3], positions[members]) + S[:, None, :3, 3]
+    gaps, near = cKDTree(positions).query(
+        moved.reshape(-1, 3), k=NEAREST, distance_upper_bound=tolerance
+    )
+    labels = np.where(np.isfinite(gaps), codes[np.minimum(near, len(codes) - 1)], -1)
+    hit = (labels == np.tile(codes[members], len(S))[:, None]).any(axis=1)
+    return hit.reshape(len(S), len(members)).sum(axis=1)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(0, 6), st.sampled_from([0.2, 0.5, 1.0]))
+def test_the_grids_count_of_placed_members_is_the_kd_trees(seed, need, tolerance):
+    """Crowded maps of few labels (often more than `NEAREST` objects within the tolerance),
+    some objects doubled at the same spot under another label (equally near objects), motions
+    onto the map's own objects and anywhere: the compiled count (`_twins_fast`) is the
+    KD-tree's wherever it reaches `need`, and under `need` wherever the KD-tree's is."""
+    rng = np.random.default_rng(seed)
+    positions = rng.uniform(0.0, [6.0, 4.0, 2.0], size=(int(rng.integers(5, 80)), 3))
+    doubled = rng.choice(len(positions), size=len(positions) // 4)
+    positions = np.vstack([positions, positions[doubled]])
+    codes = rng.integers(0, 3, size=len(positions))
+    members = rng.choice(len(positions), size=int(rng.integers(1, 9)), replace=False)
+    onto = positions[rng.integers(0, len(positions), size=40)]
+    onto[20:] += rng.normal(0.0, 1.0, (20, 3))
+    yaws = np.concatenate([np.zeros(20), rng.uniform(-np.pi, np.pi, 20)])
+    turned = np.column_stack([np.cos(yaws), np.sin(yaws), np.zeros(40)])
+    S = YawMotions(positions[members[0]], np.array([1.0, 0, 0]), onto, turned, UP)
+    plain = _placed_plainly(S.matrices(), positions, codes, members, tolerance)
+    fast = _placed(S, positions, codes, members, tolerance, TwinIndex(positions, codes), need)
+    reached = plain >= need
+    np.testing.assert_array_equal(fast[reached], plain[reached])
+    assert (fast[~reached] < need).all()
 
 
 def _turned_building(up: np.ndarray, S: np.ndarray) -> tuple[ObjectMap, np.ndarray]:
