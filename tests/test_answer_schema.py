@@ -208,7 +208,7 @@ def results(draw) -> Result:
     return result
 
 
-@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=60, suppress_health_check=[HealthCheck.too_slow])
 @given(result=results())
 def test_any_result_round_trips_through_its_json(result):
     document = json.loads(result.to_json())

@@ -19,7 +19,7 @@ UP = np.array([0.0, 0.0, 1.0])
 
 @given(st.floats(-3.1, 3.1), st.tuples(*[st.floats(-4, 4)] * 3), st.integers(0, 10**6),
        st.floats(0.0, 0.5))  # fmt: skip
-@settings(max_examples=40, deadline=None)
+@settings(max_examples=40)
 def test_ransac_recovers_a_yaw_pose_among_outliers(yaw, t, seed, outliers):
     rng = np.random.default_rng(seed)
     T = yaw_pose(yaw, t)

@@ -125,7 +125,7 @@ def test_every_numeric_option_has_a_range():
 
 
 @pytest.mark.slow
-@settings(max_examples=60, deadline=None, suppress_health_check=CAPTURE)
+@settings(max_examples=60, suppress_health_check=CAPTURE)
 @given(option=st.sampled_from(RANGED), data=st.data())
 def test_numeric_option_out_of_range_is_one_line(option, data, capsys):
     """Any value below the minimum or above the maximum: exit 2 naming the option (typer
@@ -147,7 +147,7 @@ def test_numeric_option_out_of_range_is_one_line(option, data, capsys):
     _one_error_line(capsys, flag)
 
 
-@settings(max_examples=25, deadline=None, suppress_health_check=CAPTURE)
+@settings(max_examples=25, suppress_health_check=CAPTURE)
 @given(
     option=st.sampled_from(["--gamma", "--delta", "--tolerance", "--descriptor-delta", "--top-k"]),
     value=st.integers(-(10**30), 10**30) | st.floats(allow_nan=False, allow_infinity=False),
@@ -164,7 +164,7 @@ def test_localize_settings_options_are_checked(tmp_path_factory, option, value, 
         _one_error_line(capsys, option.removeprefix("--").replace("-", "_"))
 
 
-@settings(max_examples=25, deadline=None, suppress_health_check=CAPTURE)
+@settings(max_examples=25, suppress_health_check=CAPTURE)
 @given(
     radius=st.floats() | st.integers(-(10**30), 10**30),
     near=st.tuples(st.floats(), st.floats(), st.floats()),
@@ -268,7 +268,7 @@ RESULT = st.fixed_dictionaries(
 )  # fmt: skip
 
 
-@settings(max_examples=200, deadline=None, suppress_health_check=CAPTURE)
+@settings(max_examples=200, suppress_health_check=CAPTURE)
 @given(RESULT)
 def test_any_result_document_is_read_or_refused_in_one_line(tmp_path_factory, document):
     path = tmp_path_factory.mktemp("result") / "r.json"

@@ -317,7 +317,7 @@ _JSON = st.recursive(
 )
 
 
-@settings(max_examples=60, deadline=None)
+@settings(max_examples=60)
 @given(document=_JSON)
 def test_label_map_files_are_a_mapping_of_strings_or_one_error(tmp_path_factory, document):
     path = tmp_path_factory.mktemp("lm") / "m.json"

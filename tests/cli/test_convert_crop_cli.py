@@ -196,7 +196,7 @@ def test_crop_rejects_non_rigid_transform():
         crop_with_truth(_grid_map(), [0, 0, 0], 3.0, transform=np.diag([2.0, 1, 1, 1]))
 
 
-@settings(max_examples=40, deadline=None)
+@settings(max_examples=40)
 @given(
     center=st.tuples(*[st.floats(-1, 7, allow_nan=False)] * 2, st.floats(0, 2)),
     radius=st.floats(0.5, 6),

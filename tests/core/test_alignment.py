@@ -232,7 +232,7 @@ def test_the_information_grows_with_the_pairs_and_is_symmetric_positive_definite
     assert np.all(np.diag(many) > np.diag(few))
 
 
-@settings(max_examples=40, deadline=None)
+@settings(max_examples=40)
 @given(
     n=st.integers(1, 60),
     views=st.integers(1, 10),
@@ -273,7 +273,7 @@ def _mutual_nearest_literal(R, t, radius, cand_a, cand_b, cand_a_xyz, cand_b_xyz
     return sorted((a, int(cand_b[c])) for a, c in keep.items())
 
 
-@settings(max_examples=80, deadline=None)
+@settings(max_examples=80)
 @given(
     seed=st.integers(0, 2**31),
     n_a=st.integers(1, 12),

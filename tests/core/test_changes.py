@@ -208,7 +208,7 @@ def test_a_moved_object_whose_old_place_was_seen_is_moved_not_missing():
     assert set(changes.matched) >= {"g0", "g1", "g2", "g3"}
 
 
-@settings(max_examples=40, deadline=None)
+@settings(max_examples=40)
 @given(
     yaw=st.floats(-np.pi, np.pi),
     shift=st.tuples(*[st.floats(-50, 50)] * 2),

@@ -211,7 +211,7 @@ def _scenario(seed: int, n_global: int, n_local: int, n_labels: int):
     return g, local, detections
 
 
-@settings(max_examples=25, deadline=None)
+@settings(max_examples=25)
 @given(
     seed=st.integers(0, 10_000),
     n_global=st.integers(4, 10),
@@ -241,7 +241,7 @@ def test_bitset_clustering_equals_literal_rules(
             assert got[key] == pytest.approx(score, abs=1e-9)
 
 
-@settings(max_examples=25, deadline=None)
+@settings(max_examples=25)
 @given(
     seed=st.integers(0, 10_000),
     n_global=st.integers(4, 10),
@@ -432,7 +432,7 @@ def test_kernels_out_of_room_are_called_again_with_more(monkeypatch, sweep):
     assert max(rooms) >= 64  # some calls ran out of room several times
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=200)
 @given(
     st.lists(st.sampled_from([0.0, 0.0, 0.25, 0.5, 1.0, 1.75, 3.0]), min_size=1, max_size=30),
     st.data(),
@@ -445,7 +445,7 @@ def test_kth_largest_score_equals_a_partition(scores, data):
     assert _kth_largest(values, k) == np.sort(values)[::-1][k - 1]
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=200)
 @given(st.lists(st.integers(1, 9), min_size=1, max_size=40), st.data())
 def test_kth_largest_size_equals_a_partition(sizes, data):
     """The k-th largest set size, counted rather than partitioned, is a full partition's."""
@@ -474,7 +474,7 @@ def _splitmix64_finaliser(x: int) -> int:
     return x ^ (x >> 31)
 
 
-@settings(max_examples=50, deadline=None)
+@settings(max_examples=50)
 @given(st.lists(st.integers(0, 2**62 - 1), max_size=20))
 def test_candidate_keys_are_splitmix64_of_two_odd_and_even_counters(indices):
     key, key2 = kernels.candidate_keys(np.array(indices, dtype=np.int64))
@@ -483,7 +483,7 @@ def test_candidate_keys_are_splitmix64_of_two_odd_and_even_counters(indices):
     assert key2.tolist() == [_splitmix64_finaliser(2 * i + 2) for i in indices]
 
 
-@settings(max_examples=50, deadline=None)
+@settings(max_examples=50)
 @given(
     st.lists(st.lists(st.integers(-1, 9), min_size=1, max_size=4), max_size=6),
     st.lists(st.lists(st.integers(-1, 9), min_size=1, max_size=4), max_size=6),
@@ -516,7 +516,7 @@ def test_pool_rows_stack_renumber_and_count_like_numpy(top_rows, bottom_rows):
     assert np.array_equal(kernels.rows_of(table, owner, which), table[owner[which]])
 
 
-@settings(max_examples=80, deadline=None)
+@settings(max_examples=80)
 @given(
     seed=st.integers(0, 10_000),
     n_global=st.integers(1, 12),

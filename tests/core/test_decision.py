@@ -452,7 +452,7 @@ def test_is_rival_just_inside_and_outside():
         assert not is_rival(four, shared(four, 4, k), overlap)
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=200)
 @given(a=PAIR_SETS, b=PAIR_SETS, overlap=st.floats(0, 1))
 def test_is_rival_limits_and_symmetry(a, b, overlap):
     a, b = sorted(a), sorted(b)
@@ -559,7 +559,7 @@ ANGLES = st.floats(-math.pi, math.pi)
 SHIFTS = st.tuples(*[st.floats(-20, 20)] * 3)
 
 
-@settings(max_examples=150, deadline=None)
+@settings(max_examples=150)
 @given(
     theta=ANGLES,
     t=SHIFTS,
@@ -588,7 +588,7 @@ def test_same_place_does_not_depend_on_the_local_frames_origin(
     )
 
 
-@settings(max_examples=100, deadline=None)
+@settings(max_examples=100)
 @given(
     places=st.lists(
         st.tuples(
@@ -640,7 +640,7 @@ def test_distinct_just_inside_and_outside_and_stops_at_top_k():
 
 
 # decide never says localized for less than it needs ---------------------------------------
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=200)
 @given(
     n=st.integers(2, 6),
     fitness=st.one_of(st.none(), st.floats(0, 1)),

@@ -37,7 +37,7 @@ def test_no_pairs():
     assert digests(["a"], ["b"], []) == []
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=200)
 @given(
     st.lists(st.text(max_size=150), min_size=1, max_size=6),
     st.lists(st.text(max_size=150), min_size=1, max_size=6),

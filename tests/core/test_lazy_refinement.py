@@ -27,7 +27,7 @@ def _verdict(result: semloc.Result) -> tuple:
     return result.status, None if best is None else sorted(best.pairs)
 
 
-@settings(max_examples=25, deadline=None)
+@settings(max_examples=25)
 @given(
     building=st.sampled_from(sorted(BUILDINGS)),
     n_objects=st.integers(3, 8),

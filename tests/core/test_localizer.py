@@ -183,9 +183,7 @@ poses = st.tuples(
 )
 
 
-@settings(
-    max_examples=15, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
-)
+@settings(max_examples=15, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(pose=poses, seed=st.integers(0, 1000))
 def test_invariant_to_rigid_transform_of_the_local_map(building, pose, seed):
     obs = observe(building, 6, seed=seed)
@@ -199,9 +197,7 @@ def test_invariant_to_rigid_transform_of_the_local_map(building, pose, seed):
     np.testing.assert_allclose(moved.pose, base.pose @ np.linalg.inv(T), atol=1e-6)
 
 
-@settings(
-    max_examples=15, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
-)
+@settings(max_examples=15, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(seed=st.integers(0, 1000), order_seed=st.integers(0, 1000))
 def test_invariant_to_object_order(building, seed, order_seed):
     obs = observe(building, 6, seed=seed)

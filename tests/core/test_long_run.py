@@ -173,9 +173,7 @@ def building() -> ObjectMap:
     return layout(160, seed=5)
 
 
-@settings(
-    max_examples=4, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
-)
+@settings(max_examples=4, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(
     translation=st.floats(0.0, 0.02),
     yaw_walk=st.floats(0.0, 0.3),
@@ -194,9 +192,7 @@ def test_drift_below_a_bound_keeps_the_pose_right(building, translation, yaw_wal
     assert all(error < 0.5 for status, error, _ in after if status == "localized")
 
 
-@settings(
-    max_examples=4, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
-)
+@settings(max_examples=4, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(
     yaw_walk=st.floats(0.0, 0.3),
     moved=st.floats(0.0, 0.05),

@@ -43,7 +43,6 @@ def test_the_compiled_gate_is_the_documented_formula(d_global, d_local, criterio
     )
 
 
-@settings(deadline=None)
 @given(st.lists(st.tuples(distances, distances), min_size=1, max_size=12), criteria)
 def test_merge_criterion_applies_the_compiled_gate_element_wise(pairs, criterion):
     d_global, d_local = np.array(pairs).T
@@ -63,7 +62,6 @@ def test_merge_criterion_applies_the_compiled_gate_element_wise(pairs, criterion
     assert np.shape(merge_metric(d_global[0], d_local[0])) == ()
 
 
-@settings(deadline=None)
 @given(distances, distances, criteria)
 def test_the_gate_passes_only_distances_within_its_window(d_global, d_local, criterion):
     """The sweep tests only global pairs within the window's top (a hair wider, as the
@@ -81,7 +79,7 @@ def test_the_gate_passes_only_distances_within_its_window(d_global, d_local, cri
         assert not kernels.gate(below, d_local, tolerance, gamma, min_distance)
 
 
-@settings(max_examples=60, deadline=None)
+@settings(max_examples=60)
 @given(st.floats(0.0, 7.0), st.floats(0.0, 7.0), criteria, st.sampled_from([0.25, 0.5, 1.0]))
 def test_place_retrieval_looks_up_every_map_distance_the_gate_passes(
     map_gap, local_gap, criterion, bin_size

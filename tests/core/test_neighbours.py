@@ -19,7 +19,7 @@ def brute_knn(points: np.ndarray, query: np.ndarray, k: int, bound: float):
     return idx, np.where(dist < bound, dist, np.inf)
 
 
-@settings(max_examples=40, deadline=None)
+@settings(max_examples=40)
 @given(seeds, st.integers(1, 300), st.integers(1, 20), st.floats(0.01, 3.0))
 def test_forest_search_equals_brute_force_in_each_tree(seed, n, k, bound) -> None:
     rng = np.random.default_rng(seed)
@@ -54,7 +54,7 @@ def test_far_queries_find_nothing_and_duplicates_are_kept() -> None:
     assert np.all(idx[1] == -1) and np.all(np.isinf(dist[1]))
 
 
-@settings(max_examples=25, deadline=None)
+@settings(max_examples=25)
 @given(seeds, st.integers(8, 200))
 def test_neighbourhood_shapes_match_an_eigendecomposition(seed, n) -> None:
     rng = np.random.default_rng(seed)
@@ -73,7 +73,7 @@ def test_neighbourhood_shapes_match_an_eigendecomposition(seed, n) -> None:
     np.testing.assert_allclose(np.linalg.norm(normals, axis=1), 1.0)
 
 
-@settings(max_examples=40, deadline=None)
+@settings(max_examples=40)
 @given(seeds, st.floats(0.05, 2.0))
 @example(0, 0.36874235689686835)  # a point at squared distance bound * bound, 1 ulp below bound**2
 def test_box_test_keeps_answers_at_the_bound_on_lattice_points(seed, bound) -> None:

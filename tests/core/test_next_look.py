@@ -104,7 +104,7 @@ def test_suggestions_round_trip_through_json():
     assert isinstance(back.next_look[0], Look)
 
 
-@settings(max_examples=15, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=15, suppress_health_check=[HealthCheck.too_slow])
 @given(
     seed=st.integers(0, 50),
     shift=st.tuples(st.floats(20, 60), st.floats(-30, 30)),

@@ -22,7 +22,7 @@ def chair(points: np.ndarray | None = None) -> SemanticObject:
     return SemanticObject("c1", "chair", cloud.mean(axis=0), size=[0.5, 0.5, 0.9], points=cloud)
 
 
-@settings(max_examples=60, deadline=None)
+@settings(max_examples=60)
 @given(
     points=st.lists(st.tuples(finite, finite, finite), min_size=1, max_size=8).map(np.array),
     target=vectors,
@@ -35,7 +35,7 @@ def test_a_new_position_moves_the_points_by_the_same_offset(points, target):
     assert far_from_points([moved]) == far_from_points([obj])  # what was close stays close
 
 
-@settings(max_examples=30, deadline=None)
+@settings(max_examples=30)
 @given(offset=vectors)
 def test_replace_and_transformed_agree_on_a_shift(offset):
     obj = chair()

@@ -32,7 +32,7 @@ def _view(world: ObjectMap, indices, pose: np.ndarray, noise: float, seed: int) 
     return ObjectMap(objects, up=[0, 0, 1], name="view")
 
 
-@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=25, suppress_health_check=[HealthCheck.too_slow])
 @given(
     seed=st.integers(0, 10_000),
     size=st.integers(2, 9),

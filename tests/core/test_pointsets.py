@@ -18,7 +18,7 @@ def test_largest_extent_first_and_ties_keep_axis_order():
     assert axes_by_spread(np.zeros((0, 3))).tolist() == [0, 1, 2]
 
 
-@settings(max_examples=100, deadline=None)
+@settings(max_examples=100)
 @given(arrays(float, st.tuples(st.integers(1, 20), st.just(3)), elements=st.floats(-1e3, 1e3)))
 def test_extents_never_increase_along_the_order(points):
     order = axes_by_spread(points)
@@ -27,7 +27,7 @@ def test_extents_never_increase_along_the_order(points):
     assert np.all(np.diff(extent) <= 0)
 
 
-@settings(max_examples=100, deadline=None)
+@settings(max_examples=100)
 @given(arrays(float, st.tuples(st.integers(0, 20), st.just(3)), elements=st.integers(-5, 5)))
 def test_sweep_ranks_are_dense_and_follow_the_longest_axis(points):
     """Whole-number coordinates make ties along the axis common: equal coordinates share a
@@ -51,7 +51,7 @@ def test_a_map_finds_its_sweep_order_once():
     assert order.rank.tolist() == [0, 1, 2, 0, 1, 2] and order.n_ranks == 3
 
 
-@settings(max_examples=150, deadline=None)
+@settings(max_examples=150)
 @given(
     arrays(float, st.tuples(st.integers(0, 400), st.just(3)), elements=st.floats(-5, 5)),
     st.sampled_from([0.01, 0.05, 0.25, 1.0]),

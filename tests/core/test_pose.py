@@ -70,7 +70,7 @@ def box_surface(rng: np.random.Generator, size, n: int = 3000) -> np.ndarray:
 # --------------------------------------------------------------------------- closed form
 
 
-@settings(max_examples=50, deadline=None)
+@settings(max_examples=50)
 @given(seed=seeds, n=st.integers(3, 12))
 def test_align_6dof_recovers_known_transform(seed: int, n: int) -> None:
     rng = np.random.default_rng(seed)
@@ -84,7 +84,7 @@ def test_align_6dof_recovers_known_transform(seed: int, n: int) -> None:
     assert np.allclose(T[3], [0, 0, 0, 1])
 
 
-@settings(max_examples=50, deadline=None)
+@settings(max_examples=50)
 @given(seed=seeds, n=st.integers(2, 10))
 def test_align_4dof_recovers_yaw_and_translation(seed: int, n: int) -> None:
     rng = np.random.default_rng(seed)
@@ -95,7 +95,7 @@ def test_align_4dof_recovers_yaw_and_translation(seed: int, n: int) -> None:
     assert np.allclose(T, T_true, atol=1e-6)
 
 
-@settings(max_examples=50, deadline=None)
+@settings(max_examples=50)
 @given(seed=seeds, n=st.integers(2, 6), sets=st.integers(1, 6), yaw_only=st.booleans())
 def test_align_batch_equals_one_by_one(seed: int, n: int, sets: int, yaw_only: bool) -> None:
     """The batched closed form gives each set's `align_positions` pose, and flags exactly the
@@ -123,7 +123,7 @@ def test_align_batch_rejects_bad_shapes() -> None:
         align_positions_batch(np.full((1, 2, 3), np.nan), np.zeros((1, 2, 3)))
 
 
-@settings(max_examples=50, deadline=None)
+@settings(max_examples=50)
 @given(seed=seeds, n=st.integers(2, 10))
 def test_align_4dof_with_tilted_up(seed: int, n: int) -> None:
     """up_local = R0 @ z, up_global = z: the true R is yaw @ R0^T and must be recovered."""
@@ -217,7 +217,7 @@ def test_align_bad_input_raises(kwargs) -> None:
 # --------------------------------------------------------------------------- estimate_pose
 
 
-@settings(max_examples=50, deadline=None)
+@settings(max_examples=50)
 @given(seed=seeds, n=st.integers(3, 8), yaw_only=st.booleans())
 def test_estimate_without_points_matches_closed_form(seed: int, n: int, yaw_only: bool) -> None:
     rng = np.random.default_rng(seed)
@@ -458,7 +458,7 @@ def _boxes_scene(rng: np.random.Generator, T_true: np.ndarray, up_tilt: np.ndarr
     return local, glob
 
 
-@settings(max_examples=15, deadline=None)
+@settings(max_examples=15)
 @given(
     seed=seeds,
     yaw=st.floats(-np.pi, np.pi),
@@ -488,7 +488,7 @@ def test_4dof_icp_on_prepared_clouds_keeps_up_exactly(seed, yaw, tilt, bias) -> 
     assert est.fitness > 0.95
 
 
-@settings(max_examples=15, deadline=None)
+@settings(max_examples=15)
 @given(seed=seeds, bias=st.floats(0.0, 0.2))
 def test_6dof_icp_recovers_random_rigid_transforms(seed, bias) -> None:
     rng = np.random.default_rng(seed)

@@ -240,9 +240,7 @@ def building() -> ObjectMap:
     return layout(80, seed=11)
 
 
-@settings(
-    max_examples=25, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
-)
+@settings(max_examples=25, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(
     seed=st.integers(0, 10_000),
     offset=st.tuples(st.floats(-1, 1), st.floats(-1, 1), st.floats(-1, 1)),

@@ -96,7 +96,7 @@ def test_twin_pairs_move_each_pair_onto_the_copy_one_to_one():
     y=st.floats(-200.0, 200.0),
     z=st.floats(-3.0, 3.0),
 )
-@settings(max_examples=40, deadline=None)
+@settings(max_examples=40)
 def test_any_upright_copy_is_found_with_its_motion(yaw, x, y, z):
     S = yaw_pose(yaw, [x, y, z])
     found = find(building([S]), range(len(ROOM)))
@@ -347,7 +347,7 @@ def _placed_plainly(S, positions, codes, members, tolerance):
     return hit.reshape(len(S), len(members)).sum(axis=1)
 
 
-@settings(max_examples=60, deadline=None)
+@settings(max_examples=60)
 @given(st.integers(0, 2**32 - 1), st.integers(0, 6), st.sampled_from([0.2, 0.5, 1.0]))
 def test_the_grids_count_of_placed_members_is_the_kd_trees(seed, need, tolerance):
     """Crowded maps of few labels (often more than `NEAREST` objects within the tolerance),

@@ -68,7 +68,7 @@ def test_a_set_as_small_as_a_minimal_sample_is_kept_whole():
     assert found.inliers.tolist() == [True, True]
 
 
-@settings(max_examples=40, deadline=None)
+@settings(max_examples=40)
 @given(
     yaw=st.floats(-np.pi, np.pi),
     shift=st.tuples(st.floats(-5, 5), st.floats(-5, 5), st.floats(-1, 1)),
@@ -239,7 +239,7 @@ FEATURE_RANGES = {"n_pairs": (2, 12), "rejected_share": (0, 0.6), "residual": (0
                   "fitness": (0, 1), "n_support": (0, 6), "conflict_share": (0, 0.6)}  # fmt: skip
 
 
-@settings(max_examples=60, deadline=None)
+@settings(max_examples=60)
 @given(
     values=st.tuples(*(st.floats(*FEATURE_RANGES[k]) for k in FEATURES)),
     feature=st.sampled_from([k for k in FEATURES if SIGNS[k]]),
@@ -417,7 +417,7 @@ def _literal_consensus(local, global_, up, config):
     return best[1], (best[2] if best[1].sum() >= 2 else None)
 
 
-@settings(max_examples=60, deadline=None)
+@settings(max_examples=60)
 @given(
     seed=st.integers(0, 10_000),
     n=st.integers(2, 7),
@@ -463,7 +463,7 @@ def _literal_extend(pose, local_xyz, pairs, candidates, global_xyz, config):
     return sorted([*pairs, *added], key=lambda p: p[1]), len(added), conflicts
 
 
-@settings(max_examples=60, deadline=None)
+@settings(max_examples=60)
 @given(
     seed=st.integers(0, 10_000),
     n_local=st.integers(1, 7),

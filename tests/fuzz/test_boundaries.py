@@ -34,7 +34,7 @@ HOSTILE = st.one_of(
 FIELDS = ["id", "label", "position", "size", "rotation", "points", "descriptor", "seen", "score",
           "embedding"]  # fmt: skip
 TOP = ["format", "version", "name", "up", "objects", "points_file"]
-QUIET = settings(max_examples=60, deadline=None, suppress_health_check=list(HealthCheck))
+QUIET = settings(max_examples=60, suppress_health_check=list(HealthCheck))
 
 
 @QUIET

@@ -130,9 +130,7 @@ def maps(draw):
 
 
 @given(maps())
-@settings(
-    max_examples=25, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
-)
+@settings(max_examples=25, suppress_health_check=[HealthCheck.function_scoped_fixture])
 def test_a_map_goes_to_a_graph_and_back_unchanged(tmp_path, objmap):
     path = tmp_path / "g.json"
     path.write_bytes(dsg_bytes(objmap, path))

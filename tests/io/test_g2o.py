@@ -47,7 +47,7 @@ def _g2o_information(pose: np.ndarray, local: np.ndarray, other: np.ndarray) -> 
     return jacobian.T @ jacobian / sigma2
 
 
-@settings(max_examples=60, deadline=None)
+@settings(max_examples=60)
 @given(
     quaternion=quaternions,
     translation=st.lists(finite, min_size=3, max_size=3),
@@ -73,7 +73,7 @@ def test_the_edge_is_in_g2os_convention(quaternion, translation, n, seed):
     assert float(fields[16]) == pytest.approx(parsed_information[1, 1])
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=200)
 @given(st.text(max_size=300) | st.lists(st.sampled_from([TAG, "0", "1", "nan", "inf", "-2.5",
                                                           "1e400", "x", "0.0"]),
                                          max_size=32).map(" ".join))  # fmt: skip

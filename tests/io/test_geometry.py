@@ -18,7 +18,7 @@ _points = arrays(np.float64, st.tuples(st.integers(1, 40), st.just(3)),
                  elements=st.floats(-5, 5, allow_nan=False))  # fmt: skip
 
 
-@settings(max_examples=80, deadline=None)
+@settings(max_examples=80)
 @given(points=_points)
 def test_upright_box_is_tight_and_no_larger_than_the_axis_aligned_box(points):
     centre, size, rotation = upright_box(points)
@@ -32,7 +32,7 @@ def test_upright_box_is_tight_and_no_larger_than_the_axis_aligned_box(points):
     assert size[0] * size[1] <= aabb[0] * aabb[1] + 1e-9
 
 
-@settings(max_examples=40, deadline=None)
+@settings(max_examples=40)
 @given(
     yaw=st.floats(-np.pi, np.pi),
     size=st.tuples(st.floats(0.2, 3), st.floats(0.2, 3), st.floats(0.1, 2)),

@@ -159,7 +159,7 @@ objects = st.lists(
 )
 
 
-@settings(max_examples=40, deadline=None)
+@settings(max_examples=40)
 @given(objects=objects, inline=st.booleans())
 def test_round_trip_property(tmp_path_factory, objects, inline):
     folder = tmp_path_factory.mktemp("rt")
@@ -179,7 +179,7 @@ def test_round_trip_property(tmp_path_factory, objects, inline):
             np.testing.assert_allclose(a.points, b.points, rtol=1e-6, atol=1e-5)
 
 
-@settings(max_examples=60, deadline=None)
+@settings(max_examples=60)
 @given(st.recursive(st.none() | st.booleans() | finite | st.text(max_size=5),
                     lambda c: st.lists(c, max_size=3) | st.dictionaries(st.text(max_size=5), c, max_size=3),
                     max_leaves=10))  # fmt: skip

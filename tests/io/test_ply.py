@@ -100,7 +100,7 @@ _element = st.tuples(
 )
 
 
-@settings(max_examples=60, deadline=None)
+@settings(max_examples=60)
 @given(
     fmt=st.sampled_from(["ascii", "binary_little_endian", "binary_big_endian"]),
     elements=st.lists(_element, min_size=1, max_size=4),

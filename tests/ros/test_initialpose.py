@@ -55,7 +55,7 @@ def test_without_a_heading_the_prior_is_the_circle_the_origin_may_lie_on():
         assert np.linalg.norm(truth[:3, 3] - prior.position) == pytest.approx(5.0)
 
 
-@settings(max_examples=60, deadline=None)
+@settings(max_examples=60)
 @given(
     st.floats(-math.pi, math.pi), st.floats(-math.pi, math.pi),
     st.lists(st.floats(-20, 20), min_size=3, max_size=3),

@@ -148,7 +148,7 @@ from semloc.ros.bag import detection_from_msg  # noqa: E402
 
 @given(st.lists(st.tuples(finite, finite, finite), max_size=40),
        st.integers(0, 5), st.integers(0, 2**40))  # fmt: skip
-@settings(max_examples=30, deadline=None)
+@settings(max_examples=30)
 def test_point_clouds_round_trip(points, detections, stamp):
     xyz = np.asarray(points, dtype=np.float32).reshape(-1, 3)
     index = np.arange(len(xyz)) % (detections + 1)
@@ -163,7 +163,7 @@ def test_point_clouds_round_trip(points, detections, stamp):
 @given(st.text(min_size=1, max_size=20).filter(lambda s: s.strip()), st.floats(0.01, 1),
        st.lists(finite, min_size=3, max_size=3), quats,
        st.lists(st.floats(0.01, 5), min_size=3, max_size=3))  # fmt: skip
-@settings(max_examples=40, deadline=None)
+@settings(max_examples=40)
 def test_detections_round_trip_through_cdr(label, score, centre, q, size):
     T = matrix_of(centre, q)
     hyp = msgs.new("vision_msgs/msg/ObjectHypothesis", class_id=label, score=score)

@@ -61,7 +61,7 @@ def check(server, body: bytes) -> None:
             assert isinstance(answer, dict) and set(answer) == {"error", "detail"}, answer
 
 
-SETTINGS = settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+SETTINGS = settings(max_examples=40, suppress_health_check=[HealthCheck.too_slow])
 
 
 @SETTINGS
